@@ -1,0 +1,15 @@
+# Finds the Debian packages Tessera links against and defines imported targets for them.
+# Used by the build and, installed beside TesseraConfig.cmake, by consumers of the static
+# libraries, which must link the same dependencies.
+find_package(PkgConfig REQUIRED)
+find_package(Threads REQUIRED)
+find_package(TIFF REQUIRED)
+find_package(PNG REQUIRED)
+find_package(JPEG REQUIRED)
+find_package(nlohmann_json 3.10 REQUIRED)
+find_package(fmt 9 REQUIRED)
+pkg_check_modules(TESSERA_ZSTD REQUIRED IMPORTED_TARGET GLOBAL libzstd)
+pkg_check_modules(TESSERA_LZ4 REQUIRED IMPORTED_TARGET GLOBAL liblz4)
+pkg_check_modules(TESSERA_XXHASH REQUIRED IMPORTED_TARGET GLOBAL libxxhash)
+pkg_check_modules(TESSERA_WEBP REQUIRED IMPORTED_TARGET GLOBAL libwebp)
+pkg_check_modules(TESSERA_TURBOJPEG REQUIRED IMPORTED_TARGET GLOBAL libturbojpeg)

@@ -1,0 +1,51 @@
+#pragma once
+/// \file
+/// Byte sources: where archive bytes come from (a local file, memory, later HTTP ranges).
+/// The archive reader and the loader pool see only this interface.
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <tessera/result.h>
+
+namespace tessera {
+
+/// One range of a batched read. `out` must hold `length_bytes` bytes.
+struct ByteRange {
+  uint64_t offset_bytes = 0;
+  uint64_t length_bytes = 0;
+  uint8_t* out = nullptr;
+};
+
+/// Random-access, read-only bytes. Thread-safe: `read` may be called from many threads at once.
+class ByteSource {
+ public:
+  virtual ~ByteSource() = default;
+
+  /// Total size in bytes, known at open.
+  virtual uint64_t sizeBytes() const = 0;
+
+  /// A name for messages: a path or URL.
+  virtual const std::string& name() const = 0;
+
+  /// Reads exactly `out.size()` bytes at `offset_bytes`. A range past the end, a short read or
+  /// an I/O error is an error naming the source, the offset and the cause; `out` is then
+  /// unspecified.
+  [[nodiscard]] virtual Result<void> read(uint64_t offset_bytes, std::span<uint8_t> out) const = 0;
+
+  /// Reads several ranges. The default reads them one by one; sources with a per-request
+  /// cost (HTTP) merge nearby ranges. Fails as a whole if any range fails.
+  [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
+};
+
+/// Opens a local file for positional reads (pread: thread-safe without a shared file offset,
+/// and an I/O error is an error value, not a SIGBUS as with mmap). Fails naming the path.
+[[nodiscard]] Result<std::shared_ptr<ByteSource>> openFileSource(const std::string& path);
+
+/// Wraps bytes held in memory; `name` is used in messages.
+std::shared_ptr<ByteSource> makeMemorySource(std::vector<uint8_t> bytes, std::string name);
+
+}  // namespace tessera

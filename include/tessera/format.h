@@ -1,0 +1,123 @@
+#pragma once
+/// \file
+/// The archive format's vocabulary: tile addresses, tile kinds, codecs, per-image geometry and
+/// the image buffers that tiles decode into. The byte layout is specified in docs/format.md;
+/// `src/format` mirrors its sections. Everything here is plain data: thread-compatible.
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+/// Format version written by this build. Readers accept any minor of the same major
+/// (docs/format.md, "Versioning").
+inline constexpr uint16_t kFormatVersionMajor = 1;
+inline constexpr uint16_t kFormatVersionMinor = 0;
+
+/// Bounds from docs/format.md, "Images".
+inline constexpr uint32_t kMinTileSizePx = 64;
+inline constexpr uint32_t kMaxTileSizePx = 2048;
+inline constexpr uint32_t kMaxBorderPx = 16;
+/// Largest image side in pixels. 2^24 keeps every level's tile count and every texel index
+/// of a 2048-px tile well inside 64-bit arithmetic, and is 64x the 262144 px we test.
+inline constexpr uint32_t kMaxImageSidePx = 1u << 24;
+inline constexpr uint32_t kMaxImages = 65536;
+
+/// How a tile's texels are stored (docs/format.md, "Tile entries").
+enum class TileKind : uint8_t {
+  kEmpty = 0,       ///< no data: decodes to all-zero texels (transparent where there is alpha)
+  kUniform = 1,     ///< every texel, border and padding included, has the colour in the entry
+  kEncoded = 2,     ///< a payload in the file, decoded by the entry's codec
+  kProcedural = 3,  ///< reserved: generated at run time (Demeulemeester et al.); v1 readers reject
+};
+
+/// Payload codecs. Values are stable on disk; new codecs take new numbers.
+enum class Codec : uint8_t {
+  kRaw = 0,   ///< texels row-major, interleaved channels, no compression
+  kZstd = 1,  ///< raw texels compressed with zstd
+  kLz4 = 2,   ///< raw texels compressed with LZ4 (block format, size known from geometry)
+  kJpeg = 3,  ///< baseline JPEG (lossy); alpha, when present, as a zstd plane after it
+  kPng = 4,   ///< PNG, lossless
+  kWebp = 5,  ///< WebP lossless
+  kPtm = 6,   ///< reserved: progressive texture map coded against the parent (Marvie & Bouatouch)
+};
+
+/// Names a codec for the CLI and JSON: "raw", "zstd", "lz4", "jpeg", "png", "webp", "ptm".
+const char* codecName(Codec codec);
+/// Parses a codec name; returns false for an unknown name.
+bool parseCodecName(std::string_view name, Codec* codec);
+/// Names a tile kind: "empty", "uniform", "encoded", "procedural".
+const char* tileKindName(TileKind kind);
+
+/// A tile's address: image index, pyramid level (0 = full resolution), column and row.
+struct TileId {
+  uint32_t image = 0;
+  uint32_t level = 0;
+  uint32_t x = 0;
+  uint32_t y = 0;
+  friend bool operator==(const TileId&, const TileId&) = default;
+};
+
+/// Geometry of one image of an archive. Level dimensions follow from it:
+/// `levelWidthPx(L) = max(1, ceil(width_px / 2^L))`, and each level is padded to whole tiles
+/// (Backes et al., eq. 1). The coarsest level is the first that fits in one tile.
+struct ImageInfo {
+  uint32_t width_px = 0;         ///< level 0 width, 1..kMaxImageSidePx
+  uint32_t height_px = 0;        ///< level 0 height, 1..kMaxImageSidePx
+  uint32_t channels = 0;         ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA; 8 bits each
+  uint32_t tile_size_px = 0;     ///< power of two, kMinTileSizePx..kMaxTileSizePx
+  uint32_t border_px = 0;        ///< texels copied from neighbours on each side, 0..kMaxBorderPx
+  uint32_t level_count = 0;      ///< levels stored, derived from size and tile size
+  uint32_t page_tiles_log2 = 5;  ///< a directory page covers 2^n x 2^n tiles
+  Codec default_codec = Codec::kZstd;
+  bool srgb_downsample = false;  ///< levels averaged in linear light rather than sRGB codes
+  std::string name;              ///< from metadata; "" when unnamed
+
+  uint32_t levelWidthPx(uint32_t level) const;
+  uint32_t levelHeightPx(uint32_t level) const;
+  uint32_t tilesX(uint32_t level) const;
+  uint32_t tilesY(uint32_t level) const;
+  /// Side of a stored tile including borders: tile_size_px + 2 * border_px.
+  uint32_t storedTileSidePx() const { return tile_size_px + 2 * border_px; }
+  /// Bytes of one decoded tile including borders.
+  size_t storedTileBytes() const {
+    return size_t(storedTileSidePx()) * storedTileSidePx() * channels;
+  }
+};
+
+/// Number of levels for a size: levels until both sides fit in one tile (at least 1).
+uint32_t levelCountFor(uint32_t width_px, uint32_t height_px, uint32_t tile_size_px);
+
+/// A read-only view of 8-bit texels, rows `stride_bytes` apart. Does not own its memory.
+struct ImageView {
+  const uint8_t* data = nullptr;
+  uint32_t width_px = 0;
+  uint32_t height_px = 0;
+  uint32_t channels = 0;
+  size_t stride_bytes = 0;
+  const uint8_t* row(uint32_t y) const { return data + y * stride_bytes; }
+};
+
+/// An owned image with tightly packed rows.
+struct Image {
+  uint32_t width_px = 0;
+  uint32_t height_px = 0;
+  uint32_t channels = 0;
+  std::vector<uint8_t> texels;  ///< width_px * height_px * channels bytes
+
+  Image() = default;
+  Image(uint32_t width, uint32_t height, uint32_t channel_count)
+      : width_px(width),
+        height_px(height),
+        channels(channel_count),
+        texels(size_t(width) * height * channel_count) {}
+  size_t strideBytes() const { return size_t(width_px) * channels; }
+  uint8_t* row(uint32_t y) { return texels.data() + y * strideBytes(); }
+  const uint8_t* row(uint32_t y) const { return texels.data() + y * strideBytes(); }
+  ImageView view() const { return {texels.data(), width_px, height_px, channels, strideBytes()}; }
+};
+
+}  // namespace tessera

@@ -1,0 +1,61 @@
+#pragma once
+// Band readers: sources of image rows for the streaming pyramid builder. A reader yields the
+// image top to bottom in bands and never holds the whole image (Backes et al., section 4;
+// libvips dzsave's strip-at-a-time design).
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include <tessera/result.h>
+
+namespace tessera::detail {
+
+/// What a reader knows about its image after open.
+struct SourceInfo {
+  uint32_t width_px = 0;
+  uint32_t height_px = 0;
+  uint32_t channels = 0;  ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA (8 bits each)
+  /// Rows the reader produces most cheaply at once (a TIFF strip or tile row); the builder
+  /// asks for bands of about this height. At least 1.
+  uint32_t natural_band_rows = 1;
+  /// "tiff", "png", "jpeg", "synthetic".
+  std::string format;
+  /// Source-specific facts for the archive metadata: for GeoTIFF the georeference
+  /// (model tie points, pixel scale, transformation, GeoKey directory, EPSG when known,
+  /// GDAL no-data), for TIFF the compression and layout, for synthetic the seed.
+  nlohmann::json metadata = nlohmann::json::object();
+};
+
+/// Yields rows top to bottom. Owned by one thread. Bad input surfaces as errors naming the
+/// file and the problem, never a crash; a reader allocates at most about
+/// width x natural_band_rows x channels bytes plus a codec's bounded scratch.
+class BandReader {
+ public:
+  virtual ~BandReader() = default;
+  virtual const SourceInfo& info() const = 0;
+  /// Fills `out` with the next `rows` rows (tightly packed, width_px * channels bytes each).
+  /// Requires rows > 0 and not past the image's end. A decoding error (truncated or corrupt
+  /// data) names the file and the row.
+  [[nodiscard]] virtual Result<void> readRows(uint32_t rows, std::span<uint8_t> out) = 0;
+};
+
+/// Opens a source by name: "synthetic:WxH[:seed]" or a path whose content (not extension)
+/// decides between TIFF/BigTIFF, PNG and JPEG. Fails naming the path and the problem: missing,
+/// empty, unrecognised, truncated header, zero or absurd dimensions (over kMaxImageSidePx),
+/// unsupported sample format (16-bit, float, palette, CMYK, planar where unsupported).
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openBandReader(const std::string& source);
+
+/// Readers by format, used by openBandReader and tests.
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path);
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openPngReader(const std::string& path);
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openJpegReader(const std::string& path);
+/// `spec` is the part after "synthetic:": "WxH[:seed[:channels]]", e.g. "4096x4096:7" or
+/// "16384x16384:1:3". Any size up to kMaxImageSidePx per side; 4 channels by default
+/// (no-data regions transparent), 3 for RGB (no-data filled with a flat colour).
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openSyntheticReader(const std::string& spec);
+
+}  // namespace tessera::detail

@@ -1,0 +1,82 @@
+#include <tessera/format.h>
+
+#include <algorithm>
+#include <string_view>
+
+namespace tessera {
+
+namespace {
+
+struct CodecNameEntry {
+  Codec codec;
+  const char* name;
+};
+
+constexpr CodecNameEntry kCodecNames[] = {
+    {Codec::kRaw, "raw"}, {Codec::kZstd, "zstd"}, {Codec::kLz4, "lz4"}, {Codec::kJpeg, "jpeg"},
+    {Codec::kPng, "png"}, {Codec::kWebp, "webp"}, {Codec::kPtm, "ptm"},
+};
+
+uint32_t ceilShift(uint32_t value, uint32_t shift) {
+  return uint32_t((uint64_t(value) + (uint64_t(1) << shift) - 1) >> shift);
+}
+
+}  // namespace
+
+const char* codecName(Codec codec) {
+  for (const auto& entry : kCodecNames)
+    if (entry.codec == codec) return entry.name;
+  return "unknown";
+}
+
+bool parseCodecName(std::string_view name, Codec* codec) {
+  for (const auto& entry : kCodecNames) {
+    if (name == entry.name) {
+      *codec = entry.codec;
+      return true;
+    }
+  }
+  return false;
+}
+
+const char* tileKindName(TileKind kind) {
+  switch (kind) {
+    case TileKind::kEmpty: return "empty";
+    case TileKind::kUniform: return "uniform";
+    case TileKind::kEncoded: return "encoded";
+    case TileKind::kProcedural: return "procedural";
+  }
+  return "unknown";
+}
+
+// Each level halves the previous one rounding up, so an odd edge column or row is averaged
+// with its own replica: ceil(w / 2^L) (docs/format.md, "Levels").
+uint32_t ImageInfo::levelWidthPx(uint32_t level) const {
+  return std::max<uint32_t>(1, ceilShift(width_px, std::min<uint32_t>(level, 31)));
+}
+
+uint32_t ImageInfo::levelHeightPx(uint32_t level) const {
+  return std::max<uint32_t>(1, ceilShift(height_px, std::min<uint32_t>(level, 31)));
+}
+
+// Padding to whole tiles: Backes et al., eq. 1, d = ceil(r / t) * t.
+uint32_t ImageInfo::tilesX(uint32_t level) const {
+  return (levelWidthPx(level) + tile_size_px - 1) / tile_size_px;
+}
+
+uint32_t ImageInfo::tilesY(uint32_t level) const {
+  return (levelHeightPx(level) + tile_size_px - 1) / tile_size_px;
+}
+
+uint32_t levelCountFor(uint32_t width_px, uint32_t height_px, uint32_t tile_size_px) {
+  uint32_t levels = 1;
+  uint64_t w = width_px, h = height_px;
+  while (w > tile_size_px || h > tile_size_px) {
+    w = (w + 1) / 2;
+    h = (h + 1) / 2;
+    ++levels;
+  }
+  return levels;
+}
+
+}  // namespace tessera
