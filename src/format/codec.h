@@ -29,7 +29,24 @@ struct ParentTexels {
   uint32_t quadrant_y = 0;  ///< 0 top, 1 bottom
 };
 
-/// One codec's implementation. Thread-safe: functions hold no state between calls.
+/// Per-thread reusable state for codecs whose libraries are costly to set up per call
+/// (TurboJPEG handles, zstd contexts, scratch buffers). Owned by one thread; a worker keeps one
+/// and passes it to every call. Passing null makes the call set up and free its own.
+class CodecScratch {
+ public:
+  CodecScratch();
+  ~CodecScratch();
+  CodecScratch(const CodecScratch&) = delete;
+  CodecScratch& operator=(const CodecScratch&) = delete;
+  struct State;  ///< defined in codec.cpp; members are lazily created per codec
+  State& state() { return *state_; }
+
+ private:
+  State* state_;
+};
+
+/// One codec's implementation. Thread-safe: functions hold no state between calls beyond the
+/// caller's `CodecScratch`.
 struct CodecFunctions {
   Codec codec;
   /// True when tiles are coded against their decoded parent tile.
@@ -38,7 +55,7 @@ struct CodecFunctions {
   bool lossless;
   /// Encodes `tile` (any width/height, `channels` 1..4). Fails only on encoder errors.
   Result<std::vector<uint8_t>> (*encode)(const ImageView& tile, const EncodeOptions& options,
-                                         const ParentTexels* parent);
+                                         const ParentTexels* parent, CodecScratch* scratch);
   /// Decodes `payload` into `out`, whose width, height and channels are the expected ones
   /// (from the archive, never from the payload). Rejects payloads that disagree with them,
   /// are truncated, have trailing bytes or would write outside `out`. Allocates at most
@@ -53,9 +70,10 @@ const CodecFunctions* findCodec(Codec codec);
 /// Convenience: looks up the codec and encodes; an unimplemented codec is kUnsupported.
 Result<std::vector<uint8_t>> encodeTile(Codec codec, const ImageView& tile,
                                         const EncodeOptions& options,
-                                        const ParentTexels* parent = nullptr);
+                                        const ParentTexels* parent = nullptr,
+                                        CodecScratch* scratch = nullptr);
 /// Convenience: looks up the codec and decodes into `out` (see CodecFunctions::decode).
 Result<void> decodeTile(Codec codec, std::span<const uint8_t> payload, Image& out,
-                        const ParentTexels* parent = nullptr);
+                        const ParentTexels* parent = nullptr, CodecScratch* scratch = nullptr);
 
 }  // namespace tessera::detail
