@@ -1,0 +1,102 @@
+#pragma once
+/// \file
+/// Reading archives: open over any ByteSource, list images and levels, read and decode tiles
+/// with checksum verification, read any rectangle of any level as RGBA.
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <tessera/byte_source.h>
+#include <tessera/format.h>
+#include <tessera/result.h>
+
+namespace tessera {
+
+namespace detail {
+class CodecScratch;
+}
+
+/// A tile's directory entry (docs/format.md, "Tile entries").
+struct TileEntry {
+  TileKind kind = TileKind::kEmpty;
+  Codec codec = Codec::kRaw;
+  uint64_t offset_bytes = 0;  ///< payload offset in the file; 0 unless kind is kEncoded
+  uint32_t length_bytes = 0;  ///< payload length; 0 unless kind is kEncoded
+  uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless kind is kEncoded
+  uint32_t uniform_rgba = 0;  ///< kUniform: channel c of the colour is byte c (little-endian)
+};
+
+/// A pixel rectangle at one level: [x, x + width) x [y, y + height).
+struct PixelRect {
+  int64_t x = 0;
+  int64_t y = 0;
+  uint32_t width = 0;
+  uint32_t height = 0;
+};
+
+/// An opened archive. Thread-safe: immutable after `open`, except for an internal cache of
+/// directory pages guarded by its own mutex. Every method may be called from any thread.
+class Archive {
+ public:
+  /// Reads the header region (one read of the first 16 KiB, one HTTP request later), checks
+  /// magic, version, checksums and structural bounds, and parses the root directory and
+  /// metadata. Directory pages are read on demand. Fails naming `source->name()` and the
+  /// problem: not an archive, newer major version, truncated file, checksum mismatch, field
+  /// out of bounds.
+  [[nodiscard]] static Result<std::shared_ptr<Archive>> open(std::shared_ptr<ByteSource> source);
+  /// Opens a local file (pread-based byte source).
+  [[nodiscard]] static Result<std::shared_ptr<Archive>> openFile(const std::string& path);
+
+  ~Archive();
+  Archive(const Archive&) = delete;
+  Archive& operator=(const Archive&) = delete;
+
+  const std::string& name() const;
+  const std::vector<ImageInfo>& images() const;
+  /// The archive's JSON metadata (docs/format.md, "Metadata").
+  const nlohmann::json& metadata() const;
+  /// Total file size in bytes as recorded in the header.
+  uint64_t fileBytes() const;
+  const ByteSource& source() const;
+
+  /// The directory entry of a tile, reading and verifying its directory page on first use.
+  /// An address outside the image's levels or tile grid is kInvalidArgument.
+  [[nodiscard]] Result<TileEntry> tileEntry(const TileId& tile) const;
+
+  /// Reads a tile's payload and verifies its checksum. Only for kEncoded tiles.
+  [[nodiscard]] Result<std::vector<uint8_t>> readPayload(const TileId& tile,
+                                                         const TileEntry& entry) const;
+
+  /// Decodes a verified payload (or expands an empty/uniform entry) into a stored tile:
+  /// storedTileSidePx() square with borders, the image's channel count. `scratch` may be null.
+  [[nodiscard]] Result<Image> decodeTile(const TileId& tile, const TileEntry& entry,
+                                         std::span<const uint8_t> payload,
+                                         detail::CodecScratch* scratch = nullptr) const;
+
+  /// tileEntry + readPayload + decodeTile.
+  [[nodiscard]] Result<Image> readTile(const TileId& tile,
+                                       detail::CodecScratch* scratch = nullptr) const;
+
+  /// Reads `rect` of `level` of `image` into RGBA (gray replicated, alpha 255 when absent).
+  /// Texels outside the level read as transparent black. The rectangle may be at most
+  /// 16384 x 16384 px (kTooLarge beyond).
+  [[nodiscard]] Result<Image> readRegionRgba(uint32_t image, uint32_t level,
+                                             const PixelRect& rect) const;
+
+  /// Same, in the image's own channel count (no RGBA expansion); outside texels are zero.
+  [[nodiscard]] Result<Image> readRegion(uint32_t image, uint32_t level,
+                                         const PixelRect& rect) const;
+
+  struct Impl;
+
+ private:
+  explicit Archive(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tessera

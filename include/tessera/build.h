@@ -1,0 +1,68 @@
+#pragma once
+/// \file
+/// Building archives from TIFF/BigTIFF, PNG, JPEG or the synthetic source: a streaming
+/// pyramid (one band per level, Backes et al. section 4) encoded on all cores and written
+/// atomically.
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include <tessera/format.h>
+#include <tessera/result.h>
+
+namespace tessera {
+
+/// Payload order in the file (docs/format.md, "Clustering").
+enum class TileOrder : uint8_t {
+  kHilbert = 0,   ///< coarse levels first, Hilbert curve within each level
+  kQuadtree = 1,  ///< depth-first quadtree, parent before children (Zhou et al.)
+  kRowMajor = 2,  ///< coarse levels first, row by row within each level
+};
+
+/// Everything `tessera build` can set. Defaults are the CLI's defaults.
+struct BuildOptions {
+  std::string input;            ///< a path, or "synthetic:WxH[:seed[:channels]]"
+  std::string output;           ///< the archive path; written atomically
+  uint32_t tile_size_px = 256;  ///< power of two, 64..2048
+  uint32_t border_px = 0;       ///< 0..16
+  Codec codec = Codec::kJpeg;
+  int quality = 85;                ///< JPEG quality 1..100
+  int effort = 0;                  ///< codec effort (zstd level, PNG/WebP effort); 0 = default
+  bool chroma_subsampling = true;  ///< JPEG 4:2:0 (true) or 4:4:4
+  bool srgb_downsample = false;    ///< average levels in linear light
+  TileOrder order = TileOrder::kHilbert;
+  uint32_t threads = 0;          ///< encoder threads; 0 = all cores
+  uint32_t page_tiles_log2 = 5;  ///< directory page side in tiles, as a power of two (3..8)
+  std::string image_name;        ///< optional name stored in metadata
+};
+
+/// Progress for a terminal bar. Called from the building thread about every 100 ms.
+struct BuildProgress {
+  uint64_t pixels_done = 0;  ///< level-0 pixels read so far
+  uint64_t pixels_total = 0;
+  uint64_t tiles_written = 0;
+  double elapsed_s = 0;
+};
+
+/// What a finished build reports.
+struct BuildReport {
+  uint64_t output_bytes = 0;
+  uint64_t tiles_encoded = 0;
+  uint64_t tiles_uniform = 0;
+  uint64_t tiles_empty = 0;
+  uint64_t payload_bytes = 0;
+  double elapsed_s = 0;
+  double megapixels_per_s = 0;  ///< level-0 megapixels / elapsed
+  ImageInfo image;
+};
+
+/// Builds an archive. On any failure, and when `cancel` becomes true, nothing is left at
+/// `options.output` (a previous file there is untouched) and no temporary file remains.
+/// Errors name the input or output file and the problem. Blocking; owned by the caller's thread.
+[[nodiscard]] Result<BuildReport> buildArchive(
+    const BuildOptions& options, const std::function<void(const BuildProgress&)>& on_progress = {},
+    const std::atomic<bool>* cancel = nullptr);
+
+}  // namespace tessera
