@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include <tessera/format.h>
 #include <tessera/result.h>
@@ -35,7 +36,8 @@ struct BuildOptions {
   TileOrder order = TileOrder::kHilbert;
   uint32_t threads = 0;          ///< encoder threads; 0 = all cores
   uint32_t page_tiles_log2 = 5;  ///< directory page side in tiles, as a power of two (3..8)
-  std::string image_name;        ///< optional name stored in metadata
+  /// Optional image names stored in metadata, one per input; default: the input's file name.
+  std::vector<std::string> image_names;
 };
 
 /// Progress for a terminal bar. Called from the building thread about every 100 ms.
@@ -55,7 +57,7 @@ struct BuildReport {
   uint64_t payload_bytes = 0;
   double elapsed_s = 0;
   double megapixels_per_s = 0;  ///< level-0 megapixels / elapsed
-  ImageInfo image;
+  std::vector<ImageInfo> images;
 };
 
 /// Builds an archive. On any failure, and when `cancel` becomes true, nothing is left at
