@@ -24,7 +24,9 @@ enum class TileOrder : uint8_t {
 
 /// Everything `tessera build` can set. Defaults are the CLI's defaults.
 struct BuildOptions {
-  std::string input;            ///< a path, or "synthetic:WxH[:seed[:channels]]"
+  /// One or more sources, one image each (a scene's texture set): paths, or
+  /// "synthetic:WxH[:seed[:channels]]".
+  std::vector<std::string> inputs;
   std::string output;           ///< the archive path; written atomically
   uint32_t tile_size_px = 256;  ///< power of two, 64..2048
   uint32_t border_px = 0;       ///< 0..16
