@@ -15,13 +15,6 @@
 
 namespace tessera {
 
-/// Payload order in the file (docs/format.md, "Clustering").
-enum class TileOrder : uint8_t {
-  kHilbert = 0,   ///< coarse levels first, Hilbert curve within each level
-  kQuadtree = 1,  ///< depth-first quadtree, parent before children (Zhou et al.)
-  kRowMajor = 2,  ///< coarse levels first, row by row within each level
-};
-
 /// Everything `tessera build` can set. Defaults are the CLI's defaults.
 struct BuildOptions {
   /// One or more sources, one image each (a scene's texture set): paths, or

@@ -52,6 +52,13 @@ bool parseCodecName(std::string_view name, Codec* codec);
 /// Names a tile kind: "empty", "uniform", "encoded", "procedural".
 const char* tileKindName(TileKind kind);
 
+/// Payload order in the file (docs/format.md, "Clustering").
+enum class TileOrder : uint8_t {
+  kHilbert = 0,   ///< coarse levels first, Hilbert curve within each level
+  kQuadtree = 1,  ///< depth-first quadtree, parent before children (Zhou et al.)
+  kRowMajor = 2,  ///< coarse levels first, row by row within each level
+};
+
 /// A tile's address: image index, pyramid level (0 = full resolution), column and row.
 struct TileId {
   uint32_t image = 0;

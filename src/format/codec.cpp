@@ -1,1 +1,133 @@
-// placeholder until written
+#include "codec.h"
+
+#include <cstring>
+
+#include <fmt/format.h>
+#include <turbojpeg.h>
+#include <zstd.h>
+
+#include "codec_internal.h"
+
+namespace tessera::detail {
+
+CodecScratch::State::~State() {
+  ZSTD_freeCCtx(zstd_cctx);
+  ZSTD_freeDCtx(zstd_dctx);
+  if (jpeg_compressor != nullptr) tjDestroy(jpeg_compressor);
+  if (jpeg_decompressor != nullptr) tjDestroy(jpeg_decompressor);
+  tjFree(jpeg_buffer);
+}
+
+CodecScratch::CodecScratch() : state_(new State) {}
+CodecScratch::~CodecScratch() { delete state_; }
+
+namespace {
+
+// The public table's decode has no scratch parameter, so these adapters give each call its
+// own short-lived state; decodeTile() passes the caller's scratch straight to the codec.
+template <DecodeFn decode>
+Result<void> decodeWithoutScratch(std::span<const uint8_t> payload, Image& out,
+                                  const ParentTexels* /*parent*/) {
+  return decode(payload, out, nullptr);
+}
+
+template <EncodeFn encode>
+Result<std::vector<uint8_t>> encodeIgnoringParent(const ImageView& tile,
+                                                  const EncodeOptions& options,
+                                                  const ParentTexels* /*parent*/,
+                                                  CodecScratch* scratch) {
+  return encode(tile, options, scratch);
+}
+
+struct CodecEntry {
+  CodecFunctions functions;
+  DecodeFn decode_with_scratch;
+};
+
+template <EncodeFn encode, DecodeFn decode>
+constexpr CodecEntry makeEntry(Codec codec, bool lossless) {
+  return {{codec, /*needs_parent=*/false, lossless, &encodeIgnoringParent<encode>,
+           &decodeWithoutScratch<decode>},
+          decode};
+}
+
+// Indexed by Codec value; the static_asserts below keep index and value in step.
+constexpr CodecEntry kCodecTable[] = {
+    makeEntry<encodeRaw, decodeRaw>(Codec::kRaw, true),
+    makeEntry<encodeZstd, decodeZstd>(Codec::kZstd, true),
+    makeEntry<encodeLz4, decodeLz4>(Codec::kLz4, true),
+    makeEntry<encodeJpeg, decodeJpeg>(Codec::kJpeg, false),
+    makeEntry<encodePng, decodePng>(Codec::kPng, true),
+    makeEntry<encodeWebp, decodeWebp>(Codec::kWebp, true),
+};
+constexpr bool tableMatchesCodecValues() {
+  for (size_t i = 0; i < std::size(kCodecTable); ++i)
+    if (size_t(kCodecTable[i].functions.codec) != i) return false;
+  return true;
+}
+static_assert(tableMatchesCodecValues(), "kCodecTable must be indexed by Codec value");
+static_assert(std::size(kCodecTable) == size_t(Codec::kPtm),
+              "every codec before kPtm has an implementation");
+
+const CodecEntry* findEntry(Codec codec) {
+  size_t index = size_t(codec);
+  return index < std::size(kCodecTable) ? &kCodecTable[index] : nullptr;
+}
+
+Unexpected unsupportedCodec(Codec codec) {
+  if (codec == Codec::kPtm)
+    return fail(ErrorCode::kUnsupported,
+                "ptm codec: progressive texture maps are not implemented in this build");
+  return fail(ErrorCode::kUnsupported, fmt::format("codec {}: unknown codec", int(codec)));
+}
+
+}  // namespace
+
+const CodecFunctions* findCodec(Codec codec) {
+  const CodecEntry* entry = findEntry(codec);
+  return entry != nullptr ? &entry->functions : nullptr;
+}
+
+Result<std::vector<uint8_t>> encodeTile(Codec codec, const ImageView& tile,
+                                        const EncodeOptions& options, const ParentTexels* parent,
+                                        CodecScratch* scratch) {
+  const CodecEntry* entry = findEntry(codec);
+  if (entry == nullptr) return unsupportedCodec(codec);
+  return entry->functions.encode(tile, options, parent, scratch);
+}
+
+Result<void> decodeTile(Codec codec, std::span<const uint8_t> payload, Image& out,
+                        const ParentTexels* /*parent*/, CodecScratch* scratch) {
+  const CodecEntry* entry = findEntry(codec);
+  if (entry == nullptr) return unsupportedCodec(codec);
+  return entry->decode_with_scratch(payload, out, scratch);
+}
+
+// Helpers shared by the codecs.
+
+std::span<const uint8_t> packedTexels(const ImageView& tile, CodecScratch::State& state) {
+  const size_t row_bytes = size_t(tile.width_px) * tile.channels;
+  if (tile.stride_bytes == row_bytes) return {tile.data, row_bytes * tile.height_px};
+  state.texels.resize(row_bytes * tile.height_px);
+  for (uint32_t y = 0; y < tile.height_px; ++y)
+    std::memcpy(state.texels.data() + y * row_bytes, tile.row(y), row_bytes);
+  return state.texels;
+}
+
+std::string geometryText(uint32_t width_px, uint32_t height_px, uint32_t channels) {
+  return fmt::format("{}x{}x{}", width_px, height_px, channels);
+}
+
+Unexpected geometryMismatch(const char* what, const Image& expected, uint32_t width_px,
+                            uint32_t height_px, uint32_t channels) {
+  return fail(ErrorCode::kCorrupt,
+              fmt::format("{}: {} expected, stream is {}", what,
+                          geometryText(expected.width_px, expected.height_px, expected.channels),
+                          geometryText(width_px, height_px, channels)));
+}
+
+std::vector<uint8_t> exactCopy(std::span<const uint8_t> bytes) {
+  return std::vector<uint8_t>(bytes.begin(), bytes.end());
+}
+
+}  // namespace tessera::detail

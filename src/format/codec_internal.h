@@ -1,0 +1,115 @@
+#pragma once
+// Shared by the codec_*.cpp files: the scratch state behind CodecScratch, the per-codec entry
+// points (which, unlike CodecFunctions::decode, take the caller's scratch), and helpers every
+// codec needs (packing strided input, checking the expected geometry, error text).
+
+#include <cstdint>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <tessera/format.h>
+#include <tessera/result.h>
+
+#include "codec.h"
+
+struct ZSTD_CCtx_s;
+struct ZSTD_DCtx_s;
+
+namespace tessera::detail {
+
+/// Everything a worker reuses between tiles. Members are created on first use by the codec
+/// that needs them and freed by the destructor; none carries data from one call to the next.
+struct CodecScratch::State {
+  State() = default;
+  ~State();
+  State(const State&) = delete;
+  State& operator=(const State&) = delete;
+
+  ZSTD_CCtx_s* zstd_cctx = nullptr;
+  ZSTD_DCtx_s* zstd_dctx = nullptr;
+  void* jpeg_compressor = nullptr;    ///< tjhandle from tjInitCompress
+  void* jpeg_decompressor = nullptr;  ///< tjhandle from tjInitDecompress
+  /// A buffer of tjBufSize() bytes that TurboJPEG compresses into without reallocating;
+  /// allocated with tjAlloc, `jpeg_buffer_bytes` long.
+  uint8_t* jpeg_buffer = nullptr;
+  size_t jpeg_buffer_bytes = 0;
+
+  /// Tightly packed copy of a strided or reshaped input (encode) or an intermediate decode
+  /// (gray expanded to RGB, a JPEG colour plane): at most one tile of 4 channels.
+  std::vector<uint8_t> texels;
+  /// A separated plane (the JPEG alpha plane).
+  std::vector<uint8_t> plane;
+  /// Compressed bytes before they are copied into the exact-size payload.
+  std::vector<uint8_t> compressed;
+};
+
+/// Resolves a possibly null CodecScratch to a usable State: the caller's, or one that lives
+/// as long as this object. Owned by one thread.
+class ScratchRef {
+ public:
+  explicit ScratchRef(CodecScratch* scratch) {
+    if (scratch == nullptr) scratch = &local_.emplace();
+    state_ = &scratch->state();
+  }
+  CodecScratch::State& operator*() const { return *state_; }
+  CodecScratch::State* operator->() const { return state_; }
+
+ private:
+  std::optional<CodecScratch> local_;
+  CodecScratch::State* state_ = nullptr;
+};
+
+// Per-codec entry points. Encoders take any tile with channels 1..4 and any stride >= the row
+// size; decoders fill `out` (already sized to the expected geometry) or return an error.
+using EncodeFn = Result<std::vector<uint8_t>> (*)(const ImageView& tile,
+                                                  const EncodeOptions& options,
+                                                  CodecScratch* scratch);
+using DecodeFn = Result<void> (*)(std::span<const uint8_t> payload, Image& out,
+                                  CodecScratch* scratch);
+
+Result<std::vector<uint8_t>> encodeRaw(const ImageView& tile, const EncodeOptions& options,
+                                       CodecScratch* scratch);
+Result<void> decodeRaw(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+Result<std::vector<uint8_t>> encodeZstd(const ImageView& tile, const EncodeOptions& options,
+                                        CodecScratch* scratch);
+Result<void> decodeZstd(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+Result<std::vector<uint8_t>> encodeLz4(const ImageView& tile, const EncodeOptions& options,
+                                       CodecScratch* scratch);
+Result<void> decodeLz4(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+Result<std::vector<uint8_t>> encodeJpeg(const ImageView& tile, const EncodeOptions& options,
+                                        CodecScratch* scratch);
+Result<void> decodeJpeg(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+Result<std::vector<uint8_t>> encodePng(const ImageView& tile, const EncodeOptions& options,
+                                       CodecScratch* scratch);
+Result<void> decodePng(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+Result<std::vector<uint8_t>> encodeWebp(const ImageView& tile, const EncodeOptions& options,
+                                        CodecScratch* scratch);
+Result<void> decodeWebp(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
+
+/// Compresses `bytes` into one zstd frame with its content size, using (and creating on first
+/// use) the scratch's compression context. The JPEG codec stores its alpha plane this way.
+Result<std::vector<uint8_t>> compressZstdFrame(std::span<const uint8_t> bytes, int level,
+                                               const char* what, CodecScratch::State& state);
+/// Decompresses a payload that must be exactly one zstd frame whose content size is
+/// `out.size()`. `what` names the payload in errors ("zstd payload", "jpeg alpha plane").
+Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8_t> out,
+                                 const char* what, CodecScratch::State& state);
+
+/// The tile's texels as one packed span: the tile itself when its rows are contiguous,
+/// otherwise a copy in `state.texels`.
+std::span<const uint8_t> packedTexels(const ImageView& tile, CodecScratch::State& state);
+
+/// "258x258x3", for messages.
+std::string geometryText(uint32_t width_px, uint32_t height_px, uint32_t channels);
+
+/// The error for a payload whose stream disagrees with the expected geometry:
+/// "jpeg payload: 258x258x3 expected, stream is 256x256x3".
+Unexpected geometryMismatch(const char* what, const Image& expected, uint32_t width_px,
+                            uint32_t height_px, uint32_t channels);
+
+/// Copies `bytes` into an exact-size vector, the payload the caller keeps.
+std::vector<uint8_t> exactCopy(std::span<const uint8_t> bytes);
+
+}  // namespace tessera::detail
