@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Installs the peer tools that bench/build_vs_peers.sh (and later the serving benchmarks)
+# compare Tessera against, from Debian 12's own packages so anyone can reproduce the figures.
+# Idempotent: packages already present are left alone, and apt is only asked when one is missing.
+set -euo pipefail
+
+packages=(
+  libvips-tools  # vips tiffsave --tile --pyramid, vips dzsave
+  gdal-bin       # gdal_translate -of COG
+  libtiff-tools  # tiffinfo, to check the peers' tile layout and photometric
+  time           # /usr/bin/time -v: wall time and peak RSS
+  nginx          # later: static range-request serving baseline
+  wrk            # later: HTTP load generator
+)
+
+missing=()
+for p in "${packages[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if ((${#missing[@]} == 0)); then
+  echo "install_peers: all ${#packages[@]} packages present"
+  exit 0
+fi
+
+sudo_cmd=()
+if ((EUID != 0)); then sudo_cmd=(sudo); fi
+echo "install_peers: installing ${missing[*]}"
+"${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+"${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+  "${missing[@]}"
+# nginx starts a service on install in some setups; the benchmarks start their own instance.
+if [[ " ${missing[*]} " == *" nginx "* ]] && command -v systemctl >/dev/null 2>&1; then
+  "${sudo_cmd[@]}" systemctl disable --now nginx >/dev/null 2>&1 || true
+fi

@@ -1,0 +1,118 @@
+#!/usr/bin/env bash
+# The whole test suite, as CI runs it (.ci/run): installs the Debian packages, then
+#   1. checks clang-format on every tracked C++ file,
+#   2. builds Release and runs every test,
+#   3. builds RelWithDebInfo with AddressSanitizer + UBSan and runs every test,
+#   4. builds with ThreadSanitizer and runs the tests labelled "concurrency",
+# and ends with each stage's ctest summary. Every stage runs even when an earlier one failed,
+# so one run reports everything; the exit status is non-zero when any stage failed.
+#
+# Environment (all optional):
+#   TESSERA_CI_STAGES   stages to run, default "format release asan tsan"
+#   TESSERA_CI_BUILD    build root, default <repo>/build-ci (one subfolder per stage)
+#   TESSERA_CI_JOBS     parallel compile jobs, default $(nproc)
+#   TESSERA_CI_TIMEOUT  per-test timeout in seconds, default 300 (sanitizer stages: 3x)
+#   TESSERA_CI_FILTER   ctest -R regex, to run a subset while iterating
+#   TESSERA_CI_WERROR   ON/OFF for -Werror in the Release stage, default ON
+set -uo pipefail
+
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+cd "$repo"
+
+stages=${TESSERA_CI_STAGES:-format release asan tsan}
+build_root=${TESSERA_CI_BUILD:-$repo/build-ci}
+jobs=${TESSERA_CI_JOBS:-$(nproc)}
+timeout_s=${TESSERA_CI_TIMEOUT:-300}
+filter=${TESSERA_CI_FILTER:-}
+werror=${TESSERA_CI_WERROR:-ON}
+test_jobs=2
+
+summary=()   # one line per stage, printed at the end
+failed=0
+
+log() { printf '\n==== ci: %s\n' "$*"; }
+stage_result() {  # stage_result NAME STATUS DETAIL
+  summary+=("$(printf '%-8s %-4s %s' "$1" "$2" "$3")")
+  [[ $2 == ok ]] || failed=1
+}
+
+scripts/install-deps.sh || { echo "ci: scripts/install-deps.sh failed" >&2; exit 1; }
+
+# Sanitizer runtime options: fail on the first report, with symbolized stacks.
+export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}
+export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}
+export TSAN_OPTIONS=${TSAN_OPTIONS:-halt_on_error=1:second_deadlock_stack=1}
+
+format_check() {
+  log "clang-format check ($(clang-format --version | head -1))"
+  local files=() bad=()
+  mapfile -t files < <(git ls-files -- '*.cpp' '*.cc' '*.h' '*.hpp' '*.inl')
+  local f
+  for f in "${files[@]}"; do
+    [[ -f $f ]] || continue  # deleted in the working tree but still in the index
+    clang-format --dry-run --Werror --style=file "$f" >/dev/null 2>&1 || bad+=("$f")
+  done
+  if ((${#bad[@]})); then
+    echo "ci: ${#bad[@]} of ${#files[@]} files need clang-format (fix: clang-format -i FILE):"
+    printf '  %s\n' "${bad[@]}"
+    stage_result format FAIL "${#bad[@]} of ${#files[@]} files not clang-formatted: ${bad[*]}"
+  else
+    echo "ci: ${#files[@]} files clang-formatted"
+    stage_result format ok "${#files[@]} files clang-formatted"
+  fi
+}
+
+# build_and_test NAME BUILD_TYPE SANITIZE LABEL TIMEOUT [extra cmake args...]
+build_and_test() {
+  local name=$1 type=$2 sanitize=$3 label=$4 timeout=$5
+  shift 5
+  local dir=$build_root/$name
+  log "$name: configure ($type${sanitize:+, sanitize=$sanitize}) in $dir"
+  if ! cmake -S "$repo" -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE="$type" \
+      -DTESSERA_BUILD_TESTS=ON -DTESSERA_BUILD_TOOLS=ON -DTESSERA_SANITIZE="$sanitize" "$@"; then
+    stage_result "$name" FAIL "configure failed"
+    return
+  fi
+  log "$name: build (-j$jobs)"
+  if ! cmake --build "$dir" -j "$jobs"; then
+    stage_result "$name" FAIL "build failed"
+    return
+  fi
+  log "$name: test${label:+ (label $label)}"
+  local args=(--test-dir "$dir" --output-on-failure -j "$test_jobs" --timeout "$timeout"
+              --no-tests=ignore)
+  [[ -n $label ]] && args+=(-L "$label")
+  [[ -n $filter ]] && args+=(-R "$filter")
+  local out=$dir/ctest.log status
+  ctest "${args[@]}" 2>&1 | tee "$out"
+  status=${PIPESTATUS[0]}
+  # ctest's own summary: "100% tests passed, 0 tests failed out of N" and "Total Test time".
+  local line
+  line=$(grep -E 'tests passed|No tests were found' "$out" | tail -1)
+  [[ -n $line ]] || line="ctest exited $status"
+  line+=" $(grep -E '^Total Test time' "$out" | tail -1 | sed 's/^Total Test time (real) = */in /')"
+  if ((status == 0)); then stage_result "$name" ok "$line"; else stage_result "$name" FAIL "$line"; fi
+}
+
+start=$SECONDS
+for stage in $stages; do
+  case $stage in
+    format) format_check ;;
+    release)
+      build_and_test release Release "" "" "$timeout_s" -DTESSERA_BUILD_BENCH=ON \
+        -DTESSERA_WERROR="$werror" ;;
+    asan)
+      build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) ;;
+    tsan)
+      build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) ;;
+    *) echo "ci: unknown stage '$stage' (known: format release asan tsan)" >&2; exit 2 ;;
+  esac
+done
+
+log "summary ($(((SECONDS - start) / 60)) min $(((SECONDS - start) % 60)) s)"
+printf '%s\n' "${summary[@]}"
+if ((failed)); then
+  echo "ci: FAILED"
+  exit 1
+fi
+echo "ci: all stages passed"
