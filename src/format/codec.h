@@ -60,7 +60,8 @@ struct CodecFunctions {
   /// (from the archive, never from the payload). Rejects payloads that disagree with them,
   /// are truncated, have trailing bytes or would write outside `out`. Allocates at most
   /// the size of `out` plus a bounded scratch.
-  Result<void> (*decode)(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent);
+  Result<void> (*decode)(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
+                         CodecScratch* scratch);
 };
 
 /// The table entry for `codec`, or null for codecs this build does not implement
