@@ -19,40 +19,55 @@ CodecScratch::State::~State() {
 }
 
 CodecScratch::CodecScratch() : state_(new State) {}
-CodecScratch::~CodecScratch() { delete state_; }
+CodecScratch::~CodecScratch() {
+  delete state_;
+}
 
 namespace {
 
-// The public table's decode has no scratch parameter, so these adapters give each call its
-// own short-lived state; decodeTile() passes the caller's scratch straight to the codec.
-template <DecodeFn decode>
-Result<void> decodeWithoutScratch(std::span<const uint8_t> payload, Image& out,
-                                  const ParentTexels* /*parent*/) {
-  return decode(payload, out, nullptr);
+// A tile outside these bounds is a caller bug, not bad input: the archive and the builder
+// validate geometry before any codec sees it.
+void checkTile(const ImageView& tile) {
+  TESSERA_CHECK(tile.data != nullptr && tile.width_px >= 1 && tile.height_px >= 1)
+      << "encode: empty tile " << tile.width_px << "x" << tile.height_px;
+  TESSERA_CHECK(tile.channels >= 1 && tile.channels <= 4)
+      << "encode: " << tile.channels << " channels, 1..4 supported";
+  TESSERA_CHECK(tile.stride_bytes >= size_t(tile.width_px) * tile.channels)
+      << "encode: stride " << tile.stride_bytes << " shorter than a row";
 }
 
+// Sizes `out` to its geometry so every decoder can write width*height*channels bytes.
+void prepareOut(Image& out) {
+  TESSERA_CHECK(out.width_px >= 1 && out.height_px >= 1)
+      << "decode: empty expected geometry " << out.width_px << "x" << out.height_px;
+  TESSERA_CHECK(out.channels >= 1 && out.channels <= 4)
+      << "decode: " << out.channels << " channels, 1..4 supported";
+  out.texels.resize(size_t(out.width_px) * out.height_px * out.channels);
+}
+
+// Adapters from the table's signatures to the codecs', which take no parent (no implemented
+// codec needs one) and can rely on the geometry checks done here.
 template <EncodeFn encode>
-Result<std::vector<uint8_t>> encodeIgnoringParent(const ImageView& tile,
-                                                  const EncodeOptions& options,
-                                                  const ParentTexels* /*parent*/,
-                                                  CodecScratch* scratch) {
+Result<std::vector<uint8_t>> encodeChecked(const ImageView& tile, const EncodeOptions& options,
+                                           const ParentTexels* /*parent*/, CodecScratch* scratch) {
+  checkTile(tile);
   return encode(tile, options, scratch);
 }
 
-struct CodecEntry {
-  CodecFunctions functions;
-  DecodeFn decode_with_scratch;
-};
+template <DecodeFn decode>
+Result<void> decodeChecked(std::span<const uint8_t> payload, Image& out,
+                           const ParentTexels* /*parent*/, CodecScratch* scratch) {
+  prepareOut(out);
+  return decode(payload, out, scratch);
+}
 
 template <EncodeFn encode, DecodeFn decode>
-constexpr CodecEntry makeEntry(Codec codec, bool lossless) {
-  return {{codec, /*needs_parent=*/false, lossless, &encodeIgnoringParent<encode>,
-           &decodeWithoutScratch<decode>},
-          decode};
+constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
+  return {codec, /*needs_parent=*/false, lossless, &encodeChecked<encode>, &decodeChecked<decode>};
 }
 
 // Indexed by Codec value; the static_asserts below keep index and value in step.
-constexpr CodecEntry kCodecTable[] = {
+constexpr CodecFunctions kCodecTable[] = {
     makeEntry<encodeRaw, decodeRaw>(Codec::kRaw, true),
     makeEntry<encodeZstd, decodeZstd>(Codec::kZstd, true),
     makeEntry<encodeLz4, decodeLz4>(Codec::kLz4, true),
@@ -62,17 +77,12 @@ constexpr CodecEntry kCodecTable[] = {
 };
 constexpr bool tableMatchesCodecValues() {
   for (size_t i = 0; i < std::size(kCodecTable); ++i)
-    if (size_t(kCodecTable[i].functions.codec) != i) return false;
+    if (size_t(kCodecTable[i].codec) != i) return false;
   return true;
 }
 static_assert(tableMatchesCodecValues(), "kCodecTable must be indexed by Codec value");
 static_assert(std::size(kCodecTable) == size_t(Codec::kPtm),
               "every codec before kPtm has an implementation");
-
-const CodecEntry* findEntry(Codec codec) {
-  size_t index = size_t(codec);
-  return index < std::size(kCodecTable) ? &kCodecTable[index] : nullptr;
-}
 
 Unexpected unsupportedCodec(Codec codec) {
   if (codec == Codec::kPtm)
@@ -84,23 +94,23 @@ Unexpected unsupportedCodec(Codec codec) {
 }  // namespace
 
 const CodecFunctions* findCodec(Codec codec) {
-  const CodecEntry* entry = findEntry(codec);
-  return entry != nullptr ? &entry->functions : nullptr;
+  const size_t index = size_t(codec);
+  return index < std::size(kCodecTable) ? &kCodecTable[index] : nullptr;
 }
 
 Result<std::vector<uint8_t>> encodeTile(Codec codec, const ImageView& tile,
                                         const EncodeOptions& options, const ParentTexels* parent,
                                         CodecScratch* scratch) {
-  const CodecEntry* entry = findEntry(codec);
-  if (entry == nullptr) return unsupportedCodec(codec);
-  return entry->functions.encode(tile, options, parent, scratch);
+  const CodecFunctions* functions = findCodec(codec);
+  if (functions == nullptr) return unsupportedCodec(codec);
+  return functions->encode(tile, options, parent, scratch);
 }
 
 Result<void> decodeTile(Codec codec, std::span<const uint8_t> payload, Image& out,
-                        const ParentTexels* /*parent*/, CodecScratch* scratch) {
-  const CodecEntry* entry = findEntry(codec);
-  if (entry == nullptr) return unsupportedCodec(codec);
-  return entry->decode_with_scratch(payload, out, scratch);
+                        const ParentTexels* parent, CodecScratch* scratch) {
+  const CodecFunctions* functions = findCodec(codec);
+  if (functions == nullptr) return unsupportedCodec(codec);
+  return functions->decode(payload, out, parent, scratch);
 }
 
 // Helpers shared by the codecs.

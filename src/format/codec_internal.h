@@ -1,7 +1,7 @@
 #pragma once
 // Shared by the codec_*.cpp files: the scratch state behind CodecScratch, the per-codec entry
-// points (which, unlike CodecFunctions::decode, take the caller's scratch), and helpers every
-// codec needs (packing strided input, checking the expected geometry, error text).
+// points that codec.cpp puts in its table, and helpers every codec needs (packing strided
+// input, error text).
 
 #include <cstdint>
 #include <optional>
