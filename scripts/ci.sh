@@ -17,7 +17,7 @@
 set -uo pipefail
 
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
-cd "$repo"
+cd "$repo" || exit 1
 
 stages=${TESSERA_CI_STAGES:-format release asan tsan}
 build_root=${TESSERA_CI_BUILD:-$repo/build-ci}

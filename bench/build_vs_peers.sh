@@ -1,0 +1,275 @@
+#!/usr/bin/env bash
+# Builder vs peers: `tessera build` against `vips tiffsave --tile --pyramid`, `vips dzsave`
+# (folder and --container zip) and `gdal_translate -of COG`, one after another in one run, on the
+# same uncompressed tiled TIFF inputs (tessera-make-tiff): JPEG q85 with 256-px tiles and 4:2:0
+# chroma for every tool, plus a lossless row. For each: wall time and peak RSS (/usr/bin/time -v),
+# megapixels/s, output bytes, ratios to Tessera, and PSNR of level 0 against the source
+# (tessera-psnr, streamed). Prints a Markdown table and writes it to the bench folder.
+#
+# Usage: bench/build_vs_peers.sh [options]
+#   --sizes "32768 16384"  square input sides in px (default: 1 GP and 268 MP)
+#   --input FILE           use this TIFF instead of generated ones (repeatable)
+#   --dir DIR              work folder for inputs, outputs and results (default out/bench)
+#   --no-tessera           peers only (also automatic when `tessera build` is not usable)
+#   --no-peers             Tessera only
+#   --no-lossless          JPEG rows only
+#   --keep                 keep every output (default: delete each after measuring it)
+# Environment: TESSERA_BENCH_BUILD (build folder, default build-bench), TESSERA_BIN,
+# TESSERA_PSNR_BIN, TESSERA_MAKE_TIFF_BIN (use these binaries instead of building them),
+# TESSERA_BENCH_JOBS (compile jobs, default nproc).
+set -euo pipefail
+
+repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+command_line=bench/build_vs_peers.sh
+if (($#)); then command_line+=$(printf ' %q' "$@"); fi
+sizes=(32768 16384)
+inputs=()
+bench_dir=$repo/out/bench
+run_tessera=auto
+run_peers=1
+run_lossless=1
+keep=0
+while (($#)); do
+  case $1 in
+    --sizes) read -r -a sizes <<<"$2"; shift 2 ;;
+    --input) inputs+=("$(realpath "$2")"); shift 2 ;;
+    --dir) bench_dir=$2; shift 2 ;;
+    --no-tessera) run_tessera=0; shift ;;
+    --no-peers) run_peers=0; shift ;;
+    --no-lossless) run_lossless=0; shift ;;
+    --keep) keep=1; shift ;;
+    -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
+    *) echo "build_vs_peers: unknown option $1 (see --help)" >&2; exit 2 ;;
+  esac
+done
+
+build_dir=${TESSERA_BENCH_BUILD:-$repo/build-bench}
+jobs=${TESSERA_BENCH_JOBS:-$(nproc)}
+mkdir -p "$bench_dir"
+bench_dir=$(realpath "$bench_dir")
+log_dir=$bench_dir/logs
+mkdir -p "$log_dir"
+
+# ---- tools -----------------------------------------------------------------------------------
+"$repo/scripts/install-deps.sh"
+"$repo/bench/install_peers.sh"
+
+tessera=${TESSERA_BIN:-}
+psnr=${TESSERA_PSNR_BIN:-}
+make_tiff=${TESSERA_MAKE_TIFF_BIN:-}
+if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
+  cmake -S "$repo" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_BUILD_TOOLS=ON \
+    -DTESSERA_BUILD_BENCH=ON -DTESSERA_BUILD_TESTS=OFF >"$log_dir/configure.log" 2>&1 ||
+    { cat "$log_dir/configure.log"; exit 1; }
+  # One target at a time, so a tool that does not build yet only disables its own rows.
+  build_target() {  # build_target TARGET -> prints the binary's path, or nothing on failure
+    if cmake --build "$build_dir" -j "$jobs" --target "$1" >"$log_dir/build-$1.log" 2>&1; then
+      find "$build_dir" -type f -perm -u+x -name "$2" -not -path '*/CMakeFiles/*' | head -1
+    else
+      echo "build_vs_peers: target $1 did not build (see $log_dir/build-$1.log)" >&2
+    fi
+  }
+  [[ -n $tessera ]] || tessera=$(build_target tessera_cli tessera)
+  [[ -n $psnr ]] || psnr=$(build_target tessera-psnr tessera-psnr)
+  [[ -n $make_tiff ]] || ((${#inputs[@]})) || make_tiff=$(build_target tessera-make-tiff tessera-make-tiff)
+fi
+if [[ $run_tessera == auto ]]; then
+  run_tessera=0
+  if [[ -n $tessera ]] && "$tessera" build --help >/dev/null 2>&1; then run_tessera=1; fi
+  ((run_tessera)) || echo "build_vs_peers: \`tessera build\` not usable yet: peer rows only" >&2
+fi
+[[ -n $psnr ]] || echo "build_vs_peers: no tessera-psnr: PSNR column left empty" >&2
+
+# ---- inputs ----------------------------------------------------------------------------------
+if ((${#inputs[@]} == 0)); then
+  [[ -n $make_tiff ]] || { echo "build_vs_peers: no tessera-make-tiff and no --input" >&2; exit 1; }
+  for side in "${sizes[@]}"; do
+    input=$bench_dir/input-${side}x${side}.tif
+    if [[ ! -s $input ]]; then
+      echo "build_vs_peers: writing $input"
+      "$make_tiff" "$input" --width "$side" --height "$side" --tile 256 >"$log_dir/make-$side.log" 2>&1 ||
+        { cat "$log_dir/make-$side.log"; exit 1; }
+    fi
+    inputs+=("$input")
+  done
+fi
+
+# ---- measuring -------------------------------------------------------------------------------
+threads=$(nproc)
+rows=()  # "input|tool|codec|wall_s|rss_kib|bytes|psnr|chroma|load|command"
+
+tiff_chroma() {  # photometric and chroma subsampling of page 0 of a JPEG-in-TIFF
+  tiffinfo "$1" 2>/dev/null | awk '
+    /^=== TIFF directory 1/ { exit }
+    /Photometric Interpretation:/ { p = $NF }
+    /YCbCr Subsampling:/ { h = $3; v = $4; sub(",", "", h) }
+    END {
+      if (p == "YCbCr") { if (h == "") { h = 2; v = 2 }  # TIFF default
+        print (h == 2 && v == 2) ? "4:2:0" : (h == 1 && v == 1) ? "4:4:4" : h "x" v " YCbCr" }
+      else print p }'
+}
+
+# measure INPUT TOOL CODEC OUTPUT PSNR_TARGET CHROMA -- COMMAND...
+# OUTPUT: what to size (a file, or a folder plus its .dzi); PSNR_TARGET: what tessera-psnr
+# reads ("" for none, "=ROW" to copy another row's figure).
+measure() {
+  local input=$1 tool=$2 codec=$3 output=$4 psnr_target=$5 chroma=$6
+  shift 7
+  local id
+  id=$(basename "${input%.*}")-$(tr -c 'a-zA-Z0-9' '_' <<<"$tool $codec" | sed 's/_*$//')
+  local tfile=$log_dir/$id.time lfile=$log_dir/$id.log
+  rm -rf "$output" "${output%.dzi}_files" "${output%.dzi}.zip"
+  local load
+  load=$(cut -d' ' -f1 /proc/loadavg)
+  echo "build_vs_peers: [$(date +%H:%M:%S)] $tool ($codec) on $(basename "$input"), load $load"
+  local cmd
+  cmd=$(printf '%q ' "$@")
+  echo "  $cmd"
+  if ! /usr/bin/time -v -o "$tfile" "$@" >"$lfile" 2>&1; then
+    echo "build_vs_peers: FAILED, see $lfile" >&2
+    tail -5 "$lfile" >&2
+    rows+=("$(basename "$input")|$tool|$codec|FAIL|||||$load|$cmd")
+    return
+  fi
+  local wall rss bytes psnr_db=""
+  wall=$(awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, t, ":"); s = 0;
+           for (i = 1; i <= n; i++) s = s * 60 + t[i]; printf "%.2f", s }' "$tfile")
+  rss=$(awk -F': ' '/Maximum resident set size/ { print $2 }' "$tfile")
+  if [[ $output == *.dzi ]]; then
+    bytes=$(du -sbc "$output" "${output%.dzi}_files" | tail -1 | cut -f1)
+  else
+    bytes=$(du -sb "$output" | cut -f1)
+  fi
+  [[ $chroma == tiff ]] && chroma=$(tiff_chroma "$output")
+  [[ $chroma == dz ]] && chroma=$(vipsheader -f jpeg-chroma-subsample \
+    "$(find "${output%.dzi}_files" -name '0_0.jpg' | sort -V | tail -1)" 2>/dev/null || echo "?")
+  if [[ $psnr_target == =* ]]; then
+    psnr_db=${psnr_target}
+  elif [[ -n $psnr_target && -n $psnr ]]; then
+    psnr_db=$("$psnr" "$input" "$psnr_target" 2>>"$lfile" |
+      sed -n 's/^psnr_db=\([^ ]*\).*/\1/p' || true)
+    [[ -n $psnr_db ]] || psnr_db="error"
+  fi
+  echo "  wall ${wall} s, peak RSS $((rss / 1024)) MiB, $bytes bytes, PSNR ${psnr_db:-n/a} dB, chroma $chroma"
+  rows+=("$(basename "$input")|$tool|$codec|$wall|$rss|$bytes|$psnr_db|$chroma|$load|$cmd")
+  ((keep)) || rm -rf "$output" "${output%.dzi}_files"
+}
+
+for input in "${inputs[@]}"; do
+  out=$bench_dir/out-$(basename "${input%.*}")
+  mkdir -p "$out"
+  # JPEG q85, 256-px tiles, 4:2:0 chroma everywhere.
+  if ((run_tessera)); then
+    measure "$input" tessera "jpeg q85" "$out/tessera.tess" "$out/tessera.tess" "4:2:0" -- \
+      "$tessera" build "$input" -o "$out/tessera.tess" --tile 256 --codec jpeg --quality 85 \
+      --threads "$threads" --quiet
+  fi
+  if ((run_peers)); then
+    measure "$input" "vips tiffsave" "jpeg q85" "$out/vips.tif" "$out/vips.tif" tiff -- \
+      vips tiffsave "$input" "$out/vips.tif" --tile --pyramid --compression jpeg --Q 85 \
+      --tile-width 256 --tile-height 256
+    # The zip row writes the same tiles as the folder row, so it shares its PSNR; keep the
+    # folder until the zip row has run, then measure the zip (its own wall and RSS).
+    keep_was=$keep
+    keep=1
+    measure "$input" "vips dzsave" "jpeg q85" "$out/dz.dzi" "$out/dz.dzi" dz -- \
+      vips dzsave "$input" "$out/dz" --tile-size 256 --overlap 0 --suffix '.jpg[Q=85]'
+    keep=$keep_was
+    dz_psnr=$(IFS='|' read -r -a f <<<"${rows[-1]}"; echo "${f[6]}")
+    dz_chroma=$(IFS='|' read -r -a f <<<"${rows[-1]}"; echo "${f[7]}")
+    ((keep)) || rm -rf "$out/dz.dzi" "$out/dz_files"
+    measure "$input" "vips dzsave --container zip" "jpeg q85" "$out/dz.zip" "=$dz_psnr" \
+      "$dz_chroma" -- \
+      vips dzsave "$input" "$out/dz.zip" --tile-size 256 --overlap 0 --suffix '.jpg[Q=85]' \
+      --container zip
+    # GDAL: YCbCr 4:2:0 is what the COG driver writes for 3-band JPEG (checked per run by
+    # tiffinfo below); QUALITY and OVERVIEW_QUALITY both 85; box-filtered overviews like the
+    # others; all cores for compression, as vips and Tessera use all cores.
+    measure "$input" "gdal COG" "jpeg q85" "$out/gdal.tif" "$out/gdal.tif" tiff -- \
+      gdal_translate -q -of COG -co COMPRESS=JPEG -co QUALITY=85 -co OVERVIEW_QUALITY=85 \
+      -co BLOCKSIZE=256 -co RESAMPLING=AVERAGE -co NUM_THREADS=ALL_CPUS "$input" "$out/gdal.tif"
+  fi
+  if ((run_lossless)); then
+    if ((run_tessera)); then
+      measure "$input" tessera "png" "$out/tessera-png.tess" "$out/tessera-png.tess" "-" -- \
+        "$tessera" build "$input" -o "$out/tessera-png.tess" --tile 256 --codec png \
+        --threads "$threads" --quiet
+      measure "$input" tessera "webp lossless" "$out/tessera-webp.tess" \
+        "$out/tessera-webp.tess" "-" -- \
+        "$tessera" build "$input" -o "$out/tessera-webp.tess" --tile 256 --codec webp \
+        --threads "$threads" --quiet
+    fi
+    if ((run_peers)); then
+      # Horizontal predictor on both peers (vips' default; GDAL's PREDICTOR=YES); BigTIFF for
+      # vips since a lossless 1-GP pyramid may pass 4 GiB (GDAL switches by itself).
+      measure "$input" "vips tiffsave" "deflate" "$out/vips-deflate.tif" \
+        "$out/vips-deflate.tif" "-" -- \
+        vips tiffsave "$input" "$out/vips-deflate.tif" --tile --pyramid --compression deflate \
+        --predictor horizontal --tile-width 256 --tile-height 256 --bigtiff
+      measure "$input" "gdal COG" "deflate" "$out/gdal-deflate.tif" "$out/gdal-deflate.tif" "-" -- \
+        gdal_translate -q -of COG -co COMPRESS=DEFLATE -co PREDICTOR=YES -co BLOCKSIZE=256 \
+        -co RESAMPLING=AVERAGE -co NUM_THREADS=ALL_CPUS "$input" "$out/gdal-deflate.tif"
+    fi
+  fi
+done
+
+# ---- report ----------------------------------------------------------------------------------
+pixels_of() {  # level-0 pixels of the input whose file name is $1
+  local i
+  for i in "${inputs[@]}"; do
+    if [[ $(basename "$i") == "$1" ]]; then
+      tiffinfo "$i" 2>/dev/null | awk '/Image Width/ { printf "%d", $3 * $6; exit }'
+    fi
+  done
+}
+
+report=$bench_dir/build_vs_peers-$(date +%Y%m%d-%H%M%S).md
+{
+  echo "### Builder vs peers, $(date -u '+%Y-%m-%d %H:%M UTC')"
+  echo
+  echo "Machine: $(lscpu | sed -n 's/^Model name: *//p' | head -1), $(nproc) cores," \
+    "$(free -g | awk '/^Mem:/ { print $2 }') GiB RAM, $(sed -n "s/^PRETTY_NAME=//p" /etc/os-release | tr -d \")," \
+    "kernel $(uname -r)."
+  echo "Tools: $(vips --version), $(gdalinfo --version | cut -d, -f1)," \
+    "tessera $(git -C "$repo" rev-parse --short HEAD 2>/dev/null || echo '?')."
+  echo "Command: \`$command_line\`"
+  echo
+  echo "| input | tool | codec | wall s | MP/s | peak RSS MiB | output bytes | wall ÷ Tessera | bytes ÷ Tessera | PSNR dB | chroma | load |"
+  echo "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|"
+  for row in "${rows[@]}"; do
+    IFS='|' read -r in tool codec wall rss bytes psnr_db chroma load cmd <<<"$row"
+    pixels=$(pixels_of "$in")
+    # Reference row: Tessera JPEG for lossy rows, Tessera PNG for lossless rows.
+    ref_codec="jpeg q85"
+    [[ $codec == "jpeg q85" ]] || ref_codec="png"
+    ref_wall="" ref_bytes=""
+    for r in "${rows[@]}"; do
+      IFS='|' read -r rin rtool rcodec rwall _ rbytes _ <<<"$r"
+      if [[ $rin == "$in" && $rtool == tessera && $rcodec == "$ref_codec" && $rwall != FAIL ]]; then
+        ref_wall=$rwall ref_bytes=$rbytes
+      fi
+    done
+    if [[ $wall == FAIL ]]; then
+      echo "| $in | $tool | $codec | failed | | | | | | | | $load |"
+      continue
+    fi
+    mps=$(awk -v p="$pixels" -v w="$wall" 'BEGIN { if (p > 0 && w > 0) printf "%.1f", p / 1e6 / w }')
+    wr="—" br="—"
+    if [[ -n $ref_wall ]]; then
+      wr=$(awk -v a="$wall" -v b="$ref_wall" 'BEGIN { printf "%.2f", a / b }')
+      br=$(awk -v a="$bytes" -v b="$ref_bytes" 'BEGIN { printf "%.2f", a / b }')
+    fi
+    echo "| $in | $tool | $codec | $wall | $mps | $((rss / 1024)) | $bytes | $wr | $br | ${psnr_db:-—} | $chroma | $load |"
+  done
+  echo
+  echo "Commands, in the order run:"
+  echo
+  for row in "${rows[@]}"; do
+    IFS='|' read -r _ _ _ _ _ _ _ _ _ cmd <<<"$row"
+    echo "    ${cmd//$bench_dir/\$BENCH}"
+  done
+} >"$report"
+echo
+cat "$report"
+echo
+echo "build_vs_peers: report written to $report"
