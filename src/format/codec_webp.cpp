@@ -21,6 +21,11 @@ constexpr int kDefaultWebpEffort = 1;
 // "RIFF" size "WEBP" "VP8L" size, then the VP8L bitstream.
 constexpr size_t kRiffHeaderBytes = 12;
 constexpr size_t kChunkHeaderBytes = 8;
+// The VP8L header: signature 0x2F, then 14 bits width - 1, 14 bits height - 1, 1 bit
+// alpha_is_used, 3 bits version, packed LSB first; alpha_is_used is bit 4 of its 4th byte.
+constexpr uint8_t kVp8lSignature = 0x2F;
+constexpr size_t kAlphaHintByte = kRiffHeaderBytes + kChunkHeaderBytes + 4;
+constexpr uint8_t kAlphaHintBit = 0x10;
 
 uint32_t readLe32(const uint8_t* p) {
   return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
@@ -137,6 +142,16 @@ Result<std::vector<uint8_t>> encodeWebp(const ImageView& tile, const EncodeOptio
   }
   std::vector<uint8_t> payload = exactCopy(std::span(writer.mem, writer.size));
   WebPMemoryWriterClear(&writer);
+  // libwebp clears the VP8L alpha_is_used hint when every texel is opaque, which would make
+  // an opaque RGBA payload indistinguishable from an RGB one. Setting it back (the VP8L spec
+  // says decoders treat it as a hint only) lets decode check the channel count exactly.
+  if (alpha) {
+    if (payload.size() <= kAlphaHintByte || std::memcmp(payload.data() + 12, "VP8L", 4) != 0 ||
+        payload[kRiffHeaderBytes + kChunkHeaderBytes] != kVp8lSignature)
+      return fail(ErrorCode::kInternal,
+                  fmt::format("{}: libwebp did not write a simple VP8L file", kWhat));
+    payload[kAlphaHintByte] |= kAlphaHintBit;
+  }
   return payload;
 }
 
@@ -150,12 +165,11 @@ Result<void> decodeWebp(std::span<const uint8_t> payload, Image& out, CodecScrat
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: bad WebP header: {}", kWhat, statusName(status)));
   const bool out_alpha = out.channels == 2 || out.channels == 4;
-  // A stream without alpha decodes to alpha 255, which is right for an opaque RGBA tile (the
-  // encoder drops the alpha flag when every texel is opaque); one with alpha for an RGB tile
-  // would lose data.
+  // The encoder always sets the alpha hint for 2- and 4-channel tiles, so it tells the
+  // channel count apart (gray and colour are told apart after decoding).
   const bool stream_alpha = config.input.has_alpha != 0;
   if (uint32_t(config.input.width) != out.width_px ||
-      uint32_t(config.input.height) != out.height_px || (stream_alpha && !out_alpha))
+      uint32_t(config.input.height) != out.height_px || stream_alpha != out_alpha)
     return geometryMismatch(kWhat, out, uint32_t(config.input.width), uint32_t(config.input.height),
                             stream_alpha ? 4 : 3);
 
