@@ -75,7 +75,7 @@ if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
 fi
 if [[ $run_tessera == auto ]]; then
   run_tessera=0
-  if [[ -n $tessera ]] && "$tessera" build --help >/dev/null 2>&1; then run_tessera=1; fi
+  if [[ -n $tessera ]] && "$tessera" build --help 2>&1 | grep -q -- --codec; then run_tessera=1; fi
   ((run_tessera)) || echo "build_vs_peers: \`tessera build\` not usable yet: peer rows only" >&2
 fi
 [[ -n $psnr ]] || echo "build_vs_peers: no tessera-psnr: PSNR column left empty" >&2
@@ -128,6 +128,11 @@ measure() {
   if ! /usr/bin/time -v -o "$tfile" "$@" >"$lfile" 2>&1; then
     echo "build_vs_peers: FAILED, see $lfile" >&2
     tail -5 "$lfile" >&2
+    rows+=("$(basename "$input")|$tool|$codec|FAIL|||||$load|$cmd")
+    return
+  fi
+  if [[ ! -e $output ]]; then
+    echo "build_vs_peers: FAILED, $output was not written, see $lfile" >&2
     rows+=("$(basename "$input")|$tool|$codec|FAIL|||||$load|$cmd")
     return
   fi
