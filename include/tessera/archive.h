@@ -4,6 +4,7 @@
 /// with checksum verification, read any rectangle of any level as RGBA.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -29,6 +30,18 @@ struct TileEntry {
   uint32_t length_bytes = 0;  ///< payload length; 0 unless kind is kEncoded
   uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless kind is kEncoded
   uint32_t uniform_rgba = 0;  ///< kUniform: channel c of the colour is byte c (little-endian)
+};
+
+/// What `Archive::verify` found.
+struct VerifyReport {
+  uint64_t tiles_checked = 0;     ///< directory entries examined
+  uint64_t payloads_checked = 0;  ///< encoded payloads read and checksummed
+  uint64_t payload_bytes = 0;
+  uint64_t pages_checked = 0;
+  uint64_t fault_count = 0;         ///< every fault found
+  std::vector<std::string> faults;  ///< the first kMaxReportedFaults messages, in file order
+  static constexpr size_t kMaxReportedFaults = 100;
+  bool ok() const { return fault_count == 0; }
 };
 
 /// A pixel rectangle at one level: [x, x + width) x [y, y + height).
@@ -91,6 +104,12 @@ class Archive {
   /// Same, in the image's own channel count (no RGBA expansion); outside texels are zero.
   [[nodiscard]] Result<Image> readRegion(uint32_t image, uint32_t level,
                                          const PixelRect& rect) const;
+
+  /// Checks every checksum and structural invariant: page indexes, pages, payload checksums,
+  /// that every payload decodes, that blocks lie inside the file and no two overlap. Keeps
+  /// going after a fault. `on_progress(done, total)` is called per level when set.
+  VerifyReport verify(bool decode_payloads = true,
+                      const std::function<void(uint64_t, uint64_t)>& on_progress = {}) const;
 
   struct Impl;
 

@@ -1,1 +1,260 @@
-// placeholder until written
+#include <tessera/archive.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "format/archive_impl.h"
+#include "format/checksum.h"
+#include "format/codec.h"
+
+namespace tessera {
+
+using detail::BlockRef;
+using detail::PageRef;
+
+namespace {
+
+uint64_t levelKey(uint32_t image, uint32_t level) {
+  return (uint64_t(image) << 8) | level;
+}
+
+uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
+  return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
+}
+
+}  // namespace
+
+std::string Archive::Impl::tileName(const TileId& tile) const {
+  if (records.size() == 1)
+    return fmt::format("{}: tile ({},{},{})", name, tile.level, tile.x, tile.y);
+  return fmt::format("{}: image {} tile ({},{},{})", name, tile.image, tile.level, tile.x, tile.y);
+}
+
+Result<std::vector<uint8_t>> Archive::Impl::readBlock(const BlockRef& block,
+                                                      const std::string& what) const {
+  std::vector<uint8_t> bytes(block.length_bytes);
+  if (block.offset_bytes + block.length_bytes <= header_region.size()) {
+    std::memcpy(bytes.data(), header_region.data() + block.offset_bytes, bytes.size());
+  } else {
+    TESSERA_TRY(source->read(block.offset_bytes, bytes));
+  }
+  uint64_t actual = detail::checksum64(bytes);
+  if (actual != block.checksum)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: {} checksum mismatch at offset {} (stored {:016x}, computed "
+                            "{:016x})",
+                            name, what, block.offset_bytes, block.checksum, actual));
+  return bytes;
+}
+
+Result<PageRef> Archive::Impl::pageRef(uint32_t image, uint32_t level, uint32_t page_index) {
+  const ImageInfo& info = infos[image];
+  const BlockRef& index_block = records[image].levels[level].page_index;
+  if (index_block.length_bytes == 0) return PageRef{};
+  std::string what = fmt::format("{}: image {} level {} page index", name, image, level);
+  bool whole = index_block.length_bytes <= kWholePageIndexBytes ||
+               index_block.offset_bytes + index_block.length_bytes <= header_region.size();
+  if (!whole) {
+    uint8_t ref_bytes[detail::kPageRefBytes];
+    TESSERA_TRY(source->read(
+        index_block.offset_bytes + uint64_t(page_index) * detail::kPageRefBytes, ref_bytes));
+    return detail::decodePageRef(ref_bytes, info, level, page_index, header.file_bytes, what);
+  }
+  uint64_t key = levelKey(image, level);
+  {
+    std::lock_guard lock(cache_mutex);
+    auto it = page_indexes.find(key);
+    if (it != page_indexes.end()) return (*it->second)[page_index];
+  }
+  TESSERA_ASSIGN_OR_RETURN(
+      std::vector<uint8_t> bytes,
+      readBlock(index_block, fmt::format("image {} level {} page index", image, level)));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<PageRef> refs,
+                           detail::decodePageIndex(bytes, info, level, header.file_bytes, what));
+  auto shared = std::make_shared<const std::vector<PageRef>>(std::move(refs));
+  std::lock_guard lock(cache_mutex);
+  page_indexes.emplace(key, shared);
+  return (*shared)[page_index];
+}
+
+Result<std::shared_ptr<const std::vector<TileEntry>>> Archive::Impl::page(uint32_t image,
+                                                                          uint32_t level,
+                                                                          uint32_t page_x,
+                                                                          uint32_t page_y) {
+  const ImageInfo& info = infos[image];
+  uint32_t page_index = page_y * detail::pagesX(info, level) + page_x;
+  uint64_t key = pageKey(image, level, page_index);
+  {
+    std::lock_guard lock(cache_mutex);
+    auto it = pages.find(key);
+    if (it != pages.end()) return it->second;
+  }
+  TESSERA_ASSIGN_OR_RETURN(PageRef ref, pageRef(image, level, page_index));
+  detail::PageGeometry geometry = detail::pageGeometry(info, level, page_x, page_y);
+  std::vector<TileEntry> entries;
+  if (ref.length_bytes == 0) {
+    entries.resize(size_t(geometry.columns) * geometry.rows);
+  } else {
+    std::string what = fmt::format("image {} level {} page ({},{})", image, level, page_x, page_y);
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readBlock(ref, what));
+    TESSERA_ASSIGN_OR_RETURN(entries,
+                             detail::decodeTileEntries(bytes, info, header, name + ": " + what));
+  }
+  auto shared = std::make_shared<const std::vector<TileEntry>>(std::move(entries));
+  std::lock_guard lock(cache_mutex);
+  if (pages.emplace(key, shared).second) {
+    page_order.push_back(key);
+    if (page_order.size() > kMaxCachedPages) {
+      pages.erase(page_order.front());
+      page_order.pop_front();
+    }
+  }
+  return shared;
+}
+
+Archive::Archive(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Archive::~Archive() = default;
+
+Result<std::shared_ptr<Archive>> Archive::open(std::shared_ptr<ByteSource> source) {
+  auto impl = std::make_unique<Impl>();
+  impl->name = source->name();
+  impl->source = source;
+  const std::string& name = impl->name;
+  uint64_t size = source->sizeBytes();
+  if (size == 0) return fail(ErrorCode::kCorrupt, name + ": empty file, not a Tessera archive");
+  impl->header_region.resize(std::min<uint64_t>(size, detail::kHeaderRegionBytes));
+  TESSERA_TRY(source->read(0, impl->header_region));
+  TESSERA_ASSIGN_OR_RETURN(impl->header, detail::decodeHeader(impl->header_region, name));
+  const detail::FileHeader& header = impl->header;
+  if (header.file_bytes != size)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: header records {} bytes but the file has {} (truncated or "
+                            "appended to)",
+                            name, header.file_bytes, size));
+  if (header.header_region_bytes > impl->header_region.size()) {
+    // A writer may use a larger header region; read the rest once so its blocks are free too.
+    size_t old_size = impl->header_region.size();
+    impl->header_region.resize(header.header_region_bytes);
+    TESSERA_TRY(source->read(old_size, std::span(impl->header_region).subspan(old_size)));
+  }
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> root_bytes,
+                           impl->readBlock(header.root, "root directory"));
+  TESSERA_ASSIGN_OR_RETURN(impl->records, detail::decodeRootDirectory(root_bytes, header, name));
+  if (header.metadata.length_bytes > 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> json_bytes,
+                             impl->readBlock(header.metadata, "metadata"));
+    impl->metadata = nlohmann::json::parse(json_bytes.begin(), json_bytes.end(), nullptr,
+                                           /*allow_exceptions=*/false);
+    if (impl->metadata.is_discarded() || !impl->metadata.is_object())
+      return fail(ErrorCode::kCorrupt, name + ": metadata is not a JSON object");
+  } else {
+    impl->metadata = nlohmann::json::object();
+  }
+  const nlohmann::json* image_meta = nullptr;
+  if (auto it = impl->metadata.find("images"); it != impl->metadata.end() && it->is_array())
+    image_meta = &*it;
+  for (size_t i = 0; i < impl->records.size(); ++i) {
+    ImageInfo info = impl->records[i].info;
+    if (image_meta && i < image_meta->size()) {
+      const nlohmann::json& meta = (*image_meta)[i];
+      if (meta.is_object() && meta.contains("name") && meta["name"].is_string())
+        info.name = meta["name"].get<std::string>();
+    }
+    impl->infos.push_back(std::move(info));
+  }
+  return std::shared_ptr<Archive>(new Archive(std::move(impl)));
+}
+
+const std::string& Archive::name() const {
+  return impl_->name;
+}
+const std::vector<ImageInfo>& Archive::images() const {
+  return impl_->infos;
+}
+const nlohmann::json& Archive::metadata() const {
+  return impl_->metadata;
+}
+uint64_t Archive::fileBytes() const {
+  return impl_->header.file_bytes;
+}
+const ByteSource& Archive::source() const {
+  return *impl_->source;
+}
+
+Result<TileEntry> Archive::tileEntry(const TileId& tile) const {
+  if (tile.image >= impl_->infos.size())
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: no image {} (archive has {})", impl_->name, tile.image,
+                            impl_->infos.size()));
+  const ImageInfo& info = impl_->infos[tile.image];
+  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
+      tile.y >= info.tilesY(tile.level))
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{} is outside the image ({} levels)",
+                                                         impl_->tileName(tile), info.level_count));
+  uint32_t shift = info.page_tiles_log2;
+  TESSERA_ASSIGN_OR_RETURN(auto entries,
+                           impl_->page(tile.image, tile.level, tile.x >> shift, tile.y >> shift));
+  detail::PageGeometry geometry =
+      detail::pageGeometry(info, tile.level, tile.x >> shift, tile.y >> shift);
+  return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
+                    (tile.x - geometry.first_tile_x)];
+}
+
+Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
+                                                  const TileEntry& entry) const {
+  TESSERA_CHECK(entry.kind == TileKind::kEncoded) << "readPayload on a tile without payload";
+  std::vector<uint8_t> payload(entry.length_bytes);
+  TESSERA_TRY(impl_->source->read(entry.offset_bytes, payload));
+  uint64_t actual = detail::checksum64(payload);
+  if (actual != entry.checksum)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{} checksum mismatch at offset {} (stored {:016x}, computed {:016x})",
+                            impl_->tileName(tile), entry.offset_bytes, entry.checksum, actual));
+  return payload;
+}
+
+Result<Image> Archive::decodeTile(const TileId& tile, const TileEntry& entry,
+                                  std::span<const uint8_t> payload,
+                                  detail::CodecScratch* scratch) const {
+  const ImageInfo& info = impl_->infos.at(tile.image);
+  uint32_t side = info.storedTileSidePx();
+  Image image(side, side, info.channels);
+  switch (entry.kind) {
+    case TileKind::kEmpty: break;
+    case TileKind::kUniform: {
+      uint8_t colour[4];
+      for (uint32_t c = 0; c < 4; ++c) colour[c] = uint8_t(entry.uniform_rgba >> (8 * c));
+      for (size_t i = 0; i < image.texels.size(); i += info.channels)
+        std::memcpy(&image.texels[i], colour, info.channels);
+      break;
+    }
+    case TileKind::kEncoded: {
+      const detail::CodecFunctions* codec = detail::findCodec(entry.codec);
+      if (!codec || codec->needs_parent)
+        return fail(ErrorCode::kUnsupported,
+                    fmt::format("{}: codec {} is not supported by this build",
+                                impl_->tileName(tile), codecName(entry.codec)));
+      Result<void> decoded = codec->decode(payload, image, nullptr, scratch);
+      if (!decoded)
+        return fail(decoded.error().code,
+                    fmt::format("{}: {}", impl_->tileName(tile), decoded.error().message));
+      break;
+    }
+    case TileKind::kProcedural:
+      return fail(ErrorCode::kUnsupported, impl_->tileName(tile) + " is procedural");
+  }
+  return image;
+}
+
+Result<Image> Archive::readTile(const TileId& tile, detail::CodecScratch* scratch) const {
+  TESSERA_ASSIGN_OR_RETURN(TileEntry entry, tileEntry(tile));
+  std::vector<uint8_t> payload;
+  if (entry.kind == TileKind::kEncoded) {
+    TESSERA_ASSIGN_OR_RETURN(payload, readPayload(tile, entry));
+  }
+  return decodeTile(tile, entry, payload, scratch);
+}
+
+}  // namespace tessera

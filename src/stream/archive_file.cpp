@@ -1,0 +1,12 @@
+// Archive::openFile lives in the stream module: the format module reads through a ByteSource
+// it is given and never opens files itself.
+#include <tessera/archive.h>
+
+namespace tessera {
+
+Result<std::shared_ptr<Archive>> Archive::openFile(const std::string& path) {
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ByteSource> source, openFileSource(path));
+  return open(std::move(source));
+}
+
+}  // namespace tessera

@@ -1,0 +1,52 @@
+#pragma once
+// Shared pieces of the `tessera` subcommands: each subcommand file registers its options on
+// the CLI11 app and runs; they share only these plain structs and free functions.
+
+#include <cstdio>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include <tessera/result.h>
+
+namespace tessera::cli {
+
+/// Exit codes, documented in `tessera --help` and docs/cli.md.
+enum ExitCode : int {
+  kExitOk = 0,
+  kExitFailure = 1,     ///< the operation failed (bad input, I/O error)
+  kExitUsage = 2,       ///< bad command line
+  kExitCorrupt = 3,     ///< verify found faults
+  kExitCancelled = 130  ///< interrupted (SIGINT)
+};
+
+/// Prints "tessera: <message>" to stderr and returns the exit code for the error.
+int reportError(const Error& error);
+
+/// True when stderr is a terminal (progress bars only then).
+bool stderrIsTerminal();
+
+/// A one-line progress bar with percentage, throughput and ETA, redrawn in place on stderr.
+/// Owned by one thread.
+class ProgressBar {
+ public:
+  explicit ProgressBar(std::string label) : label_(std::move(label)) {}
+  /// `done` and `total` in `unit`s; `rate_unit` e.g. "MP/s".
+  void update(double done, double total, double elapsed_s, double rate_scale,
+              const char* rate_unit);
+  void finish();
+
+ private:
+  std::string label_;
+  bool drawn_ = false;
+};
+
+/// Formats a byte count as "12.3 MiB".
+std::string formatBytes(uint64_t bytes);
+
+void registerBuildCommand(CLI::App& app, int& exit_code);
+void registerInfoCommand(CLI::App& app, int& exit_code);
+void registerVerifyCommand(CLI::App& app, int& exit_code);
+void registerExtractCommand(CLI::App& app, int& exit_code);
+
+}  // namespace tessera::cli

@@ -1,0 +1,77 @@
+// `tessera verify`: every checksum and structural invariant.
+#include <nlohmann/json.hpp>
+
+#include <tessera/archive.h>
+
+#include "tools/cli.h"
+
+namespace tessera::cli {
+
+namespace {
+
+int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
+  Result<std::shared_ptr<Archive>> opened = Archive::openFile(path);
+  if (!opened) {
+    if (json)
+      std::printf("%s\n", nlohmann::json({{"path", path},
+                                          {"ok", false},
+                                          {"fault_count", 1},
+                                          {"faults", {opened.error().message}}})
+                              .dump(2)
+                              .c_str());
+    int code = reportError(opened.error());
+    return opened.error().code == ErrorCode::kCorrupt ? int(kExitCorrupt) : code;
+  }
+  bool show_progress = !quiet && !json && stderrIsTerminal();
+  ProgressBar bar("verifying");
+  VerifyReport report = (*opened)->verify(decode, [&](uint64_t done, uint64_t total) {
+    if (show_progress) bar.update(double(done), double(total), 0, 1, "levels");
+  });
+  bar.finish();
+  if (json) {
+    std::printf("%s\n", nlohmann::json({{"path", path},
+                                        {"ok", report.ok()},
+                                        {"fault_count", report.fault_count},
+                                        {"faults", report.faults},
+                                        {"tiles_checked", report.tiles_checked},
+                                        {"payloads_checked", report.payloads_checked},
+                                        {"payload_bytes", report.payload_bytes},
+                                        {"pages_checked", report.pages_checked}})
+                            .dump(2)
+                            .c_str());
+  } else {
+    for (const std::string& fault : report.faults) std::fprintf(stderr, "%s\n", fault.c_str());
+    if (report.fault_count > report.faults.size())
+      std::fprintf(stderr, "... and %llu more\n",
+                   (unsigned long long)(report.fault_count - report.faults.size()));
+    if (report.ok()) {
+      if (!quiet)
+        std::printf(
+            "%s: OK (%llu tiles, %llu payloads, %s, %llu directory pages)\n", path.c_str(),
+            (unsigned long long)report.tiles_checked, (unsigned long long)report.payloads_checked,
+            formatBytes(report.payload_bytes).c_str(), (unsigned long long)report.pages_checked);
+    } else {
+      std::printf("%s: %llu fault(s); first: %s\n", path.c_str(),
+                  (unsigned long long)report.fault_count, report.faults.front().c_str());
+    }
+  }
+  return report.ok() ? kExitOk : kExitCorrupt;
+}
+
+}  // namespace
+
+void registerVerifyCommand(CLI::App& app, int& exit_code) {
+  auto path = std::make_shared<std::string>();
+  auto json = std::make_shared<bool>(false);
+  auto no_decode = std::make_shared<bool>(false);
+  auto quiet = std::make_shared<bool>(false);
+  CLI::App* cmd = app.add_subcommand(
+      "verify", "Check every checksum and structural invariant; exit 3 on faults");
+  cmd->add_option("archive", *path, "Archive file")->required();
+  cmd->add_flag("--json", *json, "Machine-readable report");
+  cmd->add_flag("--no-decode", *no_decode, "Check checksums only, do not decode payloads");
+  cmd->add_flag("-q,--quiet", *quiet, "Print only faults");
+  cmd->callback([=, &exit_code] { exit_code = runVerify(*path, *json, !*no_decode, *quiet); });
+}
+
+}  // namespace tessera::cli
