@@ -98,20 +98,19 @@ double psnr(const Image& a, const Image& b, bool skip_alpha = false) {
   return 10 * std::log10(255.0 * 255.0 / (squared / double(count)));
 }
 
-// Every prefix length for small payloads; for big ones every length near both ends, where
-// headers and end markers live, and about 512 evenly spread between, which keeps each loop
-// under a second with ASan.
-std::vector<size_t> truncationLengths(size_t size) {
-  constexpr size_t kDense = 512;
+// Every prefix length for small payloads; for big ones every length within `dense` of either
+// end, where headers and end markers live, and about `dense` more spread evenly between, which
+// keeps each loop around a second under ASan.
+std::vector<size_t> truncationLengths(size_t size, size_t dense) {
   std::vector<size_t> lengths;
-  if (size <= 3 * kDense) {
+  if (size <= 3 * dense) {
     for (size_t n = 0; n < size; ++n) lengths.push_back(n);
     return lengths;
   }
-  for (size_t n = 0; n < kDense; ++n) lengths.push_back(n);
-  const size_t step = std::max<size_t>(1, (size - 2 * kDense) / kDense);
-  for (size_t n = kDense; n < size - kDense; n += step) lengths.push_back(n);
-  for (size_t n = size - kDense; n < size; ++n) lengths.push_back(n);
+  for (size_t n = 0; n < dense; ++n) lengths.push_back(n);
+  const size_t step = std::max<size_t>(1, (size - 2 * dense) / dense);
+  for (size_t n = dense; n < size - dense; n += step) lengths.push_back(n);
+  for (size_t n = size - dense; n < size; ++n) lengths.push_back(n);
   return lengths;
 }
 
@@ -177,14 +176,14 @@ TEST(Codec, LosslessCodecsRoundTripNoiseAndFlatTiles) {
 }
 
 TEST(Codec, EncodeEffortChangesSizeButNotTexels) {
-  Image image = makeImageLike(128, 128, 3);
+  Image image = makeImageLike(64, 64, 3);
   for (Codec codec : {Codec::kZstd, Codec::kPng, Codec::kWebp}) {
     for (int effort : {1, 5, 9}) {
-      SCOPED_TRACE(trace(codec, 128, 128, 3) + " effort " + std::to_string(effort));
+      SCOPED_TRACE(trace(codec, 64, 64, 3) + " effort " + std::to_string(effort));
       EncodeOptions options;
       options.effort = effort;
       std::vector<uint8_t> payload = encodeOrDie(codec, image.view(), options);
-      Image decoded(128, 128, 3);
+      Image decoded(64, 64, 3);
       ASSERT_TRUE(decodeTile(codec, payload, decoded).has_value());
       EXPECT_EQ(decoded.texels, image.texels);
     }
@@ -369,12 +368,13 @@ TEST(Codec, DecodeRejectsTrailingBytes) {
   }
 }
 
-void expectEveryTruncationRejected(Codec codec, const Image& image, CodecScratch* scratch) {
+void expectEveryTruncationRejected(Codec codec, const Image& image, size_t dense,
+                                   CodecScratch* scratch) {
   const std::vector<uint8_t> payload = encodeOrDie(codec, image.view(), {}, scratch);
-  for (size_t length : truncationLengths(payload.size())) {
+  Image decoded(image.width_px, image.height_px, image.channels);
+  for (size_t length : truncationLengths(payload.size(), dense)) {
     // A fresh allocation of exactly `length` bytes, so ASan reports any read past it.
     std::vector<uint8_t> prefix(payload.begin(), payload.begin() + ptrdiff_t(length));
-    Image decoded(image.width_px, image.height_px, image.channels);
     auto result = decodeTile(codec, prefix, decoded, nullptr, scratch);
     ASSERT_FALSE(result.has_value()) << "prefix of " << length << " of " << payload.size();
     ASSERT_EQ(result.error().code, ErrorCode::kCorrupt) << result.error().message;
@@ -386,18 +386,18 @@ TEST(Codec, DecodeRejectsEveryTruncation) {
   for (Codec codec : kAllCodecs) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       SCOPED_TRACE(trace(codec, 48, 40, channels));
-      expectEveryTruncationRejected(codec, makeImageLike(48, 40, channels), &scratch);
+      expectEveryTruncationRejected(codec, makeImageLike(48, 40, channels), 512, &scratch);
     }
   }
 }
 
 TEST(Codec, DecodeRejectsTruncationOfLargeTiles) {
+  // 4 channels: the JPEG alpha container and every lossless codec's largest stream; the other
+  // channel counts are covered densely at 48x40 above.
   CodecScratch scratch;
   for (Codec codec : kAllCodecs) {
-    for (uint32_t channels : {3u, 4u}) {
-      SCOPED_TRACE(trace(codec, 258, 258, channels));
-      expectEveryTruncationRejected(codec, makeImageLike(258, 258, channels), &scratch);
-    }
+    SCOPED_TRACE(trace(codec, 258, 258, 4));
+    expectEveryTruncationRejected(codec, makeImageLike(258, 258, 4), 128, &scratch);
   }
 }
 
@@ -410,7 +410,7 @@ TEST(Codec, SingleByteCorruptionNeverCrashes) {
       const std::vector<uint8_t> payload = encodeOrDie(codec, image.view(), {}, &scratch);
       size_t rejected = 0;
       for (size_t i = 0; i < payload.size(); ++i) {
-        for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0xFF)}) {
+        for (uint8_t flip : {uint8_t(0x01), uint8_t(0xFF)}) {
           std::vector<uint8_t> corrupt = payload;
           corrupt[i] ^= flip;
           Image decoded(24, 20, channels);
@@ -423,7 +423,7 @@ TEST(Codec, SingleByteCorruptionNeverCrashes) {
           }
         }
       }
-      const size_t attempts = 3 * payload.size();
+      const size_t attempts = 2 * payload.size();
       // PNG checksums every chunk, so no corruption goes unnoticed; raw has no structure
       // beyond its size. The others detect what breaks their structure (see docs/codecs.md).
       if (codec == Codec::kPng) {
