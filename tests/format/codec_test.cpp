@@ -175,7 +175,7 @@ TEST(Codec, LosslessCodecsRoundTripNoiseAndFlatTiles) {
   }
 }
 
-TEST(Codec, EncodeEffortChangesSizeButNotTexels) {
+TEST(Codec, EveryEffortRoundTripsExactly) {
   Image image = makeImageLike(64, 64, 3);
   for (Codec codec : {Codec::kZstd, Codec::kPng, Codec::kWebp}) {
     for (int effort : {1, 5, 9}) {

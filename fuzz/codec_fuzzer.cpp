@@ -1,0 +1,74 @@
+// Fuzzes the tile decoders with hostile payloads, and the encoders and decoders together with
+// arbitrary texels (round-trip mode). Input layout: codec_fuzz_input.h.
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+
+#include "codec_fuzz_input.h"
+#include "format/codec.h"
+
+namespace tessera::fuzz {
+namespace {
+
+[[noreturn]] void die(const char* what, const CodecFuzzInput& input) {
+  std::fprintf(stderr, "codec_fuzzer: %s: %s %ux%ux%u\n", what, codecName(input.codec),
+               input.width_px, input.height_px, input.channels);
+  std::abort();
+}
+
+void fuzzDecode(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
+  Image out(input.width_px, input.height_px, input.channels);
+  const size_t expected_bytes = out.texels.size();
+  auto result = detail::decodeTile(input.codec, input.rest, out, nullptr, &scratch);
+  if (result && out.texels.size() != expected_bytes) die("decode changed the tile size", input);
+  if (!result && result.error().message.empty()) die("error without a message", input);
+}
+
+void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
+  if (input.rest.size() < 2) return;
+  detail::EncodeOptions options;
+  options.quality = 1 + input.rest[0] % 100;
+  options.effort = input.rest[1] & 15;
+  if (options.effort > 9) options.effort = 9;
+  options.chroma_subsampling = (input.rest[1] >> 4) & 1;
+  const std::span<const uint8_t> seed = input.rest.subspan(2);
+
+  Image tile(input.width_px, input.height_px, input.channels);
+  for (size_t i = 0; i < tile.texels.size(); ++i)
+    tile.texels[i] = seed.empty() ? 0 : seed[i % seed.size()];
+  const detail::CodecFunctions* functions = detail::findCodec(input.codec);
+  auto payload = detail::encodeTile(input.codec, tile.view(), options, nullptr, &scratch);
+  if (functions == nullptr) {
+    if (payload) die("unimplemented codec encoded", input);
+    return;
+  }
+  if (!payload) die("encode failed", input);
+
+  Image decoded(input.width_px, input.height_px, input.channels);
+  auto result = detail::decodeTile(input.codec, *payload, decoded, nullptr, &scratch);
+  if (!result) die("decode of a fresh payload failed", input);
+  if (functions->lossless) {
+    if (decoded.texels != tile.texels) die("lossless round trip changed texels", input);
+  } else if (input.channels == 2 || input.channels == 4) {
+    for (size_t i = input.channels - 1; i < tile.texels.size(); i += input.channels)
+      if (decoded.texels[i] != tile.texels[i]) die("JPEG alpha changed", input);
+  }
+}
+
+}  // namespace
+}  // namespace tessera::fuzz
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  using namespace tessera::fuzz;
+  CodecFuzzInput input;
+  if (!parseCodecFuzzInput({data, size}, &input)) return 0;
+  // One scratch per process, as a worker keeps one: it also checks that no state leaks from
+  // one (possibly failed) call into the next.
+  static tessera::detail::CodecScratch scratch;
+  if (input.round_trip) {
+    fuzzRoundTrip(input, scratch);
+  } else {
+    fuzzDecode(input, scratch);
+  }
+  return 0;
+}
