@@ -10,9 +10,9 @@
 namespace tessera::fuzz {
 namespace {
 
-[[noreturn]] void die(const char* what, const CodecFuzzInput& input) {
-  std::fprintf(stderr, "codec_fuzzer: %s: %s %ux%ux%u\n", what, codecName(input.codec),
-               input.width_px, input.height_px, input.channels);
+[[noreturn]] void die(const char* what, const CodecFuzzInput& input, const char* detail = "") {
+  std::fprintf(stderr, "codec_fuzzer: %s: %s %ux%ux%u %s\n", what, codecName(input.codec),
+               input.width_px, input.height_px, input.channels, detail);
   std::abort();
 }
 
@@ -42,11 +42,11 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
     if (payload) die("unimplemented codec encoded", input);
     return;
   }
-  if (!payload) die("encode failed", input);
+  if (!payload) die("encode failed", input, payload.error().message.c_str());
 
   Image decoded(input.width_px, input.height_px, input.channels);
   auto result = detail::decodeTile(input.codec, *payload, decoded, nullptr, &scratch);
-  if (!result) die("decode of a fresh payload failed", input);
+  if (!result) die("decode of a fresh payload failed", input, result.error().message.c_str());
   if (functions->lossless) {
     if (decoded.texels != tile.texels) die("lossless round trip changed texels", input);
   } else if (input.channels == 2 || input.channels == 4) {

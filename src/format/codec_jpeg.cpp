@@ -152,6 +152,15 @@ Result<tjhandle> decompressor(CodecScratch::State& state) {
   return static_cast<tjhandle>(state.jpeg_decompressor);
 }
 
+// libjpeg keeps tables and state in its decompressor across images, and after a failed
+// decode that state can make the next, valid stream fail too (found by codec_fuzzer: a bad
+// Huffman table poisoned the following tile). A handle that has seen an error is therefore
+// dropped; errors are rare, so recreating it costs nothing measurable.
+void dropHandle(void*& handle) {
+  if (handle != nullptr) tjDestroy(handle);
+  handle = nullptr;
+}
+
 }  // namespace
 
 Result<std::vector<uint8_t>> encodeJpeg(const ImageView& tile, const EncodeOptions& options,
@@ -210,10 +219,14 @@ Result<std::vector<uint8_t>> encodeJpeg(const ImageView& tile, const EncodeOptio
   unsigned long jpeg_bytes = state->jpeg_buffer_bytes;
   const int quality = std::clamp(options.quality, 1, 100);
   if (tjCompress2(handle, colour, int(width), int(colour_stride), int(height), pixel_format, &jpeg,
-                  &jpeg_bytes, subsampling, quality, kCompressFlags) != 0)
-    return fail(ErrorCode::kInternal,
-                fmt::format("{}: TurboJPEG compression of {} failed: {}", kWhat,
-                            geometryText(width, height, tile.channels), tjGetErrorStr2(handle)));
+                  &jpeg_bytes, subsampling, quality, kCompressFlags) != 0) {
+    Unexpected error =
+        fail(ErrorCode::kInternal,
+             fmt::format("{}: TurboJPEG compression of {} failed: {}", kWhat,
+                         geometryText(width, height, tile.channels), tjGetErrorStr2(handle)));
+    dropHandle(state->jpeg_compressor);
+    return error;
+  }
 
   if (!hasAlpha(tile.channels)) return exactCopy(std::span(jpeg, jpeg_bytes));
   TESSERA_ASSIGN_OR_RETURN(
@@ -263,9 +276,12 @@ Result<void> decodeJpeg(std::span<const uint8_t> payload, Image& out, CodecScrat
   TESSERA_ASSIGN_OR_RETURN(tjhandle handle, decompressor(*state));
   int header_width = 0, header_height = 0, subsampling = 0, colorspace = 0;
   if (tjDecompressHeader3(handle, jpeg.data(), jpeg.size(), &header_width, &header_height,
-                          &subsampling, &colorspace) != 0)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: bad JPEG header: {}", kWhat, tjGetErrorStr2(handle)));
+                          &subsampling, &colorspace) != 0) {
+    Unexpected error = fail(ErrorCode::kCorrupt,
+                            fmt::format("{}: bad JPEG header: {}", kWhat, tjGetErrorStr2(handle)));
+    dropHandle(state->jpeg_decompressor);
+    return error;
+  }
   const bool colorspace_ok = components == 1 ? colorspace == TJCS_GRAY
                                              : (colorspace == TJCS_YCbCr || colorspace == TJCS_RGB);
   if (uint32_t(header_width) != width || uint32_t(header_height) != height || !colorspace_ok)
@@ -289,10 +305,14 @@ Result<void> decodeJpeg(std::span<const uint8_t> payload, Image& out, CodecScrat
     pixel_format = TJPF_GRAY;
   }
   if (tjDecompress2(handle, jpeg.data(), jpeg.size(), colour, int(width), int(colour_stride),
-                    int(height), pixel_format, kDecompressFlags) != 0)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: JPEG data of {} is corrupt: {}", kWhat,
-                            geometryText(width, height, out.channels), tjGetErrorStr2(handle)));
+                    int(height), pixel_format, kDecompressFlags) != 0) {
+    Unexpected error =
+        fail(ErrorCode::kCorrupt,
+             fmt::format("{}: JPEG data of {} is corrupt: {}", kWhat,
+                         geometryText(width, height, out.channels), tjGetErrorStr2(handle)));
+    dropHandle(state->jpeg_decompressor);
+    return error;
+  }
 
   if (out.channels == 2) {
     uint8_t* dst = out.texels.data();
