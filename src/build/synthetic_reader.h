@@ -1,0 +1,76 @@
+#pragma once
+// The synthetic source behind "synthetic:WxH[:seed[:channels]]": a deterministic, image-like
+// generator for tests, demos and benchmarks at any size up to kMaxImageSidePx per side.
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <tessera/result.h>
+
+namespace tessera::detail {
+
+/// A parsed synthetic source name.
+struct SyntheticSpec {
+  uint32_t width_px = 0;   ///< 1..kMaxImageSidePx
+  uint32_t height_px = 0;  ///< 1..kMaxImageSidePx
+  uint64_t seed = 1;       ///< any value; the same seed gives the same image on any machine
+  uint32_t channels = 4;   ///< 3 (no-data flat black) or 4 (no-data transparent)
+};
+
+/// Parses "WxH[:seed[:channels]]" (the part after "synthetic:"). Errors name the whole source,
+/// e.g. "synthetic:0x5: zero image dimensions": kInvalidArgument for bad syntax or channel
+/// counts, kCorrupt for a zero side, kTooLarge for a side over kMaxImageSidePx.
+[[nodiscard]] Result<SyntheticSpec> parseSyntheticSpec(const std::string& spec);
+
+/// Paints fractal terrain coloured by elevation: flat deep sea (so uniform tiles occur), coast,
+/// beaches, lowland greens varied by moisture, hills, rock and snow, hill shading, rivers,
+/// streams, highways and roads as thin lines, and a no-data border outside an irregular "scan
+/// footprint" near the edges. Integer arithmetic only, so the bytes are identical on every
+/// machine and compiler. Any row range can be generated independently: rows depend only on
+/// the spec and their index. Owned by one thread; it caches the coarse noise grid for the last
+/// rows it generated, which makes consecutive bands cheap.
+class SyntheticGenerator {
+ public:
+  explicit SyntheticGenerator(const SyntheticSpec& spec);
+  const SyntheticSpec& spec() const { return spec_; }
+  /// Writes rows [first_row, first_row + rows) into `out` (width_px * channels bytes per row,
+  /// tightly packed). Requires the rows inside the image and `out` large enough.
+  void generateRows(uint32_t first_row, uint32_t rows, std::span<uint8_t> out);
+
+ private:
+  struct Octave {
+    int cell_shift = 0;  // cell side 2^cell_shift px
+    int32_t amplitude = 0;
+    uint32_t seed = 0;
+  };
+  enum Field { kElevation, kMoisture, kRiver, kStream, kHighway, kRoad, kFieldCount };
+
+  void ensureGridRows(uint32_t grid_row);
+  void computeGridRow(uint32_t grid_row, std::vector<int32_t>* values);
+  void generateRow(uint32_t y, uint8_t* out);
+  int32_t footprintNoise(uint32_t t, uint32_t side, uint32_t seed) const;
+
+  SyntheticSpec spec_;
+  uint32_t grid_cols_ = 0;                   // grid points per row, 16 px apart
+  std::vector<Octave> coarse_[kFieldCount];  // octaves of 16 px and more, on the grid
+  std::vector<Octave> fine_;                 // elevation octaves under 16 px, per pixel
+  uint32_t footprint_seeds_[4] = {};         // left, right, top, bottom edges
+  uint32_t margin_x_px_ = 0;                 // depth of the no-data border, left and right
+  uint32_t margin_y_px_ = 0;                 // top and bottom
+  uint8_t palette_dry_[1024][3] = {};        // colour by elevation, dry land
+  uint8_t palette_wet_[1024][3] = {};        // colour by elevation, wet land
+
+  // Cached grid rows grid_row_ and grid_row_ + 1: per field, grid_cols_ values each.
+  uint32_t grid_row_ = UINT32_MAX;
+  std::vector<int32_t> grid_top_;
+  std::vector<int32_t> grid_bottom_;
+  // Per-row scratch, sized for one chunk of pixels.
+  std::vector<int32_t> elevation_;   // kChunkPx + 1 values
+  std::vector<int32_t> lattice_;     // one octave's lattice values along a row
+  std::vector<int32_t> row_fields_;  // coarse fields interpolated to the current row
+  std::vector<int32_t> slope_y_;     // elevation change per 16 px down, per grid column
+};
+
+}  // namespace tessera::detail
