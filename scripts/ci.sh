@@ -89,8 +89,13 @@ build_and_test() {
   # ctest's own summary: "100% tests passed, 0 tests failed out of N" and "Total Test time".
   local line
   line=$(grep -E 'tests passed|No tests were found' "$out" | tail -1)
-  [[ -n $line ]] || line="ctest exited $status"
-  line+=" $(grep -E '^Total Test time' "$out" | tail -1 | sed 's/^Total Test time (real) = */in /')"
+  if [[ -n $line ]]; then
+    line+=" $(grep -E '^Total Test time' "$out" | tail -1 | sed 's/^Total Test time (real) = */in /')"
+  elif ((status == 0)); then
+    line="no tests matched${label:+ label $label}${filter:+ filter $filter} (none yet)"
+  else
+    line="ctest exited $status"
+  fi
   if ((status == 0)); then stage_result "$name" ok "$line"; else stage_result "$name" FAIL "$line"; fi
 }
 
