@@ -62,16 +62,23 @@ if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
     -DTESSERA_BUILD_BENCH=ON -DTESSERA_BUILD_TESTS=OFF >"$log_dir/configure.log" 2>&1 ||
     { cat "$log_dir/configure.log"; exit 1; }
   # One target at a time, so a tool that does not build yet only disables its own rows.
-  build_target() {  # build_target TARGET -> prints the binary's path, or nothing on failure
-    if cmake --build "$build_dir" -j "$jobs" --target "$1" >"$log_dir/build-$1.log" 2>&1; then
-      find "$build_dir" -type f -perm -u+x -name "$2" -not -path '*/CMakeFiles/*' | head -1
-    else
-      echo "build_vs_peers: target $1 did not build (see $log_dir/build-$1.log)" >&2
-    fi
+  build_target() {  # build_target BINARY TARGET... -> the binary's path, or nothing on failure
+    local binary=$1 target
+    shift
+    for target in "$@"; do
+      if cmake --build "$build_dir" -j "$jobs" --target "$target" >"$log_dir/build-$target.log" 2>&1
+      then
+        find "$build_dir" -type f -perm -u+x -name "$binary" -not -path '*/CMakeFiles/*' | head -1
+        return 0
+      fi
+    done
+    echo "build_vs_peers: $binary did not build (see $log_dir/build-$target.log)" >&2
   }
-  [[ -n $tessera ]] || tessera=$(build_target tessera_cli tessera)
-  [[ -n $psnr ]] || psnr=$(build_target tessera-psnr tessera-psnr)
-  [[ -n $make_tiff ]] || ((${#inputs[@]})) || make_tiff=$(build_target tessera-make-tiff tessera-make-tiff)
+  [[ -n $tessera ]] || tessera=$(build_target tessera tessera_cli)
+  [[ -n $psnr ]] || psnr=$(build_target tessera-psnr tessera_psnr)
+  if [[ -z $make_tiff ]] && ((${#inputs[@]} == 0)); then
+    make_tiff=$(build_target tessera-make-tiff tessera_make_tiff tessera-make-tiff)
+  fi
 fi
 if [[ $run_tessera == auto ]]; then
   run_tessera=0
