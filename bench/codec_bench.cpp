@@ -27,7 +27,8 @@ uint32_t hash(uint32_t x, uint32_t y, uint32_t seed) {
 
 // Fractal value noise (5 octaves, gain 0.5) per channel plus +-2 codes of sensor noise: the
 // spectrum of aerial and terrain imagery, which is what Tessera tiles mostly hold. Flat or
-// purely random tiles would flatter or punish the entropy coders.
+// purely random tiles would flatter or punish the entropy coders. The sensor noise is why the
+// byte-oriented LZ coders barely compress it, as on real photographs.
 Image makeImageLike(uint32_t width, uint32_t height, uint32_t channels) {
   Image image(width, height, channels);
   for (uint32_t y = 0; y < height; ++y) {
@@ -48,6 +49,12 @@ Image makeImageLike(uint32_t width, uint32_t height, uint32_t channels) {
           value += amplitude * 2 * (top * (1 - ty) + bottom * ty);
         }
         value += 128 + double(int(hash(x, y, 99 + c) % 5) - 2);
+        if (c == 3) {
+          // Alpha is a mask, not a texture: opaque with a soft-edged transparent disk, as
+          // around the footprint of a scanned map or an image's padded edge.
+          const double dx = x - width * 0.7, dy = y - height * 0.3;
+          value = (std::sqrt(dx * dx + dy * dy) - width * 0.2) * 64;
+        }
         image.row(y)[size_t(x) * channels + c] = uint8_t(std::fmin(255.0, std::fmax(0.0, value)));
       }
     }
