@@ -85,6 +85,11 @@ class Archive {
   [[nodiscard]] Result<std::vector<uint8_t>> readPayload(const TileId& tile,
                                                          const TileEntry& entry) const;
 
+  /// Checks `payload` (read by the caller, e.g. within a merged range) against the entry's
+  /// length and checksum; the error names the tile and the offset.
+  [[nodiscard]] Result<void> verifyPayload(const TileId& tile, const TileEntry& entry,
+                                           std::span<const uint8_t> payload) const;
+
   /// Decodes a verified payload (or expands an empty/uniform entry) into a stored tile:
   /// storedTileSidePx() square with borders, the image's channel count. `scratch` may be null.
   [[nodiscard]] Result<Image> decodeTile(const TileId& tile, const TileEntry& entry,

@@ -202,16 +202,26 @@ Result<TileEntry> Archive::tileEntry(const TileId& tile) const {
                     (tile.x - geometry.first_tile_x)];
 }
 
-Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
-                                                  const TileEntry& entry) const {
-  TESSERA_CHECK(entry.kind == TileKind::kEncoded) << "readPayload on a tile without payload";
-  std::vector<uint8_t> payload(entry.length_bytes);
-  TESSERA_TRY(impl_->source->read(entry.offset_bytes, payload));
+Result<void> Archive::verifyPayload(const TileId& tile, const TileEntry& entry,
+                                    std::span<const uint8_t> payload) const {
+  if (payload.size() != entry.length_bytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{} payload of {} bytes, entry says {}", impl_->tileName(tile),
+                            payload.size(), entry.length_bytes));
   uint64_t actual = detail::checksum64(payload);
   if (actual != entry.checksum)
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{} checksum mismatch at offset {} (stored {:016x}, computed {:016x})",
                             impl_->tileName(tile), entry.offset_bytes, entry.checksum, actual));
+  return {};
+}
+
+Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
+                                                  const TileEntry& entry) const {
+  TESSERA_CHECK(entry.kind == TileKind::kEncoded) << "readPayload on a tile without payload";
+  std::vector<uint8_t> payload(entry.length_bytes);
+  TESSERA_TRY(impl_->source->read(entry.offset_bytes, payload));
+  TESSERA_TRY(verifyPayload(tile, entry, payload));
   return payload;
 }
 

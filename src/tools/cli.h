@@ -48,5 +48,6 @@ void registerBuildCommand(CLI::App& app, int& exit_code);
 void registerInfoCommand(CLI::App& app, int& exit_code);
 void registerVerifyCommand(CLI::App& app, int& exit_code);
 void registerExtractCommand(CLI::App& app, int& exit_code);
+void registerFlyCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

@@ -69,6 +69,7 @@ int main(int argc, char** argv) {
   registerInfoCommand(app, exit_code);
   registerVerifyCommand(app, exit_code);
   registerExtractCommand(app, exit_code);
+  registerFlyCommand(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

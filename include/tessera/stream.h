@@ -1,0 +1,192 @@
+#pragma once
+/// \file
+/// The streaming runtime: views, clip-region residency (Backes et al., sections 5-6, with the
+/// refinements of Luo & Duan, sections 3.3-3.4), the loader pool and `TileStreamer`, the
+/// facade a renderer calls once per frame. Nothing here blocks the render thread: it only
+/// polls finished work.
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <tessera/archive.h>
+#include <tessera/cache.h>
+#include <tessera/format.h>
+#include <tessera/result.h>
+
+namespace tessera {
+
+/// Orthographic 2D view. Positions are level-0 pixels of the image; y grows downwards.
+struct OrthoView {
+  double centre_x = 0;
+  double centre_y = 0;
+  double texels_per_pixel = 1;  ///< level-0 texels per screen pixel (zoom); > 0
+  uint32_t viewport_w = 1280;
+  uint32_t viewport_h = 720;
+  double rotation_rad = 0;  ///< screen rotation about the centre
+};
+
+/// Perspective camera over the texture plane (terrain), in level-0 pixel units: the plane is
+/// z = 0, x right, y down the image; `eye_z` is the height above it.
+struct PerspectiveView {
+  double eye_x = 0;
+  double eye_y = 0;
+  double eye_z = 1000;
+  double yaw_rad = 0;       ///< heading: 0 looks towards -y (up the image)
+  double pitch_rad = -0.7;  ///< below 0 looks down; -pi/2 straight down
+  double fov_y_rad = 1.0;
+  uint32_t viewport_w = 1280;
+  uint32_t viewport_h = 720;
+};
+
+/// A view of one image of an archive.
+struct View {
+  enum class Kind { kOrtho, kPerspective };
+  Kind kind = Kind::kOrtho;
+  uint32_t image = 0;
+  OrthoView ortho;
+  PerspectiveView perspective;
+  uint32_t viewportWidth() const {
+    return kind == Kind::kOrtho ? ortho.viewport_w : perspective.viewport_w;
+  }
+  uint32_t viewportHeight() const {
+    return kind == Kind::kOrtho ? ortho.viewport_h : perspective.viewport_h;
+  }
+};
+
+/// A block of tiles at one level: [x0, x1) x [y0, y1).
+struct TileRect {
+  int64_t x0 = 0, y0 = 0, x1 = 0, y1 = 0;
+  bool contains(int64_t x, int64_t y) const { return x >= x0 && x < x1 && y >= y0 && y < y1; }
+  bool empty() const { return x1 <= x0 || y1 <= y0; }
+  int64_t count() const { return empty() ? 0 : (x1 - x0) * (y1 - y0); }
+  friend bool operator==(const TileRect&, const TileRect&) = default;
+};
+
+/// Clip-region side in tiles for a screen: n = ceil(max(sw, sh) / t) * 2 (Backes et al., eq. 3).
+uint32_t clipRegionTiles(uint32_t screen_w, uint32_t screen_h, uint32_t tile_size_px);
+/// Clip-region centre tile for a view centre f in level pixels: c = floor(f / t) (eq. 4).
+int64_t clipCentreTile(double f_level_px, uint32_t tile_size_px);
+/// The clip region of side n around centre c: tiles [c - n/2, c - n/2 + n).
+TileRect clipRegionAround(int64_t centre_x, int64_t centre_y, uint32_t n);
+/// The level whose texels are at least as dense as the screen's pixels: the largest L with
+/// 2^L <= texels_per_pixel, clamped to [0, level_count - 1]. This is the exact texel-to-pixel
+/// form of Backes et al., eq. 5 (no magnification of a coarser level while a finer one exists).
+uint32_t desiredLevelFor(double texels_per_pixel, uint32_t level_count);
+/// The coarsest level at which one tile covers a clip region of n tiles at `level`:
+/// level + log2(n) (Backes et al., eq. 7, with level 0 the finest), clamped to the coarsest.
+uint32_t startLevelFor(uint32_t level, uint32_t n, uint32_t level_count);
+
+/// Life cycle of a tile in the runtime (Luo & Duan, section 3.2, extended).
+enum class TileState : uint8_t {
+  kUnloaded,   ///< not in host memory
+  kRequested,  ///< queued or being read and decoded
+  kLoaded,     ///< decoded, in the host cache
+  kResident,   ///< uploaded to the GPU (or the renderer's stand-in)
+  kLocked,     ///< resident and never evicted (the coarsest level)
+};
+
+/// A tile the residency manager wants loaded. Lower `priority` loads sooner.
+struct TileRequest {
+  TileId id;
+  double priority = 0;
+  bool prefetch = false;  ///< wanted for a predicted move, not the current view
+};
+
+/// Per-frame tuning. Defaults suit a 1920x1080 view with 256-px tiles.
+struct ResidencyOptions {
+  uint32_t upload_budget_tiles = 32;  ///< tiles handed to the renderer per frame
+  uint64_t upload_budget_bytes = 0;   ///< 0 = no byte limit
+  bool prefetch = true;               ///< direction-based prefetch (Luo & Duan, section 3.3)
+  /// Largest clip-centre move per frame, in tiles of the desired level (Luo & Duan's
+  /// Maxdu/Maxdv): a very fast camera streams what it can show instead of what it flew over.
+  double max_centre_step_tiles = 4;
+  /// Tiles kept around each clip region before eviction (the expanded region of section 3.4).
+  uint32_t keep_margin_tiles = 2;
+};
+
+/// What a frame looked like: the figures `tessera fly` records.
+struct FrameReport {
+  uint32_t desired_level = 0;
+  uint32_t finest_full_level = 0;  ///< finest level whose resident tiles cover the whole view
+  double coverage_desired = 0;     ///< fraction of visible texture covered at the desired level
+  bool fully_covered = false;      ///< every visible texel covered by some resident level
+  size_t queue_length = 0;         ///< requests waiting in the loader
+  size_t in_flight = 0;
+  size_t uploads = 0;  ///< tiles handed to the renderer this frame
+  uint64_t upload_bytes = 0;
+  uint64_t bytes_read_total = 0;     ///< by the loader since start, merged-read gaps included
+  uint64_t payload_bytes_total = 0;  ///< payload bytes of the tiles those reads delivered
+  uint64_t reads_total = 0;          ///< read calls on the byte source
+  uint64_t tiles_loaded_total = 0;
+  uint64_t load_failures_total = 0;
+  double decode_ms_total = 0;  ///< worker time spent decoding since start
+  double update_ms = 0;        ///< render-thread time of this update() call
+};
+
+/// What the renderer should do this frame.
+struct FrameUpdate {
+  /// Tiles to upload now, parents before children, within the upload budget. Each is in
+  /// the cache and pinned until the renderer calls `TileStreamer::uploaded`.
+  std::vector<std::shared_ptr<const DecodedTile>> uploads;
+  /// Resident tiles the renderer may drop (left every region).
+  std::vector<TileId> releases;
+  /// Per level, the tiles the view needs now (clip regions clipped to the image).
+  struct LevelRegion {
+    uint32_t level = 0;
+    TileRect region;
+  };
+  std::vector<LevelRegion> regions;
+  FrameReport report;
+};
+
+/// Everything `TileStreamer::create` can set.
+struct StreamerOptions {
+  size_t cache_budget_bytes = size_t(512) << 20;
+  bool viewer_shift_eviction = true;  ///< else LRU
+  uint32_t loader_threads = 0;        ///< 0 = all cores
+  ResidencyOptions residency;
+  /// Reads whose gap is below this are merged into one (adjacent tiles of the Hilbert layout).
+  uint64_t merge_gap_bytes = 64 * 1024;
+  uint64_t max_merged_read_bytes = 4 << 20;
+  /// Retry a failed read or checksum after this, doubling per failure up to the maximum.
+  std::chrono::milliseconds retry_initial{10};
+  std::chrono::milliseconds retry_max{1000};
+};
+
+/// The runtime for one archive. `update`, `uploaded` and `release` are render-thread only and
+/// never wait on disk, network or decoding; loading happens on the loader threads.
+class TileStreamer {
+ public:
+  [[nodiscard]] static Result<std::unique_ptr<TileStreamer>> create(
+      std::shared_ptr<Archive> archive, const StreamerOptions& options);
+  ~TileStreamer();
+  TileStreamer(const TileStreamer&) = delete;
+  TileStreamer& operator=(const TileStreamer&) = delete;
+
+  /// Once per frame: drains finished loads, recomputes clip regions and priorities for
+  /// `view`, cancels requests that left every region, and returns the uploads for this frame.
+  const FrameUpdate& update(const View& view);
+  /// The renderer uploaded this tile (from the last FrameUpdate): it becomes resident and
+  /// its cache pin is released.
+  void uploaded(const TileId& id);
+  /// The renderer dropped a resident tile.
+  void released(const TileId& id);
+  /// Current state of a tile.
+  TileState state(const TileId& id) const;
+  /// Blocks until the loader is idle: for tests and benchmarks, never the render thread.
+  void waitIdleForTesting();
+
+  const Archive& archive() const;
+  TileCache& cache();
+  CacheStats cacheStats() const;
+
+  struct Impl;
+
+ private:
+  explicit TileStreamer(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,86 @@
+// Viewer-shift eviction (Luo & Duan, section 3.4). LRU evicts the row the viewer just left
+// behind last and the row ahead (cached but not yet shown) first; this policy does the
+// opposite: tiles outside the expanded clip regions go first, ordered by their projection on
+// the motion vector, the farthest behind the motion first.
+#include <algorithm>
+#include <cmath>
+#include <unordered_set>
+
+#include <tessera/cache.h>
+
+namespace tessera {
+
+namespace {
+
+class ViewerShiftPolicy final : public EvictionPolicy {
+ public:
+  const char* name() const override { return "viewer-shift"; }
+  void onInsert(const TileId& id) override { tiles_.insert(id); }
+  void onAccess(const TileId&) override {}
+  void onErase(const TileId& id) override { tiles_.erase(id); }
+  void onViewerMotion(const ViewerMotion& motion) override {
+    double length = std::hypot(motion.motion_x, motion.motion_y);
+    // Keep the last direction while the viewer is still: where it came from is still behind.
+    if (length > 0) {
+      direction_x_ = motion.motion_x / length;
+      direction_y_ = motion.motion_y / length;
+    }
+    centre_x_ = motion.centre_x;
+    centre_y_ = motion.centre_y;
+    keep_ = motion.keep_regions;
+    tile_size_px_ = motion.tile_size_px;
+  }
+
+  void victims(size_t count, std::vector<TileId>& out) override {
+    struct Candidate {
+      bool kept;
+      double score;  ///< lower goes first
+      TileId id;
+    };
+    std::vector<Candidate> candidates;
+    candidates.reserve(tiles_.size());
+    for (const TileId& id : tiles_) {
+      // Tile centre in level-0 pixels.
+      double span = std::ldexp(double(tile_size_px_), int(id.level));
+      double cx = (id.x + 0.5) * span, cy = (id.y + 0.5) * span;
+      bool kept = isKept(id);
+      double dx = cx - centre_x_, dy = cy - centre_y_;
+      // Projection on the motion vector: most negative = farthest behind.
+      double projection = dx * direction_x_ + dy * direction_y_;
+      double distance = std::hypot(dx, dy);
+      double score = (direction_x_ != 0 || direction_y_ != 0) ? projection : -distance;
+      if (kept) score = -distance;  // among kept tiles, farthest from the viewer first
+      candidates.push_back({kept, score, id});
+    }
+    size_t take = std::min(count, candidates.size());
+    std::partial_sort(candidates.begin(), candidates.begin() + take, candidates.end(),
+                      [](const Candidate& a, const Candidate& b) {
+                        if (a.kept != b.kept) return !a.kept;
+                        return a.score < b.score;
+                      });
+    for (size_t i = 0; i < take; ++i) out.push_back(candidates[i].id);
+  }
+
+ private:
+  bool isKept(const TileId& id) const {
+    for (const ViewerMotion::LevelRegion& r : keep_)
+      if (r.image == id.image && r.level == id.level && int64_t(id.x) >= r.x0 &&
+          int64_t(id.x) < r.x1 && int64_t(id.y) >= r.y0 && int64_t(id.y) < r.y1)
+        return true;
+    return false;
+  }
+
+  std::unordered_set<TileId, TileIdHash> tiles_;
+  double direction_x_ = 0, direction_y_ = 0;
+  double centre_x_ = 0, centre_y_ = 0;
+  uint32_t tile_size_px_ = 256;
+  std::vector<ViewerMotion::LevelRegion> keep_;
+};
+
+}  // namespace
+
+std::unique_ptr<EvictionPolicy> makeViewerShiftPolicy() {
+  return std::make_unique<ViewerShiftPolicy>();
+}
+
+}  // namespace tessera

@@ -1,0 +1,292 @@
+#include "stream/loader_pool.h"
+
+#include <algorithm>
+
+#include <fmt/format.h>
+
+#include "format/codec.h"
+
+namespace tessera::detail {
+
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+/// Requests of the same level considered for merging with the one a worker takes.
+constexpr size_t kMergeCandidates = 32;
+
+}  // namespace
+
+struct LoaderPool::Batch {
+  struct Item {
+    TileId id;
+    TileEntry entry;
+  };
+  TileId first;
+  std::vector<TileId> candidates;
+  std::vector<Item> items;
+};
+
+LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
+                       const LoaderOptions& options)
+    : archive_(std::move(archive)), cache_(cache), options_(options) {
+  uint32_t threads =
+      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  for (uint32_t i = 0; i < threads; ++i) workers_.emplace_back([this, i] { run(i); });
+}
+
+LoaderPool::~LoaderPool() {
+  {
+    std::lock_guard lock(mutex_);
+    stopping_ = true;
+    queue_.clear();
+  }
+  work_ready_.notify_all();
+  for (std::thread& worker : workers_) worker.join();
+}
+
+void LoaderPool::setWanted(std::span<const TileRequest> requests) {
+  {
+    std::lock_guard lock(mutex_);
+    std::unordered_set<TileId, TileIdHash> wanted;
+    wanted.reserve(requests.size() * 2);
+    for (const TileRequest& request : requests) wanted.insert(request.id);
+    for (const Pending& pending : queue_)
+      if (!wanted.count(pending.id)) ++stats_.cancelled;
+    queue_.clear();
+    for (const TileRequest& request : requests)
+      if (!in_flight_.count(request.id)) queue_.push_back({request.id, request.priority});
+    wanted_ = std::move(wanted);
+    // Retry state of tiles nobody wants any more is forgotten: a later request starts afresh.
+    for (auto it = retries_.begin(); it != retries_.end();)
+      it = wanted_.count(it->first) ? std::next(it) : retries_.erase(it);
+    stats_.queued = queue_.size();
+  }
+  work_ready_.notify_all();
+}
+
+void LoaderPool::poll(std::vector<LoadEvent>& out) {
+  std::lock_guard lock(mutex_);
+  for (LoadEvent& event : events_) out.push_back(std::move(event));
+  events_.clear();
+}
+
+bool LoaderPool::isRequested(const TileId& id) const {
+  std::lock_guard lock(mutex_);
+  if (in_flight_.count(id)) return true;
+  return std::any_of(queue_.begin(), queue_.end(), [&](const Pending& p) { return p.id == id; });
+}
+
+LoaderStats LoaderPool::stats() const {
+  std::lock_guard lock(mutex_);
+  LoaderStats stats = stats_;
+  stats.queued = queue_.size();
+  stats.in_flight = in_flight_.size();
+  return stats;
+}
+
+void LoaderPool::waitIdle() {
+  std::unique_lock lock(mutex_);
+  idle_.wait(lock, [&] {
+    if (!in_flight_.empty()) return false;
+    // Requests waiting out a retry backoff do not count: they may wait for a long time.
+    auto now = Clock::now();
+    return std::none_of(queue_.begin(), queue_.end(), [&](const Pending& p) {
+      auto it = retries_.find(p.id);
+      return it == retries_.end() || it->second.not_before <= now;
+    });
+  });
+}
+
+bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
+  for (size_t i = 0; i < queue_.size(); ++i) {
+    auto retry = retries_.find(queue_[i].id);
+    if (retry != retries_.end() && retry->second.not_before > now) continue;
+    batch.first = queue_[i].id;
+    batch.candidates.clear();
+    batch.items.clear();
+    queue_.erase(queue_.begin() + ptrdiff_t(i));
+    in_flight_.insert(batch.first);
+    for (size_t j = i; j < queue_.size() && batch.candidates.size() < kMergeCandidates; ++j) {
+      const TileId& other = queue_[j].id;
+      if (other.image == batch.first.image && other.level == batch.first.level &&
+          !retries_.count(other))
+        batch.candidates.push_back(other);
+    }
+    stats_.queued = queue_.size();
+    return true;
+  }
+  return false;
+}
+
+void LoaderPool::run(uint32_t) {
+  CodecScratch scratch;
+  Batch batch;
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    if (stopping_) return;
+    auto now = Clock::now();
+    if (!takeBatchLocked(batch, now)) {
+      // Sleep until new work, or until the earliest backoff ends.
+      auto wake = Clock::time_point::max();
+      for (const Pending& pending : queue_) {
+        auto it = retries_.find(pending.id);
+        if (it != retries_.end()) wake = std::min(wake, it->second.not_before);
+      }
+      idle_.notify_all();
+      if (wake == Clock::time_point::max())
+        work_ready_.wait(lock);
+      else
+        work_ready_.wait_until(lock, wake);
+      continue;
+    }
+    lock.unlock();
+    loadBatch(batch, scratch);
+    lock.lock();
+  }
+}
+
+void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
+  std::lock_guard lock(mutex_);
+  in_flight_.erase(id);
+  if (failed) {
+    ++stats_.failures;
+    RetryState& retry = retries_[id];
+    ++retry.failures;
+    auto backoff = options_.retry_initial * (1u << std::min(retry.failures - 1, 16u));
+    retry.not_before =
+        Clock::now() + std::min<std::chrono::milliseconds>(backoff, options_.retry_max);
+    // Still wanted: back in the queue at its place, to be tried after the backoff.
+    if (wanted_.count(id)) queue_.push_back({id, 1e300});
+  } else {
+    retries_.erase(id);
+  }
+  events_.push_back(std::move(event));
+  idle_.notify_all();
+  if (failed) work_ready_.notify_one();
+}
+
+void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
+  const Archive& archive = *archive_;
+  Result<TileEntry> first_entry = archive.tileEntry(batch.first);
+  if (!first_entry) {
+    finish(batch.first, {batch.first, false, false, first_entry.error().message}, true);
+    return;
+  }
+  batch.items.push_back({batch.first, *first_entry});
+
+  // Merge: requests of the same level whose payloads extend the first one's range with gaps
+  // under merge_gap_bytes (neighbours on the Hilbert curve usually are).
+  if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty()) {
+    std::vector<Batch::Item> neighbours;
+    for (const TileId& id : batch.candidates) {
+      Result<TileEntry> entry = archive.tileEntry(id);
+      if (entry && entry->kind == TileKind::kEncoded) neighbours.push_back({id, *entry});
+    }
+    std::sort(neighbours.begin(), neighbours.end(), [](const auto& a, const auto& b) {
+      return a.entry.offset_bytes < b.entry.offset_bytes;
+    });
+    uint64_t begin = first_entry->offset_bytes;
+    uint64_t end = begin + first_entry->length_bytes;
+    std::vector<Batch::Item> chosen;
+    // Grow the range forwards, then backwards.
+    for (const auto& n : neighbours) {
+      if (n.entry.offset_bytes < end) continue;
+      if (n.entry.offset_bytes - end > options_.merge_gap_bytes) break;
+      uint64_t new_end = n.entry.offset_bytes + n.entry.length_bytes;
+      if (new_end - begin > options_.max_merged_read_bytes) break;
+      end = new_end;
+      chosen.push_back(n);
+    }
+    for (auto it = neighbours.rbegin(); it != neighbours.rend(); ++it) {
+      uint64_t n_end = it->entry.offset_bytes + it->entry.length_bytes;
+      if (n_end > begin) continue;
+      if (begin - n_end > options_.merge_gap_bytes) break;
+      if (end - it->entry.offset_bytes > options_.max_merged_read_bytes) break;
+      begin = it->entry.offset_bytes;
+      chosen.push_back(*it);
+    }
+    // Claim the chosen ones that are still queued (another worker or a new frame may have
+    // taken or cancelled them meanwhile).
+    std::lock_guard lock(mutex_);
+    for (const auto& item : chosen) {
+      auto it = std::find_if(queue_.begin(), queue_.end(),
+                             [&](const Pending& p) { return p.id == item.id; });
+      if (it == queue_.end()) continue;
+      queue_.erase(it);
+      in_flight_.insert(item.id);
+      batch.items.push_back(item);
+    }
+    stats_.queued = queue_.size();
+  }
+
+  // One read for every encoded payload of the batch.
+  uint64_t begin = UINT64_MAX, end = 0;
+  for (const auto& item : batch.items) {
+    if (item.entry.kind != TileKind::kEncoded) continue;
+    begin = std::min(begin, item.entry.offset_bytes);
+    end = std::max(end, item.entry.offset_bytes + item.entry.length_bytes);
+  }
+  std::vector<uint8_t> bytes;
+  Result<void> read;
+  if (begin < end) {
+    bytes.resize(end - begin);
+    read = archive.source().read(begin, bytes);
+    std::lock_guard lock(mutex_);
+    ++stats_.reads;
+    stats_.bytes_read += bytes.size();
+  }
+
+  const size_t tile_bytes = archive.images()[batch.first.image].storedTileBytes();
+  for (const auto& item : batch.items) {
+    std::span<const uint8_t> payload;
+    if (item.entry.kind == TileKind::kEncoded) {
+      if (!read) {
+        finish(item.id, {item.id, false, false, read.error().message}, true);
+        continue;
+      }
+      payload = std::span<const uint8_t>(bytes).subspan(item.entry.offset_bytes - begin,
+                                                        item.entry.length_bytes);
+      if (Result<void> verified = archive.verifyPayload(item.id, item.entry, payload); !verified) {
+        finish(item.id, {item.id, false, false, verified.error().message}, true);
+        continue;
+      }
+    }
+    // The budget counts buffers in flight: no room means try again later, not an error.
+    if (!cache_.reserve(tile_bytes)) {
+      finish(item.id, {item.id, false, false, "tile cache full of pinned tiles"}, true);
+      continue;
+    }
+    auto started = Clock::now();
+    Result<Image> decoded = archive.decodeTile(item.id, item.entry, payload, &scratch);
+    uint64_t decode_ns = uint64_t(
+        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
+    cache_.unreserve(tile_bytes);
+    if (!decoded) {
+      finish(item.id, {item.id, false, false, decoded.error().message}, true);
+      continue;
+    }
+    bool wanted;
+    {
+      std::lock_guard lock(mutex_);
+      wanted = wanted_.count(item.id) > 0;
+      stats_.decode_ns += decode_ns;
+      if (wanted) {
+        ++stats_.tiles_loaded;
+        stats_.payload_bytes += item.entry.length_bytes;
+      } else {
+        ++stats_.stale_dropped;
+      }
+    }
+    // A tile that left every region while it loaded is dropped here (Backes et al., section 6).
+    if (wanted) {
+      auto tile = std::make_shared<DecodedTile>();
+      tile->id = item.id;
+      tile->texels = std::move(*decoded);
+      cache_.insert(std::move(tile));
+    }
+    finish(item.id, {item.id, wanted, !wanted, ""}, false);
+  }
+}
+
+}  // namespace tessera::detail

@@ -1,0 +1,107 @@
+#pragma once
+// The loader pool: a fixed set of worker threads fed by a priority queue that the render
+// thread replaces every frame (Backes et al., section 6). Workers read (merging requests whose
+// payloads are adjacent in the file into one read), verify checksums, decode and insert into
+// the tile cache; the render thread polls their results and never waits for them.
+
+#include <chrono>
+#include <condition_variable>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <unordered_map>
+#include <unordered_set>
+#include <vector>
+
+#include <tessera/archive.h>
+#include <tessera/cache.h>
+#include <tessera/stream.h>
+
+namespace tessera::detail {
+
+struct LoaderOptions {
+  uint32_t threads = 0;  ///< 0 = all cores
+  uint64_t merge_gap_bytes = 64 * 1024;
+  uint64_t max_merged_read_bytes = 4 << 20;
+  std::chrono::milliseconds retry_initial{10};
+  std::chrono::milliseconds retry_max{1000};
+};
+
+/// A finished request, reported once to the render thread.
+struct LoadEvent {
+  TileId id;
+  bool ok = false;
+  bool stale = false;  ///< decoded but no longer wanted: dropped, not cached
+  std::string error;   ///< names the archive, the tile and the problem
+};
+
+struct LoaderStats {
+  uint64_t bytes_read = 0;     ///< including gaps read inside merged ranges
+  uint64_t payload_bytes = 0;  ///< payload bytes of tiles delivered
+  uint64_t reads = 0;          ///< read calls on the byte source
+  uint64_t tiles_loaded = 0;
+  uint64_t failures = 0;
+  uint64_t cancelled = 0;      ///< queued requests dropped because no longer wanted
+  uint64_t stale_dropped = 0;  ///< finished requests dropped because no longer wanted
+  uint64_t decode_ns = 0;
+  size_t queued = 0;
+  size_t in_flight = 0;
+};
+
+/// Thread-safe. Lock order: the pool's mutex, then the cache's (never the reverse).
+class LoaderPool {
+ public:
+  LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache, const LoaderOptions& options);
+  /// Stops the workers after their current batch; queued requests are dropped.
+  ~LoaderPool();
+  LoaderPool(const LoaderPool&) = delete;
+  LoaderPool& operator=(const LoaderPool&) = delete;
+
+  /// Replaces the queue with `requests` (sorted by priority, lower first). Queued requests not
+  /// among them are cancelled; in-flight ones finish and are dropped if still unwanted.
+  /// Tiles failing repeatedly wait out their backoff. Render thread; takes the lock briefly.
+  void setWanted(std::span<const TileRequest> requests);
+  /// Moves finished events into `out`. Never blocks on I/O or decoding.
+  void poll(std::vector<LoadEvent>& out);
+  /// True when the tile is queued or being loaded.
+  bool isRequested(const TileId& id) const;
+  LoaderStats stats() const;
+  /// Blocks until nothing is queued (and ready) or in flight. Tests and benchmarks only.
+  void waitIdle();
+
+ private:
+  struct Pending {
+    TileId id;
+    double priority;
+  };
+  struct RetryState {
+    uint32_t failures = 0;
+    std::chrono::steady_clock::time_point not_before;
+  };
+  struct Batch;
+  void run(uint32_t worker_index);
+  bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
+  void loadBatch(Batch& batch, CodecScratch& scratch);
+  void finish(const TileId& id, LoadEvent event, bool failed);
+
+  std::shared_ptr<Archive> archive_;
+  TileCache& cache_;
+  LoaderOptions options_;
+
+  mutable std::mutex mutex_;  // guards every member below
+  std::condition_variable work_ready_;
+  std::condition_variable idle_;
+  std::vector<Pending> queue_;  ///< sorted by priority
+  std::unordered_set<TileId, TileIdHash> wanted_;
+  std::unordered_set<TileId, TileIdHash> in_flight_;
+  std::unordered_map<TileId, RetryState, TileIdHash> retries_;
+  std::vector<LoadEvent> events_;
+  LoaderStats stats_;
+  bool stopping_ = false;
+  std::vector<std::thread> workers_;
+};
+
+}  // namespace tessera::detail

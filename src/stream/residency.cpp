@@ -1,0 +1,367 @@
+#include "stream/residency.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera::detail {
+
+namespace {
+
+constexpr double kClassStride = 1e12;
+constexpr double kLevelStride = 1e8;
+
+double levelScale(uint32_t level) {
+  return std::ldexp(1.0, int(level));
+}
+
+/// Camera basis of a perspective view: forward, right and up unit vectors.
+struct Basis {
+  double fx, fy, fz, rx, ry, rz, ux, uy, uz;
+};
+
+Basis basisOf(const PerspectiveView& v) {
+  Basis b{};
+  b.fx = std::sin(v.yaw_rad) * std::cos(v.pitch_rad);
+  b.fy = -std::cos(v.yaw_rad) * std::cos(v.pitch_rad);
+  b.fz = std::sin(v.pitch_rad);
+  b.rx = std::cos(v.yaw_rad);
+  b.ry = std::sin(v.yaw_rad);
+  b.rz = 0;
+  // up = right x forward
+  b.ux = b.ry * b.fz - b.rz * b.fy;
+  b.uy = b.rz * b.fx - b.rx * b.fz;
+  b.uz = b.rx * b.fy - b.ry * b.fx;
+  return b;
+}
+
+/// Screen-space size of one pixel at unit distance, in radians.
+double pixelAngle(const PerspectiveView& v) {
+  return 2 * std::tan(v.fov_y_rad / 2) / std::max(1u, v.viewport_h);
+}
+
+/// Rays that miss the ground (above the horizon) are cut where one pixel covers a whole
+/// coarsest-level tile: nothing finer could be seen there.
+double farDistance(const PerspectiveView& v, const ImageInfo& info) {
+  double coarsest_texel = levelScale(info.level_count - 1);
+  return coarsest_texel * info.tile_size_px / pixelAngle(v);
+}
+
+}  // namespace
+
+Footprint footprintOf(const View& view, const ImageInfo& info) {
+  Footprint f;
+  if (view.kind == View::Kind::kOrtho) {
+    const OrthoView& o = view.ortho;
+    double tpp = o.texels_per_pixel > 0 ? o.texels_per_pixel : 1;
+    double hw = o.viewport_w * 0.5 * tpp, hh = o.viewport_h * 0.5 * tpp;
+    double c = std::abs(std::cos(o.rotation_rad)), s = std::abs(std::sin(o.rotation_rad));
+    double ex = c * hw + s * hh, ey = s * hw + c * hh;
+    f = {o.centre_x - ex,
+         o.centre_y - ey,
+         o.centre_x + ex,
+         o.centre_y + ey,
+         o.centre_x,
+         o.centre_y,
+         desiredLevelFor(tpp, info.level_count)};
+    return f;
+  }
+  const PerspectiveView& p = view.perspective;
+  Basis b = basisOf(p);
+  double tan_half = std::tan(p.fov_y_rad / 2);
+  double aspect = double(std::max(1u, p.viewport_w)) / std::max(1u, p.viewport_h);
+  double far = farDistance(p, info);
+  double eye_z = std::max(p.eye_z, 1e-6);
+  f.x0 = f.x1 = p.eye_x;
+  f.y0 = f.y1 = p.eye_y;
+  auto include = [&](double x, double y) {
+    f.x0 = std::min(f.x0, x);
+    f.x1 = std::max(f.x1, x);
+    f.y0 = std::min(f.y0, y);
+    f.y1 = std::max(f.y1, y);
+  };
+  // Sample the screen's edges, not just its corners: the ground trace of an edge bends once
+  // it crosses the horizon.
+  constexpr int kSteps = 8;
+  for (int i = 0; i <= kSteps; ++i) {
+    for (int j = 0; j <= kSteps; ++j) {
+      if (i != 0 && i != kSteps && j != 0 && j != kSteps) continue;
+      double sx = -1 + 2.0 * i / kSteps, sy = -1 + 2.0 * j / kSteps;
+      double dx = b.fx + (b.rx * sx * aspect + b.ux * sy) * tan_half;
+      double dy = b.fy + (b.ry * sx * aspect + b.uy * sy) * tan_half;
+      double dz = b.fz + (b.rz * sx * aspect + b.uz * sy) * tan_half;
+      double len = std::sqrt(dx * dx + dy * dy + dz * dz);
+      double dist = dz < 0 ? std::min(far, eye_z / -dz * len) : far;
+      include(p.eye_x + dx / len * dist, p.eye_y + dy / len * dist);
+    }
+  }
+  f.centre_x = p.eye_x;
+  f.centre_y = p.eye_y;
+  // The nearest ground point inside the footprint is straight below the eye when that is
+  // visible, else on the box: density there sets the finest level needed.
+  double nx = std::clamp(p.eye_x, f.x0, f.x1), ny = std::clamp(p.eye_y, f.y0, f.y1);
+  double d =
+      std::sqrt((nx - p.eye_x) * (nx - p.eye_x) + (ny - p.eye_y) * (ny - p.eye_y) + eye_z * eye_z);
+  f.desired_level = desiredLevelFor(d * pixelAngle(p), info.level_count);
+  return f;
+}
+
+uint32_t requiredLevelForTile(const View& view, const ImageInfo& info, const TileId& tile,
+                              uint32_t desired_level) {
+  if (view.kind == View::Kind::kOrtho) return desired_level;
+  const PerspectiveView& p = view.perspective;
+  double span = levelScale(tile.level) * info.tile_size_px;
+  double x0 = tile.x * span, y0 = tile.y * span;
+  double nx = std::clamp(p.eye_x, x0, x0 + span), ny = std::clamp(p.eye_y, y0, y0 + span);
+  double eye_z = std::max(p.eye_z, 1e-6);
+  double d =
+      std::sqrt((nx - p.eye_x) * (nx - p.eye_x) + (ny - p.eye_y) * (ny - p.eye_y) + eye_z * eye_z);
+  return desiredLevelFor(d * pixelAngle(p), info.level_count);
+}
+
+ResidencyManager::ResidencyManager(const ImageInfo& info, uint32_t image,
+                                   const ResidencyOptions& options)
+    : info_(info), image_(image), options_(options), centres_(info.level_count) {}
+
+TileRect ResidencyManager::gridRect(uint32_t level) const {
+  return {0, 0, info_.tilesX(level), info_.tilesY(level)};
+}
+
+namespace {
+
+TileRect intersect(const TileRect& a, const TileRect& b) {
+  return {std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
+}
+
+/// Tiles of `level` under a box in level-0 pixels.
+TileRect tilesUnder(double x0, double y0, double x1, double y1, uint32_t level, uint32_t t) {
+  double span = levelScale(level) * t;
+  return {int64_t(std::floor(x0 / span)), int64_t(std::floor(y0 / span)),
+          int64_t(std::floor(x1 / span)) + 1, int64_t(std::floor(y1 / span)) + 1};
+}
+
+/// The same block of the image one or more levels coarser.
+TileRect coarsen(const TileRect& r, uint32_t steps) {
+  if (r.empty()) return r;
+  return {r.x0 >> steps, r.y0 >> steps, ((r.x1 - 1) >> steps) + 1, ((r.y1 - 1) >> steps) + 1};
+}
+
+}  // namespace
+
+void ResidencyManager::updateCentre(uint32_t level, double f_x, double f_y, uint32_t n,
+                                    bool limit_step) {
+  LevelCentre& c = centres_[level];
+  const uint32_t t = info_.tile_size_px;
+  double fx = f_x / levelScale(level) / t, fy = f_y / levelScale(level) / t;
+  int64_t target_x = clipCentreTile(f_x / levelScale(level), t);  // eq. 4
+  int64_t target_y = clipCentreTile(f_y / levelScale(level), t);
+  c.prev_x = c.x;
+  c.prev_y = c.y;
+  if (!c.valid) {
+    c = {true, target_x, target_y, target_x, target_y};
+    return;
+  }
+  // Effective region: size floor(n / 2) around the centre; inside it nothing reloads.
+  double half = std::floor(n / 2.0) / 2;
+  bool outside = std::abs(fx - double(c.x)) > half || std::abs(fy - double(c.y)) > half;
+  if (!outside) return;
+  double step = limit_step ? options_.max_centre_step_tiles : 1e18;
+  auto approach = [&](int64_t from, int64_t to) {
+    int64_t delta = to - from;
+    int64_t limit = int64_t(std::max(1.0, step));
+    return from + std::clamp(delta, -limit, limit);
+  };
+  c.x = approach(c.x, target_x);
+  c.y = approach(c.y, target_y);
+}
+
+void ResidencyManager::addWanted(const TileId& tile, int cls, double distance, bool prefetch) {
+  double priority = cls * kClassStride + (info_.level_count - 1 - tile.level) * kLevelStride +
+                    std::min(distance, kLevelStride - 1);
+  auto [it, inserted] = wanted_index_.try_emplace(tile, priority);
+  if (!inserted) {
+    if (priority >= it->second) return;
+    it->second = priority;
+  }
+  plan_.wanted.push_back({tile, priority, prefetch});
+}
+
+const ResidencyPlan& ResidencyManager::plan(const View& view) {
+  const uint32_t t = info_.tile_size_px;
+  const uint32_t coarsest = info_.level_count - 1;
+  Footprint fp = footprintOf(view, info_);
+  const uint32_t desired = fp.desired_level;
+  const uint32_t n = clipRegionTiles(view.viewportWidth(), view.viewportHeight(), t);
+
+  double prev_centre_x = footprint_.centre_x, prev_centre_y = footprint_.centre_y;
+  bool first_frame = !centres_[desired].valid;
+  for (uint32_t l = desired; l <= coarsest; ++l) updateCentre(l, fp.centre_x, fp.centre_y, n, true);
+  // Levels finer than the desired one lose their centres so a later zoom-in starts afresh.
+  for (uint32_t l = 0; l < desired; ++l) centres_[l].valid = false;
+
+  plan_ = {};
+  plan_.desired_level = desired;
+  wanted_index_.clear();
+  keep_rects_.assign(info_.level_count, TileRect{});
+
+  auto distanceFrom = [&](const TileId& tile) {
+    double span = levelScale(tile.level) * t;
+    double dx = (tile.x + 0.5) * span - fp.centre_x, dy = (tile.y + 0.5) * span - fp.centre_y;
+    return std::sqrt(dx * dx + dy * dy) / span;
+  };
+  auto addRect = [&](uint32_t level, const TileRect& rect, int cls, bool prefetch) {
+    TileRect r = intersect(rect, gridRect(level));
+    for (int64_t y = r.y0; y < r.y1; ++y)
+      for (int64_t x = r.x0; x < r.x1; ++x) {
+        TileId tile{image_, level, uint32_t(x), uint32_t(y)};
+        addWanted(tile, cls, distanceFrom(tile), prefetch);
+      }
+  };
+
+  // Class 0: the coarsest level, always resident so every texel is always covered.
+  addRect(coarsest, gridRect(coarsest), 0, false);
+
+  // Class 1: what the view shows, at the level it needs, and everything coarser beneath it.
+  if (view.kind == View::Kind::kOrtho) {
+    for (uint32_t l = desired; l <= coarsest; ++l) {
+      TileRect under = intersect(tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, l, t), gridRect(l));
+      addRect(l, under, 1, false);
+      if (l == desired)
+        for (int64_t y = under.y0; y < under.y1; ++y)
+          for (int64_t x = under.x0; x < under.x1; ++x)
+            plan_.visible.push_back({image_, l, uint32_t(x), uint32_t(y)});
+    }
+  } else {
+    // Quadtree refinement: split a visible tile while it is coarser than its nearest point needs.
+    std::vector<TileId> stack;
+    TileRect top = gridRect(coarsest);
+    for (int64_t y = top.y0; y < top.y1; ++y)
+      for (int64_t x = top.x0; x < top.x1; ++x)
+        stack.push_back({image_, coarsest, uint32_t(x), uint32_t(y)});
+    constexpr size_t kMaxVisibleTiles = 4096;
+    while (!stack.empty()) {
+      TileId tile = stack.back();
+      stack.pop_back();
+      addWanted(tile, 1, distanceFrom(tile), false);
+      uint32_t needed = requiredLevelForTile(view, info_, tile, desired);
+      if (tile.level == 0 || needed >= tile.level || plan_.visible.size() > kMaxVisibleTiles) {
+        plan_.visible.push_back(tile);
+        continue;
+      }
+      TileRect children =
+          intersect(intersect({int64_t(tile.x) * 2, int64_t(tile.y) * 2, int64_t(tile.x) * 2 + 2,
+                               int64_t(tile.y) * 2 + 2},
+                              tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, tile.level - 1, t)),
+                    gridRect(tile.level - 1));
+      for (int64_t y = children.y0; y < children.y1; ++y)
+        for (int64_t x = children.x0; x < children.x1; ++x)
+          stack.push_back({image_, tile.level - 1, uint32_t(x), uint32_t(y)});
+    }
+  }
+
+  // Class 2: the clip region at the desired level (eq. 3-4, with hysteresis), and at coarser
+  // levels the tiles under it: from the start level of eq. 7 on that is a single tile.
+  const LevelCentre& c = centres_[desired];
+  TileRect clip = clipRegionAround(c.x, c.y, n);
+  for (uint32_t l = desired; l <= coarsest; ++l) {
+    TileRect region = coarsen(clip, l - desired);
+    TileRect clipped = intersect(region, gridRect(l));
+    addRect(l, clipped, 2, false);
+    if (!clipped.empty()) plan_.clip_regions.push_back({l, clipped});
+    uint32_t m = options_.keep_margin_tiles;
+    keep_rects_[l] = {region.x0 - m, region.y0 - m, region.x1 + m, region.y1 + m};
+  }
+  for (const TileId& tile : plan_.visible) {
+    TileRect& keep = keep_rects_[tile.level];
+    if (keep.empty()) keep = {tile.x, tile.y, int64_t(tile.x) + 1, int64_t(tile.y) + 1};
+    keep = {std::min<int64_t>(keep.x0, tile.x), std::min<int64_t>(keep.y0, tile.y),
+            std::max<int64_t>(keep.x1, tile.x + 1), std::max<int64_t>(keep.y1, tile.y + 1)};
+  }
+
+  // Class 3: direction-based prefetch (Luo & Duan, section 3.3): when the view centre
+  // crosses a tile boundary, the next column or row beyond the clip region in that direction.
+  if (options_.prefetch) {
+    double span = levelScale(desired) * t;
+    if (first_frame) {
+      addRect(desired, {clip.x0 - 1, clip.y0 - 1, clip.x1 + 1, clip.y0}, 3, true);
+      addRect(desired, {clip.x0 - 1, clip.y1, clip.x1 + 1, clip.y1 + 1}, 3, true);
+      addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
+      addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
+    } else {
+      int64_t cross_x =
+          int64_t(std::floor(fp.centre_x / span)) - int64_t(std::floor(prev_centre_x / span));
+      int64_t cross_y =
+          int64_t(std::floor(fp.centre_y / span)) - int64_t(std::floor(prev_centre_y / span));
+      if (cross_x > 0) addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
+      if (cross_x < 0) addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
+      if (cross_y > 0) addRect(desired, {clip.x0, clip.y1, clip.x1, clip.y1 + 1}, 3, true);
+      if (cross_y < 0) addRect(desired, {clip.x0, clip.y0 - 1, clip.x1, clip.y0}, 3, true);
+    }
+  }
+
+  // Keep only the best priority per tile, sorted.
+  std::sort(plan_.wanted.begin(), plan_.wanted.end(),
+            [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
+  plan_.wanted.erase(
+      std::remove_if(plan_.wanted.begin(), plan_.wanted.end(),
+                     [&](const TileRequest& r) { return wanted_index_.at(r.id) != r.priority; }),
+      plan_.wanted.end());
+
+  plan_.motion.centre_x = fp.centre_x;
+  plan_.motion.centre_y = fp.centre_y;
+  plan_.motion.motion_x = first_frame ? 0 : fp.centre_x - prev_centre_x;
+  plan_.motion.motion_y = first_frame ? 0 : fp.centre_y - prev_centre_y;
+  for (uint32_t l = 0; l < info_.level_count; ++l)
+    if (!keep_rects_[l].empty())
+      plan_.motion.keep_regions.push_back(
+          {image_, l, keep_rects_[l].x0, keep_rects_[l].y0, keep_rects_[l].x1, keep_rects_[l].y1});
+  footprint_ = fp;
+  last_view_ = view;
+  return plan_;
+}
+
+bool ResidencyManager::isWanted(const TileId& tile) const {
+  return wanted_index_.count(tile) > 0;
+}
+
+double ResidencyManager::priorityOf(const TileId& tile) const {
+  auto it = wanted_index_.find(tile);
+  return it == wanted_index_.end() ? 1e300 : it->second;
+}
+
+bool ResidencyManager::isKept(const TileId& tile) const {
+  if (tile.image != image_ || tile.level >= keep_rects_.size()) return false;
+  if (tile.level + 1 == info_.level_count) return true;
+  return keep_rects_[tile.level].contains(tile.x, tile.y) || isWanted(tile);
+}
+
+void ResidencyManager::measureCoverage(const std::function<bool(const TileId&)>& resident,
+                                       FrameReport& report) const {
+  report.desired_level = plan_.desired_level;
+  size_t at_desired = 0;
+  bool all_covered = true;
+  uint32_t finest_full = plan_.desired_level;
+  for (const TileId& tile : plan_.visible) {
+    if (resident(tile)) {
+      ++at_desired;
+      continue;
+    }
+    // The finest resident ancestor covers this tile's area.
+    TileId ancestor = tile;
+    bool covered = false;
+    while (ancestor.level + 1 < info_.level_count) {
+      ancestor = {ancestor.image, ancestor.level + 1, ancestor.x / 2, ancestor.y / 2};
+      if (resident(ancestor)) {
+        covered = true;
+        break;
+      }
+    }
+    if (!covered) all_covered = false;
+    finest_full = std::max(finest_full, covered ? ancestor.level : uint32_t(info_.level_count));
+  }
+  report.coverage_desired =
+      plan_.visible.empty() ? 1.0 : double(at_desired) / double(plan_.visible.size());
+  report.fully_covered = all_covered;
+  report.finest_full_level = std::min(finest_full, info_.level_count - 1);
+}
+
+}  // namespace tessera::detail

@@ -1,0 +1,188 @@
+// TileStreamer: the per-frame loop of the runtime. Render thread: poll finished loads,
+// plan residency, re-prioritise the loader, hand uploads within budget (parent before child).
+#include <tessera/stream.h>
+
+#include <algorithm>
+#include <unordered_set>
+
+#include <fmt/format.h>
+
+#include "stream/loader_pool.h"
+#include "stream/residency.h"
+
+namespace tessera {
+
+using Clock = std::chrono::steady_clock;
+
+struct TileStreamer::Impl {
+  std::shared_ptr<Archive> archive;
+  StreamerOptions options;
+  std::unique_ptr<TileCache> cache;
+  std::unique_ptr<detail::LoaderPool> loader;
+  std::vector<std::unique_ptr<detail::ResidencyManager>> residency;  ///< per image, lazily
+  std::unordered_set<TileId, TileIdHash> resident;
+  std::unordered_set<TileId, TileIdHash> awaiting_upload;  ///< handed out, pinned, not confirmed
+  FrameUpdate update;
+  std::vector<detail::LoadEvent> events;
+  std::vector<TileRequest> requests;
+  uint64_t load_failures = 0;
+};
+
+TileStreamer::TileStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+
+TileStreamer::~TileStreamer() {
+  // Stop loading before the cache it fills goes away.
+  impl_->loader.reset();
+}
+
+Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archive> archive,
+                                                           const StreamerOptions& options) {
+  if (!archive) return fail(ErrorCode::kInvalidArgument, "TileStreamer needs an archive");
+  size_t largest_tile = 0;
+  for (const ImageInfo& info : archive->images())
+    largest_tile = std::max(largest_tile, info.storedTileBytes());
+  // The coarsest levels are pinned and a few tiles are always in flight: a budget below
+  // that could never make progress.
+  size_t minimum = largest_tile * 64;
+  if (options.cache_budget_bytes < minimum)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: cache budget of {} bytes is below the {} bytes 64 tiles need",
+                            archive->name(), options.cache_budget_bytes, minimum));
+  auto impl = std::make_unique<Impl>();
+  impl->archive = archive;
+  impl->options = options;
+  impl->cache = std::make_unique<TileCache>(
+      options.cache_budget_bytes,
+      options.viewer_shift_eviction ? makeViewerShiftPolicy() : makeLruPolicy());
+  detail::LoaderOptions loader_options;
+  loader_options.threads = options.loader_threads;
+  loader_options.merge_gap_bytes = options.merge_gap_bytes;
+  loader_options.max_merged_read_bytes = options.max_merged_read_bytes;
+  loader_options.retry_initial = options.retry_initial;
+  loader_options.retry_max = options.retry_max;
+  impl->loader = std::make_unique<detail::LoaderPool>(archive, *impl->cache, loader_options);
+  impl->residency.resize(archive->images().size());
+  return std::unique_ptr<TileStreamer>(new TileStreamer(std::move(impl)));
+}
+
+const FrameUpdate& TileStreamer::update(const View& view) {
+  const auto started = Clock::now();
+  Impl& s = *impl_;
+  FrameUpdate& out = s.update;
+  out.uploads.clear();
+  out.releases.clear();
+  out.regions.clear();
+
+  s.events.clear();
+  s.loader->poll(s.events);
+  for (const detail::LoadEvent& event : s.events)
+    if (!event.ok && !event.stale) ++s.load_failures;
+
+  uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
+  if (!s.residency[image])
+    s.residency[image] = std::make_unique<detail::ResidencyManager>(s.archive->images()[image],
+                                                                    image, s.options.residency);
+  detail::ResidencyManager& residency = *s.residency[image];
+  const detail::ResidencyPlan& plan = residency.plan(view);
+  ViewerMotion motion = plan.motion;
+  motion.tile_size_px = s.archive->images()[image].tile_size_px;
+  s.cache->setViewerMotion(motion);
+  out.regions = plan.clip_regions;
+
+  // Wanted tiles that are neither resident nor cached go to the loader, in priority order;
+  // cached ones are upload candidates, parents before children.
+  s.requests.clear();
+  std::unordered_set<TileId, TileIdHash> uploading;
+  const ResidencyOptions& budget = s.options.residency;
+  uint64_t upload_bytes = 0;
+  const uint32_t coarsest = s.archive->images()[image].level_count - 1;
+  for (const TileRequest& request : plan.wanted) {
+    const TileId& id = request.id;
+    if (s.resident.count(id) || s.awaiting_upload.count(id)) continue;
+    bool budget_left =
+        out.uploads.size() < budget.upload_budget_tiles &&
+        (budget.upload_budget_bytes == 0 || upload_bytes < budget.upload_budget_bytes);
+    bool parent_ready = id.level == coarsest ||
+                        s.resident.count({id.image, id.level + 1, id.x / 2, id.y / 2}) ||
+                        uploading.count({id.image, id.level + 1, id.x / 2, id.y / 2});
+    if (budget_left && parent_ready) {
+      if (std::shared_ptr<const DecodedTile> tile = s.cache->find(id)) {
+        s.cache->pin(id);
+        upload_bytes += tile->texels.texels.size();
+        uploading.insert(id);
+        s.awaiting_upload.insert(id);
+        out.uploads.push_back(std::move(tile));
+        continue;
+      }
+    } else if (s.cache->contains(id)) {
+      continue;  // loaded, waiting for its parent or for budget
+    }
+    s.requests.push_back(request);
+  }
+  s.loader->setWanted(s.requests);
+
+  // Resident tiles that left every (expanded) region are released.
+  for (auto it = s.resident.begin(); it != s.resident.end();) {
+    if (it->image == image && !residency.isKept(*it)) {
+      out.releases.push_back(*it);
+      it = s.resident.erase(it);
+    } else {
+      ++it;
+    }
+  }
+
+  FrameReport& report = out.report;
+  report = {};
+  residency.measureCoverage(
+      [&](const TileId& id) { return s.resident.count(id) > 0 || uploading.count(id) > 0; },
+      report);
+  detail::LoaderStats loader_stats = s.loader->stats();
+  report.queue_length = loader_stats.queued;
+  report.in_flight = loader_stats.in_flight;
+  report.uploads = out.uploads.size();
+  report.upload_bytes = upload_bytes;
+  report.bytes_read_total = loader_stats.bytes_read;
+  report.payload_bytes_total = loader_stats.payload_bytes;
+  report.reads_total = loader_stats.reads;
+  report.tiles_loaded_total = loader_stats.tiles_loaded;
+  report.load_failures_total = loader_stats.failures;
+  report.decode_ms_total = loader_stats.decode_ns / 1e6;
+  report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+  return out;
+}
+
+void TileStreamer::uploaded(const TileId& id) {
+  if (impl_->awaiting_upload.erase(id) == 0) return;
+  impl_->resident.insert(id);
+  impl_->cache->unpin(id);
+}
+
+void TileStreamer::released(const TileId& id) {
+  impl_->resident.erase(id);
+}
+
+TileState TileStreamer::state(const TileId& id) const {
+  if (impl_->resident.count(id)) {
+    uint32_t coarsest = impl_->archive->images()[id.image].level_count - 1;
+    return id.level == coarsest ? TileState::kLocked : TileState::kResident;
+  }
+  if (impl_->cache->contains(id)) return TileState::kLoaded;
+  if (impl_->loader->isRequested(id)) return TileState::kRequested;
+  return TileState::kUnloaded;
+}
+
+void TileStreamer::waitIdleForTesting() {
+  impl_->loader->waitIdle();
+}
+
+const Archive& TileStreamer::archive() const {
+  return *impl_->archive;
+}
+TileCache& TileStreamer::cache() {
+  return *impl_->cache;
+}
+CacheStats TileStreamer::cacheStats() const {
+  return impl_->cache->stats();
+}
+
+}  // namespace tessera

@@ -1,0 +1,233 @@
+// `tessera fly`: flies a camera path headless at a fixed frame rate, in real time, and
+// records what the runtime did each frame (no GPU: uploads are accepted at once).
+#include <algorithm>
+#include <chrono>
+#include <filesystem>
+#include <fstream>
+#include <thread>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <tessera/archive.h>
+#include <tessera/stream.h>
+
+#include "tools/camera_path.h"
+#include "tools/cli.h"
+
+namespace tessera::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct FlyArgs {
+  std::string archive;
+  std::string path = "pan";
+  double speed_px_s = 1000;
+  double duration_s = 10;
+  std::string viewport = "1920x1080";
+  double fps = 60;
+  size_t cache_mib = 512;
+  std::string eviction = "viewer-shift";
+  uint32_t threads = 0;
+  uint32_t upload_budget = 32;
+  uint32_t image = 0;
+  std::string out_dir = "fly-out";
+  bool json = false;
+  bool quiet = false;
+};
+
+double percentile(std::vector<double> values, double p) {
+  if (values.empty()) return 0;
+  std::sort(values.begin(), values.end());
+  size_t index = std::min(values.size() - 1, size_t(p / 100 * (values.size() - 1) + 0.5));
+  return values[index];
+}
+
+uint64_t peakRssBytes() {
+  std::ifstream status("/proc/self/status");
+  std::string key;
+  while (status >> key) {
+    if (key == "VmHWM:") {
+      uint64_t kib = 0;
+      status >> kib;
+      return kib * 1024;
+    }
+  }
+  return 0;
+}
+
+/// Per jump (and at the start): how long until the view was at full detail, and until the
+/// whole clip region was loaded (Backes et al., Table 1).
+struct JumpTiming {
+  double at_s = 0;
+  double full_detail_ms = -1;
+  double clip_region_ms = -1;
+};
+
+int runFly(const FlyArgs& args) {
+  uint32_t viewport_w = 0, viewport_h = 0;
+  if (std::sscanf(args.viewport.c_str(), "%ux%u", &viewport_w, &viewport_h) != 2 ||
+      viewport_w == 0 || viewport_h == 0 || viewport_w > 16384 || viewport_h > 16384)
+    return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
+  if (!(args.fps > 0 && args.fps <= 1000))
+    return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
+  Result<std::shared_ptr<Archive>> archive = Archive::openFile(args.archive);
+  if (!archive) return reportError(archive.error());
+  if (args.image >= (*archive)->images().size())
+    return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
+  const ImageInfo& info = (*archive)->images()[args.image];
+
+  Result<CameraPath> path =
+      std::filesystem::exists(args.path)
+          ? loadPathFile(args.path)
+          : builtinPath(args.path, info, args.speed_px_s, args.duration_s, viewport_w, viewport_h);
+  if (!path) return reportError(path.error());
+
+  StreamerOptions options;
+  options.cache_budget_bytes = args.cache_mib << 20;
+  options.viewer_shift_eviction = args.eviction != "lru";
+  options.loader_threads = args.threads;
+  options.residency.upload_budget_tiles = args.upload_budget;
+  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
+  if (!streamer) return reportError(streamer.error());
+
+  std::error_code ec;
+  std::filesystem::create_directories(args.out_dir, ec);
+  std::ofstream csv(args.out_dir + "/frames.csv");
+  if (!csv) return reportError({ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write"});
+  csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
+         "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
+         "tiles_loaded,load_failures,update_ms\n";
+
+  std::vector<double> update_ms;
+  std::vector<JumpTiming> jumps{{0}};
+  size_t frames_full_detail = 0, frames_covered = 0, frames = 0;
+  uint64_t uploaded_payload_bytes = 0;
+  const auto start = Clock::now();
+  const double duration = path->durationS();
+  FrameReport last{};
+  for (uint64_t k = 0;; ++k) {
+    double t_s = k / args.fps;
+    if (t_s > duration) break;
+    // Frame pacing: a real renderer presents at the display rate; this is that wait.
+    std::this_thread::sleep_until(
+        start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
+    double now_s = std::chrono::duration<double>(Clock::now() - start).count();
+    if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) jumps.push_back({now_s});
+    View view;
+    view.image = args.image;
+    view.ortho = path->at(t_s, viewport_w, viewport_h);
+    const FrameUpdate& update = (*streamer)->update(view);
+    for (const auto& tile : update.uploads) (*streamer)->uploaded(tile->id);
+    const FrameReport& r = update.report;
+    last = r;
+    update_ms.push_back(r.update_ms);
+    ++frames;
+    frames_full_detail += r.coverage_desired >= 1.0;
+    frames_covered += r.fully_covered;
+    uploaded_payload_bytes = r.payload_bytes_total;
+    JumpTiming& jump = jumps.back();
+    double since_ms = (now_s - jump.at_s) * 1000;
+    if (jump.full_detail_ms < 0 && r.coverage_desired >= 1.0) jump.full_detail_ms = since_ms;
+    if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0 && r.uploads == 0)
+      jump.clip_region_ms = since_ms;
+    csv << fmt::format(
+        "{},{:.2f},{:.1f},{:.1f},{:.4f},{},{},{:.4f},{},{},{},{},{},{},{},{},{:.4f}\n", k,
+        now_s * 1000, view.ortho.centre_x, view.ortho.centre_y, view.ortho.texels_per_pixel,
+        r.desired_level, r.finest_full_level, r.coverage_desired, r.fully_covered ? 1 : 0,
+        r.queue_length, r.in_flight, r.uploads, r.upload_bytes, r.bytes_read_total,
+        r.tiles_loaded_total, r.load_failures_total, r.update_ms);
+  }
+  CacheStats cache = (*streamer)->cacheStats();
+  nlohmann::json jump_list = nlohmann::json::array();
+  for (const JumpTiming& j : jumps)
+    jump_list.push_back(
+        {{"at_s", j.at_s},
+         {"full_detail_ms",
+          j.full_detail_ms < 0 ? nlohmann::json() : nlohmann::json(j.full_detail_ms)},
+         {"clip_region_ms",
+          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}});
+  nlohmann::json summary = {
+      {"archive", args.archive},
+      {"path", path->name},
+      {"viewport", args.viewport},
+      {"fps", args.fps},
+      {"speed_px_s", args.speed_px_s},
+      {"eviction", (*streamer)->cache().policyName()},
+      {"cache_budget_bytes", options.cache_budget_bytes},
+      {"frames", frames},
+      {"frames_full_detail_pct", frames ? 100.0 * frames_full_detail / frames : 0},
+      {"frames_fully_covered_pct", frames ? 100.0 * frames_covered / frames : 0},
+      {"update_ms",
+       {{"p50", percentile(update_ms, 50)},
+        {"p99", percentile(update_ms, 99)},
+        {"max", update_ms.empty() ? 0 : *std::max_element(update_ms.begin(), update_ms.end())}}},
+      {"jumps", jump_list},
+      {"bytes_read", last.bytes_read_total},
+      {"reads", last.reads_total},
+      {"payload_bytes_delivered", uploaded_payload_bytes},
+      {"read_amplification",
+       uploaded_payload_bytes ? double(last.bytes_read_total) / uploaded_payload_bytes : 0},
+      {"tiles_loaded", last.tiles_loaded_total},
+      {"load_failures", last.load_failures_total},
+      {"decode_ms_total", last.decode_ms_total},
+      {"cache",
+       {{"hits", cache.hits},
+        {"misses", cache.misses},
+        {"hit_rate",
+         cache.hits + cache.misses ? double(cache.hits) / (cache.hits + cache.misses) : 0},
+        {"evictions", cache.evictions},
+        {"peak_bytes", cache.peak_bytes}}},
+      {"peak_rss_bytes", peakRssBytes()}};
+  std::ofstream(args.out_dir + "/summary.json") << summary.dump(2) << "\n";
+  if (args.json) {
+    std::printf("%s\n", summary.dump(2).c_str());
+  } else if (!args.quiet) {
+    std::printf(
+        "%s: %zu frames, %.1f%% at full detail, %.1f%% covered; update p50 %.3f ms p99 "
+        "%.3f ms; read %s (amplification %.2f); first full detail after %.1f ms; wrote "
+        "%s/frames.csv and summary.json\n",
+        args.archive.c_str(), frames, summary["frames_full_detail_pct"].get<double>(),
+        summary["frames_fully_covered_pct"].get<double>(), percentile(update_ms, 50),
+        percentile(update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
+        summary["read_amplification"].get<double>(), jumps[0].full_detail_ms, args.out_dir.c_str());
+  }
+  return kExitOk;
+}
+
+}  // namespace
+
+void registerFlyCommand(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<FlyArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "fly", "Fly a camera path headless in real time and report streaming figures");
+  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("--path", args->path, "pan, zoom, jump, spiral, or a keyframe file (docs/fly.md)")
+      ->capture_default_str();
+  cmd->add_option("--speed", args->speed_px_s, "Pan speed in level-0 pixels per second")
+      ->capture_default_str();
+  cmd->add_option("--duration", args->duration_s, "Seconds to fly (built-in paths)")
+      ->capture_default_str();
+  cmd->add_option("--viewport", args->viewport, "Viewport WxH, e.g. 1280x720, 1920x1080, 3840x2160")
+      ->capture_default_str();
+  cmd->add_option("--fps", args->fps, "Frames per second")->capture_default_str();
+  cmd->add_option("--cache-mib", args->cache_mib, "Tile cache budget in MiB")
+      ->capture_default_str();
+  cmd->add_option("--eviction", args->eviction, "viewer-shift or lru")
+      ->check(CLI::IsMember({"viewer-shift", "lru"}))
+      ->capture_default_str();
+  cmd->add_option("--threads", args->threads, "Loader threads (0 = all cores)")
+      ->capture_default_str();
+  cmd->add_option("--upload-budget", args->upload_budget, "Tiles uploaded per frame")
+      ->capture_default_str();
+  cmd->add_option("--image", args->image, "Image index")->capture_default_str();
+  cmd->add_option("-o,--out", args->out_dir, "Folder for frames.csv and summary.json")
+      ->capture_default_str();
+  cmd->add_flag("--json", args->json, "Print the summary as JSON");
+  cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
+  cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
+}
+
+}  // namespace tessera::cli
