@@ -102,6 +102,10 @@ class TileCache {
   /// Inserts (replacing a tile with the same id), evicting unpinned tiles as the policy
   /// orders until it fits. Returns false (and counts `rejected`) if pinned tiles leave no room.
   bool insert(std::shared_ptr<const DecodedTile> tile);
+  /// For each id, the tile if cached (pinned, so it stays until `unpin`) or null; one lock for
+  /// the whole batch, so a render thread pays one short critical section per frame.
+  void findAndPin(std::span<const TileId> ids,
+                  std::vector<std::shared_ptr<const DecodedTile>>& out);
   /// Pinned tiles are never evicted (the coarsest level, tiles being uploaded). Pins count.
   void pin(const TileId& id);
   void unpin(const TileId& id);

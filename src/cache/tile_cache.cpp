@@ -86,6 +86,23 @@ bool TileCache::insert(std::shared_ptr<const DecodedTile> tile) {
   return true;
 }
 
+void TileCache::findAndPin(std::span<const TileId> ids,
+                           std::vector<std::shared_ptr<const DecodedTile>>& out) {
+  std::lock_guard lock(mutex_);
+  for (const TileId& id : ids) {
+    auto it = slots_.find(id);
+    if (it == slots_.end()) {
+      ++stats_.misses;
+      out.push_back(nullptr);
+      continue;
+    }
+    ++stats_.hits;
+    policy_->onAccess(id);
+    if (it->second.pins++ == 0) ++stats_.pinned;
+    out.push_back(it->second.tile);
+  }
+}
+
 void TileCache::pin(const TileId& id) {
   std::lock_guard lock(mutex_);
   auto it = slots_.find(id);

@@ -25,6 +25,11 @@ struct TileStreamer::Impl {
   FrameUpdate update;
   std::vector<detail::LoadEvent> events;
   std::vector<TileRequest> requests;
+  /// Tiles the loader delivered and that are not resident; some may have been evicted since.
+  std::unordered_set<TileId, TileIdHash> loaded;
+  std::vector<TileId> candidates;
+  std::vector<TileRequest> candidate_requests;
+  std::vector<std::shared_ptr<const DecodedTile>> pinned;
   uint64_t load_failures = 0;
 };
 
@@ -76,7 +81,10 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   s.events.clear();
   s.loader->poll(s.events);
   for (const detail::LoadEvent& event : s.events)
-    if (!event.ok && !event.stale) ++s.load_failures;
+    if (event.ok)
+      s.loaded.insert(event.id);
+    else if (!event.stale)
+      ++s.load_failures;
 
   uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
   if (!s.residency[image])
@@ -89,42 +97,69 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   s.cache->setViewerMotion(motion);
   out.regions = plan.clip_regions;
 
-  // Wanted tiles that are neither resident nor cached go to the loader, in priority order;
-  // cached ones are upload candidates, parents before children.
+  // Wanted tiles that are neither resident nor loaded go to the loader, in priority order.
+  // Loaded ones become upload candidates within the budget, parents before children. The
+  // render thread tracks "loaded" from the loader's events, so it takes the cache's lock once
+  // per frame (findAndPin); a tile evicted meanwhile is simply requested again.
   s.requests.clear();
+  s.candidates.clear();
+  s.candidate_requests.clear();
   std::unordered_set<TileId, TileIdHash> uploading;
   const ResidencyOptions& budget = s.options.residency;
-  uint64_t upload_bytes = 0;
-  const uint32_t coarsest = s.archive->images()[image].level_count - 1;
+  const ImageInfo& info = s.archive->images()[image];
+  const uint32_t coarsest = info.level_count - 1;
+  auto parentReady = [&](const TileId& id) {
+    TileId parent{id.image, id.level + 1, id.x / 2, id.y / 2};
+    return id.level == coarsest || s.resident.count(parent) || uploading.count(parent);
+  };
+  uint64_t candidate_bytes = 0;
   for (const TileRequest& request : plan.wanted) {
     const TileId& id = request.id;
     if (s.resident.count(id) || s.awaiting_upload.count(id)) continue;
-    bool budget_left =
-        out.uploads.size() < budget.upload_budget_tiles &&
-        (budget.upload_budget_bytes == 0 || upload_bytes < budget.upload_budget_bytes);
-    bool parent_ready = id.level == coarsest ||
-                        s.resident.count({id.image, id.level + 1, id.x / 2, id.y / 2}) ||
-                        uploading.count({id.image, id.level + 1, id.x / 2, id.y / 2});
-    if (budget_left && parent_ready) {
-      if (std::shared_ptr<const DecodedTile> tile = s.cache->find(id)) {
-        s.cache->pin(id);
-        upload_bytes += tile->texels.texels.size();
-        uploading.insert(id);
-        s.awaiting_upload.insert(id);
-        out.uploads.push_back(std::move(tile));
-        continue;
-      }
-    } else if (s.cache->contains(id)) {
-      continue;  // loaded, waiting for its parent or for budget
+    if (!s.loaded.count(id)) {
+      s.requests.push_back(request);
+      continue;
     }
-    s.requests.push_back(request);
+    bool budget_left =
+        s.candidates.size() < budget.upload_budget_tiles &&
+        (budget.upload_budget_bytes == 0 || candidate_bytes < budget.upload_budget_bytes);
+    if (budget_left && parentReady(id)) {
+      s.candidates.push_back(id);
+      s.candidate_requests.push_back(request);
+      uploading.insert(id);
+      candidate_bytes += info.storedTileBytes();
+    }
   }
+  s.pinned.clear();
+  s.cache->findAndPin(s.candidates, s.pinned);
+  uploading.clear();
+  uint64_t upload_bytes = 0;
+  for (size_t i = 0; i < s.candidates.size(); ++i) {
+    const TileId& id = s.candidates[i];
+    if (!s.pinned[i]) {
+      s.loaded.erase(id);  // evicted since it loaded
+      s.requests.push_back(s.candidate_requests[i]);
+      continue;
+    }
+    if (!parentReady(id)) {  // its parent was evicted before it could go up
+      s.cache->unpin(id);
+      continue;
+    }
+    upload_bytes += s.pinned[i]->texels.texels.size();
+    uploading.insert(id);
+    s.awaiting_upload.insert(id);
+    s.loaded.erase(id);
+    out.uploads.push_back(std::move(s.pinned[i]));
+  }
+  std::sort(s.requests.begin(), s.requests.end(),
+            [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
   s.loader->setWanted(s.requests);
 
   // Resident tiles that left every (expanded) region are released.
   for (auto it = s.resident.begin(); it != s.resident.end();) {
     if (it->image == image && !residency.isKept(*it)) {
       out.releases.push_back(*it);
+      s.loaded.insert(*it);  // probably still cached; found out at the next upload attempt
       it = s.resident.erase(it);
     } else {
       ++it;

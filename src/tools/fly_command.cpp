@@ -131,7 +131,7 @@ int runFly(const FlyArgs& args) {
     JumpTiming& jump = jumps.back();
     double since_ms = (now_s - jump.at_s) * 1000;
     if (jump.full_detail_ms < 0 && r.coverage_desired >= 1.0) jump.full_detail_ms = since_ms;
-    if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0 && r.uploads == 0)
+    if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0)
       jump.clip_region_ms = since_ms;
     csv << fmt::format(
         "{},{:.2f},{:.1f},{:.1f},{:.4f},{},{},{:.4f},{},{},{},{},{},{},{},{},{:.4f}\n", k,

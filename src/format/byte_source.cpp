@@ -1,3 +1,5 @@
+// The ByteSource interface lives with the archive reader that consumes it; the file and
+// memory implementations are in the stream module.
 #include <tessera/byte_source.h>
 
 namespace tessera {
