@@ -50,6 +50,10 @@ constexpr uint8_t kStreamColour[3] = {62, 104, 150};
 constexpr uint8_t kHighwayColour[3] = {214, 204, 188};
 constexpr uint8_t kRoadColour[3] = {158, 146, 124};
 constexpr uint8_t kNoDataColour[3] = {0, 0, 0};
+constexpr int32_t kPaletteSize = 1024;  // elevation steps of 32 units from kPaletteMin
+constexpr int32_t kWetLevels = 17;      // moisture levels, dithered between
+constexpr uint32_t kNoiseTableSize = 8192;
+constexpr uint32_t kNoiseMask = kNoiseTableSize - 1;
 
 // Chris Wellons' "lowbias32" integer hash (hash-prospector), a full-avalanche 32-bit mix.
 inline uint32_t mix(uint32_t h) {
@@ -184,7 +188,8 @@ SyntheticGenerator::SyntheticGenerator(const SyntheticSpec& spec) : spec_(spec) 
   margin_x_px_ = std::max<uint32_t>(1, spec.width_px / 24);
   margin_y_px_ = std::max<uint32_t>(1, spec.height_px / 24);
 
-  for (int i = 0; i < 1024; ++i) {
+  palettes_.resize(size_t(kWetLevels) * kPaletteSize * 3);
+  for (int32_t i = 0; i < kPaletteSize; ++i) {
     const int32_t elevation = kPaletteMin + i * 32;
     size_t k = 0;
     while (k + 2 < std::size(kPalette) && kPalette[k + 1].elevation <= elevation) ++k;
@@ -192,14 +197,23 @@ SyntheticGenerator::SyntheticGenerator(const SyntheticSpec& spec) : spec_(spec) 
     const PaletteKey& b = kPalette[k + 1];
     const int32_t span = b.elevation - a.elevation;
     const int32_t t = clampInt((elevation - a.elevation) * 256 / std::max(span, 1), 0, 256);
-    for (int c = 0; c < 3; ++c) {
-      palette_dry_[i][c] = uint8_t((a.dry[c] * (256 - t) + b.dry[c] * t) >> 8);
-      palette_wet_[i][c] = uint8_t((a.wet[c] * (256 - t) + b.wet[c] * t) >> 8);
+    for (int32_t level = 0; level < kWetLevels; ++level) {
+      const int32_t wet = level * 256 / (kWetLevels - 1);
+      uint8_t* rgb = palettes_.data() + (size_t(level) * kPaletteSize + size_t(i)) * 3;
+      for (int c = 0; c < 3; ++c) {
+        const int32_t dry_colour = (a.dry[c] * (256 - t) + b.dry[c] * t) >> 8;
+        const int32_t wet_colour = (a.wet[c] * (256 - t) + b.wet[c] * t) >> 8;
+        rgb[c] = uint8_t((dry_colour * (256 - wet) + wet_colour * wet) >> 8);
+      }
     }
   }
   elevation_.resize(kChunkPx + 1);
   row_fields_.resize(size_t(kFieldCount) * grid_cols_);
-  slope_y_.resize(grid_cols_);
+  row_slopes_.resize(size_t(kFieldCount) * grid_cols_);
+  lattice_.resize(kChunkPx + 2);
+  noise_table_.resize(kNoiseTableSize);
+  const uint32_t noise_key = seedFor(spec.seed, salt++, 0x5eed);
+  for (uint32_t i = 0; i < kNoiseTableSize; ++i) noise_table_[i] = lattice(i, noise_key);
 }
 
 void SyntheticGenerator::computeGridRow(uint32_t grid_row, std::vector<int32_t>* values) {
@@ -261,6 +275,15 @@ int32_t SyntheticGenerator::footprintNoise(uint32_t t, uint32_t side, uint32_t s
   return sum;
 }
 
+// Depth of the no-data border at position t along an edge: noise plus a slant, so the valid
+// region looks like a slightly rotated, ragged scan or satellite swath.
+uint32_t SyntheticGenerator::footprintDepth(uint32_t t, uint32_t side, uint32_t margin,
+                                            uint32_t seed, bool slant_up) const {
+  const uint64_t noise = uint64_t(footprintNoise(t, side, seed) + 4096);
+  const uint64_t slant = uint64_t(margin) * (slant_up ? side - 1 - t : t) / side;
+  return uint32_t(((margin * noise) >> 13) + slant);
+}
+
 void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
   const uint32_t width = spec_.width_px;
   const uint32_t height = spec_.height_px;
@@ -268,34 +291,30 @@ void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
   ensureGridRows(y >> kGridShift);
   const int32_t fy = int32_t(y & (kGridPx - 1));
 
-  // Coarse fields interpolated down to this row; the elevation's vertical slope per 16 px.
+  // Coarse fields interpolated down to this row, and their vertical change per 16 px.
   int32_t* row_fields = row_fields_.data();
-  int32_t* slope_y = slope_y_.data();
+  int32_t* row_slopes = row_slopes_.data();
   for (size_t i = 0; i < size_t(kFieldCount) * grid_cols_; ++i) {
     const int32_t top = grid_top_[i];
-    row_fields[i] = top + (((grid_bottom_[i] - top) * fy) >> kGridShift);
+    row_slopes[i] = grid_bottom_[i] - top;
+    row_fields[i] = top + ((row_slopes[i] * fy) >> kGridShift);
   }
-  for (uint32_t gx = 0; gx < grid_cols_; ++gx) slope_y[gx] = grid_bottom_[gx] - grid_top_[gx];
   auto field = [&](Field f) { return row_fields + size_t(f) * grid_cols_; };
+  auto slopes = [&](Field f) { return row_slopes + size_t(f) * grid_cols_; };
 
-  // The scan footprint: valid pixels lie inside [left, width - right) on this row, and
-  // below top(x) and above height - bottom(x), which only rows near the top and bottom edges
-  // need to evaluate per pixel.
-  const uint32_t left = uint32_t(
-      ((uint64_t(margin_x_px_) * uint32_t(footprintNoise(y, height, footprint_seeds_[0]) + 4096)) >>
-       13) +
-      uint64_t(margin_x_px_) * y / height);
-  const uint32_t right = uint32_t(
-      ((uint64_t(margin_x_px_) * uint32_t(footprintNoise(y, height, footprint_seeds_[1]) + 4096)) >>
-       13) +
-      uint64_t(margin_x_px_) * (height - 1 - y) / height);
+  // Valid pixels lie in [left, width - right) on this row, and below top(x) and above
+  // height - bottom(x); only rows near the top and bottom edges evaluate those, per grid column.
+  const uint32_t left = footprintDepth(y, height, margin_x_px_, footprint_seeds_[0], false);
+  const uint32_t right = footprintDepth(y, height, margin_x_px_, footprint_seeds_[1], true);
+  const uint32_t valid_end = width - std::min(width, right);
   const bool near_top = y < 2 * margin_y_px_;
   const bool near_bottom = height - 1 - y < 2 * margin_y_px_;
 
+  const int32_t* fine_noise = noise_table_.data();
   for (uint32_t x0 = 0; x0 < width; x0 += kChunkPx) {
     const uint32_t count = std::min(kChunkPx, width - x0);
     int32_t* elevation = elevation_.data();
-    // Coarse elevation (plus one pixel past the chunk for the horizontal slope).
+    // Coarse elevation, plus one pixel past the chunk for the horizontal slope.
     const int32_t* coarse = field(kElevation);
     for (uint32_t i = 0; i <= count; ++i) {
       const uint32_t x = x0 + i;
@@ -303,28 +322,29 @@ void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
       const int32_t fx = int32_t(x & (kGridPx - 1));
       elevation[i] = coarse[gx] + (((coarse[gx + 1] - coarse[gx]) * fx) >> kGridShift);
     }
-    // Fine octaves, bilinear per pixel from a row of lattice values.
+    // Fine octaves: bilinear per pixel between lattice values looked up in a noise table at
+    // a per-lattice-row offset (a hash per lattice row instead of per lattice point).
     for (const Octave& octave : fine_) {
       const int shift = octave.cell_shift;
       const uint32_t ly = y >> shift;
       const int32_t wy = int32_t(y & ((1u << shift) - 1));
       const uint32_t key0 = mix(ly ^ octave.seed);
+      const int32_t amplitude = octave.amplitude;
       if (shift == 0) {
         for (uint32_t i = 0; i <= count; ++i) {
-          elevation[i] += (lattice(x0 + i, key0) * octave.amplitude) >> 11;
+          elevation[i] += (fine_noise[(x0 + i + key0) & kNoiseMask] * amplitude) >> 11;
         }
         continue;
       }
       const uint32_t key1 = mix((ly + 1) ^ octave.seed);
       const uint32_t lx0 = x0 >> shift;
       const uint32_t lattice_cols = ((x0 + count) >> shift) - lx0 + 2;
-      lattice_.resize(std::max<size_t>(lattice_.size(), lattice_cols));
+      int32_t* values = lattice_.data();
       for (uint32_t j = 0; j < lattice_cols; ++j) {
-        const int32_t a = lattice(lx0 + j, key0);
-        const int32_t b = lattice(lx0 + j, key1);
-        lattice_[j] = ((a + (((b - a) * wy) >> shift)) * octave.amplitude) >> 11;
+        const int32_t a = fine_noise[(lx0 + j + key0) & kNoiseMask];
+        const int32_t b = fine_noise[(lx0 + j + key1) & kNoiseMask];
+        values[j] = ((a + (((b - a) * wy) >> shift)) * amplitude) >> 11;
       }
-      const int32_t* values = lattice_.data();
       const uint32_t mask = (1u << shift) - 1;
       for (uint32_t i = 0; i <= count; ++i) {
         const uint32_t x = x0 + i;
@@ -333,82 +353,106 @@ void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
       }
     }
 
-    uint8_t* pixel = out + size_t(x0) * channels;
-    for (uint32_t i = 0; i < count; ++i, pixel += channels) {
-      const uint32_t x = x0 + i;
-      bool valid = x >= left && x < width - std::min(width, right);
-      if (valid && near_top) {
-        const uint32_t top =
-            uint32_t(((uint64_t(margin_y_px_) *
-                       uint32_t(footprintNoise(x, width, footprint_seeds_[2]) + 4096)) >>
-                      13) +
-                     uint64_t(margin_y_px_) * (width - 1 - x) / width);
-        valid = y >= top;
+    struct LineStyle {
+      Field field;
+      int32_t half_width16;
+    };
+    static constexpr LineStyle kLines[] = {{kRiver, kRiverHalfWidth16},
+                                           {kStream, kStreamHalfWidth16},
+                                           {kHighway, kHighwayHalfWidth16},
+                                           {kRoad, kRoadHalfWidth16}};
+    // Colour, one grid cell (16 px) at a time: within a cell every coarse field is linear in
+    // x, so per-cell decisions (which lines can cross it, its moisture) are exact or nearly.
+    for (uint32_t cell_x = x0; cell_x < x0 + count; cell_x += kGridPx) {
+      const uint32_t gx = cell_x >> kGridShift;
+      const uint32_t cell_count = std::min(kGridPx, x0 + count - cell_x);
+      // The top/bottom borders, linear across the cell.
+      int32_t top0 = 0, top1 = 0, bottom0 = 0, bottom1 = 0;
+      if (near_top) {
+        top0 = int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[2], true));
+        top1 = int32_t(
+            footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[2], true));
       }
-      if (valid && near_bottom) {
-        const uint32_t bottom =
-            uint32_t(((uint64_t(margin_y_px_) *
-                       uint32_t(footprintNoise(x, width, footprint_seeds_[3]) + 4096)) >>
-                      13) +
-                     uint64_t(margin_y_px_) * x / width);
-        valid = height - 1 - y >= bottom;
+      if (near_bottom) {
+        bottom0 = int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[3], false));
+        bottom1 = int32_t(
+            footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[3], false));
       }
-      const uint8_t* colour = kNoDataColour;
-      uint8_t shaded[3];
-      const int32_t relative = elevation[i] - kSeaLevel;
-      if (!valid) {
-        colour = kNoDataColour;
-      } else if (relative < kDeepSea) {
-        colour = kDeepSeaColour;
-      } else {
-        const int index = clampInt((relative - kPaletteMin) >> 5, 0, 1023);
-        const uint32_t gx = x >> kGridShift;
-        const int32_t fx = int32_t(x & (kGridPx - 1));
-        auto at = [&](Field f) {
-          const int32_t* v = field(f);
-          return v[gx] + (((v[gx + 1] - v[gx]) * fx) >> kGridShift);
-        };
-        // Within a grid cell a field is linear in x, so its slope per 16 px is the cell's
-        // difference; the vertical slope is the grid rows' difference.
-        auto onLine = [&](Field f, int32_t half_width16) {
-          const int32_t* v = field(f);
-          const int32_t* top_row = grid_top_.data() + size_t(f) * grid_cols_;
-          const int32_t* bottom_row = grid_bottom_.data() + size_t(f) * grid_cols_;
-          const int32_t value = v[gx] + (((v[gx + 1] - v[gx]) * fx) >> kGridShift);
-          const int32_t slope =
-              std::abs(v[gx + 1] - v[gx]) + std::abs(bottom_row[gx] - top_row[gx]);
-          return std::abs(value) * 256 < half_width16 * slope;
-        };
-        if (relative < 0) {
-          colour = palette_wet_[index];
+      // A line field is linear across the cell, so if both ends have one sign and are farther
+      // from zero than the line's half-width, no pixel of the cell is on the line.
+      uint32_t line_mask = 0;
+      int32_t line_value[kFieldCount] = {}, line_step[kFieldCount] = {},
+              line_limit[kFieldCount] = {};
+      for (const LineStyle& line : kLines) {
+        const int32_t* v = field(line.field);
+        const int32_t a = v[gx], b = v[gx + 1];
+        const int32_t slope = std::abs(b - a) + std::abs(slopes(line.field)[gx]);
+        const int32_t limit = line.half_width16 * slope;  // compared with |value| * 256
+        const bool crosses = (a ^ b) < 0 || std::min(std::abs(a), std::abs(b)) * 256 < limit;
+        if (!crosses) continue;
+        line_mask |= 1u << line.field;
+        line_value[line.field] = a * int32_t(kGridPx);  // value * 16, stepped per pixel
+        line_step[line.field] = b - a;
+        line_limit[line.field] = limit;
+      }
+      const int32_t wet = clampInt((field(kMoisture)[gx] + 1024) >> 3, 0, 256);
+      const int32_t slope_y = slopes(kElevation)[gx] >> kGridShift;
+
+      for (uint32_t k = 0; k < cell_count; ++k) {
+        const uint32_t x = cell_x + k;
+        const uint32_t i = x - x0;
+        uint8_t* pixel = out + size_t(x) * channels;
+        bool valid = x >= left && x < valid_end;
+        if (near_top)
+          valid = valid && int32_t(y) >= top0 + (((top1 - top0) * int32_t(k)) >> kGridShift);
+        if (near_bottom) {
+          valid = valid && int32_t(height - 1 - y) >=
+                               bottom0 + (((bottom1 - bottom0) * int32_t(k)) >> kGridShift);
+        }
+        const int32_t relative = elevation[i] - kSeaLevel;
+        const uint8_t* colour;
+        uint8_t shaded[3];
+        if (!valid) {
+          colour = kNoDataColour;
+        } else if (relative < kDeepSea) {
+          colour = kDeepSeaColour;
         } else {
-          const int32_t wet = clampInt((at(kMoisture) + 1024) >> 3, 0, 256);
-          const int32_t slope = (elevation[i + 1] - elevation[i]) + (slope_y[gx] >> kGridShift);
-          const int32_t shade = clampInt(256 - ((slope * kShadeGain) >> 8), 176, 336);
-          for (int c = 0; c < 3; ++c) {
-            const int32_t base =
-                (palette_dry_[index][c] * (256 - wet) + palette_wet_[index][c] * wet) >> 8;
-            shaded[c] = uint8_t(std::min(255, (base * shade) >> 8));
-          }
-          colour = shaded;
-          if (relative >= kRoadMinElevation && relative < kRoadMaxElevation &&
-              onLine(kHighway, kHighwayHalfWidth16)) {
-            colour = kHighwayColour;
-          } else if (relative < kRiverMaxElevation && onLine(kRiver, kRiverHalfWidth16)) {
-            colour = kRiverColour;
-          } else if (relative < kRiverMaxElevation && wet > 128 &&
-                     onLine(kStream, kStreamHalfWidth16)) {
-            colour = kStreamColour;
-          } else if (relative >= kRoadMinElevation && relative < kRoadMaxElevation && wet < 176 &&
-                     onLine(kRoad, kRoadHalfWidth16)) {
-            colour = kRoadColour;
+          const int32_t index = clampInt((relative - kPaletteMin) >> 5, 0, kPaletteSize - 1);
+          // Moisture picks one of kWetLevels palettes, dithered by the elevation's low bits.
+          const int32_t level = (wet + ((elevation[i] >> 2) & 15)) >> 4;
+          const uint8_t* base =
+              palettes_.data() + (size_t(level) * kPaletteSize + size_t(index)) * 3;
+          if (relative < 0) {
+            colour = base;
+          } else {
+            const int32_t slope = (elevation[i + 1] - elevation[i]) + slope_y;
+            const int32_t shade = clampInt(256 - ((slope * kShadeGain) >> 8), 176, 336);
+            for (int c = 0; c < 3; ++c) shaded[c] = uint8_t(std::min(255, (base[c] * shade) >> 8));
+            colour = shaded;
+            if (line_mask != 0) {
+              auto on = [&](Field f) {
+                if (!(line_mask & (1u << f))) return false;
+                const int32_t value16 = line_value[f] + line_step[f] * int32_t(k);
+                return std::abs(value16) * 16 < line_limit[f];
+              };
+              const bool road_zone = relative >= kRoadMinElevation && relative < kRoadMaxElevation;
+              if (road_zone && on(kHighway)) {
+                colour = kHighwayColour;
+              } else if (relative < kRiverMaxElevation && on(kRiver)) {
+                colour = kRiverColour;
+              } else if (relative < kRiverMaxElevation && wet > 128 && on(kStream)) {
+                colour = kStreamColour;
+              } else if (road_zone && wet < 176 && on(kRoad)) {
+                colour = kRoadColour;
+              }
+            }
           }
         }
+        pixel[0] = colour[0];
+        pixel[1] = colour[1];
+        pixel[2] = colour[2];
+        if (channels == 4) pixel[3] = valid ? 255 : 0;
       }
-      pixel[0] = colour[0];
-      pixel[1] = colour[1];
-      pixel[2] = colour[2];
-      if (channels == 4) pixel[3] = valid ? 255 : 0;
     }
   }
 }

@@ -51,6 +51,8 @@ class SyntheticGenerator {
   void computeGridRow(uint32_t grid_row, std::vector<int32_t>* values);
   void generateRow(uint32_t y, uint8_t* out);
   int32_t footprintNoise(uint32_t t, uint32_t side, uint32_t seed) const;
+  uint32_t footprintDepth(uint32_t t, uint32_t side, uint32_t margin, uint32_t seed,
+                          bool slant_up) const;
 
   SyntheticSpec spec_;
   uint32_t grid_cols_ = 0;                   // grid points per row, 16 px apart
@@ -59,8 +61,10 @@ class SyntheticGenerator {
   uint32_t footprint_seeds_[4] = {};         // left, right, top, bottom edges
   uint32_t margin_x_px_ = 0;                 // depth of the no-data border, left and right
   uint32_t margin_y_px_ = 0;                 // top and bottom
-  uint8_t palette_dry_[1024][3] = {};        // colour by elevation, dry land
-  uint8_t palette_wet_[1024][3] = {};        // colour by elevation, wet land
+  // RGB by moisture level (dry to wet) and elevation step: kWetLevels x kPaletteSize x 3.
+  std::vector<uint8_t> palettes_;
+  // White noise for the fine octaves, indexed by lattice column plus a per-row hash.
+  std::vector<int32_t> noise_table_;
 
   // Cached grid rows grid_row_ and grid_row_ + 1: per field, grid_cols_ values each.
   uint32_t grid_row_ = UINT32_MAX;
@@ -70,7 +74,7 @@ class SyntheticGenerator {
   std::vector<int32_t> elevation_;   // kChunkPx + 1 values
   std::vector<int32_t> lattice_;     // one octave's lattice values along a row
   std::vector<int32_t> row_fields_;  // coarse fields interpolated to the current row
-  std::vector<int32_t> slope_y_;     // elevation change per 16 px down, per grid column
+  std::vector<int32_t> row_slopes_;  // their change per 16 px down, per grid column
 };
 
 }  // namespace tessera::detail
