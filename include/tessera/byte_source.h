@@ -36,8 +36,9 @@ class ByteSource {
   /// unspecified.
   [[nodiscard]] virtual Result<void> read(uint64_t offset_bytes, std::span<uint8_t> out) const = 0;
 
-  /// Reads several ranges. The default reads them one by one; sources with a per-request
-  /// cost (HTTP) merge nearby ranges. Fails as a whole if any range fails.
+  /// Reads several ranges (any order, may overlap). The default sorts them and reads ranges
+  /// closer than 64 KiB as one (at most 16 MiB per read), which suits disks and HTTP alike;
+  /// sources may override it. Fails as a whole if any read fails.
   [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
 };
 
