@@ -16,7 +16,8 @@
 #   --keep                 keep every output (default: delete each after measuring it)
 # Environment: TESSERA_BENCH_BUILD (build folder, default build-bench), TESSERA_BIN,
 # TESSERA_PSNR_BIN, TESSERA_MAKE_TIFF_BIN (use these binaries instead of building them),
-# TESSERA_BENCH_JOBS (compile jobs, default nproc).
+# TESSERA_BENCH_JOBS (compile jobs, default nproc), TESSERA_BENCH_REVISION (the Tessera revision
+# to name in the report when TESSERA_BIN comes from another checkout).
 set -euo pipefail
 
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -94,7 +95,7 @@ if ((${#inputs[@]} == 0)); then
     input=$bench_dir/input-${side}x${side}.tif
     if [[ ! -s $input ]]; then
       echo "build_vs_peers: writing $input"
-      "$make_tiff" "$input" --width "$side" --height "$side" --tile 256 >"$log_dir/make-$side.log" 2>&1 ||
+      "$make_tiff" "$input" "${side}x${side}" --channels 3 --tile 256 >"$log_dir/make-$side.log" 2>&1 ||
         { cat "$log_dir/make-$side.log"; exit 1; }
     fi
     inputs+=("$input")
@@ -243,7 +244,7 @@ report=$bench_dir/build_vs_peers-$(date +%Y%m%d-%H%M%S).md
     "$(free -g | awk '/^Mem:/ { print $2 }') GiB RAM, $(sed -n "s/^PRETTY_NAME=//p" /etc/os-release | tr -d \")," \
     "kernel $(uname -r)."
   echo "Tools: $(vips --version), $(gdalinfo --version | cut -d, -f1)," \
-    "tessera $(git -C "$repo" rev-parse --short HEAD 2>/dev/null || echo '?')."
+    "tessera ${TESSERA_BENCH_REVISION:-$(git -C "$repo" rev-parse --short HEAD 2>/dev/null || echo '?')}."
   echo "Command: \`$command_line\`"
   echo
   echo "| input | tool | codec | wall s | MP/s | peak RSS MiB | output bytes | wall ÷ Tessera | bytes ÷ Tessera | PSNR dB | chroma | load |"
