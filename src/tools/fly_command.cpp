@@ -1,5 +1,8 @@
 // `tessera fly`: flies a camera path headless at a fixed frame rate, in real time, and
 // records what the runtime did each frame (no GPU: uploads are accepted at once).
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
@@ -36,7 +39,18 @@ struct FlyArgs {
   std::string out_dir = "fly-out";
   bool json = false;
   bool quiet = false;
+  bool cold = false;
 };
+
+/// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
+/// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
+void dropFromPageCache(const std::string& path) {
+  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return;
+  ::fdatasync(fd);
+  ::posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+  ::close(fd);
+}
 
 double percentile(std::vector<double> values, double p) {
   if (values.empty()) return 0;
@@ -105,6 +119,7 @@ int runFly(const FlyArgs& args) {
   std::vector<JumpTiming> jumps{{0}};
   size_t frames_full_detail = 0, frames_covered = 0, frames = 0;
   uint64_t uploaded_payload_bytes = 0;
+  if (args.cold) dropFromPageCache(args.archive);
   const auto start = Clock::now();
   const double duration = path->durationS();
   FrameReport last{};
@@ -115,7 +130,10 @@ int runFly(const FlyArgs& args) {
     std::this_thread::sleep_until(
         start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
     double now_s = std::chrono::duration<double>(Clock::now() - start).count();
-    if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) jumps.push_back({now_s});
+    if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) {
+      if (args.cold) dropFromPageCache(args.archive);
+      jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
+    }
     View view;
     view.image = args.image;
     view.ortho = path->at(t_s, viewport_w, viewport_h);
@@ -155,6 +173,7 @@ int runFly(const FlyArgs& args) {
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
+      {"page_cache", args.cold ? "cold (posix_fadvise DONTNEED before each jump)" : "as found"},
       {"eviction", (*streamer)->cache().policyName()},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
@@ -226,6 +245,8 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("-o,--out", args->out_dir, "Folder for frames.csv and summary.json")
       ->capture_default_str();
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
+  cmd->add_flag("--cold", args->cold,
+                "Drop the archive from the page cache at the start and before each jump");
   cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
   cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
 }
