@@ -358,6 +358,7 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
       }
       Result<void> finished = pyramid.finish();
       if (!finished) return stop(finished.error());
+      pool.waitIdle();  // queued jobs hold `sink`, which dies with this iteration
       nlohmann::json meta = {{"name", info.name},
                              {"source", options.inputs[i]},
                              {"source_format", reader.info().format},
