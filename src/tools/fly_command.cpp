@@ -147,7 +147,7 @@ int runFly(const FlyArgs& args) {
     frames_covered += r.fully_covered;
     uploaded_payload_bytes = r.payload_bytes_total;
     JumpTiming& jump = jumps.back();
-    double since_ms = (now_s - jump.at_s) * 1000;
+    double since_ms = std::max(0.0, (now_s - jump.at_s) * 1000);
     if (jump.full_detail_ms < 0 && r.coverage_desired >= 1.0) jump.full_detail_ms = since_ms;
     if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0)
       jump.clip_region_ms = since_ms;
