@@ -1,0 +1,84 @@
+// Archive is thread-safe after open: many threads reading tiles (sharing the page cache)
+// see exactly what one thread sees. Run under ThreadSanitizer in CI (label "concurrency").
+#include <tessera/archive.h>
+
+#include <algorithm>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include "format/checksum.h"
+#include "support/archive_fixture.h"
+#include "support/reference_pyramid.h"
+#include "support/test_images.h"
+
+namespace tessera {
+namespace {
+
+TEST(ArchiveConcurrency, ManyThreadsReadEveryTileConsistently) {
+  BuildOptions options;
+  options.tile_size_px = 64;
+  options.border_px = 2;
+  options.codec = Codec::kZstd;
+  options.threads = 2;
+  options.page_tiles_log2 = 3;  // many small pages, so threads race to fill the page cache
+  test::BuiltArchive built =
+      test::buildFromImage(test::makePatternImage(1100, 700, 4, 3), options, test::testTempDir());
+  auto opened = Archive::openFile(built.path);
+  ASSERT_TRUE(opened) << opened.error().message;
+  std::shared_ptr<Archive> archive = *opened;
+  const ImageInfo info = archive->images()[0];
+  std::vector<TileId> tiles;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    for (uint32_t y = 0; y < info.tilesY(level); ++y)
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) tiles.push_back({0, level, x, y});
+
+  // Expected: checksums of each tile's texels, from a second archive object on one thread.
+  auto single = Archive::openFile(built.path);
+  ASSERT_TRUE(single);
+  std::vector<uint64_t> expected;
+  for (const TileId& tile : tiles)
+    expected.push_back(detail::checksum64((*single)->readTile(tile)->texels));
+
+  constexpr int kThreads = 8;
+  std::vector<int> mismatches(kThreads, 0);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t) {
+    threads.emplace_back([&, t] {
+      std::vector<size_t> order(tiles.size());
+      for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::shuffle(order.begin(), order.end(), std::mt19937(t));
+      for (int pass = 0; pass < 2; ++pass) {
+        for (size_t i : order) {
+          auto tile = archive->readTile(tiles[i]);
+          if (!tile || detail::checksum64(tile->texels) != expected[i]) ++mismatches[t];
+        }
+        auto region = archive->readRegion(0, 0, {int64_t(t) * 50, 30, 300, 200});
+        if (!region) ++mismatches[t];
+      }
+    });
+  }
+  for (auto& thread : threads) thread.join();
+  for (int t = 0; t < kThreads; ++t) EXPECT_EQ(mismatches[t], 0) << "thread " << t;
+}
+
+TEST(ArchiveConcurrency, ConcurrentVerifyAndReadsAgree) {
+  BuildOptions options;
+  options.tile_size_px = 64;
+  options.codec = Codec::kLz4;
+  options.threads = 2;
+  test::BuiltArchive built =
+      test::buildFromImage(test::makePatternImage(500, 400, 3, 1), options, test::testTempDir());
+  auto archive = Archive::open(makeMemorySource(built.bytes, "c.tess"));
+  ASSERT_TRUE(archive);
+  std::vector<int> faults(4, -1);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] { faults[t] = int((*archive)->verify().fault_count); });
+  for (auto& thread : threads) thread.join();
+  for (int f : faults) EXPECT_EQ(f, 0);
+}
+
+}  // namespace
+}  // namespace tessera

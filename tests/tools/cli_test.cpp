@@ -1,0 +1,291 @@
+// The `tessera` command line, run as a real process: build -> info --json -> verify -> damage
+// -> verify names the tile -> extract; usage errors, --help, bad inputs and failed outputs.
+#include <spawn.h>
+#include <sys/wait.h>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <tessera/archive.h>
+
+#include "support/archive_fixture.h"
+#include "support/reference_pyramid.h"
+#include "support/test_images.h"
+
+extern char** environ;
+
+namespace tessera {
+namespace {
+
+struct RunResult {
+  int exit_code = -1;
+  std::string out;
+  std::string err;
+};
+
+std::string slurp(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream text;
+  text << in.rdbuf();
+  return text.str();
+}
+
+// Runs the built CLI with `args`, capturing stdout and stderr through files in `dir`.
+RunResult runTessera(const std::vector<std::string>& args, const std::string& dir) {
+  std::string out_path = dir + ".stdout", err_path = dir + ".stderr";
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, 1, out_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
+                                   0644);
+  posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
+                                   0644);
+  std::vector<std::string> argv_strings = {TESSERA_CLI_PATH};
+  argv_strings.insert(argv_strings.end(), args.begin(), args.end());
+  std::vector<char*> argv;
+  for (std::string& arg : argv_strings) argv.push_back(arg.data());
+  argv.push_back(nullptr);
+  RunResult result;
+  pid_t pid = 0;
+  int spawned = posix_spawn(&pid, TESSERA_CLI_PATH, &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  EXPECT_EQ(spawned, 0) << "cannot run " << TESSERA_CLI_PATH;
+  if (spawned != 0) return result;
+  int status = 0;
+  waitpid(pid, &status, 0);
+  EXPECT_TRUE(WIFEXITED(status)) << "tessera died: status " << status;
+  result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  result.out = slurp(out_path);
+  result.err = slurp(err_path);
+  std::filesystem::remove(out_path);
+  std::filesystem::remove(err_path);
+  return result;
+}
+
+std::vector<std::string> listDir(const std::string& dir) {
+  std::vector<std::string> names;
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    names.push_back(entry.path().filename().string());
+  std::sort(names.begin(), names.end());
+  return names;
+}
+
+class Cli : public testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = test::testTempDir();
+    logs_ = dir_ + "logs/run";
+    std::filesystem::create_directories(dir_ + "logs");
+    work_ = dir_ + "work/";
+    std::filesystem::create_directories(work_);
+  }
+  RunResult run(const std::vector<std::string>& args) { return runTessera(args, logs_); }
+  std::string dir_, logs_, work_;
+};
+
+TEST_F(Cli, BuildInfoVerifyCorruptVerifyExtract) {
+  const std::string archive_path = work_ + "a.tess";
+  RunResult built = run({"build", "synthetic:300x200:4:4", "-o", archive_path, "--tile", "64",
+                         "--border", "2", "--codec", "zstd", "--threads", "2", "--quiet"});
+  ASSERT_EQ(built.exit_code, 0) << built.err;
+
+  RunResult info = run({"info", archive_path, "--json"});
+  ASSERT_EQ(info.exit_code, 0) << info.err;
+  nlohmann::json json = nlohmann::json::parse(info.out, nullptr, false);
+  ASSERT_FALSE(json.is_discarded()) << info.out;
+  EXPECT_EQ(json["path"], archive_path);
+  EXPECT_EQ(json["file_bytes"].get<uint64_t>(), std::filesystem::file_size(archive_path));
+  ASSERT_EQ(json["images"].size(), 1u);
+  const nlohmann::json& image = json["images"][0];
+  EXPECT_EQ(image["width"], 300);
+  EXPECT_EQ(image["height"], 200);
+  EXPECT_EQ(image["channels"], 4);
+  EXPECT_EQ(image["tile_size"], 64);
+  EXPECT_EQ(image["border"], 2);
+  EXPECT_EQ(image["levels"], levelCountFor(300, 200, 64));
+  EXPECT_EQ(image["codec"], "zstd");
+  ASSERT_EQ(image["level_table"].size(), levelCountFor(300, 200, 64));
+  EXPECT_EQ(image["level_table"][0]["tiles_x"], 5);
+  EXPECT_EQ(image["level_table"][0]["tiles_y"], 4);
+  const nlohmann::json& level0 = image["level_table"][0];
+  EXPECT_EQ(
+      level0["encoded"].get<int>() + level0["uniform"].get<int>() + level0["empty"].get<int>(), 20);
+
+  RunResult verified = run({"verify", archive_path});
+  EXPECT_EQ(verified.exit_code, 0) << verified.err;
+  EXPECT_NE(verified.out.find("OK"), std::string::npos) << verified.out;
+
+  // Damage one payload byte of an encoded tile.
+  auto archive = Archive::openFile(archive_path);
+  ASSERT_TRUE(archive);
+  TileId victim{};
+  TileEntry entry;
+  bool found = false;
+  for (uint32_t y = 0; y < 4 && !found; ++y)
+    for (uint32_t x = 0; x < 5 && !found; ++x)
+      if ((entry = *(*archive)->tileEntry({0, 0, x, y})).kind == TileKind::kEncoded)
+        victim = {0, 0, x, y}, found = true;
+  ASSERT_TRUE(found);
+  // Extract before damaging, to compare with the reader.
+  RunResult tile_png =
+      run({"extract", archive_path, "--level", "0", "--tile",
+           std::to_string(victim.x) + "," + std::to_string(victim.y), "-o", work_ + "tile.png"});
+  ASSERT_EQ(tile_png.exit_code, 0) << tile_png.err;
+  RunResult rect_png = run({"extract", archive_path, "--level", "1", "--rect", "-5,10,100,60", "-o",
+                            work_ + "rect.png"});
+  ASSERT_EQ(rect_png.exit_code, 0) << rect_png.err;
+  {
+    Image tile = *(*archive)->readTile(victim);
+    Image inner(64, 64, 4);
+    for (uint32_t y = 0; y < 64; ++y)
+      std::copy(tile.row(y + 2) + 2 * 4, tile.row(y + 2) + 66 * 4, inner.row(y));
+    EXPECT_EQ(test::firstDifference(inner, test::readImagePng(work_ + "tile.png")), "");
+    Image region = *(*archive)->readRegion(0, 1, {-5, 10, 100, 60});
+    EXPECT_EQ(test::firstDifference(region, test::readImagePng(work_ + "rect.png")), "");
+  }
+  archive->reset();
+
+  std::vector<uint8_t> bytes = test::readFileBytes(archive_path);
+  bytes[entry.offset_bytes + entry.length_bytes / 2] ^= 0x08;
+  ASSERT_TRUE(test::writeFileBytes(archive_path, bytes));
+  RunResult damaged = run({"verify", archive_path});
+  EXPECT_EQ(damaged.exit_code, 3);
+  std::string tile_name =
+      "tile (0," + std::to_string(victim.x) + "," + std::to_string(victim.y) + ")";
+  EXPECT_NE(damaged.err.find(tile_name), std::string::npos) << damaged.err;
+  EXPECT_NE(damaged.out.find("1 fault"), std::string::npos) << damaged.out;
+  RunResult damaged_json = run({"verify", archive_path, "--json"});
+  EXPECT_EQ(damaged_json.exit_code, 3);
+  nlohmann::json report = nlohmann::json::parse(damaged_json.out, nullptr, false);
+  ASSERT_FALSE(report.is_discarded()) << damaged_json.out;
+  EXPECT_EQ(report["ok"], false);
+  EXPECT_EQ(report["fault_count"], 1);
+
+  RunResult bad_extract =
+      run({"extract", archive_path, "--tile",
+           std::to_string(victim.x) + "," + std::to_string(victim.y), "-o", work_ + "bad.png"});
+  EXPECT_NE(bad_extract.exit_code, 0);
+  EXPECT_NE(bad_extract.err.find(tile_name), std::string::npos) << bad_extract.err;
+  EXPECT_FALSE(std::filesystem::exists(work_ + "bad.png"));
+}
+
+TEST_F(Cli, VerifyOfATruncatedArchiveExitsThree) {
+  const std::string path = work_ + "t.tess";
+  ASSERT_EQ(run({"build", "synthetic:100x100", "-o", path, "--codec", "lz4", "-q"}).exit_code, 0);
+  std::vector<uint8_t> bytes = test::readFileBytes(path);
+  bytes.resize(bytes.size() - 1);
+  ASSERT_TRUE(test::writeFileBytes(path, bytes));
+  RunResult result = run({"verify", path});
+  EXPECT_EQ(result.exit_code, 3);
+  EXPECT_NE(result.err.find(path), std::string::npos) << result.err;
+}
+
+TEST_F(Cli, HelpOnEverySubcommandExitsZero) {
+  for (std::vector<std::string> args : {std::vector<std::string>{"--help"},
+                                        {"build", "--help"},
+                                        {"info", "--help"},
+                                        {"verify", "--help"},
+                                        {"extract", "--help"}}) {
+    RunResult result = run(args);
+    EXPECT_EQ(result.exit_code, 0) << args[0];
+    EXPECT_NE(result.out.find("Usage"), std::string::npos) << result.out;
+  }
+}
+
+TEST_F(Cli, UsageErrorsExitTwo) {
+  const std::string out = work_ + "u.tess";
+  const std::vector<std::vector<std::string>> cases = {
+      {},
+      {"frobnicate"},
+      {"build", "synthetic:10x10"},
+      {"build", "synthetic:10x10", "-o", out, "--no-such-flag"},
+      {"build", "synthetic:10x10", "-o", out, "--codec", "gif"},
+      {"build", "synthetic:10x10", "-o", out, "--order", "spiral"},
+      {"build", "synthetic:10x10", "-o", out, "--tile", "abc"},
+      {"build", "synthetic:10x10", "-o", out, "--chroma", "411"},
+      {"info"},
+      {"extract", out, "-o", work_ + "x.png"},
+      {"extract", out, "-o", work_ + "x.png", "--tile", "1"},
+  };
+  for (const auto& args : cases) {
+    RunResult result = run(args);
+    std::string joined;
+    for (const auto& arg : args) joined += arg + " ";
+    EXPECT_EQ(result.exit_code, 2) << joined << "\n" << result.err;
+    EXPECT_FALSE(result.err.empty()) << joined;
+  }
+  EXPECT_TRUE(listDir(work_).empty());
+}
+
+TEST_F(Cli, BadInputsFailNamingTheFileAndLeaveNoOutput) {
+  const std::string inputs = dir_ + "in/";
+  std::filesystem::create_directories(inputs);
+  ASSERT_TRUE(test::writeFileBytes(inputs + "empty.png", {}));
+  ASSERT_TRUE(test::writeFileBytes(inputs + "absurd.tif",
+                                   test::makeRawTiffHeader(4000000000u, 4000000000u, 16)));
+  ASSERT_TRUE(test::writeFileBytes(inputs + "absurd.png",
+                                   test::makePngHeaderOnly(4000000000u, 4000000000u)));
+  std::vector<uint8_t> pixels = test::makeTestPixels(64, 48, 3, 1);
+  test::JpegSpec jpeg;
+  jpeg.width_px = 64;
+  jpeg.height_px = 48;
+  ASSERT_EQ(test::writeJpeg(inputs + "good.jpg", jpeg, pixels), "");
+  std::vector<uint8_t> jpeg_bytes = test::readFileBytes(inputs + "good.jpg");
+  jpeg_bytes.resize(jpeg_bytes.size() / 2);
+  ASSERT_TRUE(test::writeFileBytes(inputs + "truncated.jpg", jpeg_bytes));
+  test::PngSpec png16;
+  png16.width_px = 64;
+  png16.height_px = 48;
+  png16.bit_depth = 16;
+  ASSERT_EQ(test::writePng(inputs + "deep.png", png16, pixels), "");
+  for (const std::string name :
+       {"missing.png", "empty.png", "absurd.tif", "absurd.png", "truncated.jpg", "deep.png"}) {
+    RunResult result = run({"build", inputs + name, "-o", work_ + "out.tess", "--threads", "2"});
+    EXPECT_NE(result.exit_code, 0) << name;
+    EXPECT_NE(result.exit_code, 2) << name << ": a bad input is not a usage error";
+    EXPECT_NE(result.err.find(inputs + name), std::string::npos) << result.err;
+    EXPECT_TRUE(listDir(work_).empty()) << name;
+  }
+}
+
+TEST_F(Cli, AnUnwritableOutputFailsAndKeepsThePreviousFile) {
+  ASSERT_TRUE(test::writeFileBytes(work_ + "file", {7}));
+  RunResult under_file = run({"build", "synthetic:64x64", "-o", work_ + "file/out.tess", "-q"});
+  EXPECT_EQ(under_file.exit_code, 1);
+  EXPECT_NE(under_file.err.find(work_ + "file/out.tess"), std::string::npos) << under_file.err;
+  EXPECT_EQ(listDir(work_), std::vector<std::string>{"file"});
+  EXPECT_EQ(test::readFileBytes(work_ + "file"), std::vector<uint8_t>{7});
+}
+
+TEST_F(Cli, BuildJsonReportsWhatWasWritten) {
+  RunResult built = run({"build", "synthetic:200x150:2:3", "-o", work_ + "j.tess", "--tile", "64",
+                         "--codec", "lz4", "--json"});
+  ASSERT_EQ(built.exit_code, 0) << built.err;
+  nlohmann::json json = nlohmann::json::parse(built.out, nullptr, false);
+  ASSERT_FALSE(json.is_discarded()) << built.out;
+  EXPECT_EQ(json["output_bytes"].get<uint64_t>(), std::filesystem::file_size(work_ + "j.tess"));
+  uint64_t tiles = json["tiles_encoded"].get<uint64_t>() + json["tiles_uniform"].get<uint64_t>() +
+                   json["tiles_empty"].get<uint64_t>();
+  EXPECT_EQ(tiles, 4u * 3 + 2 * 2 + 1);         // 200x150, 100x75, 50x38
+  EXPECT_TRUE(built.err.empty()) << built.err;  // no progress bar when not a terminal
+}
+
+TEST_F(Cli, InfoAndVerifyOfANonArchiveFail) {
+  ASSERT_TRUE(test::writeFileBytes(work_ + "junk.tess", std::vector<uint8_t>(20000, 'j')));
+  RunResult info = run({"info", work_ + "junk.tess"});
+  EXPECT_EQ(info.exit_code, 1);
+  EXPECT_NE(info.err.find("bad magic"), std::string::npos) << info.err;
+  RunResult verify = run({"verify", work_ + "junk.tess"});
+  EXPECT_EQ(verify.exit_code, 3);
+  RunResult missing = run({"info", work_ + "missing.tess"});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find(work_ + "missing.tess"), std::string::npos) << missing.err;
+}
+
+}  // namespace
+}  // namespace tessera
