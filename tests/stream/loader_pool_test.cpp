@@ -1,0 +1,418 @@
+// The loader pool: cancellation, stale drops, priorities, merged reads, retries after faults and
+// waitIdle. Workers are held inside a read by a FaultSource gate the test opens, so every
+// ordering below is forced, not timed.
+#include "stream/loader_pool.h"
+
+#include <algorithm>
+#include <future>
+#include <thread>
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include "support/fault_source.h"
+#include "support/synthetic_archive.h"
+
+namespace tessera::detail {
+namespace {
+
+using test::FaultConfig;
+using test::FaultKind;
+using test::FaultSource;
+
+class LoaderPoolTest : public testing::Test {
+ protected:
+  void SetUp() override {
+    const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes({});
+    ASSERT_FALSE(bytes.empty());
+    source_ = std::make_shared<FaultSource>(makeMemorySource(bytes, "mem:loader.tess"));
+    archive_ = test::openArchiveOrFail(source_);
+    clean_ = test::openArchiveOrFail(makeMemorySource(bytes, "mem:clean.tess"));
+    ASSERT_TRUE(archive_ && clean_);
+    test::warmDirectory(*archive_);
+  }
+
+  void TearDown() override {
+    // Workers blocked at the gate must get out before the pool joins them.
+    if (source_) source_->openGate();
+    pool_.reset();
+  }
+
+  LoaderPool& start(LoaderOptions options) {
+    pool_ = std::make_unique<LoaderPool>(archive_, cache_, options);
+    return *pool_;
+  }
+  LoaderPool& startOneWorker() {
+    LoaderOptions options;
+    options.threads = 1;
+    return start(options);
+  }
+
+  const ImageInfo& info() const { return archive_->images()[0]; }
+
+  /// Tiles of `level` whose payload is encoded (and so needs a read).
+  std::vector<TileId> encodedTiles(uint32_t level) const {
+    std::vector<TileId> out;
+    for (const TileId& id : test::allTiles(*archive_)) {
+      if (id.level != level) continue;
+      auto entry = archive_->tileEntry(id);
+      if (entry && entry->kind == TileKind::kEncoded) out.push_back(id);
+    }
+    return out;
+  }
+
+  /// Holds the only worker inside the read of `tile`.
+  void holdWorkerOn(LoaderPool& pool, const TileId& tile) {
+    source_->closeGate();
+    std::vector<TileRequest> hold{{tile, 0, false}};
+    pool.setWanted(hold);
+    ASSERT_TRUE(source_->waitUntilBlocked(1)) << "the worker never reached the read";
+  }
+
+  /// Every cached tile of the archive equals what a clean source decodes.
+  void expectCachedTilesAreClean() {
+    for (const TileId& id : test::allTiles(*archive_)) {
+      if (!cache_.contains(id)) continue;
+      auto cached = cache_.find(id);
+      ASSERT_TRUE(cached);
+      auto reference = clean_->readTile(id);
+      ASSERT_TRUE(reference) << reference.error().message;
+      EXPECT_EQ(cached->id, id);
+      ASSERT_EQ(cached->texels.width_px, reference->width_px);
+      EXPECT_TRUE(cached->texels.texels == reference->texels)
+          << "corrupt tile in the cache: " << id.level << "," << id.x << "," << id.y;
+    }
+  }
+
+  std::vector<LoadEvent> drain(LoaderPool& pool) {
+    std::vector<LoadEvent> events;
+    pool.poll(events);
+    return events;
+  }
+
+  static std::vector<TileRequest> requestsFor(const std::vector<TileId>& tiles) {
+    std::vector<TileRequest> out;
+    for (size_t i = 0; i < tiles.size(); ++i) out.push_back({tiles[i], double(i), false});
+    return out;
+  }
+
+  std::shared_ptr<FaultSource> source_;
+  std::shared_ptr<Archive> archive_, clean_;
+  TileCache cache_{size_t(256) << 20, makeLruPolicy()};
+  std::unique_ptr<LoaderPool> pool_;
+};
+
+TEST_F(LoaderPoolTest, LoadsEveryWantedTileIntoTheCacheOnce) {
+  LoaderOptions options;
+  options.threads = 2;
+  LoaderPool& pool = start(options);
+  std::vector<TileId> tiles = test::allTiles(*archive_);
+  pool.setWanted(requestsFor(tiles));
+  pool.waitIdle();
+  for (const TileId& id : tiles) EXPECT_TRUE(cache_.contains(id));
+  expectCachedTilesAreClean();
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.tiles_loaded, tiles.size());
+  EXPECT_EQ(stats.queued, 0u);
+  EXPECT_EQ(stats.in_flight, 0u);
+  EXPECT_EQ(stats.failures, 0u);
+  std::vector<LoadEvent> events = drain(pool);
+  EXPECT_EQ(events.size(), tiles.size());
+  for (const LoadEvent& event : events) EXPECT_TRUE(event.ok) << event.error;
+  EXPECT_TRUE(drain(pool).empty());  // reported once
+}
+
+TEST_F(LoaderPoolTest, CancelsQueuedRequestsThatLeaveTheWantedSetBeforeTheyStart) {
+  LoaderPool& pool = startOneWorker();
+  std::vector<TileId> tiles = encodedTiles(0);
+  ASSERT_GE(tiles.size(), 3u);
+  const TileId held = tiles[0], b = tiles[1], c = tiles[2];
+  holdWorkerOn(pool, held);
+  const uint64_t reads_before = source_->reads();
+  pool.setWanted(requestsFor({held, b, c}));
+  EXPECT_TRUE(pool.isRequested(b));
+  EXPECT_EQ(pool.stats().queued, 2u);
+  pool.setWanted(requestsFor({held}));
+  EXPECT_FALSE(pool.isRequested(b));
+  EXPECT_FALSE(pool.isRequested(c));
+  EXPECT_TRUE(pool.isRequested(held));
+  source_->openGate();
+  pool.waitIdle();
+  EXPECT_TRUE(cache_.contains(held));
+  EXPECT_FALSE(cache_.contains(b));
+  EXPECT_FALSE(cache_.contains(c));
+  EXPECT_EQ(source_->reads(), reads_before);  // only the held read, already counted
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.cancelled, 2u);
+  EXPECT_EQ(stats.tiles_loaded, 1u);
+  std::vector<LoadEvent> events = drain(pool);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].id, held);
+}
+
+TEST_F(LoaderPoolTest, DropsATileThatLeftTheWantedSetWhileInFlight) {
+  LoaderPool& pool = startOneWorker();
+  const TileId held = encodedTiles(0).at(0);
+  holdWorkerOn(pool, held);
+  pool.setWanted({});
+  source_->openGate();
+  pool.waitIdle();
+  EXPECT_FALSE(cache_.contains(held));
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.stale_dropped, 1u);
+  EXPECT_EQ(stats.tiles_loaded, 0u);
+  EXPECT_EQ(stats.failures, 0u);
+  EXPECT_EQ(stats.cancelled, 0u);  // it had started: a stale drop, not a cancellation
+  std::vector<LoadEvent> events = drain(pool);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_EQ(events[0].id, held);
+  EXPECT_FALSE(events[0].ok);
+  EXPECT_TRUE(events[0].stale);
+}
+
+TEST_F(LoaderPoolTest, TileWantedAgainWhileInFlightIsCachedAndReadOnce) {
+  LoaderPool& pool = startOneWorker();
+  const TileId held = encodedTiles(0).at(0);
+  holdWorkerOn(pool, held);
+  const uint64_t reads_before = source_->reads();
+  pool.setWanted({});
+  pool.setWanted(requestsFor({held}));
+  EXPECT_EQ(pool.stats().queued, 0u);  // already in flight: not queued a second time
+  source_->openGate();
+  pool.waitIdle();
+  EXPECT_TRUE(cache_.contains(held));
+  EXPECT_EQ(source_->reads(), reads_before);
+  EXPECT_EQ(pool.stats().stale_dropped, 0u);
+  EXPECT_EQ(pool.stats().tiles_loaded, 1u);
+}
+
+TEST_F(LoaderPoolTest, LoadsInTheOrderOfTheLatestPrioritiesWhenMergingIsOff) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.max_merged_read_bytes = 0;  // one tile per read: completion order is queue order
+  LoaderPool& pool = start(options);
+  std::vector<TileId> fine = encodedTiles(0), coarse = encodedTiles(2);
+  ASSERT_GE(fine.size(), 5u);
+  ASSERT_GE(coarse.size(), 3u);
+  const TileId held = fine[0];
+  holdWorkerOn(pool, held);
+  // First frame: fine tiles first. Next frame re-prioritises: coarse first, fine reversed.
+  std::vector<TileId> first{held, fine[1], fine[2], fine[3], fine[4], coarse[0], coarse[1]};
+  pool.setWanted(requestsFor(first));
+  std::vector<TileId> second{held, coarse[1], coarse[0], coarse[2], fine[4], fine[3], fine[2]};
+  pool.setWanted(requestsFor(second));
+  source_->openGate();
+  pool.waitIdle();
+  std::vector<TileId> order;
+  for (const LoadEvent& event : drain(pool)) order.push_back(event.id);
+  EXPECT_EQ(order, second);
+  EXPECT_EQ(pool.stats().cancelled, 1u);  // fine[1]
+  EXPECT_FALSE(cache_.contains(fine[1]));
+}
+
+TEST_F(LoaderPoolTest, LoadsCoarseLevelsBeforeFineOnesWithMergedReads) {
+  LoaderPool& pool = startOneWorker();
+  const TileId held = encodedTiles(0).at(0);
+  holdWorkerOn(pool, held);
+  // Coarse first by priority, as the residency manager orders them.
+  std::vector<TileId> wanted{held};
+  for (uint32_t level = info().level_count; level-- > 0;)
+    for (const TileId& id : test::allTiles(*archive_))
+      if (id.level == level && !(id == held)) wanted.push_back(id);
+  pool.setWanted(requestsFor(wanted));
+  source_->openGate();
+  pool.waitIdle();
+  std::vector<LoadEvent> events = drain(pool);
+  ASSERT_EQ(events.size(), wanted.size());
+  EXPECT_EQ(events[0].id, held);
+  for (size_t i = 2; i < events.size(); ++i)
+    EXPECT_GE(events[i - 1].id.level, events[i].id.level) << "event " << i;
+}
+
+TEST_F(LoaderPoolTest, MergesAdjacentPayloadsIntoFewerReadsThanTiles) {
+  LoaderPool& pool = startOneWorker();
+  std::vector<TileId> tiles = encodedTiles(0);
+  ASSERT_GE(tiles.size(), 16u);
+  const uint64_t reads_before = source_->reads();
+  pool.setWanted(requestsFor(tiles));
+  pool.waitIdle();
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.tiles_loaded, tiles.size());
+  EXPECT_LT(stats.reads, stats.tiles_loaded);
+  EXPECT_EQ(source_->reads() - reads_before, stats.reads);
+  EXPECT_GE(stats.bytes_read, stats.payload_bytes);
+  expectCachedTilesAreClean();
+}
+
+TEST_F(LoaderPoolTest, ReadsEachPayloadAloneWhenMergingIsOff) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.max_merged_read_bytes = 0;
+  LoaderPool& pool = start(options);
+  std::vector<TileId> tiles = encodedTiles(0);
+  pool.setWanted(requestsFor(tiles));
+  pool.waitIdle();
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.reads, tiles.size());
+  EXPECT_EQ(stats.bytes_read, stats.payload_bytes);
+}
+
+TEST_F(LoaderPoolTest, UnencodedTilesLoadWithoutReads) {
+  std::vector<TileId> unencoded;
+  for (const TileId& id : test::allTiles(*archive_)) {
+    auto entry = archive_->tileEntry(id);
+    ASSERT_TRUE(entry);
+    if (entry->kind != TileKind::kEncoded) unencoded.push_back(id);
+  }
+  if (unencoded.empty()) GTEST_SKIP() << "the synthetic archive has no uniform or empty tile";
+  LoaderPool& pool = startOneWorker();
+  pool.setWanted(requestsFor(unencoded));
+  pool.waitIdle();
+  EXPECT_EQ(pool.stats().reads, 0u);
+  EXPECT_EQ(pool.stats().tiles_loaded, unencoded.size());
+  expectCachedTilesAreClean();
+}
+
+struct FaultCase {
+  const char* name;
+  FaultKind kind;
+  uint32_t every;
+};
+
+class LoaderPoolFaults : public LoaderPoolTest, public testing::WithParamInterface<FaultCase> {};
+
+TEST_P(LoaderPoolFaults, NoCorruptTileReachesTheCacheAndLoadingRecoversWhenFaultsStop) {
+  LoaderOptions options;
+  options.threads = 2;
+  options.retry_initial = std::chrono::milliseconds(1);
+  options.retry_max = std::chrono::milliseconds(4);
+  LoaderPool& pool = start(options);
+  std::vector<TileId> tiles = encodedTiles(0);
+  for (const TileId& id : encodedTiles(1)) tiles.push_back(id);
+  FaultConfig faults;
+  faults.kind = GetParam().kind;
+  faults.every = GetParam().every;
+  source_->setFaults(faults);
+  pool.setWanted(requestsFor(tiles));
+  ASSERT_TRUE(source_->waitForFaults(5)) << "faults were never injected";
+  expectCachedTilesAreClean();
+  ASSERT_GT(pool.stats().failures, 0u);
+
+  source_->stopFaulting();
+  // Failed tiles wait out a backoff of at most 4 ms; waitIdle does not wait for those, so the
+  // test polls the pool until everything is in or a generous deadline passes.
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  auto allCached = [&] {
+    return std::all_of(tiles.begin(), tiles.end(),
+                       [&](const TileId& id) { return cache_.contains(id); });
+  };
+  while (!allCached() && std::chrono::steady_clock::now() < deadline) {
+    pool.waitIdle();
+    std::this_thread::yield();
+  }
+  ASSERT_TRUE(allCached()) << "loading did not recover after the faults stopped";
+  expectCachedTilesAreClean();
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.tiles_loaded, tiles.size());
+  size_t failure_events = 0;
+  for (const LoadEvent& event : drain(pool)) {
+    if (event.ok) continue;
+    ++failure_events;
+    EXPECT_FALSE(event.stale);
+    EXPECT_NE(event.error.find("loader.tess"), std::string::npos) << event.error;
+  }
+  EXPECT_EQ(failure_events, stats.failures);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Kinds, LoaderPoolFaults,
+    testing::Values(FaultCase{"Errors", FaultKind::kError, 1},
+                    FaultCase{"ShortReads", FaultKind::kShortRead, 1},
+                    FaultCase{"FlippedBytes", FaultKind::kFlipBytes, 1},
+                    FaultCase{"EveryThirdReadFlipped", FaultKind::kFlipBytes, 3},
+                    FaultCase{"EverySecondReadShort", FaultKind::kShortRead, 2}),
+    [](const testing::TestParamInfo<FaultCase>& param_info) {
+      return std::string(param_info.param.name);
+    });
+
+TEST_F(LoaderPoolTest, ChecksumFailureIsReportedNamingTheTile) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.retry_initial = std::chrono::seconds(60);
+  LoaderPool& pool = start(options);
+  const TileId tile = encodedTiles(0).at(0);
+  source_->setFaults({FaultKind::kFlipBytes, 1, 0, 256});
+  pool.setWanted(requestsFor({tile}));
+  pool.waitIdle();
+  std::vector<LoadEvent> events = drain(pool);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_FALSE(events[0].ok);
+  EXPECT_NE(events[0].error.find("checksum"), std::string::npos) << events[0].error;
+  EXPECT_NE(events[0].error.find(fmt::format("({},{},{})", tile.level, tile.x, tile.y)),
+            std::string::npos)
+      << events[0].error;
+  EXPECT_FALSE(cache_.contains(tile));
+}
+
+TEST_F(LoaderPoolTest, WaitIdleDoesNotWaitForRequestsInBackoff) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.retry_initial = std::chrono::seconds(60);
+  LoaderPool& pool = start(options);
+  const TileId tile = encodedTiles(0).at(0);
+  source_->setFaults({FaultKind::kError});
+  pool.setWanted(requestsFor({tile}));
+  pool.waitIdle();  // returns after the first failure, not 60 s later
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.failures, 1u);
+  EXPECT_EQ(stats.queued, 1u);  // still wanted: waiting out its backoff
+  EXPECT_TRUE(pool.isRequested(tile));
+  EXPECT_FALSE(cache_.contains(tile));
+  // Once nobody wants it the retry state goes; a new request starts afresh, at once.
+  source_->stopFaulting();
+  pool.setWanted({});
+  pool.setWanted(requestsFor({tile}));
+  pool.waitIdle();
+  EXPECT_TRUE(cache_.contains(tile));
+  EXPECT_EQ(pool.stats().failures, 1u);
+}
+
+TEST_F(LoaderPoolTest, WaitIdleReturnsOnlyAfterTheTileInFlightIsCached) {
+  LoaderPool& pool = startOneWorker();
+  const TileId held = encodedTiles(0).at(0);
+  holdWorkerOn(pool, held);
+  auto cached_when_idle = std::async(std::launch::async, [&] {
+    pool.waitIdle();
+    return cache_.contains(held);
+  });
+  source_->openGate();
+  EXPECT_TRUE(cached_when_idle.get());
+}
+
+TEST_F(LoaderPoolTest, WaitIdleWithNothingWantedReturnsAtOnce) {
+  LoaderPool& pool = startOneWorker();
+  pool.waitIdle();
+  pool.setWanted({});
+  pool.waitIdle();
+  EXPECT_EQ(pool.stats().queued, 0u);
+  EXPECT_EQ(pool.stats().tiles_loaded, 0u);
+}
+
+TEST_F(LoaderPoolTest, AnAddressOutsideTheGridFailsWithAnErrorAndNoTile) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.retry_initial = std::chrono::seconds(60);
+  LoaderPool& pool = start(options);
+  const TileId bad{0, 0, 999, 999};
+  pool.setWanted(requestsFor({bad}));
+  pool.waitIdle();
+  std::vector<LoadEvent> events = drain(pool);
+  ASSERT_EQ(events.size(), 1u);
+  EXPECT_FALSE(events[0].ok);
+  EXPECT_FALSE(events[0].error.empty());
+  EXPECT_FALSE(cache_.contains(bad));
+  EXPECT_EQ(pool.stats().failures, 1u);
+}
+
+}  // namespace
+}  // namespace tessera::detail

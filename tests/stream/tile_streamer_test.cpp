@@ -1,0 +1,299 @@
+// TileStreamer, the per-frame facade: a fixed view reaches full detail, uploads keep their
+// budget and go parent before child, the coarsest level stays locked, the cache keeps its
+// budget, and a stalled or faulty source never stalls update() or uncovers the screen.
+#include <tessera/stream.h>
+
+#include <chrono>
+#include <set>
+#include <thread>
+#include <tuple>
+
+#include <gtest/gtest.h>
+
+#include "support/fault_source.h"
+#include "support/synthetic_archive.h"
+
+namespace tessera {
+namespace {
+
+using test::FaultConfig;
+using test::FaultKind;
+using test::FaultSource;
+
+using Key = std::tuple<uint32_t, uint32_t, uint32_t>;  // level, x, y
+Key keyOf(const TileId& id) {
+  return {id.level, id.x, id.y};
+}
+
+View orthoView(double centre_x, double centre_y, double tpp = 1, uint32_t w = 320,
+               uint32_t h = 240) {
+  View view;
+  view.ortho = {centre_x, centre_y, tpp, w, h, 0};
+  return view;
+}
+
+class TileStreamerTest : public testing::TestWithParam<Codec> {
+ protected:
+  void SetUp() override {
+    test::SyntheticArchiveSpec spec;
+    spec.codec = codec();
+    const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
+    ASSERT_FALSE(bytes.empty());
+    source_ = std::make_shared<FaultSource>(makeMemorySource(bytes, "mem:streamer.tess"));
+    archive_ = test::openArchiveOrFail(source_);
+    ASSERT_TRUE(archive_);
+    test::warmDirectory(*archive_);
+    options_.loader_threads = 2;
+    options_.cache_budget_bytes = size_t(64) << 20;
+    options_.retry_initial = std::chrono::milliseconds(1);
+    options_.retry_max = std::chrono::milliseconds(4);
+  }
+
+  void TearDown() override {
+    if (source_) source_->openGate();
+    streamer_.reset();
+  }
+
+  virtual Codec codec() const { return GetParam(); }
+
+  TileStreamer& start() {
+    auto streamer = TileStreamer::create(archive_, options_);
+    EXPECT_TRUE(streamer) << streamer.error().message;
+    streamer_ = std::move(*streamer);
+    return *streamer_;
+  }
+
+  const ImageInfo& info() const { return archive_->images()[0]; }
+  uint32_t coarsest() const { return info().level_count - 1; }
+
+  /// One frame as a renderer runs it: update, check the uploads against the budget and the
+  /// parent-first rule, upload them all, drop the releases.
+  FrameReport frame(const View& view) {
+    const FrameUpdate& update = streamer_->update(view);
+    const ResidencyOptions& budget = options_.residency;
+    EXPECT_LE(update.uploads.size(), budget.upload_budget_tiles);
+    for (const auto& tile : update.uploads) {
+      const TileId& id = tile->id;
+      if (id.level != coarsest()) {
+        EXPECT_TRUE(resident_.count({id.level + 1, id.x / 2, id.y / 2}))
+            << "tile " << id.level << "," << id.x << "," << id.y << " uploaded before its parent";
+      }
+      EXPECT_TRUE(resident_.insert(keyOf(id)).second) << "uploaded twice";
+    }
+    FrameReport report = update.report;
+    std::vector<TileId> uploads;
+    for (const auto& tile : update.uploads) uploads.push_back(tile->id);
+    std::vector<TileId> releases = update.releases;
+    for (const TileId& id : uploads) streamer_->uploaded(id);
+    for (const TileId& id : releases) {
+      EXPECT_NE(id.level, coarsest()) << "the coarsest level was released";
+      resident_.erase(keyOf(id));
+      streamer_->released(id);
+    }
+    ++frames_;
+    return report;
+  }
+
+  /// Frames with the loader drained in between until the view is at full detail and nothing
+  /// is left to upload, or `max_frames` pass.
+  FrameReport settle(const View& view, int max_frames = 100) {
+    FrameReport report;
+    for (int i = 0; i < max_frames; ++i) {
+      streamer_->waitIdleForTesting();
+      report = frame(view);
+      if (report.coverage_desired == 1 && report.uploads == 0 && report.queue_length == 0 &&
+          report.in_flight == 0)
+        break;
+    }
+    return report;
+  }
+
+  /// The level-0 tiles an ortho view shows, clipped to the grid.
+  std::vector<TileId> visibleTiles(const View& view) const {
+    const OrthoView& o = view.ortho;
+    double hw = o.viewport_w * o.texels_per_pixel / 2, hh = o.viewport_h * o.texels_per_pixel / 2;
+    const double t = info().tile_size_px;
+    std::vector<TileId> out;
+    for (int64_t y = std::max<int64_t>(0, int64_t((o.centre_y - hh) / t));
+         y <= std::min<int64_t>(info().tilesY(0) - 1, int64_t((o.centre_y + hh) / t)); ++y)
+      for (int64_t x = std::max<int64_t>(0, int64_t((o.centre_x - hw) / t));
+           x <= std::min<int64_t>(info().tilesX(0) - 1, int64_t((o.centre_x + hw) / t)); ++x)
+        out.push_back({0, 0, uint32_t(x), uint32_t(y)});
+    return out;
+  }
+
+  std::shared_ptr<FaultSource> source_;
+  std::shared_ptr<Archive> archive_;
+  StreamerOptions options_;
+  std::unique_ptr<TileStreamer> streamer_;
+  std::set<Key> resident_;  ///< what the fake renderer holds
+  int frames_ = 0;
+};
+
+TEST_P(TileStreamerTest, FixedViewReachesFullDetailWithEveryVisibleTileResident) {
+  TileStreamer& streamer = start();
+  const View view = orthoView(512, 384);
+  FrameReport report = settle(view);
+  EXPECT_EQ(report.desired_level, 0u);
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  EXPECT_TRUE(report.fully_covered);
+  EXPECT_EQ(report.finest_full_level, 0u);
+  std::vector<TileId> visible = visibleTiles(view);
+  EXPECT_EQ(visible.size(), 6u * 4);  // [352, 672] x [264, 504] at 64 px
+  for (const TileId& id : visible)
+    EXPECT_EQ(streamer.state(id), TileState::kResident) << id.x << "," << id.y;
+  EXPECT_EQ(streamer.state({0, coarsest(), 0, 0}), TileState::kLocked);
+  EXPECT_GT(report.tiles_loaded_total, 0u);
+  EXPECT_EQ(report.load_failures_total, 0u);
+  EXPECT_GE(report.bytes_read_total, report.payload_bytes_total);
+}
+
+TEST_P(TileStreamerTest, ZoomedOutViewIsAtFullDetailOnACoarserLevel) {
+  start();
+  const View view = orthoView(512, 384, 4);  // 4 texels per pixel: level 2
+  FrameReport report = settle(view);
+  EXPECT_EQ(report.desired_level, 2u);
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  EXPECT_EQ(report.finest_full_level, 2u);
+  for (const Key& key : resident_) EXPECT_GE(std::get<0>(key), 2u) << "a finer level uploaded";
+}
+
+TEST_P(TileStreamerTest, TileStatesFollowTheLoadAndUploadLifeCycle) {
+  TileStreamer& streamer = start();
+  const TileId top{0, coarsest(), 0, 0};
+  const TileId centre{0, 0, 8, 6};
+  EXPECT_EQ(streamer.state(centre), TileState::kUnloaded);
+  source_->closeGate();
+  streamer.update(orthoView(512, 384));
+  EXPECT_EQ(streamer.state(centre), TileState::kRequested);
+  EXPECT_EQ(streamer.state(top), TileState::kRequested);
+  source_->openGate();
+  streamer.waitIdleForTesting();
+  EXPECT_EQ(streamer.state(centre), TileState::kLoaded);
+  EXPECT_EQ(streamer.state(top), TileState::kLoaded);
+  const FrameUpdate& update = streamer.update(orthoView(512, 384));
+  ASSERT_FALSE(update.uploads.empty());
+  EXPECT_EQ(update.uploads.front()->id, top);  // the coarsest goes up first
+  std::vector<TileId> uploads;
+  for (const auto& tile : update.uploads) uploads.push_back(tile->id);
+  EXPECT_EQ(streamer.state(top), TileState::kLoaded);  // handed out, not yet confirmed
+  for (const TileId& id : uploads) {
+    streamer.uploaded(id);
+    resident_.insert(keyOf(id));
+  }
+  EXPECT_EQ(streamer.state(top), TileState::kLocked);
+  settle(orthoView(512, 384));
+  EXPECT_EQ(streamer.state(centre), TileState::kResident);
+}
+
+TEST_P(TileStreamerTest, UploadsKeepTheTileBudgetAndGoParentBeforeChild) {
+  options_.residency.upload_budget_tiles = 5;
+  start();
+  // The renderer-side checks live in frame(): budget, parent resident first, no duplicates.
+  FrameReport report = settle(orthoView(512, 384));
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  EXPECT_GT(frames_, 5) << "a budget of 5 tiles a frame should spread the uploads";
+  // And while panning, with releases in between.
+  for (int i = 0; i < 30; ++i) {
+    streamer_->waitIdleForTesting();
+    frame(orthoView(300 + 15 * i, 300 + 5 * i));
+  }
+}
+
+TEST_P(TileStreamerTest, UploadsKeepTheByteBudget) {
+  const uint64_t tile_bytes = info().storedTileBytes();
+  options_.residency.upload_budget_tiles = 1000;
+  options_.residency.upload_budget_bytes = tile_bytes * 5 / 2;  // two and a half tiles
+  TileStreamer& streamer = start();
+  for (int i = 0; i < 20; ++i) {
+    streamer.waitIdleForTesting();
+    const FrameUpdate& update = streamer.update(orthoView(512, 384));
+    if (update.uploads.size() > 1) {
+      EXPECT_LE(update.report.upload_bytes, options_.residency.upload_budget_bytes)
+          << update.uploads.size() << " tiles in frame " << i;
+    }
+    for (const auto& tile : update.uploads) streamer.uploaded(tile->id);
+  }
+}
+
+TEST_P(TileStreamerTest, UpdateDoesNotBlockWhileEveryLoaderIsStuckInARead) {
+  TileStreamer& streamer = start();
+  const View view = orthoView(512, 384);
+  source_->closeGate();
+  frame(view);
+  ASSERT_TRUE(source_->waitUntilBlocked(options_.loader_threads))
+      << "the loaders never reached the source";
+  // Both loader threads sit inside read(): update() on this thread must still come back.
+  for (int i = 0; i < 3; ++i) {
+    FrameReport report = frame(view);
+    EXPECT_FALSE(report.fully_covered);
+    EXPECT_EQ(report.uploads, 0u);
+    EXPECT_GT(report.queue_length, 0u);
+    EXPECT_GT(report.in_flight, 0u);
+  }
+  EXPECT_EQ(streamer.state({0, coarsest(), 0, 0}), TileState::kRequested);
+  source_->openGate();
+  FrameReport report = settle(view);
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  EXPECT_TRUE(report.fully_covered);
+}
+
+TEST_P(TileStreamerTest, CacheStaysWithinItsBudgetWhilePanning) {
+  const size_t per_tile = info().storedTileBytes() + sizeof(DecodedTile);
+  options_.cache_budget_bytes = 120 * per_tile;
+  TileStreamer& streamer = start();
+  settle(orthoView(180, 180));
+  for (int i = 0; i < 60; ++i) {
+    streamer.waitIdleForTesting();
+    FrameReport report = frame(orthoView(180 + 11 * i, 180 + 7 * i));
+    EXPECT_TRUE(report.fully_covered) << "frame " << i;
+  }
+  CacheStats stats = streamer.cacheStats();
+  EXPECT_LE(stats.peak_bytes, options_.cache_budget_bytes);
+  EXPECT_LE(stats.bytes + stats.reserved_bytes, options_.cache_budget_bytes);
+  EXPECT_GT(stats.evictions, 0u) << "the pan should put the cache under pressure";
+  EXPECT_EQ(streamer.state({0, coarsest(), 0, 0}), TileState::kLocked);
+  FrameReport report = settle(orthoView(180 + 11 * 59, 180 + 7 * 59));
+  EXPECT_EQ(report.coverage_desired, 1.0);
+}
+
+TEST_P(TileStreamerTest, FaultsKeepTheScreenCoveredAndLoadingRecoversWhenTheyStop) {
+  TileStreamer& streamer = start();
+  ASSERT_EQ(settle(orthoView(200, 200)).coverage_desired, 1.0);
+  source_->setFaults({FaultKind::kFlipBytes, 1, 0, 256});
+  const View far = orthoView(850, 600);
+  FrameReport report;
+  for (int i = 0; i < 10; ++i) {
+    streamer.waitIdleForTesting();
+    report = frame(far);
+    EXPECT_TRUE(report.fully_covered) << "frame " << i;
+  }
+  EXPECT_LT(report.coverage_desired, 1.0);
+  EXPECT_GT(report.load_failures_total, 0u);
+  source_->stopFaulting();
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+  while (report.coverage_desired < 1 && std::chrono::steady_clock::now() < deadline) {
+    streamer.waitIdleForTesting();
+    report = frame(far);
+    std::this_thread::yield();
+  }
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  for (const TileId& id : visibleTiles(far)) EXPECT_EQ(streamer.state(id), TileState::kResident);
+}
+
+TEST_P(TileStreamerTest, CreateRefusesABudgetBelowSixtyFourTiles) {
+  options_.cache_budget_bytes = 1000;
+  auto streamer = TileStreamer::create(archive_, options_);
+  ASSERT_FALSE(streamer);
+  EXPECT_EQ(streamer.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(streamer.error().message.find("streamer.tess"), std::string::npos);
+  EXPECT_FALSE(TileStreamer::create(nullptr, StreamerOptions{}));
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, TileStreamerTest, testing::Values(Codec::kZstd, Codec::kJpeg),
+                         [](const testing::TestParamInfo<Codec>& param_info) {
+                           return std::string(codecName(param_info.param));
+                         });
+
+}  // namespace
+}  // namespace tessera
