@@ -1,5 +1,9 @@
 #include "stream/loader_pool.h"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
 
 #include <fmt/format.h>
@@ -11,6 +15,9 @@ namespace tessera::detail {
 using Clock = std::chrono::steady_clock;
 
 namespace {
+
+/// Niceness of loader threads (0 is the default, 19 the lowest priority).
+constexpr int kLoaderNiceness = 5;
 
 /// Requests of the same level considered for merging with the one a worker takes.
 constexpr size_t kMergeCandidates = 32;
@@ -120,6 +127,10 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
 }
 
 void LoaderPool::run(uint32_t) {
+  // Loader threads yield the CPU to the render thread: on a machine with fewer free cores
+  // than threads, a frame must not wait for a decode to be preempted. Raising one's own
+  // niceness needs no privilege; failure leaves the default priority.
+  ::setpriority(PRIO_PROCESS, pid_t(::syscall(SYS_gettid)), kLoaderNiceness);
   CodecScratch scratch;
   Batch batch;
   std::unique_lock lock(mutex_);
