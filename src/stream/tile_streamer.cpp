@@ -120,9 +120,9 @@ const FrameUpdate& TileStreamer::update(const View& view) {
       s.requests.push_back(request);
       continue;
     }
-    bool budget_left =
-        s.candidates.size() < budget.upload_budget_tiles &&
-        (budget.upload_budget_bytes == 0 || candidate_bytes < budget.upload_budget_bytes);
+    bool budget_left = s.candidates.size() < budget.upload_budget_tiles &&
+                       (budget.upload_budget_bytes == 0 || s.candidates.empty() ||
+                        candidate_bytes + info.storedTileBytes() <= budget.upload_budget_bytes);
     if (budget_left && parentReady(id)) {
       s.candidates.push_back(id);
       s.candidate_requests.push_back(request);
