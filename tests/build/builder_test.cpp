@@ -48,6 +48,10 @@ struct PyramidCase {
   std::vector<std::pair<uint32_t, uint32_t>> only = {};
 };
 
+void PrintTo(const PyramidCase& c, std::ostream* out) {
+  *out << c.name;
+}
+
 const std::vector<uint32_t> kAllTileSizes = {64, 128, 256, 512, 1024, 2048};
 const std::vector<uint32_t> kAllBorders = {0, 1, 4};
 

@@ -65,6 +65,11 @@ struct Case {
   uint32_t width, height, channels, tile, border, band_rows;
 };
 
+void PrintTo(const Case& c, std::ostream* out) {
+  *out << c.width << "x" << c.height << " c" << c.channels << " t" << c.tile << " b" << c.border
+       << " rows" << c.band_rows;
+}
+
 class PyramidBuilderTest : public testing::TestWithParam<Case> {};
 
 TEST_P(PyramidBuilderTest, EmitsEveryTileOnceAndEqualToTheReference) {
