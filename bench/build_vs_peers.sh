@@ -69,7 +69,7 @@ if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
     for target in "$@"; do
       if cmake --build "$build_dir" -j "$jobs" --target "$target" >"$log_dir/build-$target.log" 2>&1
       then
-        find "$build_dir" -type f -perm -u+x -name "$binary" -not -path '*/CMakeFiles/*' | head -1
+        find "$build_dir" -type f -perm -u+x -name "$binary" -not -path '*/CMakeFiles/*' -print -quit
         return 0
       fi
     done
@@ -106,9 +106,12 @@ fi
 threads=$(nproc)
 rows=()  # "input|tool|codec|wall_s|rss_kib|bytes|psnr|chroma|load|command"
 
+# Filters read their whole input: an early exit would kill the writer with SIGPIPE, which
+# pipefail turns into a failure.
 tiff_chroma() {  # photometric and chroma subsampling of page 0 of a JPEG-in-TIFF
   tiffinfo "$1" 2>/dev/null | awk '
-    /^=== TIFF directory 1/ { exit }
+    /^=== TIFF directory 1/ { done = 1 }
+    done { next }
     /Photometric Interpretation:/ { p = $NF }
     /YCbCr Subsampling:/ { h = $3; v = $4; sub(",", "", h) }
     END {
@@ -132,6 +135,7 @@ measure() {
   echo "build_vs_peers: [$(date +%H:%M:%S)] $tool ($codec) on $(basename "$input"), load $load"
   local cmd
   cmd=$(printf '%q ' "$@")
+  cmd=${cmd% }
   echo "  $cmd"
   if ! /usr/bin/time -v -o "$tfile" "$@" >"$lfile" 2>&1; then
     echo "build_vs_peers: FAILED, see $lfile" >&2
@@ -231,7 +235,7 @@ pixels_of() {  # level-0 pixels of the input whose file name is $1
   local i
   for i in "${inputs[@]}"; do
     if [[ $(basename "$i") == "$1" ]]; then
-      tiffinfo "$i" 2>/dev/null | awk '/Image Width/ { printf "%d", $3 * $6; exit }'
+      tiffinfo "$i" 2>/dev/null | awk '/Image Width/ && !n++ { printf "%d", $3 * $6 }'
     fi
   done
 }
@@ -240,7 +244,7 @@ report=$bench_dir/build_vs_peers-$(date +%Y%m%d-%H%M%S).md
 {
   echo "### Builder vs peers, $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo
-  echo "Machine: $(lscpu | sed -n 's/^Model name: *//p' | head -1), $(nproc) cores," \
+  echo "Machine: $(lscpu | awk -F': *' '/^Model name/ && !n++ { print $2 }'), $(nproc) cores," \
     "$(free -g | awk '/^Mem:/ { print $2 }') GiB RAM, $(sed -n "s/^PRETTY_NAME=//p" /etc/os-release | tr -d \")," \
     "kernel $(uname -r)."
   echo "Tools: $(vips --version), $(gdalinfo --version | cut -d, -f1)," \
