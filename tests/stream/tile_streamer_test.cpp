@@ -257,6 +257,29 @@ TEST_P(TileStreamerTest, CacheStaysWithinItsBudgetWhilePanning) {
   EXPECT_EQ(report.coverage_desired, 1.0);
 }
 
+TEST_P(TileStreamerTest, ReachesFullDetailWithABudgetBelowTheWantedSet) {
+  // 100 tiles: above the 64 tiles create() demands, below the ~150 tiles the clip regions of a
+  // 320x240 view want at 64 px. The view must still reach full detail: the visible tiles and
+  // their ancestors matter more than the rest of the clip region.
+  const size_t per_tile = info().storedTileBytes() + sizeof(DecodedTile);
+  for (bool viewer_shift : {true, false}) {
+    SCOPED_TRACE(viewer_shift ? "viewer-shift" : "lru");
+    options_.cache_budget_bytes = 100 * per_tile;
+    options_.viewer_shift_eviction = viewer_shift;
+    resident_.clear();
+    TileStreamer& streamer = start();
+    for (View view : {orthoView(600, 400), orthoView(200, 400), orthoView(900, 400),
+                      orthoView(600, 400, 4), orthoView(100, 700, 8), orthoView(950, 100)}) {
+      double x = view.ortho.centre_x;
+      FrameReport report = settle(view);
+      EXPECT_EQ(report.coverage_desired, 1.0) << "at x " << x;
+      EXPECT_TRUE(report.fully_covered);
+    }
+    EXPECT_LE(streamer.cacheStats().peak_bytes, options_.cache_budget_bytes);
+    streamer_.reset();
+  }
+}
+
 TEST_P(TileStreamerTest, FaultsKeepTheScreenCoveredAndLoadingRecoversWhenTheyStop) {
   TileStreamer& streamer = start();
   ASSERT_EQ(settle(orthoView(200, 200)).coverage_desired, 1.0);
