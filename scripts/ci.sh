@@ -99,13 +99,21 @@ build_and_test() {
   if ((status == 0)); then stage_result "$name" ok "$line"; else stage_result "$name" FAIL "$line"; fi
 }
 
+# GCC 12's -O2/-O3 -Warray-bounds and -Wstringop-* report false positives inside libstdc++
+# (std::copy/memcpy of small vectors); they stay warnings under -Werror. The asan stage checks
+# real out-of-bounds accesses at run time.
+release_flags=""
+if [[ $("${CXX:-c++}" --version 2>/dev/null) == *"Free Software Foundation"* ]]; then
+  release_flags="-Wno-error=array-bounds -Wno-error=stringop-overflow -Wno-error=stringop-overread"
+fi
+
 start=$SECONDS
 for stage in $stages; do
   case $stage in
     format) format_check ;;
     release)
       build_and_test release Release "" "" "$timeout_s" -DTESSERA_BUILD_BENCH=ON \
-        -DTESSERA_WERROR="$werror" ;;
+        -DTESSERA_WERROR="$werror" -DCMAKE_CXX_FLAGS="$release_flags" ;;
     asan)
       build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) ;;
     tsan)
