@@ -34,28 +34,34 @@ class ViewerShiftPolicy final : public EvictionPolicy {
   void victims(size_t count, std::vector<TileId>& out) override {
     struct Candidate {
       bool kept;
+      uint32_t level;
       double score;  ///< lower goes first
       TileId id;
     };
     std::vector<Candidate> candidates;
     candidates.reserve(tiles_.size());
     for (const TileId& id : tiles_) {
-      // Tile centre in level-0 pixels.
+      // The tile's nearest point to the viewer, in level-0 pixels: a coarse tile's centre can
+      // be far away while the tile lies right under the view.
       double span = std::ldexp(double(tile_size_px_), int(id.level));
-      double cx = (id.x + 0.5) * span, cy = (id.y + 0.5) * span;
+      double x0 = id.x * span, y0 = id.y * span;
+      double nx = std::clamp(centre_x_, x0, x0 + span), ny = std::clamp(centre_y_, y0, y0 + span);
+      double dx = nx - centre_x_, dy = ny - centre_y_;
       bool kept = isKept(id);
-      double dx = cx - centre_x_, dy = cy - centre_y_;
       // Projection on the motion vector: most negative = farthest behind.
       double projection = dx * direction_x_ + dy * direction_y_;
       double distance = std::hypot(dx, dy);
       double score = (direction_x_ != 0 || direction_y_ != 0) ? projection : -distance;
       if (kept) score = -distance;  // among kept tiles, farthest from the viewer first
-      candidates.push_back({kept, score, id});
+      candidates.push_back({kept, id.level, score, id});
     }
     size_t take = std::min(count, candidates.size());
+    // Kept tiles go last and finest level first among them: a coarse tile is the parent the
+    // finer ones need on screen, and covers the most for its bytes.
     std::partial_sort(candidates.begin(), candidates.begin() + take, candidates.end(),
                       [](const Candidate& a, const Candidate& b) {
                         if (a.kept != b.kept) return !a.kept;
+                        if (a.kept && a.level != b.level) return a.level < b.level;
                         return a.score < b.score;
                       });
     for (size_t i = 0; i < take; ++i) out.push_back(candidates[i].id);
