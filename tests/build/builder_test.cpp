@@ -195,7 +195,7 @@ INSTANTIATE_TEST_SUITE_P(
                     {},
                     {},
                     {{64, 0}, {64, 4}, {256, 4}, {2048, 0}}}),
-    [](const testing::TestParamInfo<PyramidCase>& info) { return info.param.name; });
+    [](const testing::TestParamInfo<PyramidCase>& param_info) { return param_info.param.name; });
 
 TEST(Builder, ThePatternProducesEveryTileKind) {
   // Guards the pyramid tests above: they only prove kinds if all three occur.

@@ -101,8 +101,8 @@ INSTANTIATE_TEST_SUITE_P(Shapes, PyramidBuilderTest,
                                          Case{200, 130, 2, 64, 0, 130}, Case{129, 129, 3, 64, 1, 3},
                                          Case{640, 400, 4, 64, 2, 256},
                                          Case{1000, 999, 3, 256, 1, 100}),
-                         [](const testing::TestParamInfo<Case>& info) {
-                           const Case& c = info.param;
+                         [](const testing::TestParamInfo<Case>& param_info) {
+                           const Case& c = param_info.param;
                            return std::to_string(c.width) + "x" + std::to_string(c.height) + "c" +
                                   std::to_string(c.channels) + "t" + std::to_string(c.tile) + "b" +
                                   std::to_string(c.border) + "rows" + std::to_string(c.band_rows);
