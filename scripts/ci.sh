@@ -104,7 +104,7 @@ build_and_test() {
     fi
   fi
   log "$name: build (-j$jobs)${targets[*]:+ targets: ${targets[*]}}"
-  if ! cmake --build "$dir" -j "$jobs" ${targets[@]:+--target "${targets[@]}"}; then
+  if ! cmake --build "$dir" -j "$jobs" ${targets[@]:+--target "${targets[@]}"} -- -k 0; then  # -k 0: report every failing file
     stage_result "$name" FAIL "build failed"
     return
   fi

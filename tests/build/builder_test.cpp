@@ -364,7 +364,9 @@ TEST(BuilderBadInput, EachFailsNamingTheFileAndLeavesNoOutput) {
     SCOPED_TRACE(bad.name);
     const std::string path = dir + "in/" + bad.name;
     std::filesystem::create_directories(dir + "in");
-    if (bad.write) ASSERT_TRUE(test::writeFileBytes(path, bad.bytes));
+    if (bad.write) {
+      ASSERT_TRUE(test::writeFileBytes(path, bad.bytes));
+    }
     BadInputResult result = buildMustFail(path, dir + "out_" + bad.name);
     EXPECT_NE(result.error.message.find(path), std::string::npos) << result.error.message;
     EXPECT_TRUE(result.out_dir_listing.empty());
