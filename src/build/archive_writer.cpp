@@ -1,7 +1,5 @@
 #include "build/archive_writer.h"
 
-#include <sys/mman.h>
-
 #include <cstring>
 
 #include <fmt/format.h>
@@ -54,29 +52,6 @@ class Appender {
   std::vector<uint8_t> buffer_;
 };
 
-// The spool is our own anonymous file, so mapping it cannot fault from someone else's truncation;
-// it saves a pread per payload in the layout pass.
-class SpoolMapping {
- public:
-  SpoolMapping(const TempFile& spool, uint64_t bytes) : size_(bytes) {
-    if (bytes == 0) return;
-    void* address = ::mmap(nullptr, bytes, PROT_READ, MAP_SHARED, spool.fd(), 0);
-    if (address != MAP_FAILED) {
-      data_ = static_cast<const uint8_t*>(address);
-      ::madvise(address, bytes, MADV_WILLNEED);
-    }
-  }
-  ~SpoolMapping() {
-    if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
-  }
-  const uint8_t* data() const { return data_; }
-  bool ok() const { return size_ == 0 || data_ != nullptr; }
-
- private:
-  const uint8_t* data_ = nullptr;
-  uint64_t size_;
-};
-
 struct PlacedBlock {
   BlockRef ref;
   std::vector<uint8_t> bytes;
@@ -88,9 +63,9 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     const nlohmann::json& metadata, const TempFile& out) {
   const std::string& name = out.finalPath();
-  SpoolMapping mapping(spool, spool_bytes);
-  if (!mapping.ok())
-    return fail(ErrorCode::kIo, name + ": cannot map the payload spool for the layout pass");
+  // Payloads are copied from the spool with pread, not through a mapping: mapped spool pages
+  // count in the process's resident set, which would then grow with the archive.
+  std::vector<uint8_t> payload;
 
   // Payloads, clustered. Entries are copied so the caller's spool offsets stay intact.
   std::vector<std::vector<std::vector<TileEntry>>> final_entries(images.size());
@@ -120,9 +95,9 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
       if (spooled.kind != TileKind::kEncoded) continue;
       TESSERA_CHECK(spooled.spool_offset + spooled.length_bytes <= spool_bytes)
           << "spool entry past the spool end";
-      TESSERA_ASSIGN_OR_RETURN(
-          levels[tile.level][slot].offset_bytes,
-          appender.append({mapping.data() + spooled.spool_offset, spooled.length_bytes}));
+      payload.resize(spooled.length_bytes);
+      TESSERA_TRY(spool.pread(spooled.spool_offset, payload));
+      TESSERA_ASSIGN_OR_RETURN(levels[tile.level][slot].offset_bytes, appender.append(payload));
       written.payload_bytes += spooled.length_bytes;
     }
   }

@@ -28,8 +28,6 @@ class TempFile {
   /// fsyncs, then gives the file its final name atomically (replacing any file there) and
   /// fsyncs the directory. After success the object no longer owns a temporary.
   [[nodiscard]] Result<void> commit();
-  /// The descriptor, for mapping the file read-only; owned by this object.
-  int fd() const { return fd_; }
   /// The path errors should name: the final path.
   const std::string& finalPath() const { return final_path_; }
 
