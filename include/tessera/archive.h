@@ -95,6 +95,12 @@ class Archive {
   [[nodiscard]] Result<Image> decodeTile(const TileId& tile, const TileEntry& entry,
                                          std::span<const uint8_t> payload,
                                          detail::CodecScratch* scratch = nullptr) const;
+  /// The same into `out`, reusing its buffer: when `out.texels` already holds a stored tile's
+  /// bytes nothing is allocated, zeroed or page-faulted (the streamer recycles evicted tiles'
+  /// buffers this way). Every texel is written, whatever `out` held before.
+  [[nodiscard]] Result<void> decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                            std::span<const uint8_t> payload, Image& out,
+                                            detail::CodecScratch* scratch = nullptr) const;
 
   /// tileEntry + readPayload + decodeTile.
   [[nodiscard]] Result<Image> readTile(const TileId& tile,

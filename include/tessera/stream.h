@@ -92,6 +92,9 @@ struct TileRequest {
   TileId id;
   double priority = 0;
   bool prefetch = false;  ///< wanted for a predicted move, not the current view
+  /// 0 the coarsest level, 1 on screen, 2 the rest of the clip regions, 3 prefetch. The loader
+  /// merges reads only within a class, so tiles on screen never wait behind the region's.
+  uint32_t urgency = 0;
 };
 
 /// Per-frame tuning. Defaults suit a 1920x1080 view with 256-px tiles.
@@ -147,8 +150,17 @@ struct StreamerOptions {
   bool viewer_shift_eviction = true;  ///< else LRU
   uint32_t loader_threads = 0;        ///< 0 = all cores
   ResidencyOptions residency;
-  /// Reads whose gap is below this are merged into one (adjacent tiles of the Hilbert layout).
-  uint64_t merge_gap_bytes = 64 * 1024;
+  /// A loader thread takes queued tiles of one level and urgency whose payloads follow each
+  /// other in the file with gaps under this, and decodes them as one batch (neighbours on
+  /// screen are neighbours in the Hilbert layout); batching halves the loader's CPU time per
+  /// tile here (docs/runtime.md).
+  uint64_t batch_gap_bytes = 64 * 1024;
+  /// Within a batch, payloads closer than this are read in one read, gap included: the gaps
+  /// are bytes read for nothing, each extra read a system call (measured trade-off in
+  /// docs/benchmarks.md). A remote source, where each read is a request, wants it as large
+  /// as batch_gap_bytes.
+  uint64_t merge_gap_bytes = 16 * 1024;
+  /// The most bytes a batch spans in the file; 0 makes every tile its own read and batch.
   uint64_t max_merged_read_bytes = 4 << 20;
   /// Retry a failed read or checksum after this, doubling per failure up to the maximum.
   std::chrono::milliseconds retry_initial{10};

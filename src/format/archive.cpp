@@ -228,16 +228,34 @@ Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
 Result<Image> Archive::decodeTile(const TileId& tile, const TileEntry& entry,
                                   std::span<const uint8_t> payload,
                                   detail::CodecScratch* scratch) const {
+  Image image;
+  TESSERA_TRY(decodeTileInto(tile, entry, payload, image, scratch));
+  return image;
+}
+
+Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                     std::span<const uint8_t> payload, Image& image,
+                                     detail::CodecScratch* scratch) const {
   const ImageInfo& info = impl_->infos.at(tile.image);
   uint32_t side = info.storedTileSidePx();
-  Image image(side, side, info.channels);
+  image.width_px = side;
+  image.height_px = side;
+  image.channels = info.channels;
+  image.texels.resize(size_t(side) * side * info.channels);
   switch (entry.kind) {
-    case TileKind::kEmpty: break;
+    case TileKind::kEmpty: std::fill(image.texels.begin(), image.texels.end(), uint8_t{0}); break;
     case TileKind::kUniform: {
       uint8_t colour[4];
       for (uint32_t c = 0; c < 4; ++c) colour[c] = uint8_t(entry.uniform_rgba >> (8 * c));
-      for (size_t i = 0; i < image.texels.size(); i += info.channels)
-        std::memcpy(&image.texels[i], colour, info.channels);
+      // One texel, then copies of what is filled so far: a few large copies, not one per texel.
+      std::span<uint8_t> texels(image.texels);
+      size_t filled = std::min<size_t>(info.channels, texels.size());
+      std::memcpy(texels.data(), colour, filled);
+      while (filled < texels.size()) {
+        size_t copy = std::min(filled, texels.size() - filled);
+        std::memcpy(texels.data() + filled, texels.data(), copy);
+        filled += copy;
+      }
       break;
     }
     case TileKind::kEncoded: {
@@ -255,7 +273,7 @@ Result<Image> Archive::decodeTile(const TileId& tile, const TileEntry& entry,
     case TileKind::kProcedural:
       return fail(ErrorCode::kUnsupported, impl_->tileName(tile) + " is procedural");
   }
-  return image;
+  return {};
 }
 
 Result<Image> Archive::readTile(const TileId& tile, detail::CodecScratch* scratch) const {

@@ -36,10 +36,13 @@ struct LoaderPool::Batch {
 
 LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
                        const LoaderOptions& options)
-    : archive_(std::move(archive)), cache_(cache), options_(options) {
-  uint32_t threads =
-      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
-  for (uint32_t i = 0; i < threads; ++i) workers_.emplace_back([this, i] { run(i); });
+    : archive_(std::move(archive)),
+      cache_(cache),
+      options_(options),
+      thread_count_(options.threads ? options.threads
+                                    : std::max(1u, std::thread::hardware_concurrency())),
+      texel_pool_(std::make_shared<TexelPool>(options.recycled_bytes)) {
+  for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
 }
 
 LoaderPool::~LoaderPool() {
@@ -62,7 +65,8 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
       if (!wanted.count(pending.id)) ++stats_.cancelled;
     queue_.clear();
     for (const TileRequest& request : requests)
-      if (!in_flight_.count(request.id)) queue_.push_back({request.id, request.priority});
+      if (!in_flight_.count(request.id))
+        queue_.push_back({request.id, request.priority, request.urgency});
     wanted_ = std::move(wanted);
     // Retry state of tiles nobody wants any more is forgotten: a later request starts afresh.
     for (auto it = retries_.begin(); it != retries_.end();)
@@ -110,14 +114,20 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
     auto retry = retries_.find(queue_[i].id);
     if (retry != retries_.end() && retry->second.not_before > now) continue;
     batch.first = queue_[i].id;
+    const uint32_t first_urgency = queue_[i].urgency;
     batch.candidates.clear();
     batch.items.clear();
     queue_.erase(queue_.begin() + ptrdiff_t(i));
     in_flight_.insert(batch.first);
-    for (size_t j = i; j < queue_.size() && batch.candidates.size() < kMergeCandidates; ++j) {
+    // A fair share of the class's queue at most, so the other workers decode the rest of the
+    // screen in parallel instead of waiting for one worker's long batch.
+    size_t same_class = 0;
+    for (size_t j = i; j < queue_.size(); ++j) same_class += queue_[j].urgency == first_urgency;
+    const size_t share = std::min(kMergeCandidates, same_class / thread_count_);
+    for (size_t j = i; j < queue_.size() && batch.candidates.size() < share; ++j) {
       const TileId& other = queue_[j].id;
       if (other.image == batch.first.image && other.level == batch.first.level &&
-          !retries_.count(other))
+          queue_[j].urgency == first_urgency && !retries_.count(other))
         batch.candidates.push_back(other);
     }
     stats_.queued = queue_.size();
@@ -168,7 +178,7 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
     retry.not_before =
         Clock::now() + std::min<std::chrono::milliseconds>(backoff, options_.retry_max);
     // Still wanted: back in the queue at its place, to be tried after the backoff.
-    if (wanted_.count(id)) queue_.push_back({id, 1e300});
+    if (wanted_.count(id)) queue_.push_back({id, 1e300, UINT32_MAX});
   } else {
     retries_.erase(id);
   }
@@ -186,8 +196,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   }
   batch.items.push_back({batch.first, *first_entry});
 
-  // Merge: requests of the same level whose payloads extend the first one's range with gaps
-  // under merge_gap_bytes (neighbours on the Hilbert curve usually are).
+  // Batch: requests of the same level and urgency whose payloads extend the first one's range
+  // with gaps under batch_gap_bytes (neighbours on the Hilbert curve usually are).
   if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty()) {
     std::vector<Batch::Item> neighbours;
     for (const TileId& id : batch.candidates) {
@@ -203,7 +213,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     // Grow the range forwards, then backwards.
     for (const auto& n : neighbours) {
       if (n.entry.offset_bytes < end) continue;
-      if (n.entry.offset_bytes - end > options_.merge_gap_bytes) break;
+      if (n.entry.offset_bytes - end > options_.batch_gap_bytes) break;
       uint64_t new_end = n.entry.offset_bytes + n.entry.length_bytes;
       if (new_end - begin > options_.max_merged_read_bytes) break;
       end = new_end;
@@ -212,7 +222,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     for (auto it = neighbours.rbegin(); it != neighbours.rend(); ++it) {
       uint64_t n_end = it->entry.offset_bytes + it->entry.length_bytes;
       if (n_end > begin) continue;
-      if (begin - n_end > options_.merge_gap_bytes) break;
+      if (begin - n_end > options_.batch_gap_bytes) break;
       if (end - it->entry.offset_bytes > options_.max_merged_read_bytes) break;
       begin = it->entry.offset_bytes;
       chosen.push_back(*it);
@@ -231,33 +241,53 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     stats_.queued = queue_.size();
   }
 
-  // One read for every encoded payload of the batch.
-  uint64_t begin = UINT64_MAX, end = 0;
-  for (const auto& item : batch.items) {
-    if (item.entry.kind != TileKind::kEncoded) continue;
-    begin = std::min(begin, item.entry.offset_bytes);
-    end = std::max(end, item.entry.offset_bytes + item.entry.length_bytes);
+  // Reads: the batch's payloads in file order, each run whose gaps are under merge_gap_bytes
+  // in one call.
+  struct Run {
+    uint64_t begin = 0;
+    uint64_t end = 0;
+    std::vector<uint8_t> bytes;
+    Result<void> read;
+  };
+  std::vector<const Batch::Item*> encoded;
+  for (const auto& item : batch.items)
+    if (item.entry.kind == TileKind::kEncoded) encoded.push_back(&item);
+  std::sort(encoded.begin(), encoded.end(), [](const Batch::Item* a, const Batch::Item* b) {
+    return a->entry.offset_bytes < b->entry.offset_bytes;
+  });
+  std::vector<Run> runs;
+  std::vector<size_t> run_of_item(batch.items.size());
+  for (const Batch::Item* item : encoded) {
+    const uint64_t offset = item->entry.offset_bytes;
+    if (runs.empty() || offset > runs.back().end + options_.merge_gap_bytes)
+      runs.push_back({offset, offset, {}, {}});
+    runs.back().end = std::max(runs.back().end, offset + item->entry.length_bytes);
+    run_of_item[size_t(item - batch.items.data())] = runs.size() - 1;
   }
-  std::vector<uint8_t> bytes;
-  Result<void> read;
-  if (begin < end) {
-    bytes.resize(end - begin);
-    read = archive.source().read(begin, bytes);
+  uint64_t bytes_read = 0;
+  for (Run& run : runs) {
+    run.bytes.resize(run.end - run.begin);
+    run.read = archive.source().read(run.begin, run.bytes);
+    bytes_read += run.bytes.size();
+  }
+  if (!runs.empty()) {
     std::lock_guard lock(mutex_);
-    ++stats_.reads;
-    stats_.bytes_read += bytes.size();
+    stats_.reads += runs.size();
+    stats_.bytes_read += bytes_read;
   }
 
   const size_t tile_bytes = archive.images()[batch.first.image].storedTileBytes();
-  for (const auto& item : batch.items) {
+  for (size_t i = 0; i < batch.items.size(); ++i) {
+    const Batch::Item& item = batch.items[i];
     std::span<const uint8_t> payload;
     if (item.entry.kind == TileKind::kEncoded) {
-      if (!read) {
-        finish(item.id, {item.id, false, false, read.error().message}, true);
+      const Run& run = runs[run_of_item[i]];
+      if (!run.read) {
+        finish(item.id, {item.id, false, false, run.read.error().message}, true);
         continue;
       }
-      payload = std::span<const uint8_t>(bytes).subspan(item.entry.offset_bytes - begin,
-                                                        item.entry.length_bytes);
+      payload = std::span<const uint8_t>(run.bytes).subspan(item.entry.offset_bytes - run.begin,
+                                                            item.entry.length_bytes);
       if (Result<void> verified = archive.verifyPayload(item.id, item.entry, payload); !verified) {
         finish(item.id, {item.id, false, false, verified.error().message}, true);
         continue;
@@ -269,11 +299,14 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       continue;
     }
     auto started = Clock::now();
-    Result<Image> decoded = archive.decodeTile(item.id, item.entry, payload, &scratch);
+    Image texels;
+    texels.texels = texel_pool_->take(tile_bytes);
+    Result<void> decoded = archive.decodeTileInto(item.id, item.entry, payload, texels, &scratch);
     uint64_t decode_ns = uint64_t(
         std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
     cache_.unreserve(tile_bytes);
     if (!decoded) {
+      texel_pool_->give(std::move(texels.texels));
       finish(item.id, {item.id, false, false, decoded.error().message}, true);
       continue;
     }
@@ -290,12 +323,10 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       }
     }
     // A tile that left every region while it loaded is dropped here (Backes et al., section 6).
-    if (wanted) {
-      auto tile = std::make_shared<DecodedTile>();
-      tile->id = item.id;
-      tile->texels = std::move(*decoded);
-      cache_.insert(std::move(tile));
-    }
+    if (wanted)
+      cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
+    else
+      texel_pool_->give(std::move(texels.texels));
     finish(item.id, {item.id, wanted, !wanted, ""}, false);
   }
 }

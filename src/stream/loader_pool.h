@@ -20,14 +20,19 @@
 #include <tessera/cache.h>
 #include <tessera/stream.h>
 
+#include "stream/texel_pool.h"
+
 namespace tessera::detail {
 
 struct LoaderOptions {
-  uint32_t threads = 0;  ///< 0 = all cores
-  uint64_t merge_gap_bytes = 64 * 1024;
+  uint32_t threads = 0;                  ///< 0 = all cores
+  uint64_t batch_gap_bytes = 64 * 1024;  ///< StreamerOptions::batch_gap_bytes
+  uint64_t merge_gap_bytes = 16 * 1024;  ///< StreamerOptions::merge_gap_bytes
   uint64_t max_merged_read_bytes = 4 << 20;
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
+  /// Idle buffers of evicted tiles kept for the next decodes (TexelPool).
+  uint64_t recycled_bytes = 32u << 20;
 };
 
 /// A finished request, reported once to the render thread.
@@ -76,6 +81,7 @@ class LoaderPool {
   struct Pending {
     TileId id;
     double priority;
+    uint32_t urgency;
   };
   struct RetryState {
     uint32_t failures = 0;
@@ -90,6 +96,8 @@ class LoaderPool {
   std::shared_ptr<Archive> archive_;
   TileCache& cache_;
   LoaderOptions options_;
+  const uint32_t thread_count_;  ///< set before the workers start; they read it unlocked
+  std::shared_ptr<TexelPool> texel_pool_;
 
   mutable std::mutex mutex_;  // guards every member below
   std::condition_variable work_ready_;

@@ -164,7 +164,10 @@ void ResidencyManager::updateCentre(uint32_t level, double f_x, double f_y, uint
   double half = std::floor(n / 2.0) / 2;
   bool outside = std::abs(fx - double(c.x)) > half || std::abs(fy - double(c.y)) > half;
   if (!outside) return;
-  double step = limit_step ? options_.max_centre_step_tiles : 1e18;
+  // A move of a whole region or more is a jump, not a flight: the regions in between share no
+  // tile with the destination, so walking through them would only load what is never shown.
+  const bool jump = std::max(std::abs(target_x - c.x), std::abs(target_y - c.y)) >= int64_t(n);
+  double step = limit_step && !jump ? options_.max_centre_step_tiles : 1e18;
   auto approach = [&](int64_t from, int64_t to) {
     int64_t delta = to - from;
     int64_t limit = int64_t(std::max(1.0, step));
@@ -182,7 +185,7 @@ void ResidencyManager::addWanted(const TileId& tile, int cls, double distance, b
     if (priority >= it->second) return;
     it->second = priority;
   }
-  plan_.wanted.push_back({tile, priority, prefetch});
+  plan_.wanted.push_back({tile, priority, prefetch, uint32_t(cls)});
 }
 
 const ResidencyPlan& ResidencyManager::plan(const View& view) {

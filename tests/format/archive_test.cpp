@@ -197,6 +197,50 @@ TEST(Archive, DecodeTileExpandsUniformAndEmptyEntries) {
       std::all_of(empty->texels.begin(), empty->texels.end(), [](uint8_t v) { return v == 0; }));
 }
 
+TEST(Archive, DecodeTileIntoReusesAnyBufferAndWritesEveryTexel) {
+  SmallArchive small;
+  auto archive = openBytes(small.built.bytes);
+  ASSERT_TRUE(archive);
+  const ImageInfo& info = archive->images()[0];
+  TileEntry uniform;
+  uniform.kind = TileKind::kUniform;
+  uniform.uniform_rgba = 0x00302010;
+  std::vector<std::pair<TileId, TileEntry>> cases = {{{0, 0, 0, 0}, uniform},
+                                                     {{0, 0, 0, 0}, TileEntry{}}};
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    for (uint32_t y = 0; y < info.tilesY(level); ++y)
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+        TileId id{0, level, x, y};
+        auto entry = archive->tileEntry(id);
+        ASSERT_TRUE(entry);
+        cases.push_back({id, *entry});
+      }
+  // A buffer of the right size full of another tile's bytes, a smaller one and a larger one.
+  const size_t stored = info.storedTileBytes();
+  for (size_t garbage_bytes : {stored, stored / 3, stored * 2}) {
+    for (const auto& [id, entry] : cases) {
+      SCOPED_TRACE(::testing::Message()
+                   << "level " << id.level << " x " << id.x << " y " << id.y << " kind "
+                   << int(entry.kind) << " buffer " << garbage_bytes);
+      std::vector<uint8_t> payload;
+      if (entry.kind == TileKind::kEncoded) {
+        auto read = archive->readPayload(id, entry);
+        ASSERT_TRUE(read);
+        payload = std::move(*read);
+      }
+      auto expected = archive->decodeTile(id, entry, payload);
+      ASSERT_TRUE(expected) << expected.error().message;
+      Image reused(1, 1, 1);
+      reused.texels.assign(garbage_bytes, 0xAB);
+      ASSERT_TRUE(archive->decodeTileInto(id, entry, payload, reused));
+      EXPECT_EQ(reused.width_px, expected->width_px);
+      EXPECT_EQ(reused.height_px, expected->height_px);
+      EXPECT_EQ(reused.channels, expected->channels);
+      EXPECT_TRUE(reused.texels == expected->texels);
+    }
+  }
+}
+
 TEST(Archive, EveryTruncationIsRejected) {
   SmallArchive small;
   const std::vector<uint8_t>& bytes = small.built.bytes;

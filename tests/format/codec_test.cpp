@@ -136,6 +136,29 @@ TEST(Codec, LosslessCodecsRoundTripBitExactForEverySizeAndChannelCount) {
   }
 }
 
+TEST(Codec, DecodeWritesEveryTexelOfAReusedBuffer) {
+  // The streamer decodes into recycled tile buffers without clearing them: a codec that left
+  // any texel alone would show the previous tile's texels there.
+  CodecScratch scratch;
+  for (Codec codec : kAllCodecs) {
+    for (Size size : kSizes) {
+      for (uint32_t channels = 1; channels <= 4; ++channels) {
+        SCOPED_TRACE(trace(codec, size.width_px, size.height_px, channels));
+        Image image = makeImageLike(size.width_px, size.height_px, channels, 5);
+        std::vector<uint8_t> payload = encodeOrDie(codec, image.view(), {}, &scratch);
+        Image cleared(size.width_px, size.height_px, channels);
+        ASSERT_TRUE(decodeTile(codec, payload, cleared, nullptr, &scratch).has_value());
+        for (uint8_t garbage : {uint8_t{0xAB}, uint8_t{0xFF}}) {
+          Image reused(size.width_px, size.height_px, channels);
+          std::fill(reused.texels.begin(), reused.texels.end(), garbage);
+          ASSERT_TRUE(decodeTile(codec, payload, reused, nullptr, &scratch).has_value());
+          EXPECT_EQ(reused.texels, cleared.texels) << "garbage " << int(garbage);
+        }
+      }
+    }
+  }
+}
+
 TEST(Codec, LosslessCodecsRoundTripStridedInput) {
   for (Codec codec : kLosslessCodecs) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {

@@ -216,12 +216,31 @@ TEST(Residency, MaxCentreStepStillWantsWhatTheViewShows) {
   options.max_centre_step_tiles = 1;
   ResidencyManager residency(info, 0, options);
   residency.plan(orthoView(2000, 2000, 1, 1920, 1080));
-  const ResidencyPlan& plan = residency.plan(orthoView(12000, 2000, 1, 1920, 1080));
+  // 12 tiles right, less than the 16-tile region: a flight, so the centre moves 1 tile (7 -> 8).
+  const ResidencyPlan& plan = residency.plan(orthoView(5100, 2000, 1, 1920, 1080));
   ASSERT_FALSE(plan.visible.empty());
   for (const TileId& id : plan.visible) EXPECT_TRUE(residency.isWanted(id));
-  // The visible columns around x = 12000 / 256 = 46.9 lie far outside the lagging clip region.
-  EXPECT_FALSE(clipAt(plan, 0).contains(46, 7));
-  EXPECT_TRUE(residency.isWanted({0, 0, 46, 7}));
+  // The visible columns around x = 5100 / 256 = 19.9 lie outside the lagging clip region [0, 16).
+  EXPECT_EQ(clipAt(plan, 0).x0, 0);
+  EXPECT_FALSE(clipAt(plan, 0).contains(19, 7));
+  EXPECT_TRUE(residency.isWanted({0, 0, 19, 7}));
+}
+
+TEST(Residency, AJumpOfAWholeRegionMovesTheCentreAtOnce) {
+  ImageInfo info = imageOf(16384, 16384, 256);
+  ResidencyOptions options;
+  options.max_centre_step_tiles = 1;
+  ResidencyManager residency(info, 0, options);
+  residency.plan(orthoView(2000, 2000, 1, 1920, 1080));  // centre 7, region [-1, 15)
+  // 39 tiles right: no region between here and there shares a tile with the destination.
+  const ResidencyPlan& plan = residency.plan(orthoView(12000, 2000, 1, 1920, 1080));
+  EXPECT_EQ(clipAt(plan, 0).x0, 46 - 8);
+  EXPECT_TRUE(clipAt(plan, 0).contains(46, 7));
+  // Exactly one region (16 tiles) away is a jump too; 15 tiles is a flight of 1 tile a frame.
+  EXPECT_EQ(clipAt(residency.plan(orthoView((46 + 16.5) * 256, 2000, 1, 1920, 1080)), 0).x0,
+            62 - 8);
+  EXPECT_EQ(clipAt(residency.plan(orthoView((62 - 15 + 0.5) * 256, 2000, 1, 1920, 1080)), 0).x0,
+            61 - 8);
 }
 
 TEST(Residency, CoarsestLevelIsAlwaysWantedFirst) {
