@@ -14,6 +14,8 @@
 #   --no-peers             Tessera only
 #   --no-lossless          JPEG rows only
 #   --keep                 keep every output (default: delete each after measuring it)
+#   --runs N               run each command N times and report the run of median wall time
+#                          (default 3; peak RSS is the highest of the N)
 # Environment: TESSERA_BENCH_BUILD (build folder, default build-bench), TESSERA_BIN,
 # TESSERA_PSNR_BIN, TESSERA_MAKE_TIFF_BIN (use these binaries instead of building them),
 # TESSERA_BENCH_JOBS (compile jobs, default nproc), TESSERA_BENCH_REVISION (the Tessera revision
@@ -30,6 +32,7 @@ run_tessera=auto
 run_peers=1
 run_lossless=1
 keep=0
+runs=3
 while (($#)); do
   case $1 in
     --sizes) read -r -a sizes <<<"$2"; shift 2 ;;
@@ -39,6 +42,7 @@ while (($#)); do
     --no-peers) run_peers=0; shift ;;
     --no-lossless) run_lossless=0; shift ;;
     --keep) keep=1; shift ;;
+    --runs) runs=$2; shift 2 ;;
     -h | --help) sed -n '2,/^set -euo/p' "$0" | sed '$d; s/^# \{0,1\}//'; exit 0 ;;
     *) echo "build_vs_peers: unknown option $1 (see --help)" >&2; exit 2 ;;
   esac
@@ -120,6 +124,12 @@ tiff_chroma() {  # photometric and chroma subsampling of page 0 of a JPEG-in-TIF
       else print p }'
 }
 
+# Elapsed wall seconds in a /usr/bin/time -v report.
+wall_of() {
+  awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, t, ":"); s = 0;
+    for (i = 1; i <= n; i++) s = s * 60 + t[i]; printf "%.2f", s }' "$1"
+}
+
 # measure INPUT TOOL CODEC OUTPUT PSNR_TARGET CHROMA -- COMMAND...
 # OUTPUT: what to size (a file, or a folder plus its .dzi); PSNR_TARGET: what tessera-psnr
 # reads ("" for none, "=ROW" to copy another row's figure).
@@ -137,21 +147,36 @@ measure() {
   cmd=$(printf '%q ' "$@")
   cmd=${cmd% }
   echo "  $cmd"
-  if ! /usr/bin/time -v -o "$tfile" "$@" >"$lfile" 2>&1; then
+  local run walls=() failed=0
+  for ((run = 1; run <= runs; ++run)); do
+    rm -rf "$output" "${output%.dzi}_files" "${output%.dzi}.zip"
+    # No dirty pages from the previous run: Tessera fsyncs its output, and must not pay for
+    # the write-back of what a peer left in the page cache (the peers do not fsync).
+    sync
+    if ! /usr/bin/time -v -o "$tfile.$run" "$@" >"$lfile" 2>&1; then
+      failed=1
+      break
+    fi
+    walls+=("$(wall_of "$tfile.$run") $run")
+  done
+  if ((failed)); then
     echo "build_vs_peers: FAILED, see $lfile" >&2
     tail -5 "$lfile" >&2
     rows+=("$(basename "$input")|$tool|$codec|FAIL|||||$load|$cmd")
     return
   fi
+  local median_run all_walls
+  median_run=$(printf '%s\n' "${walls[@]}" | sort -n | sed -n "$(((runs + 1) / 2))p" | cut -d' ' -f2)
+  all_walls=$(printf '%s\n' "${walls[@]}" | cut -d' ' -f1 | paste -sd' ')
+  cp "$tfile.$median_run" "$tfile"
   if [[ ! -e $output ]]; then
     echo "build_vs_peers: FAILED, $output was not written, see $lfile" >&2
     rows+=("$(basename "$input")|$tool|$codec|FAIL|||||$load|$cmd")
     return
   fi
   local wall rss bytes psnr_db=""
-  wall=$(awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, t, ":"); s = 0;
-           for (i = 1; i <= n; i++) s = s * 60 + t[i]; printf "%.2f", s }' "$tfile")
-  rss=$(awk -F': ' '/Maximum resident set size/ { print $2 }' "$tfile")
+  wall=$(wall_of "$tfile")
+  rss=$(cat "$tfile".[0-9]* | awk -F': ' '/Maximum resident set size/ { if ($2 > m) m = $2 } END { print m }')
   if [[ $output == *.dzi ]]; then
     bytes=$(du -sbc "$output" "${output%.dzi}_files" | tail -1 | cut -f1)
   else
@@ -167,7 +192,7 @@ measure() {
       sed -n 's/^psnr_db=\([^ ]*\).*/\1/p' || true)
     [[ -n $psnr_db ]] || psnr_db="error"
   fi
-  echo "  wall ${wall} s, peak RSS $((rss / 1024)) MiB, $bytes bytes, PSNR ${psnr_db:-n/a} dB, chroma $chroma"
+  echo "  wall ${wall} s (median of: $all_walls), peak RSS $((rss / 1024)) MiB, $bytes bytes, PSNR ${psnr_db:-n/a} dB, chroma $chroma"
   rows+=("$(basename "$input")|$tool|$codec|$wall|$rss|$bytes|$psnr_db|$chroma|$load|$cmd")
   ((keep)) || rm -rf "$output" "${output%.dzi}_files"
 }
@@ -250,6 +275,8 @@ report=$bench_dir/build_vs_peers-$(date +%Y%m%d-%H%M%S).md
   echo "Tools: $(vips --version), $(gdalinfo --version | cut -d, -f1)," \
     "tessera ${TESSERA_BENCH_REVISION:-$(git -C "$repo" rev-parse --short HEAD 2>/dev/null || echo '?')}."
   echo "Command: \`$command_line\`"
+  echo "Each row: the run of median wall time of $runs (\`sync\` before each run), the highest"
+  echo "peak RSS of the $runs."
   echo
   echo "| input | tool | codec | wall s | MP/s | peak RSS MiB | output bytes | wall ÷ Tessera | bytes ÷ Tessera | PSNR dB | chroma | load |"
   echo "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---|---:|"
