@@ -196,7 +196,7 @@ def main():
                 s["update_ms"]["p99"], s["read_amplification"],
                 "%.2f / %.2f" % paper if paper else "-"))
         w("")
-        w("Medians over the four jumps of `--path jump` (the start, which also opens the archive "
+        w("Medians over the four jumps of the keyframe path jumps.path (five spots on land) (the start, which also opens the archive "
           "and loads the coarsest level, is left out; it is in each summary.json). \"full "
           "detail\": until every visible tile at the desired level was resident; \"clip "
           "region\": until the loader was idle, the whole clip region and the levels under it "
