@@ -149,6 +149,11 @@ struct StreamerOptions {
   size_t cache_budget_bytes = size_t(512) << 20;
   bool viewer_shift_eviction = true;  ///< else LRU
   uint32_t loader_threads = 0;        ///< 0 = all cores
+  /// Loader threads run under SCHED_IDLE: any thread of normal priority, the render thread
+  /// first, preempts a decode at once, so a frame never waits for one. Set false in a program
+  /// whose other threads keep every core busy, where idle-priority loaders would starve; they
+  /// then run at niceness 5 (docs/runtime.md).
+  bool loader_idle_priority = true;
   ResidencyOptions residency;
   /// A loader thread takes queued tiles of one level and urgency whose payloads follow each
   /// other in the file with gaps under this, and decodes them as one batch (neighbours on

@@ -31,6 +31,7 @@ struct LoaderOptions {
   uint64_t max_merged_read_bytes = 4 << 20;
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
+  bool idle_priority = true;  ///< StreamerOptions::loader_idle_priority
   /// Idle buffers of evicted tiles kept for the next decodes (TexelPool).
   uint64_t recycled_bytes = 32u << 20;
 };

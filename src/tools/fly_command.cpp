@@ -36,6 +36,7 @@ struct FlyArgs {
   uint32_t threads = 0;
   uint32_t upload_budget = 32;
   uint64_t merge_gap_kib = StreamerOptions{}.merge_gap_bytes >> 10;
+  std::string loader_priority = "idle";
   uint32_t image = 0;
   std::string out_dir = "fly-out";
   bool json = false;
@@ -106,6 +107,7 @@ int runFly(const FlyArgs& args) {
   options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.merge_gap_bytes = args.merge_gap_kib << 10;
+  options.loader_idle_priority = args.loader_priority == "idle";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
 
@@ -251,6 +253,10 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--threads", args->threads, "Loader threads (0 = all cores)")
       ->capture_default_str();
   cmd->add_option("--upload-budget", args->upload_budget, "Tiles uploaded per frame")
+      ->capture_default_str();
+  cmd->add_option("--loader-priority", args->loader_priority,
+                  "idle (SCHED_IDLE, the default) or nice (niceness 5)")
+      ->check(CLI::IsMember({"idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
                   "Reads of tiles closer than this in the file are merged into one")

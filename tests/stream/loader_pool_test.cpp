@@ -3,7 +3,12 @@
 // ordering below is forced, not timed.
 #include "stream/loader_pool.h"
 
+#include <sched.h>
+#include <sys/resource.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <filesystem>
 #include <future>
 #include <thread>
 
@@ -255,6 +260,35 @@ TEST_F(LoaderPoolTest, ReadsEachPayloadAloneWhenMergingIsOff) {
   LoaderStats stats = pool.stats();
   EXPECT_EQ(stats.reads, tiles.size());
   EXPECT_EQ(stats.bytes_read, stats.payload_bytes);
+}
+
+/// Threads of this process under SCHED_IDLE, and those at niceness 5.
+std::pair<int, int> idleAndNiceThreads() {
+  int idle = 0, nice = 0;
+  for (const auto& entry : std::filesystem::directory_iterator("/proc/self/task")) {
+    const pid_t tid = pid_t(std::stol(entry.path().filename().string()));
+    idle += ::sched_getscheduler(tid) == SCHED_IDLE;
+    errno = 0;
+    nice += ::getpriority(PRIO_PROCESS, id_t(tid)) == 5 && errno == 0;
+  }
+  return {idle, nice};
+}
+
+TEST_F(LoaderPoolTest, WorkersRunAtIdlePriorityOrNicenessFiveWhenAsked) {
+  const auto [idle_before, nice_before] = idleAndNiceThreads();
+  for (bool idle_priority : {true, false}) {
+    SCOPED_TRACE(idle_priority ? "idle" : "nice");
+    LoaderOptions options;
+    options.threads = 1;
+    options.idle_priority = idle_priority;
+    LoaderPool& pool = start(options);
+    holdWorkerOn(pool, encodedTiles(0).at(0));  // the worker has set its priority by now
+    const auto [idle, nice] = idleAndNiceThreads();
+    EXPECT_EQ(idle - idle_before, idle_priority ? 1 : 0);
+    EXPECT_EQ(nice - nice_before, idle_priority ? 0 : 1);
+    source_->openGate();
+    pool_.reset();
+  }
 }
 
 TEST_F(LoaderPoolTest, UnencodedTilesLoadWithoutReads) {
