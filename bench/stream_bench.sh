@@ -395,10 +395,45 @@ print("%.2f" % (100.0 * sum(float(r["coverage_desired"]) >= 1.0 for r in rest) /
                 if rest else 0.0))
 EOF
 }
+# The built-in `--path pan` bounces along one row: after its first crossing every tile is in
+# the cache, so at high speed it measures cache hits. This path sweeps the image in rows a
+# whole clip region apart (16 tiles of 256 px at FHD), turning at the edges (a lawn-mower
+# path) so that the view always enters tiles it has not seen, at SPEED along every leg.
+raster_path() {  # raster_path SPEED OUT
+  python3 - "$1" "$2" "$SIZE" "$SPEED_S" <<'EOF'
+import sys
+speed, out, size, duration = float(sys.argv[1]), sys.argv[2], int(sys.argv[3]), float(sys.argv[4])
+half_w, half_h, row_step = 960, 540, 16 * 256
+x0, x1 = half_w, size - half_w
+rows = [half_h + i * row_step for i in range(max(1, (size - 2 * half_h) // row_step + 1))]
+# Corners of the lawn-mower path, then keyframes at each corner until `duration`, the last
+# one interpolated (a keyframe file's flight lasts until its last key).
+corners, x = [], x0
+for i, y in enumerate(rows):
+    corners.append((x, y))
+    x = x1 if x == x0 else x0
+    corners.append((x, y))
+keys, t = [(0.0, corners[0][0], corners[0][1])], 0.0
+for (ax, ay), (bx, by) in zip(corners, corners[1:]):
+    leg = (abs(bx - ax) + abs(by - ay)) / speed
+    if t + leg >= duration:
+        u = (duration - t) / leg
+        keys.append((duration, ax + (bx - ax) * u, ay + (by - ay) * u))
+        break
+    t += leg
+    keys.append((t, bx, by))
+with open(out, "w") as f:
+    f.write("# t_s x y texels_per_pixel: rows %d px apart at %.0f px/s\n" % (row_step, speed))
+    for t, x, y in keys:
+        f.write("%.4f %.1f %.1f 1\n" % (t, x, y))
+EOF
+}
 pan() {  # pan SPEED -> prints the steady full-detail percentage
   warm "$ARCH256"
-  fly speed "pan-$1" "$ARCH256" --path pan --speed "$1" --duration "$SPEED_S" --fps "$PAN_FPS" \
-    --viewport 1920x1080
+  mkdir -p "$RUN/speed"
+  raster_path "$1" "$RUN/speed/raster-$1.path"
+  fly speed "pan-$1" "$ARCH256" --path "$RUN/speed/raster-$1.path" --duration "$SPEED_S" \
+    --fps "$PAN_FPS" --viewport 1920x1080
   steady_pct "$RUN/speed/pan-$1"
 }
 if wants speed; then

@@ -107,6 +107,11 @@ struct ResidencyOptions {
   double max_centre_step_tiles = 4;
   /// Tiles kept around each clip region before eviction (the expanded region of section 3.4).
   uint32_t keep_margin_tiles = 2;
+  /// While the view moves, the tiles it will show this many frames ahead at its current
+  /// velocity are wanted as urgently as those it shows (0 = off). A fast pan then finds the
+  /// tiles entering the screen loaded; the clip region, which follows the view with
+  /// hysteresis, can trail it by half its size.
+  uint32_t lookahead_frames = 6;
 };
 
 /// What a frame looked like: the figures `tessera fly` records.

@@ -261,6 +261,23 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
     }
   }
 
+  // Class 1 too: where the view will be `lookahead_frames` from now, and everything swept on
+  // the way, with the coarser tiles beneath (a child goes up only after its parent). A move of
+  // a whole region or more in one frame is a jump, not a velocity.
+  if (view.kind == View::Kind::kOrtho && !first_frame && options_.lookahead_frames > 0) {
+    const double span = levelScale(desired) * t;
+    const double step_x = fp.centre_x - prev_centre_x, step_y = fp.centre_y - prev_centre_y;
+    const bool moving = step_x != 0 || step_y != 0;
+    if (moving && std::max(std::abs(step_x), std::abs(step_y)) < n * span) {
+      const double ahead_x = step_x * options_.lookahead_frames;
+      const double ahead_y = step_y * options_.lookahead_frames;
+      const double x0 = std::min(fp.x0, fp.x0 + ahead_x), x1 = std::max(fp.x1, fp.x1 + ahead_x);
+      const double y0 = std::min(fp.y0, fp.y0 + ahead_y), y1 = std::max(fp.y1, fp.y1 + ahead_y);
+      for (uint32_t l = desired; l <= coarsest; ++l)
+        addRect(l, tilesUnder(x0, y0, x1, y1, l, t), 1, false);
+    }
+  }
+
   // Class 2: the clip region at the desired level (eq. 3-4, with hysteresis), and at coarser
   // levels the tiles under it: from the start level of eq. 7 on that is a single tile.
   const LevelCentre& c = centres_[desired];

@@ -401,6 +401,51 @@ INSTANTIATE_TEST_SUITE_P(Directions, DirectionalPrefetch,
                            return std::string(param_info.param.name);
                          });
 
+TEST(Residency, LookaheadWantsTheTilesAheadOfAPanAsUrgentlyAsTheVisibleOnes) {
+  // 64 x 64 tiles of 256 px; a 1920 x 1080 view panning right by 1.5 tiles a frame. The view
+  // spans x in [c - 960, c + 960]; six frames ahead its right edge is 9 tiles further on.
+  ImageInfo info = imageOf(16384, 16384, 256);
+  const double t = 256;
+  for (uint32_t frames : {0u, 6u}) {
+    SCOPED_TRACE(frames);
+    ResidencyOptions options;
+    options.lookahead_frames = frames;
+    ResidencyManager residency(info, 0, options);
+    residency.plan(orthoView(20 * t, 32 * t, 1, 1920, 1080));
+    const ResidencyPlan& plan = residency.plan(orthoView(21.5 * t, 32 * t, 1, 1920, 1080));
+    // Right edge now: (21.5 * 256 + 960) / 256 = 25.25 -> column 25; in six frames 34.25.
+    // Column 16, just left of the view, lies in the clip region [12, 28): wanted, not urgent.
+    const TileId ahead{0, 0, 33, 32}, behind{0, 0, 16, 32};
+    if (frames == 0) {
+      EXPECT_FALSE(residency.isWanted(ahead));
+    } else {
+      ASSERT_TRUE(residency.isWanted(ahead));
+      auto it = std::find_if(plan.wanted.begin(), plan.wanted.end(),
+                             [&](const TileRequest& r) { return r.id == ahead; });
+      ASSERT_NE(it, plan.wanted.end());
+      EXPECT_EQ(it->urgency, 1u);
+      EXPECT_FALSE(it->prefetch);
+      // Its parent is wanted too, or it could never go up.
+      EXPECT_TRUE(residency.isWanted({0, 1, 16, 16}));
+    }
+    auto behind_request = std::find_if(plan.wanted.begin(), plan.wanted.end(),
+                                       [&](const TileRequest& r) { return r.id == behind; });
+    ASSERT_NE(behind_request, plan.wanted.end());
+    EXPECT_EQ(behind_request->urgency, 2u);  // nothing behind the motion becomes urgent
+  }
+}
+
+TEST(Residency, AJumpIsNotAVelocityForTheLookahead) {
+  ImageInfo info = imageOf(16384, 16384, 256);
+  const double t = 256;
+  ResidencyManager residency(info, 0, {});
+  residency.plan(orthoView(10 * t, 32 * t, 1, 1920, 1080));
+  residency.plan(orthoView(40 * t, 32 * t, 1, 1920, 1080));  // 30 tiles in one frame
+  // Six more such frames would be far past the image's right edge; nothing beyond the new
+  // view's clip region and prefetch ring is wanted at level 0.
+  EXPECT_FALSE(residency.isWanted({0, 0, 55, 32}));
+}
+
 TEST(Residency, MovingWithinATilePrefetchesNothing) {
   ImageInfo info = imageOf(16384, 16384, 256);
   ResidencyManager residency(info, 0, {});
