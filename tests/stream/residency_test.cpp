@@ -375,7 +375,11 @@ class DirectionalPrefetch : public testing::TestWithParam<PrefetchCase> {};
 TEST_P(DirectionalPrefetch, CrossingATileBoundaryAddsOnlyTheNextRowOrColumnThatWay) {
   const PrefetchCase& c = GetParam();
   ImageInfo info = imageOf(16384, 16384, 256);
-  ResidencyManager residency(info, 0, {});
+  // The prefetch rule alone: the lookahead would make the tiles of that column the view is
+  // about to show urgent, and so no longer prefetch (LookaheadWants... covers it).
+  ResidencyOptions options;
+  options.lookahead_frames = 0;
+  ResidencyManager residency(info, 0, options);
   const double t = 256;
   residency.plan(orthoView(16.5 * t, 16.5 * t, 1, 1920, 1080));
   // Half a tile beyond the boundary: inside the effective region, so the clip stays put.
