@@ -250,6 +250,10 @@ def main():
     if os.path.isdir(sp):
         w("### Highest pan speed at full detail (FHD, 256-px JPEG, warm page cache, %d fps)\n"
           % PAN_FPS)
+        w("Each flight follows a lawn-mower path over the image (raster-SPEED.path in the run's "
+          "speed folder): rows 16 tiles (one FHD clip region) apart, along x and down at SPEED, "
+          "so the view keeps entering tiles it has not seen; a flight lasts 6 s or until the "
+          "whole image was swept. Upload budget: 32 tiles a frame (the default).\n")
         w("| speed px/s | frames at full detail, after the first | all frames | fully covered |"
           " tiles loaded | decode ms per tile | update p99 ms | update max ms | read ampl. |")
         w("|---|---|---|---|---|---|---|---|---|")
