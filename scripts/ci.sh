@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run): installs the Debian packages, then
-#   1. checks clang-format on every tracked C++ file,
+#   1. checks clang-format on every tracked C++ file and .editorconfig on every text file,
 #   2. builds Release and runs every test,
 #   3. builds RelWithDebInfo with AddressSanitizer + UBSan and runs every test,
 #   4. builds with ThreadSanitizer and runs the tests labelled "concurrency",
@@ -59,6 +59,30 @@ format_check() {
   else
     echo "ci: ${#files[@]} files clang-formatted"
     stage_result format ok "${#files[@]} files clang-formatted"
+  fi
+}
+
+# .editorconfig, on every tracked text file but the binary test data: LF line ends, a final
+# newline, no trailing blanks (Markdown may keep them: two mean a line break), no tab indents.
+editorconfig_check() {
+  log "editorconfig check"
+  local files=() bad=() f
+  mapfile -t files < <(git ls-files -z -- ':!fuzz/corpus' ':!tests/data' | xargs -0 grep -Il '' --)
+  for f in "${files[@]}"; do
+    [[ -f $f ]] || continue
+    local why=()
+    grep -q $'\r' "$f" && why+=("CR line ends")
+    [[ -s $f && -n $(tail -c1 "$f") ]] && why+=("no final newline")
+    [[ $f != *.md ]] && grep -qE '[[:blank:]]+$' "$f" && why+=("trailing blanks")
+    grep -q $'^\t' "$f" && why+=("tab indentation")
+    ((${#why[@]})) && bad+=("$f: $(IFS=,; echo "${why[*]}")")
+  done
+  if ((${#bad[@]})); then
+    printf '  %s\n' "${bad[@]}"
+    stage_result editorconfig FAIL "${#bad[@]} of ${#files[@]} files break .editorconfig"
+  else
+    echo "ci: ${#files[@]} text files follow .editorconfig"
+    stage_result editorconfig ok "${#files[@]} text files follow .editorconfig"
   fi
 }
 
@@ -140,7 +164,7 @@ fi
 start=$SECONDS
 for stage in $stages; do
   case $stage in
-    format) format_check ;;
+    format) format_check; editorconfig_check ;;
     release)
       build_and_test release Release "" "" "$timeout_s" -DTESSERA_BUILD_BENCH=ON \
         -DTESSERA_WERROR="$werror" -DCMAKE_CXX_FLAGS="$release_flags" ;;
