@@ -159,6 +159,10 @@ struct StreamerOptions {
   /// whose other threads keep every core busy, where idle-priority loaders would starve; they
   /// then run at niceness 5 (docs/runtime.md).
   bool loader_idle_priority = true;
+  /// Tile buffers kept idle for the next decodes: those of evicted tiles, and fresh ones the
+  /// loaders fault in while they have nothing to do (only into room the cache budget still
+  /// has), so the tiles after a jump skip the page faults of fresh memory (docs/runtime.md).
+  uint64_t recycled_buffer_bytes = 64u << 20;
   ResidencyOptions residency;
   /// A loader thread takes queued tiles of one level and urgency whose payloads follow each
   /// other in the file with gaps under this, and decodes them as one batch (neighbours on

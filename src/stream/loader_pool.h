@@ -4,6 +4,7 @@
 // payloads are adjacent in the file into one read), verify checksums, decode and insert into
 // the tile cache; the render thread polls their results and never waits for them.
 
+#include <atomic>
 #include <chrono>
 #include <condition_variable>
 #include <cstdint>
@@ -32,8 +33,8 @@ struct LoaderOptions {
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
   bool idle_priority = true;  ///< StreamerOptions::loader_idle_priority
-  /// Idle buffers of evicted tiles kept for the next decodes (TexelPool).
-  uint64_t recycled_bytes = 32u << 20;
+  /// StreamerOptions::recycled_buffer_bytes.
+  uint64_t recycled_bytes = 64u << 20;
 };
 
 /// A finished request, reported once to the render thread.
@@ -75,6 +76,12 @@ class LoaderPool {
   /// True when the tile is queued or being loaded.
   bool isRequested(const TileId& id) const;
   LoaderStats stats() const;
+  /// Idle tile buffers kept for the next decodes (recycled or prewarmed).
+  uint64_t idleBufferBytes() const { return texel_pool_->idleBytes(); }
+  /// Blocks until the idle workers have filled the buffer pool as far as they will (up to
+  /// recycled_bytes, within the cache's free budget). Tests only: it returns when that holds,
+  /// and nothing wakes it if the cache frees room later while every worker sleeps.
+  void waitPrewarmed();
   /// Blocks until nothing is queued (and ready) or in flight. Tests and benchmarks only.
   void waitIdle();
 
@@ -93,12 +100,15 @@ class LoaderPool {
   bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
   void loadBatch(Batch& batch, CodecScratch& scratch);
   void finish(const TileId& id, LoadEvent event, bool failed);
+  /// True when an idle worker should add a fresh buffer to the texel pool. Under mutex_.
+  bool shouldPrewarm() const;
 
   std::shared_ptr<Archive> archive_;
   TileCache& cache_;
   LoaderOptions options_;
   const uint32_t thread_count_;  ///< set before the workers start; they read it unlocked
   std::shared_ptr<TexelPool> texel_pool_;
+  std::atomic<size_t> last_tile_bytes_{0};  ///< the size of the last tile loaded, for prewarming
 
   mutable std::mutex mutex_;  // guards every member below
   std::condition_variable work_ready_;

@@ -62,6 +62,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   detail::LoaderOptions loader_options;
   loader_options.threads = options.loader_threads;
   loader_options.idle_priority = options.loader_idle_priority;
+  loader_options.recycled_bytes = options.recycled_buffer_bytes;
   loader_options.batch_gap_bytes = options.batch_gap_bytes;
   loader_options.merge_gap_bytes = options.merge_gap_bytes;
   loader_options.max_merged_read_bytes = options.max_merged_read_bytes;

@@ -291,6 +291,41 @@ TEST_F(LoaderPoolTest, WorkersRunAtIdlePriorityOrNicenessFiveWhenAsked) {
   }
 }
 
+TEST_F(LoaderPoolTest, IdleWorkersPrewarmBuffersUpToTheCapAndWithinTheCacheBudget) {
+  const size_t tile_bytes = info().storedTileBytes();
+  LoaderOptions options;
+  options.threads = 2;
+  options.recycled_bytes = 10 * tile_bytes + tile_bytes / 2;
+  LoaderPool& pool = start(options);
+  EXPECT_EQ(pool.idleBufferBytes(), 0u);  // nothing loaded yet: no tile size to prewarm
+  std::vector<TileId> tiles = encodedTiles(0);
+  ASSERT_GE(tiles.size(), 2u);
+  pool.setWanted(requestsFor({tiles[0], tiles[1]}));
+  pool.waitIdle();
+  pool.waitPrewarmed();
+  EXPECT_EQ(pool.idleBufferBytes(), 10 * tile_bytes);  // whole buffers, up to the cap
+  // The prewarmed buffers are what the next decodes use, and the tiles come out intact.
+  pool.setWanted(requestsFor(tiles));
+  pool.waitIdle();
+  expectCachedTilesAreClean();
+}
+
+TEST_F(LoaderPoolTest, PrewarmingNeverTakesMoreThanTheCacheHasFree) {
+  // A budget of 3 tiles: one cached, so room for 2 more, whatever the pool's cap.
+  const size_t tile_bytes = info().storedTileBytes() + sizeof(DecodedTile);
+  TileCache small(3 * tile_bytes, makeLruPolicy());
+  LoaderOptions options;
+  options.threads = 1;
+  options.recycled_bytes = 64 * tile_bytes;
+  LoaderPool pool(archive_, small, options);
+  pool.setWanted(requestsFor({encodedTiles(0).at(0)}));
+  pool.waitIdle();
+  pool.waitPrewarmed();
+  ASSERT_EQ(small.stats().tiles, 1u);
+  EXPECT_GT(pool.idleBufferBytes(), 0u);
+  EXPECT_LE(small.stats().bytes + pool.idleBufferBytes(), small.budgetBytes());
+}
+
 TEST_F(LoaderPoolTest, UnencodedTilesLoadWithoutReads) {
   std::vector<TileId> unencoded;
   for (const TileId& id : test::allTiles(*archive_)) {
