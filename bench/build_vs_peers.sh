@@ -139,7 +139,6 @@ measure() {
   local id
   id=$(basename "${input%.*}")-$(tr -c 'a-zA-Z0-9' '_' <<<"$tool $codec" | sed 's/_*$//')
   local tfile=$log_dir/$id.time lfile=$log_dir/$id.log
-  rm -rf "$output" "${output%.dzi}_files" "${output%.dzi}.zip"
   local load
   load=$(cut -d' ' -f1 /proc/loadavg)
   echo "build_vs_peers: [$(date +%H:%M:%S)] $tool ($codec) on $(basename "$input"), load $load"

@@ -276,7 +276,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   }
 
   // Reads: the batch's payloads in file order, each run whose gaps are under merge_gap_bytes
-  // in one call.
+  // in one call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set
+  // on one bad read, and the loader must count the reads and bytes it makes.
   struct Run {
     uint64_t begin = 0;
     uint64_t end = 0;
