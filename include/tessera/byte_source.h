@@ -40,6 +40,13 @@ class ByteSource {
   /// closer than 64 KiB as one (at most 16 MiB per read), which suits disks and HTTP alike;
   /// sources may override it. Fails as a whole if any read fails.
   [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
+
+  /// A hint that these ranges will be read soon (`out` is ignored). A source that can fetch
+  /// ahead starts on them and returns without waiting for the data, so the reads that follow
+  /// find it arriving or arrived: the loader hints the tiles queued behind the ones it reads,
+  /// which keeps a disk busy with many requests instead of one at a time. Never fails; the
+  /// default does nothing. Returns the bytes it asked for (0 when it does nothing).
+  virtual uint64_t prefetch(std::span<const ByteRange> ranges) const;
 };
 
 /// Opens a local file for positional reads (pread: thread-safe without a shared file offset,

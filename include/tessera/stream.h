@@ -99,9 +99,14 @@ struct TileRequest {
 
 /// Per-frame tuning. Defaults suit a 1920x1080 view with 256-px tiles.
 struct ResidencyOptions {
-  uint32_t upload_budget_tiles = 32;  ///< tiles handed to the renderer per frame
-  uint64_t upload_budget_bytes = 0;   ///< 0 = no byte limit
-  bool prefetch = true;               ///< direction-based prefetch (Luo & Duan, section 3.3)
+  /// Texel bytes handed to the renderer per frame (0 = no byte limit): the upload bandwidth
+  /// the runtime may ask for, 1 GB/s at 60 fps, about 85 RGB tiles of 256 px. A 50,000 px/s
+  /// FHD pan renews about 40 tiles a frame; 32 tiles a frame kept 82% of its frames at full
+  /// detail, this budget 99.7% (docs/benchmarks.md).
+  uint64_t upload_budget_bytes = 16u << 20;
+  /// Tiles handed to the renderer per frame: a cap on per-tile work for small tiles.
+  uint32_t upload_budget_tiles = 128;
+  bool prefetch = true;  ///< direction-based prefetch (Luo & Duan, section 3.3)
   /// Largest clip-centre move per frame, in tiles of the desired level (Luo & Duan's
   /// Maxdu/Maxdv): a very fast camera streams what it can show instead of what it flew over.
   double max_centre_step_tiles = 4;
@@ -122,6 +127,9 @@ struct FrameReport {
   bool fully_covered = false;      ///< every visible texel covered by some resident level
   size_t queue_length = 0;         ///< requests waiting in the loader
   size_t in_flight = 0;
+  /// When the loader last ran out of work (queue and in-flight both emptied): with both 0,
+  /// the moment loading finished, which a frame only sees at its next update.
+  std::chrono::steady_clock::time_point loader_idle_since{};
   size_t uploads = 0;  ///< tiles handed to the renderer this frame
   uint64_t upload_bytes = 0;
   uint64_t bytes_read_total = 0;     ///< by the loader since start, merged-read gaps included
@@ -129,8 +137,9 @@ struct FrameReport {
   uint64_t reads_total = 0;          ///< read calls on the byte source
   uint64_t tiles_loaded_total = 0;
   uint64_t load_failures_total = 0;
-  double decode_ms_total = 0;  ///< worker time spent decoding since start
-  double update_ms = 0;        ///< render-thread time of this update() call
+  double decode_ms_total = 0;       ///< worker time spent decoding since start
+  uint64_t hinted_bytes_total = 0;  ///< bytes the byte source was told to fetch ahead
+  double update_ms = 0;             ///< render-thread time of this update() call
 };
 
 /// What the renderer should do this frame.
@@ -174,6 +183,10 @@ struct StreamerOptions {
   /// docs/benchmarks.md). A remote source, where each read is a request, wants it as large
   /// as batch_gap_bytes.
   uint64_t merge_gap_bytes = 16 * 1024;
+  /// Payload bytes at the head of the loader's queue the byte source is told to fetch ahead
+  /// (ByteSource::prefetch), topped up each time a loader thread takes work. A cold disk then
+  /// has many reads in flight instead of one per thread (docs/runtime.md); 0 = off.
+  uint64_t read_ahead_bytes = 4u << 20;
   /// The most bytes a batch spans in the file; 0 makes every tile its own read and batch.
   uint64_t max_merged_read_bytes = 4 << 20;
   /// Retry a failed read or checksum after this, doubling per failure up to the maximum.

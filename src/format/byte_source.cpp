@@ -45,4 +45,8 @@ Result<void> ByteSource::readMany(std::span<const ByteRange> ranges) const {
   return {};
 }
 
+uint64_t ByteSource::prefetch(std::span<const ByteRange>) const {
+  return 0;
+}
+
 }  // namespace tessera

@@ -24,6 +24,10 @@ constexpr int kLoaderNiceness = 5;
 /// Requests of the same level considered for merging with the one a worker takes.
 constexpr size_t kMergeCandidates = 32;
 
+/// Tiles one worker looks up for read-ahead per batch it takes: bounds the time a worker
+/// spends on hints before its own read.
+constexpr size_t kReadAheadTilesPerCall = 512;
+
 }  // namespace
 
 struct LoaderPool::Batch {
@@ -70,12 +74,27 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
       if (!in_flight_.count(request.id))
         queue_.push_back({request.id, request.priority, request.urgency});
     wanted_ = std::move(wanted);
+    for (auto it = hinted_.begin(); it != hinted_.end();) {
+      if (wanted_.count(it->first)) {
+        ++it;
+      } else {
+        hinted_outstanding_bytes_ -= it->second;
+        it = hinted_.erase(it);
+      }
+    }
     // Retry state of tiles nobody wants any more is forgotten: a later request starts afresh.
     for (auto it = retries_.begin(); it != retries_.end();)
       it = wanted_.count(it->first) ? std::next(it) : retries_.erase(it);
     stats_.queued = queue_.size();
+    noteIdleLocked();
   }
   work_ready_.notify_all();
+}
+
+void LoaderPool::noteIdleLocked() {
+  const bool busy = !queue_.empty() || !in_flight_.empty();
+  if (busy_ && !busy) stats_.idle_since = Clock::now();
+  busy_ = busy;
 }
 
 void LoaderPool::poll(std::vector<LoadEvent>& out) {
@@ -152,6 +171,7 @@ void LoaderPool::run(uint32_t) {
   if (!idle) ::setpriority(PRIO_PROCESS, pid_t(::syscall(SYS_gettid)), kLoaderNiceness);
   CodecScratch scratch;
   Batch batch;
+  std::vector<TileId> read_ahead;
   std::unique_lock lock(mutex_);
   for (;;) {
     if (stopping_) return;
@@ -181,10 +201,80 @@ void LoaderPool::run(uint32_t) {
         work_ready_.wait_until(lock, wake);
       continue;
     }
+    collectReadAheadLocked(read_ahead);
     lock.unlock();
+    // Before this worker's own read: a cold disk then serves the tiles queued behind it
+    // while this one reads and decodes, instead of one read at a time per worker.
+    hintReadAhead(read_ahead);
     loadBatch(batch, scratch);
     lock.lock();
   }
+}
+
+void LoaderPool::collectReadAheadLocked(std::vector<TileId>& out) {
+  out.clear();
+  if (options_.read_ahead_bytes == 0 || hinted_outstanding_bytes_ >= options_.read_ahead_bytes)
+    return;
+  for (size_t i = 0; i < queue_.size() && out.size() < kReadAheadTilesPerCall; ++i)
+    if (hinted_.try_emplace(queue_[i].id, 0).second) out.push_back(queue_[i].id);
+}
+
+void LoaderPool::forgetHintLocked(const TileId& id) {
+  auto it = hinted_.find(id);
+  if (it == hinted_.end()) return;
+  hinted_outstanding_bytes_ -= it->second;
+  hinted_.erase(it);
+}
+
+void LoaderPool::hintReadAhead(std::span<const TileId> tiles) {
+  if (tiles.empty()) return;
+  std::vector<std::pair<TileId, uint64_t>> sized;
+  std::vector<ByteRange> ranges;
+  std::vector<TileId> not_hinted;
+  {
+    // The window's room, read once: another worker hinting at the same time may overfill it
+    // by one call's worth, which only reads a little further ahead.
+    std::unique_lock lock(mutex_);
+    uint64_t room =
+        options_.read_ahead_bytes - std::min(options_.read_ahead_bytes, hinted_outstanding_bytes_);
+    lock.unlock();
+    for (const TileId& id : tiles) {
+      Result<TileEntry> entry = room ? archive_->tileEntry(id) : Result<TileEntry>(TileEntry{});
+      if (!entry || entry->kind != TileKind::kEncoded || room == 0) {
+        not_hinted.push_back(id);
+        continue;
+      }
+      ranges.push_back({entry->offset_bytes, entry->length_bytes, nullptr});
+      sized.emplace_back(id, entry->length_bytes);
+      room -= std::min<uint64_t>(room, entry->length_bytes);
+    }
+    lock.lock();
+    // Tiles that finished or left meanwhile were forgotten already: only those still marked.
+    for (const auto& [id, bytes] : sized) {
+      auto it = hinted_.find(id);
+      if (it == hinted_.end()) continue;
+      it->second = bytes;
+      hinted_outstanding_bytes_ += bytes;
+    }
+    for (const TileId& id : not_hinted) forgetHintLocked(id);
+  }
+  if (ranges.empty()) return;
+  // Neighbours in the file merged as the loader's own reads merge them: one hint per run.
+  std::sort(ranges.begin(), ranges.end(),
+            [](const ByteRange& a, const ByteRange& b) { return a.offset_bytes < b.offset_bytes; });
+  std::vector<ByteRange> runs{ranges.front()};
+  for (size_t i = 1; i < ranges.size(); ++i) {
+    ByteRange& run = runs.back();
+    const uint64_t run_end = run.offset_bytes + run.length_bytes;
+    if (ranges[i].offset_bytes <= run_end + options_.merge_gap_bytes)
+      run.length_bytes =
+          std::max(run_end, ranges[i].offset_bytes + ranges[i].length_bytes) - run.offset_bytes;
+    else
+      runs.push_back(ranges[i]);
+  }
+  const uint64_t asked = archive_->source().prefetch(runs);
+  std::lock_guard lock(mutex_);
+  stats_.hinted_bytes += asked;
 }
 
 void LoaderPool::waitPrewarmed() {
@@ -204,6 +294,7 @@ bool LoaderPool::shouldPrewarm() const {
 void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
   std::lock_guard lock(mutex_);
   in_flight_.erase(id);
+  forgetHintLocked(id);
   if (failed) {
     ++stats_.failures;
     RetryState& retry = retries_[id];
@@ -216,6 +307,7 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
   } else {
     retries_.erase(id);
   }
+  noteIdleLocked();
   events_.push_back(std::move(event));
   idle_.notify_all();
   if (failed) work_ready_.notify_one();

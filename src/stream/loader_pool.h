@@ -35,6 +35,8 @@ struct LoaderOptions {
   bool idle_priority = true;  ///< StreamerOptions::loader_idle_priority
   /// StreamerOptions::recycled_buffer_bytes.
   uint64_t recycled_bytes = 64u << 20;
+  /// StreamerOptions::read_ahead_bytes.
+  uint64_t read_ahead_bytes = 4u << 20;
 };
 
 /// A finished request, reported once to the render thread.
@@ -54,6 +56,9 @@ struct LoaderStats {
   uint64_t cancelled = 0;      ///< queued requests dropped because no longer wanted
   uint64_t stale_dropped = 0;  ///< finished requests dropped because no longer wanted
   uint64_t decode_ns = 0;
+  uint64_t hinted_bytes = 0;  ///< bytes the byte source was told to fetch ahead
+  /// When the queue and in-flight set last became empty together (the end of a load).
+  std::chrono::steady_clock::time_point idle_since{};
   size_t queued = 0;
   size_t in_flight = 0;
 };
@@ -100,8 +105,18 @@ class LoaderPool {
   bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
   void loadBatch(Batch& batch, CodecScratch& scratch);
   void finish(const TileId& id, LoadEvent event, bool failed);
+  /// Queued tiles at the head of the queue not hinted yet, if the read-ahead window has room;
+  /// marks them hinted (size unknown yet). Under mutex_.
+  void collectReadAheadLocked(std::vector<TileId>& out);
+  /// Looks up `tiles` (in queue order), keeps those that fit the read-ahead window, and tells
+  /// the byte source their payload ranges will be read soon.
+  void hintReadAhead(std::span<const TileId> tiles);
+  /// Forgets a hinted tile (loaded, failed or unwanted). Under mutex_.
+  void forgetHintLocked(const TileId& id);
   /// True when an idle worker should add a fresh buffer to the texel pool. Under mutex_.
   bool shouldPrewarm() const;
+  /// Records the moment the pool runs out of work (stats_.idle_since). Under mutex_.
+  void noteIdleLocked();
 
   std::shared_ptr<Archive> archive_;
   TileCache& cache_;
@@ -117,9 +132,15 @@ class LoaderPool {
   std::unordered_set<TileId, TileIdHash> wanted_;
   std::unordered_set<TileId, TileIdHash> in_flight_;
   std::unordered_map<TileId, RetryState, TileIdHash> retries_;
+  /// Queued tiles whose payloads the byte source was told to fetch ahead, with their payload
+  /// bytes; forgotten when the tile finishes or stops being wanted, so a later request hints
+  /// it again. Their sum is the read-ahead window's fill.
+  std::unordered_map<TileId, uint64_t, TileIdHash> hinted_;
+  uint64_t hinted_outstanding_bytes_ = 0;
   std::vector<LoadEvent> events_;
   LoaderStats stats_;
   bool stopping_ = false;
+  bool busy_ = false;  ///< queue or in-flight set non-empty at the last noteIdleLocked
   std::vector<std::thread> workers_;
 };
 

@@ -177,8 +177,13 @@ void ResidencyManager::updateCentre(uint32_t level, double f_x, double f_y, uint
   c.y = approach(c.y, target_y);
 }
 
-void ResidencyManager::addWanted(const TileId& tile, int cls, double distance, bool prefetch) {
-  double priority = cls * kClassStride + (info_.level_count - 1 - tile.level) * kLevelStride +
+void ResidencyManager::addWanted(const TileId& tile, int cls, double distance, bool prefetch,
+                                 bool ahead) {
+  // Tiles the view will show soon rank after every tile it shows now, at any level, within
+  // the same class: they load as urgently, but a fast pan spends the upload budget on the
+  // screen first instead of on coarse tiles far ahead of it.
+  double priority = cls * kClassStride + (ahead ? kClassStride / 2 : 0) +
+                    (info_.level_count - 1 - tile.level) * kLevelStride +
                     std::min(distance, kLevelStride - 1);
   auto [it, inserted] = wanted_index_.try_emplace(tile, priority);
   if (!inserted) {
@@ -211,12 +216,13 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
     double dx = (tile.x + 0.5) * span - fp.centre_x, dy = (tile.y + 0.5) * span - fp.centre_y;
     return std::sqrt(dx * dx + dy * dy) / span;
   };
-  auto addRect = [&](uint32_t level, const TileRect& rect, int cls, bool prefetch) {
+  auto addRect = [&](uint32_t level, const TileRect& rect, int cls, bool prefetch,
+                     bool ahead = false) {
     TileRect r = intersect(rect, gridRect(level));
     for (int64_t y = r.y0; y < r.y1; ++y)
       for (int64_t x = r.x0; x < r.x1; ++x) {
         TileId tile{image_, level, uint32_t(x), uint32_t(y)};
-        addWanted(tile, cls, distanceFrom(tile), prefetch);
+        addWanted(tile, cls, distanceFrom(tile), prefetch, ahead);
       }
   };
 
@@ -244,7 +250,7 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
     while (!stack.empty()) {
       TileId tile = stack.back();
       stack.pop_back();
-      addWanted(tile, 1, distanceFrom(tile), false);
+      addWanted(tile, 1, distanceFrom(tile), false, false);
       uint32_t needed = requiredLevelForTile(view, info_, tile, desired);
       if (tile.level == 0 || needed >= tile.level || plan_.visible.size() > kMaxVisibleTiles) {
         plan_.visible.push_back(tile);
@@ -274,7 +280,7 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
       const double x0 = std::min(fp.x0, fp.x0 + ahead_x), x1 = std::max(fp.x1, fp.x1 + ahead_x);
       const double y0 = std::min(fp.y0, fp.y0 + ahead_y), y1 = std::max(fp.y1, fp.y1 + ahead_y);
       for (uint32_t l = desired; l <= coarsest; ++l)
-        addRect(l, tilesUnder(x0, y0, x1, y1, l, t), 1, false);
+        addRect(l, tilesUnder(x0, y0, x1, y1, l, t), 1, false, /*ahead=*/true);
     }
   }
 

@@ -46,9 +46,9 @@ class ResidencyManager {
   ResidencyManager(const ImageInfo& info, uint32_t image, const ResidencyOptions& options);
 
   /// Recomputes clip regions (with hysteresis and the per-frame centre limit) and the
-  /// wanted set with priorities: class 0 the coarsest level, class 1 visible tiles, class 2
-  /// the rest of the clip regions, class 3 prefetch; within a class coarse levels first,
-  /// then nearer the view centre first.
+  /// wanted set with priorities: class 0 the coarsest level, class 1 visible tiles (then
+  /// those the lookahead expects on screen soon), class 2 the rest of the clip regions,
+  /// class 3 prefetch; within each coarse levels first, then nearer the view centre first.
   const ResidencyPlan& plan(const View& view);
 
   /// True when `tile` is in the current wanted set.
@@ -74,7 +74,7 @@ class ResidencyManager {
     int64_t prev_x = 0, prev_y = 0;
   };
   void updateCentre(uint32_t level, double f_x, double f_y, uint32_t n, bool limit_step);
-  void addWanted(const TileId& tile, int cls, double distance, bool prefetch);
+  void addWanted(const TileId& tile, int cls, double distance, bool prefetch, bool ahead);
   TileRect gridRect(uint32_t level) const;
 
   ImageInfo info_;

@@ -66,6 +66,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   loader_options.batch_gap_bytes = options.batch_gap_bytes;
   loader_options.merge_gap_bytes = options.merge_gap_bytes;
   loader_options.max_merged_read_bytes = options.max_merged_read_bytes;
+  loader_options.read_ahead_bytes = options.read_ahead_bytes;
   loader_options.retry_initial = options.retry_initial;
   loader_options.retry_max = options.retry_max;
   impl->loader = std::make_unique<detail::LoaderPool>(archive, *impl->cache, loader_options);
@@ -177,6 +178,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   detail::LoaderStats loader_stats = s.loader->stats();
   report.queue_length = loader_stats.queued;
   report.in_flight = loader_stats.in_flight;
+  report.loader_idle_since = loader_stats.idle_since;
   report.uploads = out.uploads.size();
   report.upload_bytes = upload_bytes;
   report.bytes_read_total = loader_stats.bytes_read;
@@ -185,6 +187,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   report.tiles_loaded_total = loader_stats.tiles_loaded;
   report.load_failures_total = loader_stats.failures;
   report.decode_ms_total = loader_stats.decode_ns / 1e6;
+  report.hinted_bytes_total = loader_stats.hinted_bytes;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -15,6 +16,7 @@
 #include <tessera/archive.h>
 #include <tessera/stream.h>
 
+#include "format/codec.h"
 #include "tools/camera_path.h"
 #include "tools/cli.h"
 
@@ -34,14 +36,17 @@ struct FlyArgs {
   size_t cache_mib = 512;
   std::string eviction = "viewer-shift";
   uint32_t threads = 0;
-  uint32_t upload_budget = 32;
+  uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
+  uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
   uint64_t merge_gap_kib = StreamerOptions{}.merge_gap_bytes >> 10;
+  uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
   std::string loader_priority = "idle";
   uint32_t image = 0;
   std::string out_dir = "fly-out";
   bool json = false;
   bool quiet = false;
   bool cold = false;
+  bool decode_bound = false;
 };
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
@@ -80,7 +85,55 @@ struct JumpTiming {
   double at_s = 0;
   double full_detail_ms = -1;
   double clip_region_ms = -1;
+  std::vector<TileId> uploaded;  ///< tiles uploaded until the next jump
+  double decode_bound_ms = -1;   ///< --decode-bound: those tiles decoded on every thread
 };
+
+/// The decode part of the physical bound on a jump's load time: the tiles it uploaded,
+/// decoded from memory by `threads` threads at once into buffers faulted in beforehand (as
+/// the loader's prewarmed ones are), with nothing else to do: no reads, checksums, queue or
+/// cache. Wall time in ms.
+Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> tiles,
+                             uint32_t threads) {
+  struct Work {
+    TileId id;
+    TileEntry entry;
+    std::vector<uint8_t> payload;
+    Image out;
+  };
+  std::vector<Work> work(tiles.size());
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    Work& w = work[i];
+    w.id = tiles[i];
+    Result<TileEntry> entry = archive.tileEntry(w.id);
+    if (!entry) return forwardError(entry);
+    w.entry = *entry;
+    if (w.entry.kind == TileKind::kEncoded) {
+      Result<std::vector<uint8_t>> payload = archive.readPayload(w.id, w.entry);
+      if (!payload) return forwardError(payload);
+      w.payload = std::move(*payload);
+    }
+    w.out.texels.assign(archive.images()[w.id.image].storedTileBytes(), 1);
+  }
+  std::atomic<size_t> next{0};
+  std::atomic<bool> failed{false};
+  auto worker = [&] {
+    detail::CodecScratch scratch;
+    for (size_t i; (i = next.fetch_add(1)) < work.size();)
+      if (!archive.decodeTileInto(work[i].id, work[i].entry, work[i].payload, work[i].out,
+                                  &scratch))
+        failed = true;
+  };
+  const auto started = Clock::now();
+  {
+    std::vector<std::jthread> pool;
+    for (uint32_t t = 1; t < threads; ++t) pool.emplace_back(worker);
+    worker();
+  }
+  const double ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+  if (failed) return fail(ErrorCode::kCorrupt, archive.name() + ": a tile failed to decode");
+  return ms;
+}
 
 int runFly(const FlyArgs& args) {
   uint32_t viewport_w = 0, viewport_h = 0;
@@ -106,7 +159,9 @@ int runFly(const FlyArgs& args) {
   options.viewer_shift_eviction = args.eviction != "lru";
   options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
+  options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
   options.merge_gap_bytes = args.merge_gap_kib << 10;
+  options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
@@ -146,7 +201,10 @@ int runFly(const FlyArgs& args) {
     view.image = args.image;
     view.ortho = path->at(t_s, viewport_w, viewport_h);
     const FrameUpdate& update = (*streamer)->update(view);
-    for (const auto& tile : update.uploads) (*streamer)->uploaded(tile->id);
+    for (const auto& tile : update.uploads) {
+      (*streamer)->uploaded(tile->id);
+      if (args.decode_bound) jumps.back().uploaded.push_back(tile->id);
+    }
     const FrameReport& r = update.report;
     last = r;
     update_ms.push_back(r.update_ms);
@@ -159,8 +217,12 @@ int runFly(const FlyArgs& args) {
     JumpTiming& jump = jumps.back();
     double since_ms = std::max(0.0, (now_s - jump.at_s) * 1000);
     if (jump.full_detail_ms < 0 && r.coverage_desired >= 1.0) jump.full_detail_ms = since_ms;
-    if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0)
-      jump.clip_region_ms = since_ms;
+    // Loading ended when the loader ran dry, which may be up to a frame before this one saw
+    // it: the loader's own time stamp, not the frame's, so the figure does not depend on fps.
+    if (jump.clip_region_ms < 0 && r.queue_length == 0 && r.in_flight == 0) {
+      double idle_s = std::chrono::duration<double>(r.loader_idle_since - start).count();
+      jump.clip_region_ms = std::clamp((idle_s - jump.at_s) * 1000, 0.0, since_ms);
+    }
     csv << fmt::format(
         "{},{:.2f},{:.1f},{:.1f},{:.4f},{},{},{:.4f},{},{},{},{},{},{},{},{},{:.4f}\n", k,
         now_s * 1000, view.ortho.centre_x, view.ortho.centre_y, view.ortho.texels_per_pixel,
@@ -169,14 +231,32 @@ int runFly(const FlyArgs& args) {
         r.tiles_loaded_total, r.load_failures_total, r.update_ms);
   }
   CacheStats cache = (*streamer)->cacheStats();
+  const std::string policy_name = (*streamer)->cache().policyName();
+  const uint32_t threads =
+      args.threads ? args.threads : std::max(1u, std::thread::hardware_concurrency());
+  if (args.decode_bound) {
+    streamer->reset();  // its loader threads are gone before the bound is measured
+    for (JumpTiming& jump : jumps) {
+      Result<double> ms = decodeBoundMs(**archive, jump.uploaded, threads);
+      if (!ms) return reportError(ms.error());
+      jump.decode_bound_ms = *ms;
+    }
+  }
   nlohmann::json jump_list = nlohmann::json::array();
-  for (const JumpTiming& j : jumps)
-    jump_list.push_back(
-        {{"at_s", j.at_s},
-         {"full_detail_ms",
-          j.full_detail_ms < 0 ? nlohmann::json() : nlohmann::json(j.full_detail_ms)},
-         {"clip_region_ms",
-          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}});
+  for (const JumpTiming& j : jumps) {
+    nlohmann::json entry = {
+        {"at_s", j.at_s},
+        {"full_detail_ms",
+         j.full_detail_ms < 0 ? nlohmann::json() : nlohmann::json(j.full_detail_ms)},
+        {"clip_region_ms",
+         j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}};
+    if (args.decode_bound) {
+      entry["tiles_uploaded"] = j.uploaded.size();
+      entry["decode_bound_ms"] = j.decode_bound_ms;
+      entry["decode_bound_threads"] = threads;
+    }
+    jump_list.push_back(std::move(entry));
+  }
   nlohmann::json summary = {
       {"archive", args.archive},
       {"path", path->name},
@@ -184,7 +264,7 @@ int runFly(const FlyArgs& args) {
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
       {"page_cache", args.cold ? "cold (posix_fadvise DONTNEED before each jump)" : "as found"},
-      {"eviction", (*streamer)->cache().policyName()},
+      {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
       {"frames_full_detail_pct", frames ? 100.0 * frames_full_detail / frames : 0},
@@ -199,6 +279,7 @@ int runFly(const FlyArgs& args) {
       {"jumps", jump_list},
       {"bytes_read", last.bytes_read_total},
       {"reads", last.reads_total},
+      {"hinted_bytes", last.hinted_bytes_total},
       {"payload_bytes_delivered", uploaded_payload_bytes},
       {"read_amplification",
        uploaded_payload_bytes ? double(last.bytes_read_total) / uploaded_payload_bytes : 0},
@@ -252,7 +333,10 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--threads", args->threads, "Loader threads (0 = all cores)")
       ->capture_default_str();
-  cmd->add_option("--upload-budget", args->upload_budget, "Tiles uploaded per frame")
+  cmd->add_option("--upload-budget", args->upload_budget, "Most tiles uploaded per frame")
+      ->capture_default_str();
+  cmd->add_option("--upload-budget-mib", args->upload_budget_mib,
+                  "Most texel MiB uploaded per frame (0 = no byte limit)")
       ->capture_default_str();
   cmd->add_option("--loader-priority", args->loader_priority,
                   "idle (SCHED_IDLE, the default) or nice (niceness 5)")
@@ -261,12 +345,18 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
                   "Reads of tiles closer than this in the file are merged into one")
       ->capture_default_str();
+  cmd->add_option("--read-ahead-kib", args->read_ahead_kib,
+                  "Payload bytes at the head of the loader's queue fetched ahead (0 = off)")
+      ->capture_default_str();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
   cmd->add_option("-o,--out", args->out_dir, "Folder for frames.csv and summary.json")
       ->capture_default_str();
   cmd->add_flag("--json", args->json, "Print the summary as JSON");
   cmd->add_flag("--cold", args->cold,
                 "Drop the archive from the page cache at the start and before each jump");
+  cmd->add_flag("--decode-bound", args->decode_bound,
+                "After the flight, time decoding each jump's uploaded tiles on every thread "
+                "from memory (the decode part of the physical bound)");
   cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
   cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
 }

@@ -122,6 +122,27 @@ TEST(FileSource, ReadManyFailsAsAWholeWhenOneRangeFails) {
   EXPECT_NE(read.error().message.find(path), std::string::npos);
 }
 
+TEST(FileSource, PrefetchAsksForTheRangesInsideTheFileAndLeavesReadsIntact) {
+  const std::vector<uint8_t> bytes = countingBytes(70000);
+  std::string path;
+  auto source = openWritten(bytes, &path);
+  ASSERT_TRUE(source);
+  // One range inside, one running past the end (clipped), one wholly past it and an empty one
+  // (both ignored): a hint never fails.
+  const ByteRange ranges[] = {
+      {100, 5000, nullptr}, {69000, 4000, nullptr}, {80000, 10, nullptr}, {10, 0, nullptr}};
+  EXPECT_EQ(source->prefetch(ranges), 5000u + 1000u);
+  std::vector<uint8_t> out(6000);
+  ASSERT_TRUE(source->read(64000, out));
+  EXPECT_TRUE(std::equal(out.begin(), out.end(), bytes.begin() + 64000));
+}
+
+TEST(MemorySource, PrefetchIsANoOp) {
+  auto source = makeMemorySource(countingBytes(100), "mem:hint");
+  const ByteRange range{0, 100, nullptr};
+  EXPECT_EQ(source->prefetch({&range, 1}), 0u);
+}
+
 TEST(FileSource, ConcurrentReadsSeeTheirOwnRanges) {
   const std::vector<uint8_t> bytes = countingBytes(1 << 20);
   std::string path;

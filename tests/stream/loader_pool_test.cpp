@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <filesystem>
 #include <future>
+#include <map>
 #include <thread>
 
 #include <fmt/format.h>
@@ -260,6 +261,91 @@ TEST_F(LoaderPoolTest, ReadsEachPayloadAloneWhenMergingIsOff) {
   LoaderStats stats = pool.stats();
   EXPECT_EQ(stats.reads, tiles.size());
   EXPECT_EQ(stats.bytes_read, stats.payload_bytes);
+}
+
+TEST_F(LoaderPoolTest, HintsQueuedPayloadsBeforeReadingThemAndKeepsTheWindowBounded) {
+  std::vector<TileId> tiles = encodedTiles(0);
+  ASSERT_GE(tiles.size(), 8u);
+  uint64_t largest = 0;
+  std::map<uint64_t, uint64_t> payloads;  // offset -> length
+  for (const TileId& id : tiles) {
+    TileEntry entry = *archive_->tileEntry(id);
+    payloads[entry.offset_bytes] = entry.length_bytes;
+    largest = std::max<uint64_t>(largest, entry.length_bytes);
+  }
+  LoaderOptions options;
+  options.threads = 1;
+  options.max_merged_read_bytes = 0;  // one read per payload, so reads map to tiles
+  options.merge_gap_bytes = 0;        // hint ranges cover only the payloads hinted
+  options.read_ahead_bytes = 3 * largest;
+  LoaderPool& pool = start(options);
+  const size_t log_start = source_->accesses().size();
+  pool.setWanted(requestsFor(tiles));
+  pool.waitIdle();
+  ASSERT_EQ(pool.stats().tiles_loaded, tiles.size());
+  std::vector<test::SourceAccess> log = source_->accesses();
+  log.erase(log.begin(), log.begin() + ptrdiff_t(log_start));
+
+  // For each payload: where in the log it was first hinted (a range covering it) and read.
+  std::map<uint64_t, size_t> hinted_at, read_at;
+  for (size_t i = 0; i < log.size(); ++i) {
+    const test::SourceAccess& access = log[i];
+    if (!access.hint) {
+      ASSERT_TRUE(payloads.count(access.offset_bytes)) << "a read that is no payload";
+      read_at.emplace(access.offset_bytes, i);
+      continue;
+    }
+    for (auto it = payloads.lower_bound(access.offset_bytes);
+         it != payloads.end() &&
+         it->first + it->second <= access.offset_bytes + access.length_bytes;
+         ++it)
+      hinted_at.emplace(it->first, i);
+  }
+  ASSERT_EQ(read_at.size(), tiles.size());
+  // The first tile is read before anything is queued behind it; every later one was hinted
+  // before its read.
+  const uint64_t first = archive_->tileEntry(tiles[0])->offset_bytes;
+  for (const auto& [offset, read_index] : read_at) {
+    if (offset == first) continue;
+    ASSERT_TRUE(hinted_at.count(offset)) << "payload at " << offset << " never hinted";
+    EXPECT_LT(hinted_at[offset], read_index) << "payload at " << offset << " hinted after its read";
+  }
+  // Hinted and not yet read never exceeds the window by more than the tile that fills it.
+  for (size_t i = 0; i < log.size(); ++i) {
+    uint64_t ahead = 0;
+    for (const auto& [offset, hint_index] : hinted_at)
+      if (hint_index <= i && read_at[offset] > i) ahead += payloads[offset];
+    EXPECT_LE(ahead, options.read_ahead_bytes + largest) << "at log entry " << i;
+  }
+  expectCachedTilesAreClean();
+}
+
+TEST_F(LoaderPoolTest, RecordsWhenItRanOutOfWork) {
+  LoaderPool& pool = startOneWorker();
+  EXPECT_EQ(pool.stats().idle_since, std::chrono::steady_clock::time_point{});
+  const TileId held = encodedTiles(0).at(0);
+  holdWorkerOn(pool, held);
+  const auto before_finish = std::chrono::steady_clock::now();
+  source_->openGate();
+  pool.waitIdle();
+  const auto after_idle = std::chrono::steady_clock::now();
+  const auto idle_since = pool.stats().idle_since;
+  EXPECT_GE(idle_since, before_finish);  // not when the request came, when the load ended
+  EXPECT_LE(idle_since, after_idle);
+}
+
+TEST_F(LoaderPoolTest, HintsNothingWhenReadAheadIsOff) {
+  LoaderOptions options;
+  options.threads = 1;
+  options.read_ahead_bytes = 0;
+  LoaderPool& pool = start(options);
+  const size_t log_start = source_->accesses().size();
+  pool.setWanted(requestsFor(encodedTiles(0)));
+  pool.waitIdle();
+  std::vector<test::SourceAccess> log = source_->accesses();
+  EXPECT_TRUE(std::none_of(log.begin() + ptrdiff_t(log_start), log.end(),
+                           [](const test::SourceAccess& access) { return access.hint; }));
+  EXPECT_EQ(pool.stats().hinted_bytes, 0u);
 }
 
 /// Threads of this process under SCHED_IDLE, and those at niceness 5.

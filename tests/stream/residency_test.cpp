@@ -439,6 +439,45 @@ TEST(Residency, LookaheadWantsTheTilesAheadOfAPanAsUrgentlyAsTheVisibleOnes) {
   }
 }
 
+TEST(Residency, TilesOnScreenRankBeforeTheLookaheadsAtEveryLevel) {
+  // A fast pan right (3 tiles a frame): the lookahead wants coarse tiles far ahead, but each
+  // tile on screen now, fine or coarse, comes first in the plan (and so in the upload budget).
+  ImageInfo info = imageOf(16384, 16384, 256);
+  const double t = 256;
+  ResidencyManager residency(info, 0, {});
+  residency.plan(orthoView(20 * t, 32 * t, 1, 1920, 1080));
+  const ResidencyPlan& plan = residency.plan(orthoView(23 * t, 32 * t, 1, 1920, 1080));
+  // On screen: x in [23 * 256 - 960, 23 * 256 + 960) = columns 19..26 at level 0.
+  auto onScreen = [&](const TileId& id) {
+    const double span = t * double(1u << id.level);
+    return (id.x + 1) * span > 23 * t - 960 && id.x * span < 23 * t + 960 &&
+           (id.y + 1) * span > 32 * t - 540 && id.y * span < 32 * t + 540;
+  };
+  size_t last_on_screen = 0, first_ahead = plan.wanted.size(), ahead = 0;
+  for (size_t i = 0; i < plan.wanted.size(); ++i) {
+    const TileRequest& request = plan.wanted[i];
+    if (request.urgency != 1 || request.id.level == info.level_count - 1) continue;
+    if (onScreen(request.id)) {
+      last_on_screen = i;
+    } else {
+      first_ahead = std::min(first_ahead, i);
+      ++ahead;
+    }
+  }
+  ASSERT_GT(ahead, 0u) << "the lookahead wanted nothing beyond the screen";
+  EXPECT_LT(last_on_screen, first_ahead);
+  // Level 0 on screen ranks before level 1 ahead: the one level-0 tile at the far right edge
+  // and a level-1 tile two columns beyond it.
+  auto rank = [&](const TileId& id) {
+    auto it = std::find_if(plan.wanted.begin(), plan.wanted.end(),
+                           [&](const TileRequest& r) { return r.id == id; });
+    return it == plan.wanted.end() ? SIZE_MAX : size_t(it - plan.wanted.begin());
+  };
+  const TileId screen_edge{0, 0, 26, 32}, coarse_ahead{0, 1, 15, 16};
+  ASSERT_NE(rank(coarse_ahead), SIZE_MAX);
+  EXPECT_LT(rank(screen_edge), rank(coarse_ahead));
+}
+
 TEST(Residency, AJumpIsNotAVelocityForTheLookahead) {
   ImageInfo info = imageOf(16384, 16384, 256);
   const double t = 256;

@@ -29,6 +29,7 @@ Result<void> FaultSource::read(uint64_t offset_bytes, std::span<uint8_t> out) co
   {
     std::unique_lock lock(mutex_);
     ++reads_;
+    accesses_.push_back({false, offset_bytes, out.size()});
     if (gate_closed_) {
       ++blocked_;
       changed_.notify_all();
@@ -101,6 +102,20 @@ bool FaultSource::waitForFaults(uint64_t faults, double timeout_s) const {
   std::unique_lock lock(mutex_);
   return changed_.wait_for(lock, std::chrono::duration<double>(timeout_s),
                            [&] { return faults_ >= faults; });
+}
+
+uint64_t FaultSource::prefetch(std::span<const ByteRange> ranges) const {
+  {
+    std::lock_guard lock(mutex_);
+    for (const ByteRange& range : ranges)
+      accesses_.push_back({true, range.offset_bytes, range.length_bytes});
+  }
+  return inner_->prefetch(ranges);
+}
+
+std::vector<SourceAccess> FaultSource::accesses() const {
+  std::lock_guard lock(mutex_);
+  return accesses_;
 }
 
 uint64_t FaultSource::reads() const {

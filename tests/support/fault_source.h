@@ -9,6 +9,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <vector>
 
 #include <tessera/byte_source.h>
 
@@ -34,6 +35,13 @@ struct FaultConfig {
   uint64_t flip_stride_bytes = 256;
 };
 
+/// One call on the source, in the order calls arrived.
+struct SourceAccess {
+  bool hint = false;  ///< a prefetch range, else a read
+  uint64_t offset_bytes = 0;
+  uint64_t length_bytes = 0;
+};
+
 /// Thread-safe, like every ByteSource.
 class FaultSource final : public ByteSource {
  public:
@@ -44,6 +52,8 @@ class FaultSource final : public ByteSource {
   uint64_t sizeBytes() const override;
   const std::string& name() const override;
   [[nodiscard]] Result<void> read(uint64_t offset_bytes, std::span<uint8_t> out) const override;
+  /// Logs each range, then passes the hint on.
+  uint64_t prefetch(std::span<const ByteRange> ranges) const override;
 
   /// Starts faulting as `config` says (restarting the `every` count).
   void setFaults(const FaultConfig& config);
@@ -63,6 +73,9 @@ class FaultSource final : public ByteSource {
   uint64_t reads() const;           ///< read calls so far, faulted or not
   uint64_t faultsInjected() const;  ///< faulted reads so far
   uint32_t blockedNow() const;      ///< reads waiting at the gate now
+  /// Every read and prefetch range so far, in arrival order (a read is logged when it
+  /// arrives, before the gate).
+  std::vector<SourceAccess> accesses() const;
 
  private:
   std::shared_ptr<ByteSource> inner_;
@@ -75,6 +88,7 @@ class FaultSource final : public ByteSource {
   mutable uint64_t reads_ = 0;
   mutable uint64_t faults_ = 0;
   mutable uint32_t blocked_ = 0;
+  mutable std::vector<SourceAccess> accesses_;
 };
 
 }  // namespace tessera::test

@@ -222,6 +222,49 @@ TEST_F(Cli, UsageErrorsExitTwo) {
   EXPECT_TRUE(listDir(work_).empty());
 }
 
+TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
+  const std::string archive = work_ + "fly.tess";
+  ASSERT_EQ(
+      run({"build", "synthetic:4096x2048:2:3", "-o", archive, "--tile", "128", "-q"}).exit_code, 0);
+  // Two spots 0.5 s each, 30 fps: a start and one jump (the second keyframe pair).
+  const std::string path_file = work_ + "jumps.path";
+  std::ofstream(path_file) << "# t_s x y texels_per_pixel [rotation jump]\n"
+                              "0 600 600 1\n0.49 600 600 1\n0.5 3500 1500 1 0 jump\n"
+                              "1.0 3500 1500 1\n";
+  const std::string out = work_ + "fly-out";
+  RunResult flown = run({"fly", archive, "--path", path_file, "--fps", "30", "--viewport",
+                         "320x240", "--cache-mib", "64", "--decode-bound", "-q", "--out", out});
+  ASSERT_EQ(flown.exit_code, 0) << flown.err;
+  nlohmann::json summary = nlohmann::json::parse(slurp(out + "/summary.json"));
+  std::istringstream csv(slurp(out + "/frames.csv"));
+  std::string line;
+  size_t csv_frames = 0;
+  std::getline(csv, line);  // header
+  while (std::getline(csv, line)) csv_frames += !line.empty();
+  EXPECT_EQ(summary["frames"].get<size_t>(), csv_frames);
+  EXPECT_EQ(csv_frames, 31u);  // t = 0, 1/30, ..., 1.0
+  ASSERT_EQ(summary["jumps"].size(), 2u);
+  for (const auto& jump : summary["jumps"]) {
+    ASSERT_FALSE(jump["clip_region_ms"].is_null()) << jump.dump();
+    EXPECT_GE(jump["clip_region_ms"].get<double>(), 0);
+    EXPECT_GT(jump["tiles_uploaded"].get<size_t>(), 0u);
+    EXPECT_GT(jump["decode_bound_ms"].get<double>(), 0);
+  }
+  EXPECT_EQ(summary["frames_fully_covered_pct"].get<double>(), 100.0);
+  EXPECT_GE(summary["read_amplification"].get<double>(), 1.0);
+  EXPECT_GT(summary["tiles_loaded"].get<uint64_t>(), 0u);
+  EXPECT_EQ(summary["load_failures"].get<uint64_t>(), 0u);
+
+  // A path file with a bad line fails naming the file; no archive fails naming it.
+  std::ofstream(work_ + "bad.path") << "0 600 600 1\n0.5 six hundred 600 1\n";
+  RunResult bad_path = run({"fly", archive, "--path", work_ + "bad.path", "-q", "--out", out});
+  EXPECT_EQ(bad_path.exit_code, 2);  // an invalid argument, like a bad --path name
+  EXPECT_NE(bad_path.err.find("bad.path"), std::string::npos) << bad_path.err;
+  RunResult missing = run({"fly", work_ + "none.tess", "-q", "--out", out});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find("none.tess"), std::string::npos) << missing.err;
+}
+
 TEST_F(Cli, BadInputsFailNamingTheFileAndLeaveNoOutput) {
   const std::string inputs = dir_ + "in/";
   std::filesystem::create_directories(inputs);
