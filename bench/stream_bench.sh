@@ -335,8 +335,11 @@ EOF
       for state in warm cold; do
         cold=()
         if [[ $state == warm ]]; then warm "$archive"; else cold=(--cold); fi
+        # --decode-bound: after the flight, each jump's tiles decoded again on every core
+        # from memory, the decode part of the physical bound, measured on the same tiles.
         fly table1 "t$tile-$viewport-$state" "$archive" --path "$RUN/jumps.path" \
-          --fps "$JUMP_FPS" --viewport "$viewport" --cache-mib "$TABLE1_CACHE_MIB" "${cold[@]}"
+          --fps "$JUMP_FPS" --viewport "$viewport" --cache-mib "$TABLE1_CACHE_MIB" \
+          --decode-bound "${cold[@]}"
       done
     done
   done
