@@ -1,0 +1,77 @@
+#pragma once
+/// \file
+/// What a view shows, independent of any GPU: the sampling rules every renderer follows
+/// (docs/rendering.md), the CPU reference renderer that applies them straight from the
+/// archive (the ground truth for the GPU renderers), and picture comparison.
+///
+/// Sampling rules, in short. Screen pixel (px, py) has its centre at (px + 0.5, py + 0.5), row
+/// 0 at the top. Its level-0 texel coordinate (u, v) (texel (i, j) covers [i, i+1) x [j, j+1))
+/// comes from the view (`textureAt`). Its level of detail is lambda = log2(rho), rho the
+/// larger of |d(u,v)/dx| and |d(u,v)/dy| in level-0 texels per pixel (OpenGL's rule). With
+/// L = floor(lambda) clamped to the levels, the pixel shows the finest level T >= L that is
+/// available there (its tile resident): if T == L < coarsest, bilinear at L blended with
+/// bilinear at L + 1 by lambda - L (trilinear); otherwise bilinear at T. Bilinear at a level
+/// samples that level's texel grid at (u, v) / 2^level, clamped to the level's image (edge
+/// texels replicate, as stored tile borders and padding do). Pixels whose (u, v) falls
+/// outside the level-0 image, or whose ray misses the ground, are transparent black.
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <tessera/archive.h>
+#include <tessera/result.h>
+#include <tessera/stream.h>
+
+namespace tessera {
+
+/// An RGBA8 picture, rows top to bottom. Channels an image lacks are filled as a renderer
+/// shows them: grey as (g, g, g, 255), grey+alpha as (g, g, g, a), RGB with alpha 255.
+struct Picture {
+  uint32_t width = 0;
+  uint32_t height = 0;
+  std::vector<uint8_t> rgba;  ///< width * height * 4 bytes
+};
+
+/// Level-0 texel coordinate seen at screen point (sx, sy) (pixel units, (0, 0) the top-left
+/// corner of the screen). Orthographic: the view centre at the screen centre, texels_per_pixel
+/// texels per pixel, the screen rotated by rotation_rad (x towards y). Perspective: the ray
+/// from the eye through that point hits the plane z = 0; false when it does not (at or above
+/// the horizon).
+bool textureAt(const View& view, double sx, double sy, double& u, double& v);
+
+/// Level of detail at the centre of pixel (px, py): log2 of level-0 texels per pixel, rho as
+/// OpenGL defines it (the longer of the two screen-axis derivatives of (u, v)). Orthographic
+/// views give log2(texels_per_pixel) everywhere. Perspective: derivatives of the ray-plane
+/// hit, exact at the pixel centre; +infinity where the ray misses the plane.
+double levelOfDetailAt(const View& view, uint32_t px, uint32_t py);
+
+/// What the reference may sample: `available(tile)` says whether a tile is resident (a GPU
+/// renderer holding exactly those tiles should draw the same picture); empty means every
+/// tile of the archive is.
+struct ReferenceOptions {
+  std::function<bool(const TileId&)> available;
+};
+
+/// Draws `view` on the CPU from the archive's tiles by the sampling rules above. Reads and
+/// decodes the tiles it needs (each once per call). Fails naming the archive and the tile when
+/// one cannot be read or decoded.
+[[nodiscard]] Result<Picture> renderReference(const Archive& archive, const View& view,
+                                              const ReferenceOptions& options = {});
+
+/// How far two pictures of the same size are apart, over all four channels.
+struct PictureDifference {
+  double psnr_db = 0;    ///< +infinity when identical
+  uint32_t max_abs = 0;  ///< largest difference of one channel, 0..255
+  double mean_abs = 0;   ///< mean absolute difference per channel
+};
+
+/// Compares two pictures; fails (kInvalidArgument) when their sizes differ.
+[[nodiscard]] Result<PictureDifference> comparePictures(const Picture& a, const Picture& b);
+
+/// Writes a picture as an 8-bit RGBA PNG; fails naming the path. Written to a temporary name
+/// and renamed, so a failed write leaves no half-written file.
+[[nodiscard]] Result<void> writePng(const Picture& picture, const std::string& path);
+
+}  // namespace tessera
