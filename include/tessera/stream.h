@@ -212,6 +212,9 @@ class TileStreamer {
   void uploaded(const TileId& id);
   /// The renderer dropped a resident tile.
   void released(const TileId& id);
+  /// The renderer could not take this tile from the last FrameUpdate (no room on the GPU):
+  /// its pin is released and it is offered again in a later frame.
+  void declined(const TileId& id);
   /// Current state of a tile.
   TileState state(const TileId& id) const;
   /// Blocks until the loader is idle: for tests and benchmarks, never the render thread.

@@ -202,6 +202,12 @@ void TileStreamer::released(const TileId& id) {
   impl_->resident.erase(id);
 }
 
+void TileStreamer::declined(const TileId& id) {
+  if (impl_->awaiting_upload.erase(id) == 0) return;
+  impl_->cache->unpin(id);
+  impl_->loaded.insert(id);
+}
+
 TileState TileStreamer::state(const TileId& id) const {
   if (impl_->resident.count(id)) {
     uint32_t coarsest = impl_->archive->images()[id.image].level_count - 1;

@@ -16,12 +16,12 @@
 namespace tessera::test {
 
 const std::vector<uint8_t>& syntheticArchiveBytes(const SyntheticArchiveSpec& spec) {
-  using Key = std::tuple<uint32_t, uint32_t, uint32_t, uint32_t, uint32_t, int>;
+  using Key = std::tuple<uint32_t, uint32_t, uint32_t, uint32_t, uint32_t, int, uint32_t>;
   static std::mutex mutex;  // guards built
   static std::map<Key, std::vector<uint8_t>> built;
   std::lock_guard lock(mutex);
-  Key key{spec.width_px, spec.height_px,    spec.seed,
-          spec.channels, spec.tile_size_px, int(spec.codec)};
+  Key key{spec.width_px,     spec.height_px,  spec.seed,     spec.channels,
+          spec.tile_size_px, int(spec.codec), spec.border_px};
   auto it = built.find(key);
   if (it != built.end()) return it->second;
 
@@ -31,11 +31,26 @@ const std::vector<uint8_t>& syntheticArchiveBytes(const SyntheticArchiveSpec& sp
   BuildOptions options;
   options.inputs = {fmt::format("synthetic:{}x{}:{}:{}", spec.width_px, spec.height_px, spec.seed,
                                 spec.channels)};
+  // The synthetic source makes RGB and RGBA only; grey images come from a test PNG.
+  if (spec.channels <= 2) {
+    PngSpec png;
+    png.width_px = spec.width_px;
+    png.height_px = spec.height_px;
+    png.colour = spec.channels == 1 ? PngColour::kGray : PngColour::kGrayAlpha;
+    const std::string path = (dir / fmt::format("grey{}_{}x{}_{}.png", spec.channels, spec.width_px,
+                                                spec.height_px, spec.seed))
+                                 .string();
+    const std::string error = writePng(
+        path, png, makeTestPixels(spec.width_px, spec.height_px, spec.channels, spec.seed));
+    if (!error.empty()) ADD_FAILURE() << path << ": " << error;
+    options.inputs = {path};
+  }
   options.output =
-      (dir / fmt::format("s{}x{}_{}_{}_{}_{}.tess", spec.width_px, spec.height_px, spec.seed,
-                         spec.channels, spec.tile_size_px, codecName(spec.codec)))
+      (dir / fmt::format("s{}x{}_{}_{}_{}_{}_b{}.tess", spec.width_px, spec.height_px, spec.seed,
+                         spec.channels, spec.tile_size_px, codecName(spec.codec), spec.border_px))
           .string();
   options.tile_size_px = spec.tile_size_px;
+  options.border_px = spec.border_px;
   options.codec = spec.codec;
   options.threads = 2;
   std::vector<uint8_t> bytes;

@@ -20,6 +20,7 @@ struct SyntheticArchiveSpec {
   uint32_t channels = 3;
   uint32_t tile_size_px = 64;
   Codec codec = Codec::kZstd;
+  uint32_t border_px = 0;
 };
 
 /// The bytes of the archive for `spec`, built on first use (thread-safe). Fails the test

@@ -1,0 +1,123 @@
+#include "gl/gl_objects.h"
+
+#include <cstring>
+#include <vector>
+
+#include <fmt/format.h>
+
+namespace tessera::gl {
+
+Texture createTexture(GLenum target) {
+  GLuint name = 0;
+  glCreateTextures(target, 1, &name);
+  return Texture(name);
+}
+
+Buffer createBuffer() {
+  GLuint name = 0;
+  glCreateBuffers(1, &name);
+  return Buffer(name);
+}
+
+VertexArray createVertexArray() {
+  GLuint name = 0;
+  glCreateVertexArrays(1, &name);
+  return VertexArray(name);
+}
+
+Framebuffer createFramebuffer() {
+  GLuint name = 0;
+  glCreateFramebuffers(1, &name);
+  return Framebuffer(name);
+}
+
+namespace {
+
+Result<GLuint> compile(const char* name, GLenum stage, const std::string& source) {
+  GLuint shader = glCreateShader(stage);
+  const char* text = source.c_str();
+  glShaderSource(shader, 1, &text, nullptr);
+  glCompileShader(shader);
+  GLint ok = 0;
+  glGetShaderiv(shader, GL_COMPILE_STATUS, &ok);
+  if (!ok) {
+    GLint length = 0;
+    glGetShaderiv(shader, GL_INFO_LOG_LENGTH, &length);
+    std::string log(size_t(std::max(length, 1)), '\0');
+    glGetShaderInfoLog(shader, length, nullptr, log.data());
+    glDeleteShader(shader);
+    return fail(ErrorCode::kInternal,
+                fmt::format("{} {} shader does not compile: {}", name,
+                            stage == GL_VERTEX_SHADER ? "vertex" : "fragment", log.c_str()));
+  }
+  return shader;
+}
+
+}  // namespace
+
+Result<Program> linkProgram(const char* name, const std::string& vertex_source,
+                            const std::string& fragment_source) {
+  Result<GLuint> vertex = compile(name, GL_VERTEX_SHADER, vertex_source);
+  if (!vertex) return forwardError(vertex);
+  Result<GLuint> fragment = compile(name, GL_FRAGMENT_SHADER, fragment_source);
+  if (!fragment) {
+    glDeleteShader(*vertex);
+    return forwardError(fragment);
+  }
+  Program program(glCreateProgram());
+  glAttachShader(program.get(), *vertex);
+  glAttachShader(program.get(), *fragment);
+  glLinkProgram(program.get());
+  glDeleteShader(*vertex);
+  glDeleteShader(*fragment);
+  GLint ok = 0;
+  glGetProgramiv(program.get(), GL_LINK_STATUS, &ok);
+  if (!ok) {
+    GLint length = 0;
+    glGetProgramiv(program.get(), GL_INFO_LOG_LENGTH, &length);
+    std::string log(size_t(std::max(length, 1)), '\0');
+    glGetProgramInfoLog(program.get(), length, nullptr, log.data());
+    return fail(ErrorCode::kInternal,
+                fmt::format("{} program does not link: {}", name, log.c_str()));
+  }
+  return program;
+}
+
+void ColourTarget::bind(uint32_t width, uint32_t height) {
+  if (width != width_ || height != height_ || !framebuffer_) {
+    colour_ = createTexture(GL_TEXTURE_2D);
+    glTextureStorage2D(colour_.get(), 1, GL_RGBA8, GLsizei(width), GLsizei(height));
+    framebuffer_ = createFramebuffer();
+    glNamedFramebufferTexture(framebuffer_.get(), GL_COLOR_ATTACHMENT0, colour_.get(), 0);
+    width_ = width;
+    height_ = height;
+  }
+  glBindFramebuffer(GL_FRAMEBUFFER, framebuffer_.get());
+  glViewport(0, 0, GLsizei(width), GLsizei(height));
+}
+
+void ColourTarget::read(std::vector<uint8_t>& rgba) const {
+  rgba.resize(size_t(width_) * height_ * 4);
+  if (rgba.empty()) return;
+  glBindFramebuffer(GL_READ_FRAMEBUFFER, framebuffer_.get());
+  glPixelStorei(GL_PACK_ALIGNMENT, 1);
+  glReadPixels(0, 0, GLsizei(width_), GLsizei(height_), GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+  // OpenGL's rows run bottom to top; pictures run top to bottom.
+  const size_t row = size_t(width_) * 4;
+  std::vector<uint8_t> swap(row);
+  for (uint32_t y = 0; y < height_ / 2; ++y) {
+    uint8_t* a = rgba.data() + y * row;
+    uint8_t* b = rgba.data() + (height_ - 1 - y) * row;
+    std::memcpy(swap.data(), a, row);
+    std::memcpy(a, b, row);
+    std::memcpy(b, swap.data(), row);
+  }
+}
+
+void ColourTarget::blitToWindow(uint32_t window_width, uint32_t window_height) const {
+  glBlitNamedFramebuffer(framebuffer_.get(), 0, 0, 0, GLsizei(width_), GLsizei(height_), 0, 0,
+                         GLsizei(window_width), GLsizei(window_height), GL_COLOR_BUFFER_BIT,
+                         GL_LINEAR);
+}
+
+}  // namespace tessera::gl

@@ -1,0 +1,96 @@
+#pragma once
+// Typed owners of OpenGL objects: each deletes its object with the matching glDelete*, so a
+// texture can never be passed where a buffer is expected and nothing leaks on an early return.
+
+#include <epoxy/gl.h>
+
+#include <string>
+#include <cstdint>
+#include <utility>
+#include <vector>
+
+#include <tessera/result.h>
+
+namespace tessera::gl {
+
+template <void (*Delete)(GLuint)>
+class Object {
+ public:
+  Object() = default;
+  explicit Object(GLuint name) : name_(name) {}
+  ~Object() { reset(); }
+  Object(Object&& other) noexcept : name_(std::exchange(other.name_, 0)) {}
+  Object& operator=(Object&& other) noexcept {
+    if (this != &other) {
+      reset();
+      name_ = std::exchange(other.name_, 0);
+    }
+    return *this;
+  }
+  Object(const Object&) = delete;
+  Object& operator=(const Object&) = delete;
+
+  GLuint get() const { return name_; }
+  explicit operator bool() const { return name_ != 0; }
+  void reset() {
+    if (name_) Delete(name_);
+    name_ = 0;
+  }
+
+ private:
+  GLuint name_ = 0;
+};
+
+namespace detail {
+inline void deleteTexture(GLuint n) {
+  glDeleteTextures(1, &n);
+}
+inline void deleteBuffer(GLuint n) {
+  glDeleteBuffers(1, &n);
+}
+inline void deleteVertexArray(GLuint n) {
+  glDeleteVertexArrays(1, &n);
+}
+inline void deleteFramebuffer(GLuint n) {
+  glDeleteFramebuffers(1, &n);
+}
+inline void deleteProgram(GLuint n) {
+  glDeleteProgram(n);
+}
+}  // namespace detail
+
+using Texture = Object<detail::deleteTexture>;
+using Buffer = Object<detail::deleteBuffer>;
+using VertexArray = Object<detail::deleteVertexArray>;
+using Framebuffer = Object<detail::deleteFramebuffer>;
+using Program = Object<detail::deleteProgram>;
+
+/// Creates a texture of `target` (direct state access).
+Texture createTexture(GLenum target);
+Buffer createBuffer();
+VertexArray createVertexArray();
+Framebuffer createFramebuffer();
+
+/// Compiles and links a vertex and fragment shader; the error carries the driver's log.
+[[nodiscard]] Result<Program> linkProgram(const char* name, const std::string& vertex_source,
+                                          const std::string& fragment_source);
+
+/// An RGBA8 colour target of a given size, drawn into and read back.
+class ColourTarget {
+ public:
+  /// (Re)allocates when the size changes; binds it for drawing with the viewport set.
+  void bind(uint32_t width, uint32_t height);
+  /// Reads the picture back, rows top to bottom.
+  void read(std::vector<uint8_t>& rgba) const;
+  /// Blits to the default framebuffer, scaled to the window.
+  void blitToWindow(uint32_t window_width, uint32_t window_height) const;
+  uint32_t width() const { return width_; }
+  uint32_t height() const { return height_; }
+
+ private:
+  Texture colour_;
+  Framebuffer framebuffer_;
+  uint32_t width_ = 0, height_ = 0;
+};
+
+}  // namespace tessera::gl

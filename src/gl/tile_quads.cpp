@@ -1,0 +1,351 @@
+// The tile-quads renderer (Backes et al., section 7): one quad per resident tile that meets
+// the view, coarse levels first and finer ones over them, tiles in one texture array. Each
+// fragment applies the sampling rules of tessera/render.h: a tile draws where the level of
+// detail lambda is below its level + 1, blending with its parent (also resident: the streamer
+// uploads parents first and releases them last) for trilinear filtering; where a finer tile
+// is missing, the coarser one beneath shows through, magnified.
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <unordered_map>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <tessera/gl.h>
+
+#include "gl/gl_objects.h"
+#include "gl/renderers.h"
+#include "stream/residency.h"
+
+namespace tessera::gl {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+double msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+const char* kVertexShader = R"(#version 450 core
+// Per tile: its rectangle in level-0 texels relative to the view's anchor, clipped to the
+// image; the tile's and its parent's origins (level-0 texels, same anchor); level, layer,
+// parent layer (-1: none) and whether it is the coarsest level.
+layout(location = 0) in vec4 a_rect;
+layout(location = 1) in vec4 a_origins;
+layout(location = 2) in ivec4 a_info;
+uniform mat4 u_view_projection;
+out vec2 v_world;
+flat out vec4 v_origins;
+flat out ivec4 v_info;
+void main() {
+  vec2 corner = vec2(gl_VertexID & 1, gl_VertexID >> 1);
+  v_world = mix(a_rect.xy, a_rect.zw, corner);
+  v_origins = a_origins;
+  v_info = a_info;
+  gl_Position = u_view_projection * vec4(v_world, 0.0, 1.0);
+}
+)";
+
+const char* kFragmentShader = R"(#version 450 core
+in vec2 v_world;
+flat in vec4 v_origins;
+flat in ivec4 v_info;
+uniform sampler2DArray u_tiles;
+uniform float u_tile_size;
+uniform float u_border;
+uniform float u_stored_side;
+out vec4 o_colour;
+// Bilinear at `level` inside one stored tile; its border holds the neighbours' texels, so the
+// four texels around any point of the tile are in it.
+vec4 sampleTile(vec2 world, vec2 origin, int level, int layer) {
+  vec2 texel = (world - origin) * exp2(-float(level)) + u_border;
+  return texture(u_tiles, vec3(texel / u_stored_side, float(layer)));
+}
+void main() {
+  // OpenGL's rho: the longer screen-axis derivative of the level-0 texel coordinate.
+  float rho = max(length(dFdx(v_world)), length(dFdy(v_world)));
+  float lambda = log2(rho);
+  int level = v_info.x;
+  bool coarsest = v_info.w != 0;
+  if (!coarsest && lambda >= float(level + 1)) discard;  // a coarser tile beneath draws here
+  vec4 colour = sampleTile(v_world, v_origins.xy, level, v_info.y);
+  if (lambda > float(level) && v_info.z >= 0) {
+    vec4 parent = sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
+    colour = mix(colour, parent, clamp(lambda - float(level), 0.0, 1.0));
+  }
+  o_colour = colour;
+}
+)";
+
+struct Instance {
+  float rect[4];
+  float origins[4];
+  int32_t info[4];
+};
+
+class TileQuadsRenderer final : public GlRenderer {
+ public:
+  TileQuadsRenderer(const ImageInfo& info, const GlRendererOptions& options)
+      : info_(info), options_(options) {}
+
+  Result<void> init() {
+    Result<Program> program = linkProgram("tile-quads", kVertexShader, kFragmentShader);
+    if (!program) return forwardError(program);
+    program_ = std::move(*program);
+    view_projection_uniform_ = glGetUniformLocation(program_.get(), "u_view_projection");
+    glProgramUniform1i(program_.get(), glGetUniformLocation(program_.get(), "u_tiles"), 0);
+    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_tile_size"),
+                       float(info_.tile_size_px));
+    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_border"),
+                       float(info_.border_px));
+    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_stored_side"),
+                       float(info_.storedTileSidePx()));
+    glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers_);
+    TESSERA_TRY(growLayers(std::max<uint32_t>(1, options_.initial_layers)));
+
+    instances_buffer_ = createBuffer();
+    vertex_array_ = createVertexArray();
+    const GLuint vao = vertex_array_.get();
+    glVertexArrayVertexBuffer(vao, 0, instances_buffer_.get(), 0, sizeof(Instance));
+    glVertexArrayBindingDivisor(vao, 0, 1);
+    glEnableVertexArrayAttrib(vao, 0);
+    glVertexArrayAttribFormat(vao, 0, 4, GL_FLOAT, GL_FALSE, offsetof(Instance, rect));
+    glVertexArrayAttribBinding(vao, 0, 0);
+    glEnableVertexArrayAttrib(vao, 1);
+    glVertexArrayAttribFormat(vao, 1, 4, GL_FLOAT, GL_FALSE, offsetof(Instance, origins));
+    glVertexArrayAttribBinding(vao, 1, 0);
+    glEnableVertexArrayAttrib(vao, 2);
+    glVertexArrayAttribIFormat(vao, 2, 4, GL_INT, offsetof(Instance, info));
+    glVertexArrayAttribBinding(vao, 2, 0);
+    upload_buffer_ = createBuffer();
+    return {};
+  }
+
+  void apply(const FrameUpdate& update, TileStreamer& streamer) override {
+    const auto started = Clock::now();
+    stats_.uploads = 0;
+    stats_.upload_bytes = 0;
+    stats_.declined = 0;
+    for (const TileId& id : update.releases) release(id);
+
+    // Layers first, so a tile with no room is declined before any byte is copied.
+    struct Pending {
+      const DecodedTile* tile;
+      GLint layer;
+      size_t offset;
+    };
+    std::vector<Pending> pending;
+    size_t total = 0;
+    for (const auto& tile : update.uploads) {
+      if (tile->texels.channels != info_.channels ||
+          tile->texels.width_px != info_.storedTileSidePx() ||
+          tile->texels.height_px != info_.storedTileSidePx()) {
+        streamer.declined(tile->id);  // not this image's: never drawn, never a wrong tile
+        ++stats_.declined;
+        continue;
+      }
+      auto existing = layers_.find(tile->id);
+      GLint layer = existing != layers_.end() ? existing->second : takeLayer();
+      if (layer < 0) {
+        streamer.declined(tile->id);
+        ++stats_.declined;
+        continue;
+      }
+      layers_[tile->id] = layer;
+      pending.push_back({tile.get(), layer, total});
+      total += tile->texels.texels.size();
+    }
+    if (!pending.empty()) {
+      // One pixel-buffer copy for the frame, orphaned so the driver never waits for the last
+      // frame's transfer; the texture updates then read from it.
+      glNamedBufferData(upload_buffer_.get(), GLsizeiptr(total), nullptr, GL_STREAM_DRAW);
+      auto* mapped = static_cast<uint8_t*>(
+          glMapNamedBufferRange(upload_buffer_.get(), 0, GLsizeiptr(total),
+                                GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+      for (const Pending& p : pending)
+        std::memcpy(mapped + p.offset, p.tile->texels.texels.data(), p.tile->texels.texels.size());
+      glUnmapNamedBuffer(upload_buffer_.get());
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, upload_buffer_.get());
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      const GLsizei side = GLsizei(info_.storedTileSidePx());
+      for (const Pending& p : pending) {
+        glTextureSubImage3D(tiles_.get(), 0, 0, 0, p.layer, side, side, 1, pixelFormat(),
+                            GL_UNSIGNED_BYTE, reinterpret_cast<const void*>(p.offset));
+        streamer.uploaded(p.tile->id);
+        ++stats_.uploads;
+        stats_.upload_bytes += p.tile->texels.texels.size();
+      }
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+    }
+    stats_.resident_tiles = uint32_t(layers_.size());
+    stats_.apply_cpu_ms = msSince(started);
+  }
+
+  void draw(const View& view) override {
+    const auto started = Clock::now();
+    target_.bind(view.viewportWidth(), view.viewportHeight());
+    glClearColor(0, 0, 0, 0);
+    glClear(GL_COLOR_BUFFER_BIT);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_BLEND);
+
+    const ViewTransform transform = viewTransform(view, info_);
+    const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
+    instances_.clear();
+    const uint32_t t = info_.tile_size_px;
+    for (const auto& [id, layer] : layers_) {
+      const double span = std::ldexp(double(t), int(id.level));
+      double x0 = id.x * span, y0 = id.y * span;
+      double x1 = std::min(x0 + span, double(info_.width_px));
+      double y1 = std::min(y0 + span, double(info_.height_px));
+      if (x1 <= footprint.x0 || x0 >= footprint.x1 || y1 <= footprint.y0 || y0 >= footprint.y1)
+        continue;  // outside the field of view
+      Instance instance{};
+      instance.rect[0] = float(x0 - transform.anchor_x);
+      instance.rect[1] = float(y0 - transform.anchor_y);
+      instance.rect[2] = float(x1 - transform.anchor_x);
+      instance.rect[3] = float(y1 - transform.anchor_y);
+      instance.origins[0] = instance.rect[0];
+      instance.origins[1] = instance.rect[1];
+      const bool coarsest = id.level + 1 >= info_.level_count;
+      int32_t parent_layer = -1;
+      if (!coarsest) {
+        TileId parent{id.image, id.level + 1, id.x / 2, id.y / 2};
+        auto it = layers_.find(parent);
+        if (it != layers_.end()) {
+          parent_layer = it->second;
+          instance.origins[2] = float(parent.x * 2 * span - transform.anchor_x);
+          instance.origins[3] = float(parent.y * 2 * span - transform.anchor_y);
+        }
+      }
+      instance.info[0] = int32_t(id.level);
+      instance.info[1] = layer;
+      instance.info[2] = parent_layer;
+      instance.info[3] = coarsest ? 1 : 0;
+      instances_.push_back(instance);
+    }
+    // Coarse levels first: finer tiles draw over them where they apply.
+    std::sort(instances_.begin(), instances_.end(),
+              [](const Instance& a, const Instance& b) { return a.info[0] > b.info[0]; });
+    stats_.tiles_drawn = uint32_t(instances_.size());
+    if (!instances_.empty()) {
+      glNamedBufferData(instances_buffer_.get(), GLsizeiptr(instances_.size() * sizeof(Instance)),
+                        instances_.data(), GL_STREAM_DRAW);
+      glUseProgram(program_.get());
+      glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
+                                transform.view_projection);
+      glBindTextureUnit(0, tiles_.get());
+      glBindVertexArray(vertex_array_.get());
+      glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));
+      glBindVertexArray(0);
+    }
+    stats_.draw_cpu_ms = msSince(started);
+  }
+
+  Picture readPixels() override {
+    Picture picture;
+    picture.width = target_.width();
+    picture.height = target_.height();
+    target_.read(picture.rgba);
+    return picture;
+  }
+
+  void present(uint32_t window_width, uint32_t window_height) override {
+    target_.blitToWindow(window_width, window_height);
+  }
+
+  bool resident(const TileId& tile) const override { return layers_.count(tile) > 0; }
+  const RenderStats& stats() const override { return stats_; }
+  RendererKind kind() const override { return RendererKind::kTileQuads; }
+
+ private:
+  GLenum pixelFormat() const {
+    switch (info_.channels) {
+      case 1: return GL_RED;
+      case 2: return GL_RG;
+      case 3: return GL_RGB;
+      default: return GL_RGBA;
+    }
+  }
+
+  /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
+  Result<void> growLayers(uint32_t layers) {
+    const GLsizei side = GLsizei(info_.storedTileSidePx());
+    static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
+    Texture grown = createTexture(GL_TEXTURE_2D_ARRAY);
+    glGetError();
+    glTextureStorage3D(grown.get(), 1, kInternal[info_.channels - 1], side, side, GLsizei(layers));
+    if (glGetError() != GL_NO_ERROR)
+      return fail(
+          ErrorCode::kTooLarge,
+          fmt::format("tile array of {} layers of {} px does not fit in GPU memory", layers, side));
+    glTextureParameteri(grown.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+    glTextureParameteri(grown.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+    glTextureParameteri(grown.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(grown.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    // Grey and grey+alpha tiles show as grey, RGB as opaque (tessera/render.h's Picture).
+    const GLint swizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
+                                  {GL_RED, GL_RED, GL_RED, GL_GREEN},
+                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
+                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
+    glTextureParameteriv(grown.get(), GL_TEXTURE_SWIZZLE_RGBA, swizzles[info_.channels - 1]);
+    if (tiles_ && layer_capacity_ > 0)
+      glCopyImageSubData(tiles_.get(), GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, grown.get(),
+                         GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, side, side, GLsizei(layer_capacity_));
+    for (uint32_t layer = layer_capacity_; layer < layers; ++layer)
+      free_layers_.push_back(GLint(layers - 1 - (layer - layer_capacity_)));
+    tiles_ = std::move(grown);
+    layer_capacity_ = layers;
+    stats_.gpu_bytes = uint64_t(layers) * info_.storedTileBytes();
+    return {};
+  }
+
+  /// A free layer, growing the array when none is left; -1 at the driver's limit.
+  GLint takeLayer() {
+    if (free_layers_.empty()) {
+      const uint32_t limit = uint32_t(std::max(max_layers_, 1));
+      if (layer_capacity_ >= limit) return -1;
+      if (!growLayers(std::min(limit, layer_capacity_ * 2))) return -1;
+    }
+    GLint layer = free_layers_.back();
+    free_layers_.pop_back();
+    return layer;
+  }
+
+  void release(const TileId& id) {
+    auto it = layers_.find(id);
+    if (it == layers_.end()) return;
+    free_layers_.push_back(it->second);
+    layers_.erase(it);
+  }
+
+  ImageInfo info_;
+  GlRendererOptions options_;
+  Program program_;
+  GLint view_projection_uniform_ = -1;
+  Texture tiles_;
+  GLint max_layers_ = 0;
+  uint32_t layer_capacity_ = 0;
+  std::vector<GLint> free_layers_;
+  std::unordered_map<TileId, GLint, TileIdHash> layers_;
+  Buffer instances_buffer_;
+  Buffer upload_buffer_;
+  VertexArray vertex_array_;
+  std::vector<Instance> instances_;
+  ColourTarget target_;
+  RenderStats stats_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<GlRenderer>> createTileQuadsRenderer(const ImageInfo& info,
+                                                            const GlRendererOptions& options) {
+  auto renderer = std::make_unique<TileQuadsRenderer>(info, options);
+  TESSERA_TRY(renderer->init());
+  return std::unique_ptr<GlRenderer>(std::move(renderer));
+}
+
+}  // namespace tessera::gl

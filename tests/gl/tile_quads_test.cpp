@@ -1,0 +1,198 @@
+// The OpenGL backend, headless on EGL's surfaceless platform (Mesa llvmpipe in CI): a real
+// streamer feeds a real renderer; pictures are read back and checked texel by texel.
+#include <algorithm>
+#include <memory>
+
+#include <gtest/gtest.h>
+
+#include <tessera/gl.h>
+#include <tessera/stream.h>
+
+#include "support/fault_source.h"
+#include "support/synthetic_archive.h"
+
+namespace tessera {
+namespace {
+
+/// One headless context for the whole test program: the EGL display is per process anyway.
+GlContext& sharedContext() {
+  static std::unique_ptr<GlContext> context = [] {
+    auto created = GlContext::createHeadless();
+    EXPECT_TRUE(created) << created.error().message;
+    return created ? std::move(*created) : nullptr;
+  }();
+  if (!context) throw std::runtime_error("no headless OpenGL context");
+  context->makeCurrent();
+  return *context;
+}
+
+View orthoAt(double x, double y, double texels_per_pixel, uint32_t w, uint32_t h) {
+  View view;
+  view.ortho.centre_x = x;
+  view.ortho.centre_y = y;
+  view.ortho.texels_per_pixel = texels_per_pixel;
+  view.ortho.viewport_w = w;
+  view.ortho.viewport_h = h;
+  return view;
+}
+
+/// Level-0 texel (x, y) as a picture shows it (grey expanded, alpha 255 when absent).
+std::array<uint8_t, 4> texelAt(const Archive& archive, uint32_t x, uint32_t y) {
+  const ImageInfo& info = archive.images()[0];
+  const uint32_t t = info.tile_size_px;
+  auto tile = archive.readTile({0, 0, x / t, y / t});
+  EXPECT_TRUE(tile) << tile.error().message;
+  if (!tile) return {};
+  const uint32_t side = info.storedTileSidePx(), c = info.channels;
+  const uint8_t* p =
+      tile->texels.data() + (size_t(y % t + info.border_px) * side + x % t + info.border_px) * c;
+  switch (c) {
+    case 1: return {p[0], p[0], p[0], 255};
+    case 2: return {p[0], p[0], p[0], p[1]};
+    case 3: return {p[0], p[1], p[2], 255};
+    default: return {p[0], p[1], p[2], p[3]};
+  }
+}
+
+struct Rig {
+  std::shared_ptr<test::FaultSource> source;
+  std::shared_ptr<Archive> archive;
+  std::unique_ptr<TileStreamer> streamer;
+  std::unique_ptr<GlRenderer> renderer;
+
+  explicit Rig(const test::SyntheticArchiveSpec& spec, RendererKind kind) {
+    sharedContext();
+    const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
+    source = std::make_shared<test::FaultSource>(makeMemorySource(bytes, "mem:gl.tess"));
+    archive = test::openArchiveOrFail(source);
+    if (!archive) return;
+    test::warmDirectory(*archive);
+    StreamerOptions options;
+    options.cache_budget_bytes = size_t(256) << 20;
+    options.loader_threads = 2;
+    auto created = TileStreamer::create(archive, options);
+    EXPECT_TRUE(created) << created.error().message;
+    if (created) streamer = std::move(*created);
+    auto made = GlRenderer::create(kind, archive->images()[0]);
+    EXPECT_TRUE(made) << made.error().message;
+    if (made) renderer = std::move(*made);
+  }
+
+  bool ready() const { return archive && streamer && renderer; }
+
+  /// One frame as a viewer runs it.
+  const FrameUpdate& frame(const View& view) {
+    const FrameUpdate& update = streamer->update(view);
+    renderer->apply(update, *streamer);
+    renderer->draw(view);
+    return update;
+  }
+
+  /// Frames until the view is at full detail and nothing is loading or waiting to go up.
+  void settle(const View& view) {
+    for (int i = 0; i < 500; ++i) {
+      const FrameUpdate& update = frame(view);
+      // An idle loader alone is not enough: it may have finished tiles this frame did not
+      // poll yet, so the view must also be at full detail.
+      if (update.report.coverage_desired >= 1 && update.uploads.empty() &&
+          update.report.queue_length == 0 && update.report.in_flight == 0)
+        return;
+      streamer->waitIdleForTesting();
+    }
+    ADD_FAILURE() << "the view never settled";
+  }
+};
+
+class TileQuadsChannels : public testing::TestWithParam<uint32_t> {};
+
+TEST_P(TileQuadsChannels, AtOneTexelPerPixelTheScreenShowsLevelZeroTexelsExactly) {
+  test::SyntheticArchiveSpec spec;
+  spec.width_px = 500;  // odd sizes: the last column and row of tiles are partly padding
+  spec.height_px = 371;
+  spec.channels = GetParam();
+  spec.codec = Codec::kPng;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  // Centre on a whole texel so pixel centres fall on texel centres; the view crosses tile
+  // edges (every 64 px) and the image's right and bottom edges.
+  const View view = orthoAt(450, 330, 1, 96, 80);
+  rig.settle(view);
+  Picture picture = rig.renderer->readPixels();
+  ASSERT_EQ(picture.width, 96u);
+  ASSERT_EQ(picture.height, 80u);
+  uint32_t worst = 0, outside_nonzero = 0;
+  for (uint32_t py = 0; py < picture.height; ++py) {
+    for (uint32_t px = 0; px < picture.width; ++px) {
+      const int64_t x = 450 - 48 + int64_t(px), y = 330 - 40 + int64_t(py);
+      const uint8_t* got = &picture.rgba[(size_t(py) * picture.width + px) * 4];
+      if (x >= int64_t(spec.width_px) || y >= int64_t(spec.height_px)) {
+        outside_nonzero += got[0] | got[1] | got[2] | got[3];  // beyond the image: transparent
+        continue;
+      }
+      const auto want = texelAt(*rig.archive, uint32_t(x), uint32_t(y));
+      for (int c = 0; c < 4; ++c)
+        worst = std::max<uint32_t>(worst, uint32_t(std::abs(int(got[c]) - int(want[size_t(c)]))));
+    }
+  }
+  EXPECT_LE(worst, 1u) << "largest channel difference from the level-0 texels";
+  EXPECT_EQ(outside_nonzero, 0u);
+  EXPECT_GT(rig.renderer->stats().tiles_drawn, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(Channels, TileQuadsChannels, testing::Values(1u, 2u, 3u, 4u));
+
+TEST(TileQuads, TheRenderLoopNeverWaitsForAStalledSource) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  rig.settle(orthoAt(200, 200, 1, 128, 96));
+  // Every read now blocks; the view jumps to the other corner, whose level-0 tiles were
+  // never loaded.
+  rig.source->closeGate();
+  const View far_view = orthoAt(info.width_px - 100.0, info.height_px - 100.0, 1, 128, 96);
+  FrameReport last{};
+  for (int i = 0; i < 30; ++i) last = rig.frame(far_view).report;
+  EXPECT_TRUE(rig.source->waitUntilBlocked(1)) << "the loader never reached the stalled read";
+  EXPECT_LT(last.coverage_desired, 1.0);  // level 0 could not arrive
+  EXPECT_TRUE(last.fully_covered);        // a coarser level covers the screen meanwhile
+  Picture picture = rig.renderer->readPixels();
+  size_t transparent = 0;
+  for (size_t i = 3; i < picture.rgba.size(); i += 4) transparent += picture.rgba[i] == 0;
+  EXPECT_EQ(transparent, 0u) << "pixels of the image left uncovered while the source stalls";
+  rig.source->openGate();
+}
+
+TEST(TileQuads, ReleasedTilesLeaveTheGpuAndTheirLayersAreReused) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  const View near_view = orthoAt(100, 100, 1, 128, 96);
+  rig.settle(near_view);
+  const TileId corner{0, 0, 0, 0};
+  ASSERT_TRUE(rig.renderer->resident(corner));
+  const uint64_t gpu_bytes = rig.renderer->stats().gpu_bytes;
+  // Back and forth across the image: tiles left behind are released and their layers taken
+  // by the new ones, so texture memory stops growing.
+  for (int round = 0; round < 3; ++round) {
+    rig.settle(orthoAt(info.width_px - 100.0, info.height_px - 100.0, 1, 128, 96));
+    EXPECT_FALSE(rig.renderer->resident(corner));
+    rig.settle(near_view);
+    EXPECT_TRUE(rig.renderer->resident(corner));
+  }
+  EXPECT_LE(rig.renderer->stats().gpu_bytes, 2 * gpu_bytes);
+  EXPECT_EQ(rig.renderer->stats().resident_tiles, [&] {
+    uint32_t resident = 0;
+    for (const TileId& id : test::allTiles(*rig.archive))
+      resident += rig.streamer->state(id) == TileState::kResident ||
+                  rig.streamer->state(id) == TileState::kLocked;
+    return resident;
+  }());
+}
+
+}  // namespace
+}  // namespace tessera
