@@ -74,8 +74,12 @@ struct RenderStats {
 };
 
 struct GlRendererOptions {
-  /// Tile layers allocated at first; the array grows by doubling up to the driver's limit.
+  /// Tile-quads: tile layers allocated at first; the array grows by doubling up to the
+  /// driver's limit.
   uint32_t initial_layers = 64;
+  /// Clipmap: tiles along a level layer's side at first (n of Backes et al., eq. 3); a frame
+  /// whose clip regions are larger reallocates the layers.
+  uint32_t initial_clip_tiles = 0;
 };
 
 /// Draws views of one image of an archive. Render thread only, with its context current.

@@ -88,8 +88,7 @@ Result<std::unique_ptr<GlRenderer>> GlRenderer::create(RendererKind kind, const 
                             info.tile_size_px));
   switch (kind) {
     case RendererKind::kTileQuads: return gl::createTileQuadsRenderer(info, options);
-    case RendererKind::kClipmap:
-      return fail(ErrorCode::kUnsupported, "the clipmap renderer is not in this build yet");
+    case RendererKind::kClipmap: return gl::createClipmapRenderer(info, options);
   }
   return fail(ErrorCode::kInvalidArgument, "unknown renderer kind");
 }

@@ -20,5 +20,7 @@ ViewTransform viewTransform(const View& view, const ImageInfo& info);
 
 [[nodiscard]] Result<std::unique_ptr<GlRenderer>> createTileQuadsRenderer(
     const ImageInfo& info, const GlRendererOptions& options);
+[[nodiscard]] Result<std::unique_ptr<GlRenderer>> createClipmapRenderer(
+    const ImageInfo& info, const GlRendererOptions& options);
 
 }  // namespace tessera::gl

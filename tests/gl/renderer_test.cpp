@@ -103,16 +103,16 @@ struct Rig {
   }
 };
 
-class TileQuadsChannels : public testing::TestWithParam<uint32_t> {};
+class RendererChannels : public testing::TestWithParam<std::tuple<RendererKind, uint32_t>> {};
 
-TEST_P(TileQuadsChannels, AtOneTexelPerPixelTheScreenShowsLevelZeroTexelsExactly) {
+TEST_P(RendererChannels, AtOneTexelPerPixelTheScreenShowsLevelZeroTexelsExactly) {
   test::SyntheticArchiveSpec spec;
   spec.width_px = 500;  // odd sizes: the last column and row of tiles are partly padding
   spec.height_px = 371;
-  spec.channels = GetParam();
+  spec.channels = std::get<1>(GetParam());
   spec.codec = Codec::kPng;
   spec.border_px = 1;
-  Rig rig(spec, RendererKind::kTileQuads);
+  Rig rig(spec, std::get<0>(GetParam()));
   ASSERT_TRUE(rig.ready());
   // Centre on a whole texel so pixel centres fall on texel centres; the view crosses tile
   // edges (every 64 px) and the image's right and bottom edges.
@@ -140,12 +140,25 @@ TEST_P(TileQuadsChannels, AtOneTexelPerPixelTheScreenShowsLevelZeroTexelsExactly
   EXPECT_GT(rig.renderer->stats().tiles_drawn, 0u);
 }
 
-INSTANTIATE_TEST_SUITE_P(Channels, TileQuadsChannels, testing::Values(1u, 2u, 3u, 4u));
+std::string kindName(RendererKind kind) {
+  return kind == RendererKind::kTileQuads ? "TileQuads" : "Clipmap";
+}
 
-TEST(TileQuads, TheRenderLoopNeverWaitsForAStalledSource) {
+INSTANTIATE_TEST_SUITE_P(
+    All, RendererChannels,
+    testing::Combine(testing::Values(RendererKind::kTileQuads, RendererKind::kClipmap),
+                     testing::Values(1u, 2u, 3u, 4u)),
+    [](const testing::TestParamInfo<std::tuple<RendererKind, uint32_t>>& param_info) {
+      return kindName(std::get<0>(param_info.param)) + "_" +
+             std::to_string(std::get<1>(param_info.param)) + "ch";
+    });
+
+class Renderers : public testing::TestWithParam<RendererKind> {};
+
+TEST_P(Renderers, TheRenderLoopNeverWaitsForAStalledSource) {
   test::SyntheticArchiveSpec spec;
   spec.border_px = 1;
-  Rig rig(spec, RendererKind::kTileQuads);
+  Rig rig(spec, GetParam());
   ASSERT_TRUE(rig.ready());
   const ImageInfo& info = rig.archive->images()[0];
   rig.settle(orthoAt(200, 200, 1, 128, 96));
@@ -165,10 +178,10 @@ TEST(TileQuads, TheRenderLoopNeverWaitsForAStalledSource) {
   rig.source->openGate();
 }
 
-TEST(TileQuads, ReleasedTilesLeaveTheGpuAndTheirLayersAreReused) {
+TEST_P(Renderers, ReleasedTilesLeaveTheGpuAndTheirRoomIsReused) {
   test::SyntheticArchiveSpec spec;
   spec.border_px = 1;
-  Rig rig(spec, RendererKind::kTileQuads);
+  Rig rig(spec, GetParam());
   ASSERT_TRUE(rig.ready());
   const ImageInfo& info = rig.archive->images()[0];
   const View near_view = orthoAt(100, 100, 1, 128, 96);
@@ -193,6 +206,12 @@ TEST(TileQuads, ReleasedTilesLeaveTheGpuAndTheirLayersAreReused) {
     return resident;
   }());
 }
+
+INSTANTIATE_TEST_SUITE_P(All, Renderers,
+                         testing::Values(RendererKind::kTileQuads, RendererKind::kClipmap),
+                         [](const testing::TestParamInfo<RendererKind>& param_info) {
+                           return kindName(param_info.param);
+                         });
 
 }  // namespace
 }  // namespace tessera

@@ -1,0 +1,359 @@
+// The clipmap renderer (Luo & Duan, sections 3.3 and 3.5): one texture-array layer per level,
+// n x n tiles of it, addressed toroidally (tile (x, y) lives in slot (x mod n, y mod n)), so a
+// moving clip region uploads only the tiles that entered it and nothing is ever copied. Each
+// fragment picks its level from screen-space derivatives (their eq. 2 in OpenGL's form), falls
+// back to the finest level that holds every texel its bilinear footprint needs, and so never
+// samples across the toroidal seam (their one-texel shrink, done per fragment: a footprint
+// that reaches a slot holding another tile, or none, moves to the next coarser level).
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstring>
+#include <optional>
+#include <unordered_map>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include <tessera/gl.h>
+
+#include "gl/gl_objects.h"
+#include "gl/renderers.h"
+
+namespace tessera::gl {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+constexpr int kMaxLevels = 32;
+
+const char* kVertexShader = R"(#version 450 core
+uniform vec4 u_rect;  // the image, level-0 texels relative to the anchor
+uniform mat4 u_view_projection;
+out vec2 v_world;
+void main() {
+  vec2 corner = vec2(gl_VertexID & 1, gl_VertexID >> 1);
+  v_world = mix(u_rect.xy, u_rect.zw, corner);
+  gl_Position = u_view_projection * vec4(v_world, 0.0, 1.0);
+}
+)";
+
+const char* kFragmentShader = R"(#version 450 core
+#define MAX_LEVELS 32
+in vec2 v_world;
+uniform sampler2DArray u_texels;   // layer = level, N x N texels, toroidal
+uniform usampler2DArray u_owner;   // layer = level, n x n slots: owning tile + 1, 0 = empty
+uniform ivec2 u_anchor_int[MAX_LEVELS];   // the anchor in level texels, integer part
+uniform vec2 u_anchor_frac[MAX_LEVELS];   // and fraction
+uniform ivec2 u_level_size[MAX_LEVELS];   // level width and height in texels
+uniform int u_coarsest;
+uniform int u_tile;    // t
+uniform int u_slots;   // n
+out vec4 o_colour;
+
+bool heldAt(int level, ivec2 texel) {
+  ivec2 tile = texel / u_tile;
+  uvec2 owner = texelFetch(u_owner, ivec3(tile % u_slots, level), 0).rg;
+  return owner == uvec2(tile + 1);
+}
+
+vec4 texelAt(int level, ivec2 texel) {
+  return texelFetch(u_texels, ivec3(texel % (u_tile * u_slots), level), 0);
+}
+
+// Bilinear at `level`, texel indices clamped to the level's image as stored borders and
+// padding replicate it; false when a texel of the footprint is not held.
+bool bilinear(int level, vec2 world, out vec4 colour) {
+  vec2 local = u_anchor_frac[level] + world * exp2(-float(level)) - 0.5;
+  vec2 base = floor(local);
+  vec2 f = local - base;
+  ivec2 last = u_level_size[level] - 1;
+  ivec2 t0 = clamp(u_anchor_int[level] + ivec2(base), ivec2(0), last);
+  ivec2 t1 = clamp(u_anchor_int[level] + ivec2(base) + 1, ivec2(0), last);
+  if (!heldAt(level, t0) || !heldAt(level, ivec2(t1.x, t0.y)) || !heldAt(level, ivec2(t0.x, t1.y)) ||
+      !heldAt(level, t1))
+    return false;
+  vec4 top = mix(texelAt(level, t0), texelAt(level, ivec2(t1.x, t0.y)), f.x);
+  vec4 bottom = mix(texelAt(level, ivec2(t0.x, t1.y)), texelAt(level, t1), f.x);
+  colour = mix(top, bottom, f.y);
+  return true;
+}
+
+void main() {
+  float rho = max(length(dFdx(v_world)), length(dFdy(v_world)));
+  float lambda = log2(rho);
+  int wanted = clamp(int(floor(lambda)), 0, u_coarsest);
+  for (int level = wanted; level <= u_coarsest; ++level) {
+    vec4 colour;
+    if (!bilinear(level, v_world, colour)) continue;
+    if (level == wanted && level < u_coarsest && lambda > float(level)) {
+      vec4 coarser;
+      if (bilinear(level + 1, v_world, coarser))
+        colour = mix(colour, coarser, clamp(lambda - float(level), 0.0, 1.0));
+    }
+    o_colour = colour;
+    return;
+  }
+  o_colour = vec4(0.0);
+}
+)";
+
+class ClipmapRenderer final : public GlRenderer {
+ public:
+  ClipmapRenderer(const ImageInfo& info, const GlRendererOptions& options)
+      : info_(info), options_(options) {}
+
+  Result<void> init() {
+    if (info_.level_count > uint32_t(kMaxLevels))
+      return fail(ErrorCode::kUnsupported, fmt::format("clipmap renderer: {} levels, at most {}",
+                                                       info_.level_count, kMaxLevels));
+    Result<Program> program = linkProgram("clipmap", kVertexShader, kFragmentShader);
+    if (!program) return forwardError(program);
+    program_ = std::move(*program);
+    const GLuint p = program_.get();
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_owner"), 1);
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_coarsest"), GLint(info_.level_count - 1));
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_tile"), GLint(info_.tile_size_px));
+    std::vector<GLint> sizes;
+    for (uint32_t level = 0; level < info_.level_count; ++level) {
+      sizes.push_back(GLint(info_.levelWidthPx(level)));
+      sizes.push_back(GLint(info_.levelHeightPx(level)));
+    }
+    glProgramUniform2iv(p, glGetUniformLocation(p, "u_level_size"), GLsizei(info_.level_count),
+                        sizes.data());
+    rect_uniform_ = glGetUniformLocation(p, "u_rect");
+    view_projection_uniform_ = glGetUniformLocation(p, "u_view_projection");
+    anchor_int_uniform_ = glGetUniformLocation(p, "u_anchor_int");
+    anchor_frac_uniform_ = glGetUniformLocation(p, "u_anchor_frac");
+    slots_uniform_ = glGetUniformLocation(p, "u_slots");
+    vertex_array_ = createVertexArray();
+    upload_buffer_ = createBuffer();
+    return {};
+  }
+
+  void apply(const FrameUpdate& update, TileStreamer& streamer) override {
+    const auto started = Clock::now();
+    stats_.uploads = 0;
+    stats_.upload_bytes = 0;
+    stats_.declined = 0;
+    // The layers hold n x n tiles, n the largest clip region: a larger one (a bigger window)
+    // reallocates them and sends every tile back to be uploaded again.
+    uint32_t needed = std::max<uint32_t>(options_.initial_clip_tiles, 1);
+    for (const auto& region : update.regions)
+      needed = std::max<uint32_t>(needed, uint32_t(std::max(region.region.x1 - region.region.x0,
+                                                            region.region.y1 - region.region.y0)));
+    if (needed > slots_) reallocate(needed, streamer);
+    regions_.assign(info_.level_count, TileRect{});
+    for (const auto& region : update.regions)
+      if (region.level < info_.level_count) regions_[region.level] = region.region;
+
+    for (const TileId& id : update.releases) {
+      auto it = slot_of_.find(id);
+      if (it == slot_of_.end()) continue;
+      setOwner(id.level, it->second, nullptr);
+      slot_of_.erase(it);
+    }
+
+    struct Pending {
+      const DecodedTile* tile;
+      uint32_t slot;
+      size_t offset;
+    };
+    std::vector<Pending> pending;
+    size_t total = 0;
+    for (const auto& tile : update.uploads) {
+      const TileId& id = tile->id;
+      if (tile->texels.channels != info_.channels ||
+          tile->texels.width_px != info_.storedTileSidePx() || id.level >= info_.level_count) {
+        streamer.declined(id);
+        ++stats_.declined;
+        continue;
+      }
+      const uint32_t slot = slotOf(id);
+      const std::optional<TileId>& owner = owners_[id.level][slot];
+      if (owner && *owner != id) {
+        // Two tiles of a level share a slot only when one lies outside the clip region (the
+        // keep margin, the lookahead): the one inside keeps it.
+        if (inRegion(*owner) && !inRegion(id)) {
+          streamer.declined(id);
+          ++stats_.declined;
+          continue;
+        }
+        slot_of_.erase(*owner);
+        streamer.released(*owner);
+      }
+      setOwner(id.level, slot, &id);
+      slot_of_[id] = slot;
+      pending.push_back({tile.get(), slot, total});
+      total += tile->texels.texels.size();
+    }
+    if (!pending.empty()) {
+      glNamedBufferData(upload_buffer_.get(), GLsizeiptr(total), nullptr, GL_STREAM_DRAW);
+      auto* mapped = static_cast<uint8_t*>(
+          glMapNamedBufferRange(upload_buffer_.get(), 0, GLsizeiptr(total),
+                                GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+      for (const Pending& p : pending)
+        std::memcpy(mapped + p.offset, p.tile->texels.texels.data(), p.tile->texels.texels.size());
+      glUnmapNamedBuffer(upload_buffer_.get());
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, upload_buffer_.get());
+      // The tile's interior only: its borders are its neighbours' texels, which sit beside it
+      // in the layer already.
+      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+      glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(info_.storedTileSidePx()));
+      glPixelStorei(GL_UNPACK_SKIP_PIXELS, GLint(info_.border_px));
+      glPixelStorei(GL_UNPACK_SKIP_ROWS, GLint(info_.border_px));
+      const GLsizei t = GLsizei(info_.tile_size_px);
+      for (const Pending& p : pending) {
+        const GLint sx = GLint(p.slot % slots_) * t, sy = GLint(p.slot / slots_) * t;
+        glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(p.tile->id.level), t, t, 1,
+                            pixelFormat(), GL_UNSIGNED_BYTE,
+                            reinterpret_cast<const void*>(p.offset));
+        streamer.uploaded(p.tile->id);
+        ++stats_.uploads;
+        stats_.upload_bytes += p.tile->texels.texels.size();
+      }
+      glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+      glPixelStorei(GL_UNPACK_SKIP_PIXELS, 0);
+      glPixelStorei(GL_UNPACK_SKIP_ROWS, 0);
+      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+    }
+    stats_.resident_tiles = uint32_t(slot_of_.size());
+    stats_.apply_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+  }
+
+  void draw(const View& view) override {
+    const auto started = Clock::now();
+    target_.bind(view.viewportWidth(), view.viewportHeight());
+    glClearColor(0, 0, 0, 0);
+    glClear(GL_COLOR_BUFFER_BIT);
+    glDisable(GL_DEPTH_TEST);
+    glDisable(GL_BLEND);
+    stats_.tiles_drawn = 0;
+    if (slots_ == 0) {
+      stats_.draw_cpu_ms = 0;
+      return;
+    }
+    const ViewTransform transform = viewTransform(view, info_);
+    const GLuint p = program_.get();
+    glProgramUniformMatrix4fv(p, view_projection_uniform_, 1, GL_FALSE, transform.view_projection);
+    glProgramUniform4f(p, rect_uniform_, float(-transform.anchor_x), float(-transform.anchor_y),
+                       float(info_.width_px - transform.anchor_x),
+                       float(info_.height_px - transform.anchor_y));
+    glProgramUniform1i(p, slots_uniform_, GLint(slots_));
+    // The anchor in each level's texels, split so the shader adds small floats to exact
+    // integers: texel addresses stay exact on images of any size.
+    std::vector<GLint> anchor_int;
+    std::vector<GLfloat> anchor_frac;
+    for (uint32_t level = 0; level < info_.level_count; ++level) {
+      for (double a : {transform.anchor_x, transform.anchor_y}) {
+        const double scaled = std::ldexp(a, -int(level));
+        const double whole = std::floor(scaled);
+        anchor_int.push_back(GLint(whole));
+        anchor_frac.push_back(GLfloat(scaled - whole));
+      }
+    }
+    glProgramUniform2iv(p, anchor_int_uniform_, GLsizei(info_.level_count), anchor_int.data());
+    glProgramUniform2fv(p, anchor_frac_uniform_, GLsizei(info_.level_count), anchor_frac.data());
+    glUseProgram(p);
+    glBindTextureUnit(0, texels_.get());
+    glBindTextureUnit(1, owner_.get());
+    glBindVertexArray(vertex_array_.get());
+    glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
+    glBindVertexArray(0);
+    stats_.tiles_drawn = uint32_t(slot_of_.size());
+    stats_.draw_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+  }
+
+  Picture readPixels() override {
+    Picture picture;
+    picture.width = target_.width();
+    picture.height = target_.height();
+    target_.read(picture.rgba);
+    return picture;
+  }
+
+  void present(uint32_t window_width, uint32_t window_height) override {
+    target_.blitToWindow(window_width, window_height);
+  }
+
+  bool resident(const TileId& tile) const override { return slot_of_.count(tile) > 0; }
+  const RenderStats& stats() const override { return stats_; }
+  RendererKind kind() const override { return RendererKind::kClipmap; }
+
+ private:
+  GLenum pixelFormat() const {
+    switch (info_.channels) {
+      case 1: return GL_RED;
+      case 2: return GL_RG;
+      case 3: return GL_RGB;
+      default: return GL_RGBA;
+    }
+  }
+
+  uint32_t slotOf(const TileId& id) const { return (id.y % slots_) * slots_ + (id.x % slots_); }
+
+  bool inRegion(const TileId& id) const {
+    return id.level < regions_.size() && regions_[id.level].contains(id.x, id.y);
+  }
+
+  void setOwner(uint32_t level, uint32_t slot, const TileId* id) {
+    owners_[level][slot] = id ? std::optional<TileId>(*id) : std::nullopt;
+    const GLuint value[2] = {id ? id->x + 1 : 0, id ? id->y + 1 : 0};
+    glTextureSubImage3D(owner_.get(), 0, GLint(slot % slots_), GLint(slot / slots_), GLint(level),
+                        1, 1, 1, GL_RG_INTEGER, GL_UNSIGNED_INT, value);
+  }
+
+  void reallocate(uint32_t slots, TileStreamer& streamer) {
+    for (const auto& [id, slot] : slot_of_) streamer.released(id);
+    slot_of_.clear();
+    slots_ = slots;
+    const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
+    const GLsizei levels = GLsizei(info_.level_count);
+    static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
+    texels_ = createTexture(GL_TEXTURE_2D_ARRAY);
+    glTextureStorage3D(texels_.get(), 1, kInternal[info_.channels - 1], side, side, levels);
+    const GLint swizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
+                                  {GL_RED, GL_RED, GL_RED, GL_GREEN},
+                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
+                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
+    glTextureParameteriv(texels_.get(), GL_TEXTURE_SWIZZLE_RGBA, swizzles[info_.channels - 1]);
+    owner_ = createTexture(GL_TEXTURE_2D_ARRAY);
+    glTextureStorage3D(owner_.get(), 1, GL_RG32UI, GLsizei(slots_), GLsizei(slots_), levels);
+    // An integer texture with a linear filter is incomplete, and fetches from it return 0.
+    glTextureParameteri(owner_.get(), GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(owner_.get(), GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    const std::vector<GLuint> zeros(size_t(slots_) * slots_ * 2 * info_.level_count, 0);
+    glTextureSubImage3D(owner_.get(), 0, 0, 0, 0, GLsizei(slots_), GLsizei(slots_), levels,
+                        GL_RG_INTEGER, GL_UNSIGNED_INT, zeros.data());
+    owners_.assign(info_.level_count, std::vector<std::optional<TileId>>(size_t(slots_) * slots_));
+    stats_.gpu_bytes = uint64_t(side) * side * levels * info_.channels;
+  }
+
+  ImageInfo info_;
+  GlRendererOptions options_;
+  Program program_;
+  GLint rect_uniform_ = -1, view_projection_uniform_ = -1, anchor_int_uniform_ = -1,
+        anchor_frac_uniform_ = -1, slots_uniform_ = -1;
+  Texture texels_, owner_;
+  uint32_t slots_ = 0;                                      ///< n: tiles along a layer's side
+  std::vector<std::vector<std::optional<TileId>>> owners_;  ///< per level, per slot
+  std::unordered_map<TileId, uint32_t, TileIdHash> slot_of_;
+  std::vector<TileRect> regions_;  ///< this frame's clip region per level
+  Buffer upload_buffer_;
+  VertexArray vertex_array_;
+  ColourTarget target_;
+  RenderStats stats_;
+};
+
+}  // namespace
+
+Result<std::unique_ptr<GlRenderer>> createClipmapRenderer(const ImageInfo& info,
+                                                          const GlRendererOptions& options) {
+  auto renderer = std::make_unique<ClipmapRenderer>(info, options);
+  TESSERA_TRY(renderer->init());
+  return std::unique_ptr<GlRenderer>(std::move(renderer));
+}
+
+}  // namespace tessera::gl
