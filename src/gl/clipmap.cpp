@@ -162,6 +162,7 @@ class ClipmapRenderer final : public GlRenderer {
       size_t offset;
     };
     std::vector<Pending> pending;
+    std::unordered_map<TileId, size_t, TileIdHash> pending_index;
     size_t total = 0;
     for (const auto& tile : update.uploads) {
       const TileId& id = tile->id;
@@ -181,11 +182,22 @@ class ClipmapRenderer final : public GlRenderer {
           ++stats_.declined;
           continue;
         }
+        // A tile that took the slot earlier in this same frame never went up: it goes back
+        // to the streamer as declined, not released.
+        auto earlier = pending_index.find(*owner);
+        if (earlier != pending_index.end()) {
+          pending[earlier->second].tile = nullptr;
+          streamer.declined(*owner);
+          ++stats_.declined;
+          pending_index.erase(earlier);
+        } else {
+          streamer.released(*owner);
+        }
         slot_of_.erase(*owner);
-        streamer.released(*owner);
       }
       setOwner(id.level, slot, &id);
       slot_of_[id] = slot;
+      pending_index[id] = pending.size();
       pending.push_back({tile.get(), slot, total});
       total += tile->texels.texels.size();
     }
@@ -195,7 +207,9 @@ class ClipmapRenderer final : public GlRenderer {
           glMapNamedBufferRange(upload_buffer_.get(), 0, GLsizeiptr(total),
                                 GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
       for (const Pending& p : pending)
-        std::memcpy(mapped + p.offset, p.tile->texels.texels.data(), p.tile->texels.texels.size());
+        if (p.tile)
+          std::memcpy(mapped + p.offset, p.tile->texels.texels.data(),
+                      p.tile->texels.texels.size());
       glUnmapNamedBuffer(upload_buffer_.get());
       glBindBuffer(GL_PIXEL_UNPACK_BUFFER, upload_buffer_.get());
       // The tile's interior only: its borders are its neighbours' texels, which sit beside it
@@ -206,6 +220,7 @@ class ClipmapRenderer final : public GlRenderer {
       glPixelStorei(GL_UNPACK_SKIP_ROWS, GLint(info_.border_px));
       const GLsizei t = GLsizei(info_.tile_size_px);
       for (const Pending& p : pending) {
+        if (!p.tile) continue;
         const GLint sx = GLint(p.slot % slots_) * t, sy = GLint(p.slot / slots_) * t;
         glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(p.tile->id.level), t, t, 1,
                             pixelFormat(), GL_UNSIGNED_BYTE,
@@ -282,6 +297,21 @@ class ClipmapRenderer final : public GlRenderer {
   const RenderStats& stats() const override { return stats_; }
   RendererKind kind() const override { return RendererKind::kClipmap; }
 
+  Result<ClipmapLayer> readLayer(uint32_t level) const {
+    if (level >= info_.level_count || slots_ == 0)
+      return fail(ErrorCode::kInvalidArgument, fmt::format("clipmap has no layer {}", level));
+    ClipmapLayer layer;
+    layer.slots = slots_;
+    layer.side = slots_ * info_.tile_size_px;
+    layer.texels.resize(size_t(layer.side) * layer.side * info_.channels);
+    layer.owners = owners_[level];
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glGetTextureSubImage(texels_.get(), 0, 0, 0, GLint(level), GLsizei(layer.side),
+                         GLsizei(layer.side), 1, pixelFormat(), GL_UNSIGNED_BYTE,
+                         GLsizei(layer.texels.size()), layer.texels.data());
+    return layer;
+  }
+
  private:
   GLenum pixelFormat() const {
     switch (info_.channels) {
@@ -348,6 +378,12 @@ class ClipmapRenderer final : public GlRenderer {
 };
 
 }  // namespace
+
+Result<ClipmapLayer> readClipmapLayer(GlRenderer& renderer, uint32_t level) {
+  auto* clipmap = dynamic_cast<ClipmapRenderer*>(&renderer);
+  if (!clipmap) return fail(ErrorCode::kInvalidArgument, "not a clipmap renderer");
+  return clipmap->readLayer(level);
+}
 
 Result<std::unique_ptr<GlRenderer>> createClipmapRenderer(const ImageInfo& info,
                                                           const GlRendererOptions& options) {

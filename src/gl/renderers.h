@@ -2,6 +2,8 @@
 // Shared by the renderers: the view's transform and their factories.
 
 #include <memory>
+#include <optional>
+#include <vector>
 
 #include <tessera/gl.h>
 
@@ -22,5 +24,17 @@ ViewTransform viewTransform(const View& view, const ImageInfo& info);
     const ImageInfo& info, const GlRendererOptions& options);
 [[nodiscard]] Result<std::unique_ptr<GlRenderer>> createClipmapRenderer(
     const ImageInfo& info, const GlRendererOptions& options);
+
+/// A clipmap level layer as the GPU holds it, for tests: `side` x `side` texels of the image's
+/// channels, and the tile owning each of the `slots` x `slots` slots.
+struct ClipmapLayer {
+  uint32_t slots = 0;
+  uint32_t side = 0;
+  std::vector<uint8_t> texels;
+  std::vector<std::optional<TileId>> owners;
+};
+
+/// Reads level `level` of a clipmap renderer back from the GPU; fails for other renderers.
+[[nodiscard]] Result<ClipmapLayer> readClipmapLayer(GlRenderer& renderer, uint32_t level);
 
 }  // namespace tessera::gl

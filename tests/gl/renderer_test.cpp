@@ -8,6 +8,7 @@
 #include <tessera/gl.h>
 #include <tessera/stream.h>
 
+#include "gl/renderers.h"
 #include "support/fault_source.h"
 #include "support/synthetic_archive.h"
 
@@ -88,15 +89,17 @@ struct Rig {
     return update;
   }
 
-  /// Frames until the view is at full detail and nothing is loading or waiting to go up.
+  /// Frames until the view is at full detail and two frames in a row found nothing loading
+  /// or waiting to go up (the loader may finish tiles after a frame polled it; waiting for it
+  /// between frames lets the next frame see them).
   void settle(const View& view) {
+    int quiet = 0;
     for (int i = 0; i < 500; ++i) {
       const FrameUpdate& update = frame(view);
-      // An idle loader alone is not enough: it may have finished tiles this frame did not
-      // poll yet, so the view must also be at full detail.
-      if (update.report.coverage_desired >= 1 && update.uploads.empty() &&
-          update.report.queue_length == 0 && update.report.in_flight == 0)
-        return;
+      const bool idle = update.report.coverage_desired >= 1 && update.uploads.empty() &&
+                        update.report.queue_length == 0 && update.report.in_flight == 0;
+      quiet = idle ? quiet + 1 : 0;
+      if (quiet == 2) return;
       streamer->waitIdleForTesting();
     }
     ADD_FAILURE() << "the view never settled";
@@ -205,6 +208,60 @@ TEST_P(Renderers, ReleasedTilesLeaveTheGpuAndTheirRoomIsReused) {
                   rig.streamer->state(id) == TileState::kLocked;
     return resident;
   }());
+}
+
+TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kClipmap);
+  ASSERT_TRUE(rig.ready());
+  // 128 x 96 px over 64-px tiles: n = 4 slots a side. Moving 6 tiles right and 4 down in
+  // steps wraps the region around the layer, so tiles land in slots other tiles held.
+  View view;
+  for (int step = 0; step <= 8; ++step) {
+    view = orthoAt(200 + step * 48.0, 150 + step * 32.0, 1, 128, 96);
+    rig.settle(view);
+  }
+  const FrameUpdate& update = rig.frame(view);
+  const uint32_t t = spec.tile_size_px, c = spec.channels, b = spec.border_px;
+  for (uint32_t level : {0u, 1u}) {
+    SCOPED_TRACE(level);
+    auto layer = gl::readClipmapLayer(*rig.renderer, level);
+    ASSERT_TRUE(layer) << layer.error().message;
+    const uint32_t n = layer->slots;
+    // Every tile of the level's clip region is in its slot (x mod n, y mod n)...
+    TileRect region;
+    for (const auto& r : update.regions)
+      if (r.level == level) region = r.region;
+    ASSERT_FALSE(region.empty());
+    size_t wrapped = 0;
+    for (int64_t y = region.y0; y < region.y1; ++y) {
+      for (int64_t x = region.x0; x < region.x1; ++x) {
+        const TileId id{0, level, uint32_t(x), uint32_t(y)};
+        const uint32_t slot = uint32_t(y % n) * n + uint32_t(x % n);
+        ASSERT_TRUE(layer->owners[slot].has_value()) << "tile " << x << "," << y << " missing";
+        EXPECT_EQ(*layer->owners[slot], id);
+        wrapped += x >= int64_t(n) || y >= int64_t(n);
+      }
+    }
+    if (level == 0) EXPECT_GT(wrapped, 0u) << "the move never wrapped around the layer";
+    // ...and every slot holds exactly its owner's texels, as a fresh upload would write them.
+    size_t compared = 0;
+    for (uint32_t slot = 0; slot < layer->owners.size(); ++slot) {
+      if (!layer->owners[slot]) continue;
+      auto tile = rig.archive->readTile(*layer->owners[slot]);
+      ASSERT_TRUE(tile) << tile.error().message;
+      const uint32_t stored = t + 2 * b, x0 = (slot % n) * t, y0 = (slot / n) * t;
+      for (uint32_t y = 0; y < t; ++y) {
+        const uint8_t* want = tile->texels.data() + (size_t(y + b) * stored + b) * c;
+        const uint8_t* got = layer->texels.data() + (size_t(y0 + y) * layer->side + x0) * c;
+        ASSERT_TRUE(std::equal(want, want + size_t(t) * c, got))
+            << "slot " << slot << " row " << y << " differs from its tile";
+      }
+      ++compared;
+    }
+    EXPECT_GE(compared, size_t(region.count()));
+  }
 }
 
 INSTANTIATE_TEST_SUITE_P(All, Renderers,

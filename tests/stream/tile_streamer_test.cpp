@@ -186,6 +186,28 @@ TEST_P(TileStreamerTest, TileStatesFollowTheLoadAndUploadLifeCycle) {
   EXPECT_EQ(streamer.state(centre), TileState::kResident);
 }
 
+TEST_P(TileStreamerTest, ADeclinedTileStaysLoadedAndIsOfferedAgain) {
+  TileStreamer& streamer = start();
+  const View view = orthoView(512, 384);
+  streamer.update(view);
+  streamer.waitIdleForTesting();
+  const FrameUpdate& first = streamer.update(view);
+  ASSERT_FALSE(first.uploads.empty());
+  const TileId declined = first.uploads.front()->id;
+  std::vector<TileId> others;
+  for (const auto& tile : first.uploads)
+    if (tile->id != declined) others.push_back(tile->id);
+  // The renderer had no room for it: not resident, still in the cache.
+  streamer.declined(declined);
+  for (const TileId& id : others) streamer.uploaded(id);
+  EXPECT_EQ(streamer.state(declined), TileState::kLoaded);
+  EXPECT_TRUE(streamer.cache().contains(declined));
+  const FrameUpdate& second = streamer.update(view);
+  EXPECT_TRUE(std::any_of(second.uploads.begin(), second.uploads.end(), [&](const auto& tile) {
+    return tile->id == declined;
+  })) << "a declined tile is offered again";
+}
+
 TEST_P(TileStreamerTest, UploadsKeepTheTileBudgetAndGoParentBeforeChild) {
   options_.residency.upload_budget_tiles = 5;
   start();
