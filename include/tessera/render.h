@@ -38,13 +38,15 @@ struct Picture {
 /// corner of the screen). Orthographic: the view centre at the screen centre, texels_per_pixel
 /// texels per pixel, the screen rotated by rotation_rad (x towards y). Perspective: the ray
 /// from the eye through that point hits the plane z = 0; false when it does not (at or above
-/// the horizon).
+/// the horizon, or an eye at or below the plane). The camera has the runtime's forward and
+/// right vectors and up = forward x right, so a camera looking down has the horizon at the top
+/// (formulas in docs/rendering.md). Thread-safe (pure).
 bool textureAt(const View& view, double sx, double sy, double& u, double& v);
 
 /// Level of detail at the centre of pixel (px, py): log2 of level-0 texels per pixel, rho as
 /// OpenGL defines it (the longer of the two screen-axis derivatives of (u, v)). Orthographic
 /// views give log2(texels_per_pixel) everywhere. Perspective: derivatives of the ray-plane
-/// hit, exact at the pixel centre; +infinity where the ray misses the plane.
+/// hit, exact at the pixel centre; +infinity where the ray misses the plane. Thread-safe.
 double levelOfDetailAt(const View& view, uint32_t px, uint32_t py);
 
 /// What the reference may sample: `available(tile)` says whether a tile is resident (a GPU
@@ -56,7 +58,10 @@ struct ReferenceOptions {
 
 /// Draws `view` on the CPU from the archive's tiles by the sampling rules above. Reads and
 /// decodes the tiles it needs (each once per call). Fails naming the archive and the tile when
-/// one cannot be read or decoded.
+/// one cannot be read or decoded; kInvalidArgument for an image the archive lacks. Level
+/// L + 1 of a trilinear blend is sampled whether or not `available` lists its tile (the
+/// streamer keeps parents of resident tiles resident). Runs on the calling thread, which may
+/// be any: the archive is thread-safe and `available` is called only from this call.
 [[nodiscard]] Result<Picture> renderReference(const Archive& archive, const View& view,
                                               const ReferenceOptions& options = {});
 
