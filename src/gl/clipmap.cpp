@@ -176,8 +176,10 @@ class ClipmapRenderer final : public GlRenderer {
       const std::optional<TileId>& owner = owners_[id.level][slot];
       if (owner && *owner != id) {
         // Two tiles of a level share a slot only when one lies outside the clip region (the
-        // keep margin, the lookahead): the one inside keeps it.
-        if (inRegion(*owner) && !inRegion(id)) {
+        // keep margin, the lookahead, far ground in perspective): a tile inside takes the slot,
+        // one outside never evicts another (two outside tiles would take it in turns, each
+        // sent back to be loaded and offered again).
+        if (!inRegion(id)) {
           streamer.declined(id);
           ++stats_.declined;
           continue;

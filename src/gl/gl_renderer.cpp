@@ -33,12 +33,13 @@ ViewTransform viewTransform(const View& view, const ImageInfo& info) {
   const PerspectiveView& p = view.perspective;
   t.anchor_x = p.eye_x;
   t.anchor_y = p.eye_y;
-  // The camera basis of the runtime (src/stream/residency.cpp): forward, right, up = r x f.
+  // The camera of tessera::textureAt (docs/rendering.md): forward and right as in the runtime
+  // (src/stream/residency.cpp), up = f x r, so the screen's top row looks above the centre.
   const double fx = std::sin(p.yaw_rad) * std::cos(p.pitch_rad);
   const double fy = -std::cos(p.yaw_rad) * std::cos(p.pitch_rad);
   const double fz = std::sin(p.pitch_rad);
   const double rx = std::cos(p.yaw_rad), ry = std::sin(p.yaw_rad), rz = 0;
-  const double ux = ry * fz - rz * fy, uy = rz * fx - rx * fz, uz = rx * fy - ry * fx;
+  const double ux = fy * rz - fz * ry, uy = fz * rx - fx * rz, uz = fx * ry - fy * rx;
   const double tan_half = std::tan(p.fov_y_rad / 2);
   const double aspect = w / h;
   const double eye_z = std::max(p.eye_z, 1e-6);
