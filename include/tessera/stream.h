@@ -155,6 +155,9 @@ struct FrameUpdate {
     TileRect region;
   };
   std::vector<LevelRegion> regions;
+  /// n of Backes et al., eq. 3, for this frame's viewport: the side of an unclipped clip
+  /// region in tiles (a clipmap sizes its level layers by it).
+  uint32_t clip_region_tiles = 0;
   FrameReport report;
 };
 

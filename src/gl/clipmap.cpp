@@ -138,12 +138,10 @@ class ClipmapRenderer final : public GlRenderer {
     stats_.uploads = 0;
     stats_.upload_bytes = 0;
     stats_.declined = 0;
-    // The layers hold n x n tiles, n the largest clip region: a larger one (a bigger window)
-    // reallocates them and sends every tile back to be uploaded again.
-    uint32_t needed = std::max<uint32_t>(options_.initial_clip_tiles, 1);
-    for (const auto& region : update.regions)
-      needed = std::max<uint32_t>(needed, uint32_t(std::max(region.region.x1 - region.region.x0,
-                                                            region.region.y1 - region.region.y0)));
+    // The layers hold n x n tiles, n the clip region's side (eq. 3): a larger one (a bigger
+    // window) reallocates them and sends every tile back to be uploaded again.
+    const uint32_t needed =
+        std::max({options_.initial_clip_tiles, update.clip_region_tiles, uint32_t(1)});
     if (needed > slots_) reallocate(needed, streamer);
     regions_.assign(info_.level_count, TileRect{});
     for (const auto& region : update.regions)

@@ -100,6 +100,8 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   motion.tile_size_px = s.archive->images()[image].tile_size_px;
   s.cache->setViewerMotion(motion);
   out.regions = plan.clip_regions;
+  out.clip_region_tiles = clipRegionTiles(view.viewportWidth(), view.viewportHeight(),
+                                          s.archive->images()[image].tile_size_px);
 
   // Wanted tiles that are neither resident nor loaded go to the loader, in priority order.
   // Loaded ones become upload candidates within the budget, parents before children. The
