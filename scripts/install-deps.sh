@@ -9,7 +9,7 @@ packages=(
   libzstd-dev liblz4-dev libxxhash-dev
   libcli11-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
-  libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri
+  libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri libimgui-dev
 )
 
 missing=()

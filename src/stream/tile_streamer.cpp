@@ -201,7 +201,9 @@ void TileStreamer::uploaded(const TileId& id) {
 }
 
 void TileStreamer::released(const TileId& id) {
-  impl_->resident.erase(id);
+  // Probably still cached (a renderer that drops a tile to make room, or is replaced, drops
+  // one the runtime loaded): offered again from the cache, requested only if it was evicted.
+  if (impl_->resident.erase(id)) impl_->loaded.insert(id);
 }
 
 void TileStreamer::declined(const TileId& id) {

@@ -49,5 +49,6 @@ void registerInfoCommand(CLI::App& app, int& exit_code);
 void registerVerifyCommand(CLI::App& app, int& exit_code);
 void registerExtractCommand(CLI::App& app, int& exit_code);
 void registerFlyCommand(CLI::App& app, int& exit_code);
+void registerViewCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

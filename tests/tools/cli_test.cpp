@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <set>
 #include <sstream>
 
 #include <gtest/gtest.h>
@@ -14,6 +15,7 @@
 
 #include <tessera/archive.h>
 
+#include "format/codec.h"
 #include "support/archive_fixture.h"
 #include "support/reference_pyramid.h"
 #include "support/test_images.h"
@@ -36,8 +38,10 @@ std::string slurp(const std::string& path) {
   return text.str();
 }
 
-// Runs the built CLI with `args`, capturing stdout and stderr through files in `dir`.
-RunResult runTessera(const std::vector<std::string>& args, const std::string& dir) {
+// Runs `program` with `args` (and `env`, or this process's environment when null), capturing
+// stdout and stderr through files next to `dir`.
+RunResult runProgram(const std::string& program, const std::vector<std::string>& args,
+                     const std::string& dir, const std::vector<std::string>* env = nullptr) {
   std::string out_path = dir + ".stdout", err_path = dir + ".stderr";
   posix_spawn_file_actions_t actions;
   posix_spawn_file_actions_init(&actions);
@@ -45,26 +49,59 @@ RunResult runTessera(const std::vector<std::string>& args, const std::string& di
                                    0644);
   posix_spawn_file_actions_addopen(&actions, 2, err_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC,
                                    0644);
-  std::vector<std::string> argv_strings = {TESSERA_CLI_PATH};
+  std::vector<std::string> argv_strings = {program};
   argv_strings.insert(argv_strings.end(), args.begin(), args.end());
   std::vector<char*> argv;
   for (std::string& arg : argv_strings) argv.push_back(arg.data());
   argv.push_back(nullptr);
+  std::vector<std::string> env_strings = env ? *env : std::vector<std::string>{};
+  std::vector<char*> envp;
+  for (std::string& entry : env_strings) envp.push_back(entry.data());
+  envp.push_back(nullptr);
   RunResult result;
   pid_t pid = 0;
-  int spawned = posix_spawn(&pid, TESSERA_CLI_PATH, &actions, nullptr, argv.data(), environ);
+  int spawned = posix_spawnp(&pid, program.c_str(), &actions, nullptr, argv.data(),
+                             env ? envp.data() : environ);
   posix_spawn_file_actions_destroy(&actions);
-  EXPECT_EQ(spawned, 0) << "cannot run " << TESSERA_CLI_PATH;
+  EXPECT_EQ(spawned, 0) << "cannot run " << program;
   if (spawned != 0) return result;
   int status = 0;
   waitpid(pid, &status, 0);
-  EXPECT_TRUE(WIFEXITED(status)) << "tessera died: status " << status;
+  EXPECT_TRUE(WIFEXITED(status)) << program << " died: status " << status;
   result.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   result.out = slurp(out_path);
   result.err = slurp(err_path);
   std::filesystem::remove(out_path);
   std::filesystem::remove(err_path);
   return result;
+}
+
+RunResult runTessera(const std::vector<std::string>& args, const std::string& dir,
+                     const std::vector<std::string>* env = nullptr) {
+  return runProgram(TESSERA_CLI_PATH, args, dir, env);
+}
+
+// This process's environment without the variables that name a display.
+std::vector<std::string> environmentWithoutDisplay() {
+  std::vector<std::string> env;
+  for (char** entry = environ; *entry; ++entry) {
+    std::string text = *entry;
+    if (text.rfind("DISPLAY=", 0) == 0 || text.rfind("WAYLAND_DISPLAY=", 0) == 0) continue;
+    env.push_back(text);
+  }
+  return env;
+}
+
+// The directory on PATH holding `name`, or "" when none does.
+std::string findOnPath(const std::string& name) {
+  const char* path = std::getenv("PATH");
+  std::stringstream dirs(path ? path : "");
+  std::string dir;
+  while (std::getline(dirs, dir, ':')) {
+    std::filesystem::path candidate = std::filesystem::path(dir) / name;
+    if (::access(candidate.c_str(), X_OK) == 0) return candidate.string();
+  }
+  return "";
 }
 
 std::vector<std::string> listDir(const std::string& dir) {
@@ -190,7 +227,8 @@ TEST_F(Cli, HelpOnEverySubcommandExitsZero) {
                                         {"build", "--help"},
                                         {"info", "--help"},
                                         {"verify", "--help"},
-                                        {"extract", "--help"}}) {
+                                        {"extract", "--help"},
+                                        {"view", "--help"}}) {
     RunResult result = run(args);
     EXPECT_EQ(result.exit_code, 0) << args[0];
     EXPECT_NE(result.out.find("Usage"), std::string::npos) << result.out;
@@ -211,6 +249,8 @@ TEST_F(Cli, UsageErrorsExitTwo) {
       {"info"},
       {"extract", out, "-o", work_ + "x.png"},
       {"extract", out, "-o", work_ + "x.png", "--tile", "1"},
+      {"view"},
+      {"view", out, "--renderer", "bogus"},
   };
   for (const auto& args : cases) {
     RunResult result = run(args);
@@ -328,6 +368,71 @@ TEST_F(Cli, InfoAndVerifyOfANonArchiveFail) {
   RunResult missing = run({"info", work_ + "missing.tess"});
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find(work_ + "missing.tess"), std::string::npos) << missing.err;
+}
+
+TEST_F(Cli, ViewWithoutADisplayExitsOnePointingToFly) {
+  const std::string archive = work_ + "v.tess";
+  ASSERT_EQ(run({"build", "synthetic:300x200", "-o", archive, "--tile", "64", "-q"}).exit_code, 0);
+  const std::vector<std::string> env = environmentWithoutDisplay();
+  RunResult result = runTessera({"view", archive}, logs_, &env);
+  EXPECT_EQ(result.exit_code, 1) << result.err;
+  EXPECT_NE(result.err.find("no display"), std::string::npos) << result.err;
+  EXPECT_NE(result.err.find("tessera fly"), std::string::npos) << result.err;
+}
+
+TEST_F(Cli, ViewBadArgumentsAreUsageErrorsAndAMissingArchiveIsNamed) {
+  const std::string archive = work_ + "v.tess";
+  ASSERT_EQ(run({"build", "synthetic:300x200", "-o", archive, "--tile", "64", "-q"}).exit_code, 0);
+  const std::vector<std::string> env = environmentWithoutDisplay();
+  RunResult bogus = runTessera({"view", archive, "--renderer", "bogus"}, logs_, &env);
+  EXPECT_EQ(bogus.exit_code, 2) << bogus.err;
+  EXPECT_NE(bogus.err.find("bogus"), std::string::npos) << bogus.err;
+  RunResult size = runTessera({"view", archive, "--size", "wide"}, logs_, &env);
+  EXPECT_EQ(size.exit_code, 2) << size.err;
+  RunResult image = runTessera({"view", archive, "--image", "3"}, logs_, &env);
+  EXPECT_EQ(image.exit_code, 2) << image.err;
+  EXPECT_NE(image.err.find("no image 3"), std::string::npos) << image.err;
+
+  const std::string missing = work_ + "missing.tess";
+  RunResult gone = runTessera({"view", missing}, logs_, &env);
+  EXPECT_EQ(gone.exit_code, 1) << gone.err;
+  EXPECT_NE(gone.err.find(missing), std::string::npos) << gone.err;
+}
+
+// The real window on a virtual X server: only where xvfb-run is installed (CI need not have
+// it). Mesa's llvmpipe gives the OpenGL 4.5 core context.
+TEST_F(Cli, ViewUnderXvfbDrawsFramesAndWritesAScreenshot) {
+  const std::string xvfb_run = findOnPath("xvfb-run");
+  if (xvfb_run.empty()) GTEST_SKIP() << "xvfb-run is not installed (apt-get install xvfb)";
+  const std::string archive = work_ + "v.tess";
+  ASSERT_EQ(run({"build", "synthetic:1000x700", "-o", archive, "--tile", "64", "-q"}).exit_code, 0);
+  for (const char* renderer : {"tile-quads", "clipmap"}) {
+    const std::string shots = work_ + renderer;
+    std::filesystem::create_directories(shots);
+    RunResult result = runProgram(
+        xvfb_run,
+        {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive, "--renderer",
+         renderer, "--size", "320x240", "--frames", "30", "--screenshot-dir", shots},
+        logs_);
+    ASSERT_EQ(result.exit_code, 0) << renderer << ": " << result.err;
+    const std::string shot = shots + "/tessera-screenshot-1.png";
+    ASSERT_TRUE(std::filesystem::exists(shot)) << renderer << ": " << result.err;
+    const std::string png = slurp(shot);
+    ASSERT_GT(png.size(), 8u);
+    EXPECT_EQ(png.substr(1, 3), "PNG");
+    // The window's framebuffer is the --size one; the picture shows the (not flat) image.
+    Image picture(320, 240, 4);
+    ASSERT_TRUE(detail::decodeTile(
+        Codec::kPng, {reinterpret_cast<const uint8_t*>(png.data()), png.size()}, picture))
+        << renderer;
+    std::set<uint32_t> colours;
+    for (uint32_t y = 0; y < picture.height_px; y += 8)
+      for (uint32_t x = 0; x < picture.width_px; x += 8) {
+        const uint8_t* p = picture.row(y) + x * 4;
+        colours.insert(p[0] | p[1] << 8 | p[2] << 16);
+      }
+    EXPECT_GT(colours.size(), 20u) << renderer << ": the screenshot is nearly blank";
+  }
 }
 
 }  // namespace

@@ -1,0 +1,534 @@
+// `tessera view`: the interactive viewer. A GLFW window whose frame loop only polls the
+// streamer (update, apply, draw: the render thread never waits on the loader), a Dear ImGui
+// panel with the runtime's figures, overlays and screenshots (docs/view.md).
+#include <algorithm>
+#include <array>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <unordered_set>
+
+#include <epoxy/gl.h>
+#include <GLFW/glfw3.h>
+#include <imgui.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+
+#include <fmt/format.h>
+
+#include <tessera/archive.h>
+#include <tessera/gl.h>
+#include <tessera/stream.h>
+
+#include "tools/cli.h"
+#include "tools/view_camera.h"
+#include "tools/view_overlay.h"
+#include "tools/view_screenshot.h"
+
+namespace tessera::cli {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct ViewArgs {
+  std::string archive;
+  std::string renderer = "tile-quads";
+  uint32_t image = 0;
+  std::string size = "1280x720";
+  size_t cache_mib = 512;
+  bool perspective = false;
+  std::string screenshot_dir = ".";
+  uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
+};
+
+constexpr double kFlyPitchRad = -0.6;
+constexpr size_t kFrameHistory = 300;
+
+// What the window's callbacks change and the frame loop reads. Render thread only (GLFW calls
+// back from glfwPollEvents, on the thread that polls).
+struct Viewer {
+  GLFWwindow* window = nullptr;
+  ImageInfo info;
+  View view;
+  OverlayOptions overlays;
+  bool show_panel = true;
+  bool screenshot_requested = false;
+  bool dragging = false;
+  double last_cursor_x = 0, last_cursor_y = 0;  ///< framebuffer pixels
+  // Windowed placement, restored when fullscreen ends.
+  int windowed_x = 0, windowed_y = 0, windowed_w = 0, windowed_h = 0;
+};
+
+Viewer& viewerOf(GLFWwindow* window) {
+  return *static_cast<Viewer*>(glfwGetWindowUserPointer(window));
+}
+
+// Cursor positions come in window coordinates; the view is in framebuffer pixels (they differ
+// on HiDPI screens).
+void cursorInFramebuffer(GLFWwindow* window, double& x, double& y) {
+  int ww = 0, wh = 0, fw = 0, fh = 0;
+  glfwGetWindowSize(window, &ww, &wh);
+  glfwGetFramebufferSize(window, &fw, &fh);
+  glfwGetCursorPos(window, &x, &y);
+  if (ww > 0 && wh > 0) {
+    x *= double(fw) / ww;
+    y *= double(fh) / wh;
+  }
+}
+
+void fitView(Viewer& v) {
+  v.view.ortho = fitImage(v.info, v.view.viewportWidth(), v.view.viewportHeight());
+  if (v.view.kind == View::Kind::kPerspective)
+    v.view.perspective = perspectiveFrom(v.view.ortho, v.info, kFlyPitchRad);
+}
+
+void togglePerspective(Viewer& v) {
+  if (v.view.kind == View::Kind::kOrtho) {
+    v.view.perspective = perspectiveFrom(v.view.ortho, v.info, kFlyPitchRad);
+    v.view.kind = View::Kind::kPerspective;
+  } else {
+    v.view.ortho = orthoFrom(v.view.perspective, v.info);
+    v.view.kind = View::Kind::kOrtho;
+  }
+}
+
+void toggleFullscreen(Viewer& v) {
+  if (glfwGetWindowMonitor(v.window)) {
+    glfwSetWindowMonitor(v.window, nullptr, v.windowed_x, v.windowed_y, v.windowed_w, v.windowed_h,
+                         0);
+    return;
+  }
+  GLFWmonitor* monitor = glfwGetPrimaryMonitor();
+  const GLFWvidmode* mode = monitor ? glfwGetVideoMode(monitor) : nullptr;
+  if (!mode) return;
+  glfwGetWindowPos(v.window, &v.windowed_x, &v.windowed_y);
+  glfwGetWindowSize(v.window, &v.windowed_w, &v.windowed_h);
+  glfwSetWindowMonitor(v.window, monitor, 0, 0, mode->width, mode->height, mode->refreshRate);
+}
+
+// Wheel and +/-: one step zooms by this factor, about 7 steps per doubling.
+constexpr double kZoomStep = 0.9;
+
+void onScroll(GLFWwindow* window, double, double y_offset) {
+  if (ImGui::GetIO().WantCaptureMouse) return;
+  Viewer& v = viewerOf(window);
+  const double factor = std::pow(kZoomStep, y_offset);
+  if (v.view.kind == View::Kind::kPerspective) {
+    flyClimb(v.view.perspective, v.info, factor);
+    return;
+  }
+  double x = 0, y = 0;
+  cursorInFramebuffer(window, x, y);
+  zoomAround(v.view.ortho, v.info, factor, x, y);
+  clampToImage(v.view.ortho, v.info);
+}
+
+void onMouseButton(GLFWwindow* window, int button, int action, int) {
+  Viewer& v = viewerOf(window);
+  if (button != GLFW_MOUSE_BUTTON_LEFT) return;
+  if (action == GLFW_PRESS && !ImGui::GetIO().WantCaptureMouse) {
+    v.dragging = true;
+    cursorInFramebuffer(window, v.last_cursor_x, v.last_cursor_y);
+  } else if (action == GLFW_RELEASE) {
+    v.dragging = false;
+  }
+}
+
+void onCursor(GLFWwindow* window, double, double) {
+  Viewer& v = viewerOf(window);
+  if (!v.dragging) return;
+  double x = 0, y = 0;
+  cursorInFramebuffer(window, x, y);
+  const double dx = x - v.last_cursor_x, dy = y - v.last_cursor_y;
+  v.last_cursor_x = x;
+  v.last_cursor_y = y;
+  if (v.view.kind == View::Kind::kPerspective) {
+    flyTurn(v.view.perspective, dx, dy);
+  } else {
+    panByScreen(v.view.ortho, dx, dy);
+    clampToImage(v.view.ortho, v.info);
+  }
+}
+
+void onKey(GLFWwindow* window, int key, int, int action, int mods) {
+  if (action != GLFW_PRESS || ImGui::GetIO().WantCaptureKeyboard) return;
+  Viewer& v = viewerOf(window);
+  switch (key) {
+    case GLFW_KEY_Q:
+    case GLFW_KEY_ESCAPE: glfwSetWindowShouldClose(window, GLFW_TRUE); break;
+    case GLFW_KEY_HOME: fitView(v); break;
+    case GLFW_KEY_F11:
+    case GLFW_KEY_F: toggleFullscreen(v); break;
+    case GLFW_KEY_P: togglePerspective(v); break;
+    case GLFW_KEY_L: v.overlays.levels = !v.overlays.levels; break;
+    case GLFW_KEY_C: v.overlays.clip_regions = !v.overlays.clip_regions; break;
+    case GLFW_KEY_G: v.overlays.grid = !v.overlays.grid; break;
+    case GLFW_KEY_F1: v.show_panel = !v.show_panel; break;
+    case GLFW_KEY_F12: v.screenshot_requested = true; break;
+    // Plain S pans down (WASD); Ctrl+S is the screenshot.
+    case GLFW_KEY_S:
+      if (mods & GLFW_MOD_CONTROL) v.screenshot_requested = true;
+      break;
+    default: break;
+  }
+}
+
+// Held keys move the camera by time, not by frame, so the speed does not depend on the frame
+// rate.
+void applyHeldKeys(Viewer& v, double dt_s) {
+  if (ImGui::GetIO().WantCaptureKeyboard) return;
+  auto held = [&](std::initializer_list<int> keys) {
+    for (int key : keys)
+      if (glfwGetKey(v.window, key) == GLFW_PRESS) return 1.0;
+    return 0.0;
+  };
+  if (glfwGetKey(v.window, GLFW_KEY_LEFT_CONTROL) == GLFW_PRESS ||
+      glfwGetKey(v.window, GLFW_KEY_RIGHT_CONTROL) == GLFW_PRESS)
+    return;  // Ctrl+S is a screenshot, not a move
+  const double right = held({GLFW_KEY_RIGHT, GLFW_KEY_D}) - held({GLFW_KEY_LEFT, GLFW_KEY_A});
+  const double down = held({GLFW_KEY_DOWN, GLFW_KEY_S}) - held({GLFW_KEY_UP, GLFW_KEY_W});
+  const double zoom_in =
+      held({GLFW_KEY_EQUAL, GLFW_KEY_KP_ADD}) - held({GLFW_KEY_MINUS, GLFW_KEY_KP_SUBTRACT});
+  if (v.view.kind == View::Kind::kPerspective) {
+    // One altitude per second forward; +/- climb and sink by a factor of 4 per second.
+    flyMove(v.view.perspective, v.info, -down * dt_s, right * dt_s);
+    if (zoom_in != 0) flyClimb(v.view.perspective, v.info, std::pow(4.0, -zoom_in * dt_s));
+    return;
+  }
+  // Half a screen per second, and a doubling of the zoom per half second.
+  const double pan_px = 0.5 * std::max(v.view.ortho.viewport_w, v.view.ortho.viewport_h) * dt_s;
+  if (right != 0 || down != 0) panByScreen(v.view.ortho, -right * pan_px, -down * pan_px);
+  if (zoom_in != 0)
+    zoomAround(v.view.ortho, v.info, std::pow(4.0, -zoom_in * dt_s), v.view.ortho.viewport_w / 2.0,
+               v.view.ortho.viewport_h / 2.0);
+  clampToImage(v.view.ortho, v.info);
+}
+
+// Dear ImGui's context and backends for one window; shut down before the GL context goes.
+class ImGuiSession {
+ public:
+  explicit ImGuiSession(GLFWwindow* window) {
+    IMGUI_CHECKVERSION();
+    ImGui::CreateContext();
+    ImGui::GetIO().IniFilename = nullptr;  // never leave an imgui.ini in the user's folder
+    ImGui::StyleColorsDark();
+    // Installs its callbacks over ours and chains to them.
+    ImGui_ImplGlfw_InitForOpenGL(window, true);
+    ImGui_ImplOpenGL3_Init("#version 450 core");
+  }
+  ~ImGuiSession() {
+    ImGui_ImplOpenGL3_Shutdown();
+    ImGui_ImplGlfw_Shutdown();
+    ImGui::DestroyContext();
+  }
+  ImGuiSession(const ImGuiSession&) = delete;
+  ImGuiSession& operator=(const ImGuiSession&) = delete;
+};
+
+// Bytes per second read by the loader, over windows of half a second.
+class ReadRate {
+ public:
+  void add(Clock::time_point now, uint64_t bytes_total) {
+    if (start_ == Clock::time_point{}) {
+      start_ = now;
+      start_bytes_ = bytes_total;
+      return;
+    }
+    const double elapsed_s = std::chrono::duration<double>(now - start_).count();
+    if (elapsed_s < 0.5) return;
+    bytes_per_s_ = double(bytes_total - start_bytes_) / elapsed_s;
+    start_ = now;
+    start_bytes_ = bytes_total;
+  }
+  double bytesPerS() const { return bytes_per_s_; }
+
+ private:
+  Clock::time_point start_{};
+  uint64_t start_bytes_ = 0;
+  double bytes_per_s_ = 0;
+};
+
+struct FrameFigures {
+  std::array<float, kFrameHistory> frame_ms{};  ///< ring buffer, oldest at `next`
+  size_t next = 0;
+  size_t count = 0;
+  double streaming_ms = 0;  ///< render-thread time of update + apply, this frame
+  ReadRate read_rate;
+  void push(double ms) {
+    frame_ms[next] = float(ms);
+    next = (next + 1) % kFrameHistory;
+    count = std::min(count + 1, kFrameHistory);
+  }
+  double meanMs() const {
+    double sum = 0;
+    for (size_t i = 0; i < count; ++i)
+      sum += frame_ms[(next + kFrameHistory - 1 - i) % kFrameHistory];
+    return count ? sum / count : 0;
+  }
+};
+
+// The panel; returns the renderer the user picked (the current one when unchanged).
+RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUpdate& update,
+                       TileStreamer& streamer, const GlRenderer& renderer,
+                       const FrameFigures& figures, size_t cache_budget_bytes,
+                       const std::string& last_screenshot) {
+  RendererKind picked = renderer.kind();
+  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowSize(ImVec2(360, 0), ImGuiCond_FirstUseEver);
+  ImGui::Begin("tessera view");
+  ImGui::Text("%s: %ux%u, %u levels, %u px tiles", archive_name.c_str(), v.info.width_px,
+              v.info.height_px, v.info.level_count, v.info.tile_size_px);
+  const double mean_ms = figures.meanMs();
+  ImGui::Text("%.1f fps, %.2f ms/frame (mean of %zu)", mean_ms > 0 ? 1000 / mean_ms : 0, mean_ms,
+              figures.count);
+  // The graph reads the ring from its oldest entry.
+  ImGui::PlotLines("##frame_ms", figures.frame_ms.data(), int(kFrameHistory), int(figures.next),
+                   "frame ms", 0.0f, std::max(33.3f, float(mean_ms * 3)), ImVec2(-1, 60));
+  ImGui::Text("streaming on the render thread: %.3f ms", figures.streaming_ms);
+
+  if (ImGui::CollapsingHeader("Renderer", ImGuiTreeNodeFlags_DefaultOpen)) {
+    int kind = renderer.kind() == RendererKind::kTileQuads ? 0 : 1;
+    ImGui::RadioButton("tile quads", &kind, 0);
+    ImGui::SameLine();
+    ImGui::RadioButton("clipmap", &kind, 1);
+    picked = kind == 0 ? RendererKind::kTileQuads : RendererKind::kClipmap;
+    const RenderStats& rs = renderer.stats();
+    ImGui::Text("resident %u tiles, %s on the GPU", rs.resident_tiles,
+                formatBytes(rs.gpu_bytes).c_str());
+    ImGui::Text("drawn %u, uploaded %u (%s), declined %u", rs.tiles_drawn, rs.uploads,
+                formatBytes(rs.upload_bytes).c_str(), rs.declined);
+    ImGui::Text("apply %.3f ms, draw %.3f ms", rs.apply_cpu_ms, rs.draw_cpu_ms);
+  }
+
+  if (ImGui::CollapsingHeader("View", ImGuiTreeNodeFlags_DefaultOpen)) {
+    bool perspective = v.view.kind == View::Kind::kPerspective;
+    if (ImGui::Checkbox("perspective fly-over (P)", &perspective)) togglePerspective(v);
+    if (v.view.kind == View::Kind::kOrtho) {
+      ImGui::Text("centre (%.0f, %.0f), %.4g texels/pixel", v.view.ortho.centre_x,
+                  v.view.ortho.centre_y, v.view.ortho.texels_per_pixel);
+    } else {
+      const PerspectiveView& p = v.view.perspective;
+      ImGui::Text("eye (%.0f, %.0f) at %.0f, yaw %.0f, pitch %.0f deg", p.eye_x, p.eye_y, p.eye_z,
+                  p.yaw_rad * 57.2958, p.pitch_rad * 57.2958);
+    }
+    ImGui::Text("viewport %ux%u", v.view.viewportWidth(), v.view.viewportHeight());
+  }
+
+  const FrameReport& r = update.report;
+  if (ImGui::CollapsingHeader("Streaming", ImGuiTreeNodeFlags_DefaultOpen)) {
+    ImGui::Text("desired level %u, finest full level %u", r.desired_level, r.finest_full_level);
+    ImGui::Text("coverage at the desired level %.1f%%%s", r.coverage_desired * 100,
+                r.fully_covered ? "" : " (not fully covered)");
+    ImGui::Text("loader queue %zu, in flight %zu", r.queue_length, r.in_flight);
+    ImGui::Text("read %s/s, %s in all",
+                formatBytes(uint64_t(figures.read_rate.bytesPerS())).c_str(),
+                formatBytes(r.bytes_read_total).c_str());
+    ImGui::Text("tiles loaded %llu, failures %llu", (unsigned long long)r.tiles_loaded_total,
+                (unsigned long long)r.load_failures_total);
+    ImGui::Text("uploads this frame %zu (%s), update %.3f ms", r.uploads,
+                formatBytes(r.upload_bytes).c_str(), r.update_ms);
+  }
+
+  if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen)) {
+    const CacheStats c = streamer.cacheStats();
+    const uint64_t lookups = c.hits + c.misses;
+    ImGui::Text("hits %llu, misses %llu (%.1f%% hits)", (unsigned long long)c.hits,
+                (unsigned long long)c.misses, lookups ? 100.0 * c.hits / lookups : 0.0);
+    ImGui::Text("%s of %s, %zu tiles, %zu pinned", formatBytes(c.bytes).c_str(),
+                formatBytes(cache_budget_bytes).c_str(), c.tiles, c.pinned);
+    ImGui::Text("evictions %llu", (unsigned long long)c.evictions);
+  }
+
+  if (ImGui::CollapsingHeader("Overlays", ImGuiTreeNodeFlags_DefaultOpen)) {
+    ImGui::Checkbox("levels in colour (L)", &v.overlays.levels);
+    ImGui::Checkbox("clip regions and field of view (C)", &v.overlays.clip_regions);
+    ImGui::Checkbox("tile grid (G)", &v.overlays.grid);
+    for (uint32_t level = 0; level < v.info.level_count; ++level) {
+      const LevelColour c = levelColour(level);
+      if (level > 0) ImGui::SameLine();
+      ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "%u", level);
+    }
+  }
+
+  if (ImGui::Button("Screenshot (F12)")) v.screenshot_requested = true;
+  if (!last_screenshot.empty()) {
+    ImGui::SameLine();
+    ImGui::TextUnformatted(last_screenshot.c_str());
+  }
+  ImGui::TextDisabled(
+      "drag: pan | wheel: zoom | arrows/WASD: pan | +/-: zoom | Home: fit | P: fly-over\n"
+      "fly-over: WASD move, drag look, wheel or +/- altitude\n"
+      "F/F11: fullscreen | F1: panel | Q/Esc: quit");
+  ImGui::End();
+  return picked;
+}
+
+// Hands the old renderer's tiles back to the streamer and creates the new one: the streamer
+// offers them again (from its cache) and the new renderer uploads them over the next frames.
+Result<std::unique_ptr<GlRenderer>> switchRenderer(
+    RendererKind kind, const ImageInfo& info, TileStreamer& streamer,
+    std::unordered_set<TileId, TileIdHash>& resident) {
+  for (const TileId& id : resident) streamer.released(id);
+  resident.clear();
+  return GlRenderer::create(kind, info);
+}
+
+int runView(const ViewArgs& args) {
+  uint32_t window_w = 0, window_h = 0;
+  if (std::sscanf(args.size.c_str(), "%ux%u", &window_w, &window_h) != 2 || window_w == 0 ||
+      window_h == 0 || window_w > 16384 || window_h > 16384)
+    return reportError({ErrorCode::kInvalidArgument,
+                        fmt::format("--size {}: expected WxH, e.g. 1280x720", args.size)});
+  const RendererKind kind =
+      args.renderer == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads;
+
+  Result<std::shared_ptr<Archive>> archive = Archive::openFile(args.archive);
+  if (!archive) return reportError(archive.error());
+  if (args.image >= (*archive)->images().size())
+    return reportError(
+        {ErrorCode::kInvalidArgument, fmt::format("{}: no image {} (it has {})", args.archive,
+                                                  args.image, (*archive)->images().size())});
+  const ImageInfo info = (*archive)->images()[args.image];
+
+  // The window first: without a display nothing else is worth starting.
+  Result<std::unique_ptr<GlContext>> context =
+      GlContext::createWindow(window_w, window_h, fmt::format("tessera view: {}", args.archive));
+  if (!context) return reportError(context.error());
+  GLFWwindow* window = (*context)->window();
+  glfwSwapInterval(1);
+
+  StreamerOptions options;
+  options.cache_budget_bytes = args.cache_mib << 20;
+  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
+  if (!streamer) return reportError(streamer.error());
+  Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
+  if (!renderer) return reportError(renderer.error());
+  Result<std::unique_ptr<ViewOverlay>> overlay = ViewOverlay::create();
+  if (!overlay) return reportError(overlay.error());
+
+  Viewer v;
+  v.window = window;
+  v.info = info;
+  v.view.image = args.image;
+  {
+    int fw = 0, fh = 0;
+    glfwGetFramebufferSize(window, &fw, &fh);
+    v.view.ortho = fitImage(info, uint32_t(std::max(1, fw)), uint32_t(std::max(1, fh)));
+  }
+  if (args.perspective) togglePerspective(v);
+  glfwSetWindowUserPointer(window, &v);
+  glfwSetScrollCallback(window, onScroll);
+  glfwSetMouseButtonCallback(window, onMouseButton);
+  glfwSetCursorPosCallback(window, onCursor);
+  glfwSetKeyCallback(window, onKey);
+  ImGuiSession imgui(window);
+
+  std::unordered_set<TileId, TileIdHash> resident;
+  FrameFigures figures;
+  std::string last_screenshot;
+  int exit_code = kExitOk;
+  Clock::time_point last_frame = Clock::now();
+  const Clock::time_point started = last_frame;
+  for (uint64_t frame = 0; !glfwWindowShouldClose(window); ++frame) {
+    glfwPollEvents();
+    const Clock::time_point now = Clock::now();
+    const double dt_s = std::chrono::duration<double>(now - last_frame).count();
+    last_frame = now;
+    applyHeldKeys(v, std::min(dt_s, 0.1));
+
+    int fw = 0, fh = 0;
+    glfwGetFramebufferSize(window, &fw, &fh);
+    if (fw <= 0 || fh <= 0) {  // minimised: nothing to draw until the window comes back
+      glfwWaitEventsTimeout(0.1);
+      continue;
+    }
+    v.view.ortho.viewport_w = v.view.perspective.viewport_w = uint32_t(fw);
+    v.view.ortho.viewport_h = v.view.perspective.viewport_h = uint32_t(fh);
+
+    const FrameUpdate& update = (*streamer)->update(v.view);
+    (*renderer)->apply(update, **streamer);
+    // The renderer may drop tiles of its own accord (a clipmap slot taken by a newer tile),
+    // so the set keeps only what it still holds.
+    for (const auto& tile : update.uploads) resident.insert(tile->id);
+    std::erase_if(resident, [&](const TileId& id) { return !(*renderer)->resident(id); });
+    figures.streaming_ms = update.report.update_ms + (*renderer)->stats().apply_cpu_ms;
+    figures.read_rate.add(now, update.report.bytes_read_total);
+
+    (*renderer)->draw(v.view);
+    (*overlay)->draw(v.view, info, v.overlays, update, resident, **renderer);
+
+    // --frames: the last frame waits for the loader to settle (or 10 s) so its screenshot
+    // shows the image at full detail rather than whatever had loaded by then.
+    bool last = false;
+    if (args.frames > 0 && frame + 1 >= args.frames) {
+      const FrameReport& r = update.report;
+      const bool settled = r.queue_length == 0 && r.in_flight == 0 && r.uploads == 0 &&
+                           r.fully_covered && r.coverage_desired >= 1;
+      last = settled || now - started > std::chrono::seconds(10);
+      if (last) v.screenshot_requested = true;
+    }
+    if (v.screenshot_requested) {
+      v.screenshot_requested = false;
+      const std::string path = nextScreenshotPath(args.screenshot_dir);
+      Result<void> written = writeScreenshot((*renderer)->readPixels(), path);
+      if (written) {
+        last_screenshot = path;
+        std::fprintf(stderr, "tessera view: wrote %s\n", path.c_str());
+      } else {
+        last_screenshot = written.error().message;
+        exit_code = reportError(written.error());
+      }
+    }
+
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glViewport(0, 0, fw, fh);
+    (*renderer)->present(uint32_t(fw), uint32_t(fh));
+
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    RendererKind picked = (*renderer)->kind();
+    if (v.show_panel)
+      picked = drawPanel(v, args.archive, update, **streamer, **renderer, figures,
+                         options.cache_budget_bytes, last_screenshot);
+    ImGui::Render();
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    glfwSwapBuffers(window);
+    figures.push(std::chrono::duration<double, std::milli>(Clock::now() - now).count());
+
+    if (picked != (*renderer)->kind()) {
+      renderer = switchRenderer(picked, info, **streamer, resident);
+      if (!renderer) return reportError(renderer.error());
+    }
+    if (last) break;
+  }
+  return exit_code;
+}
+
+}  // namespace
+
+void registerViewCommand(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<ViewArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "view", "Open an archive in a window: pan, zoom, fly over, overlays (docs/view.md)");
+  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("--renderer", args->renderer, "tile-quads or clipmap")
+      ->check(CLI::IsMember({"tile-quads", "clipmap"}))
+      ->capture_default_str();
+  cmd->add_option("--image", args->image, "Image index")->capture_default_str();
+  cmd->add_option("--size", args->size, "Window size WxH")->capture_default_str();
+  cmd->add_option("--cache-mib", args->cache_mib, "Tile cache budget in MiB")
+      ->capture_default_str();
+  cmd->add_flag("--perspective", args->perspective, "Start in the perspective fly-over");
+  cmd->add_option("--screenshot-dir", args->screenshot_dir, "Folder for tessera-screenshot-<n>.png")
+      ->capture_default_str();
+  // For tests and scripted runs: an empty group hides it from --help.
+  cmd->add_option("--frames", args->frames,
+                  "Quit after this many frames, once loading settles, writing a screenshot")
+      ->group("");
+  cmd->callback([args, &exit_code] { exit_code = runView(*args); });
+}
+
+}  // namespace tessera::cli
