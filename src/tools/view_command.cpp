@@ -472,7 +472,7 @@ int runView(const ViewArgs& args) {
     if (v.screenshot_requested) {
       v.screenshot_requested = false;
       const std::string path = nextScreenshotPath(args.screenshot_dir);
-      Result<void> written = writeScreenshot((*renderer)->readPixels(), path);
+      Result<void> written = writePng((*renderer)->readPixels(), path);
       if (written) {
         last_screenshot = path;
         std::fprintf(stderr, "tessera view: wrote %s\n", path.c_str());
