@@ -125,7 +125,7 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent ? &*parent : nullptr);
             ASSERT_TRUE(payload.has_value()) << payload.error().message;
             EXPECT_EQ((*payload)[0],
-                      uint8_t(parent ? Predictor::kParentBilinear : Predictor::kRoot));
+                      uint8_t(parent ? Predictor::kParentNearest : Predictor::kRoot));
             Image out = decodeOrDie(*payload, side, channels, parent ? &*parent : nullptr);
             ASSERT_EQ(out.texels, tile.texels)
                 << c.width << "x" << c.height << " border " << c.border << " channels " << channels
