@@ -92,6 +92,11 @@ class Archive {
 
   /// Decodes a verified payload (or expands an empty/uniform entry) into a stored tile:
   /// storedTileSidePx() square with borders, the image's channel count. `scratch` may be null.
+  /// A tile of a codec coded against its parent (ptm) below the coarsest level first obtains
+  /// its decoded parent: from a small internal cache of recently decoded parents, or by
+  /// reading it (recursively, coarsest ancestor first). A parent that is missing, corrupt or
+  /// undecodable fails the child, naming both tiles; no child is ever decoded against a
+  /// parent other than its own verified one.
   [[nodiscard]] Result<Image> decodeTile(const TileId& tile, const TileEntry& entry,
                                          std::span<const uint8_t> payload,
                                          detail::CodecScratch* scratch = nullptr) const;
@@ -101,6 +106,21 @@ class Archive {
   [[nodiscard]] Result<void> decodeTileInto(const TileId& tile, const TileEntry& entry,
                                             std::span<const uint8_t> payload, Image& out,
                                             detail::CodecScratch* scratch = nullptr) const;
+
+  /// The same with the parent's decoded stored tile supplied by the caller (a loader that
+  /// decodes coarse to fine): `parent` must be what decodeTile returned for
+  /// `parentTile(tile)`. For codecs that do not use a parent, or at the coarsest level,
+  /// `parent` is ignored. Fails (kInvalidArgument) when `parent` has the wrong geometry.
+  [[nodiscard]] Result<void> decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                            std::span<const uint8_t> payload, Image& out,
+                                            const Image& parent,
+                                            detail::CodecScratch* scratch = nullptr) const;
+
+  /// The tile one level coarser whose quarter `tile` refines. `tile.level + 1` must be below
+  /// the image's level_count.
+  static TileId parentTile(const TileId& tile) {
+    return {tile.image, tile.level + 1, tile.x / 2, tile.y / 2};
+  }
 
   /// tileEntry + readPayload + decodeTile.
   [[nodiscard]] Result<Image> readTile(const TileId& tile,
@@ -126,6 +146,11 @@ class Archive {
 
  private:
   explicit Archive(std::unique_ptr<Impl> impl);
+  Result<void> decodeWithParent(const TileId& tile, const TileEntry& entry,
+                                std::span<const uint8_t> payload, Image& out, const Image* parent,
+                                detail::CodecScratch* scratch) const;
+  Result<std::shared_ptr<const Image>> decodedParent(const TileId& tile,
+                                                     detail::CodecScratch* scratch) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -42,7 +42,7 @@ enum class Codec : uint8_t {
   kJpeg = 3,  ///< baseline JPEG (lossy); alpha, when present, as a zstd plane after it
   kPng = 4,   ///< PNG, lossless
   kWebp = 5,  ///< WebP lossless
-  kPtm = 6,   ///< reserved: progressive texture map coded against the parent (Marvie & Bouatouch)
+  kPtm = 6,   ///< progressive texture map coded against the parent tile (Marvie & Bouatouch)
 };
 
 /// Names a codec for the CLI and JSON: "raw", "zstd", "lz4", "jpeg", "png", "webp", "ptm".

@@ -7,6 +7,7 @@
 #include <condition_variable>
 #include <cstring>
 #include <filesystem>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -132,7 +133,8 @@ TileClass classifyTile(const uint8_t* texels, uint32_t side, uint32_t channels,
 }
 
 void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
-               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what) {
+               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
+               const ParentTexels* parent = nullptr) {
   uint32_t colour = 0;
   switch (classifyTile(texels, side, channels, &colour)) {
     case TileClass::kEmpty:
@@ -148,7 +150,7 @@ void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
   }
   ImageView view{texels, side, side, channels, size_t(side) * channels};
   auto payload =
-      encodeTile(context.codec, view, context.encode_options, nullptr, &worker.codec_scratch);
+      encodeTile(context.codec, view, context.encode_options, parent, &worker.codec_scratch);
   if (!payload) {
     context.recordError({payload.error().code, what + ": " + payload.error().message});
     return;
@@ -206,6 +208,7 @@ class EncodingSink final : public TileSink {
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
     if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
+    if (findCodec(context_.codec)->needs_parent) return holdRow(level, tile_row, rows);
     const uint32_t side = info_.storedTileSidePx();
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
       auto buffer = buffers_.acquire();
@@ -225,6 +228,82 @@ class EncodingSink final : public TileSink {
   nlohmann::json statistics;
 
  private:
+  // Codecs that code a tile against its parent (ptm) need the parent's tile row, which the
+  // streaming pyramid cuts after both of its child rows (or, without borders, between them).
+  // So a row's raw tiles are held until its parent row exists, and a parent row until both
+  // child rows are submitted: at most about three tile rows per level.
+  struct HeldRow {
+    std::vector<std::vector<uint8_t>> tiles;  ///< stored tiles, raw, x = 0..tilesX - 1
+    bool submitted = false;                   ///< encode jobs queued for this row
+    uint32_t children_waiting = 0;            ///< child rows not yet submitted against it
+  };
+
+  Result<void> holdRow(uint32_t level, uint32_t tile_row, const LevelRows& rows) {
+    if (held_.empty()) held_.resize(info_.level_count);
+    auto row = std::make_shared<HeldRow>();
+    row->tiles.resize(info_.tilesX(level));
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      row->tiles[x].resize(info_.storedTileBytes());
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, row->tiles[x].data());
+    }
+    const uint32_t first_child = 2 * tile_row;
+    if (level > 0) row->children_waiting = std::min(2u, info_.tilesY(level - 1) - first_child);
+    const uint32_t children = row->children_waiting;
+    held_[level][tile_row] = row;
+
+    if (level + 1 == info_.level_count) {
+      submitRow(level, tile_row, row, nullptr);
+    } else if (auto parent = held_[level + 1].find(tile_row / 2);
+               parent != held_[level + 1].end()) {
+      submitRow(level, tile_row, row, parent->second);
+    }
+    for (uint32_t child = first_child; child < first_child + children; ++child) {
+      auto it = held_[level - 1].find(child);
+      if (it != held_[level - 1].end() && !it->second->submitted)
+        submitRow(level - 1, child, it->second, row);
+    }
+    return {};
+  }
+
+  // Queues the row's tiles; the jobs share ownership of the row and its parent row, which are
+  // freed when the last job is done and the bookkeeping below has let go of them.
+  // By value: releasing the rows below may drop the map's references while this runs.
+  void submitRow(uint32_t level, uint32_t tile_row, std::shared_ptr<HeldRow> row,
+                 std::shared_ptr<HeldRow> parent) {
+    row->submitted = true;
+    const uint32_t side = info_.storedTileSidePx();
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      SpoolEntry* entry = &spooled_.entries[level][size_t(tile_row) * info_.tilesX(level) + x];
+      pool_.submit([this, row, parent, entry, side, level, x, tile_row](WorkerState& worker) {
+        std::optional<ParentTexels> parent_texels;
+        if (parent) {
+          const std::vector<uint8_t>& texels = parent->tiles[x / 2];
+          parent_texels = ParentTexels{
+              {texels.data(), side, side, info_.channels, size_t(side) * info_.channels},
+              x & 1,
+              tile_row & 1,
+              info_.tile_size_px,
+              info_.border_px};
+        }
+        encodeJob(context_, worker, *entry, row->tiles[x].data(), side, info_.channels,
+                  fmt::format("{}: tile ({},{},{})", source_name_, level, x, tile_row),
+                  parent_texels ? &*parent_texels : nullptr);
+      });
+    }
+    if (parent) --parent->children_waiting;
+    release(level, tile_row);
+    if (parent) release(level + 1, tile_row / 2);
+  }
+
+  void release(uint32_t level, uint32_t tile_row) {
+    auto it = held_[level].find(tile_row);
+    if (it != held_[level].end() && it->second->submitted && it->second->children_waiting == 0)
+      held_[level].erase(it);
+  }
+
+  /// Per level, rows held for the parent-coded path, by tile row. Owned by the cutter thread.
+  std::vector<std::map<uint32_t, std::shared_ptr<HeldRow>>> held_;
+
   const ImageInfo& info_;
   SpooledImage& spooled_;
   EncodeContext& context_;
@@ -242,9 +321,10 @@ Result<void> validateOptions(const BuildOptions& options) {
   if (!findCodec(options.codec))
     return fail(ErrorCode::kUnsupported,
                 fmt::format("codec {} is not available in this build", codecName(options.codec)));
-  if (findCodec(options.codec)->needs_parent)
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("codec {} needs the progressive builder", codecName(options.codec)));
+  if (options.codec == Codec::kPtm && options.srgb_downsample)
+    return fail(ErrorCode::kInvalidArgument,
+                "codec ptm stores the integer floor-average pyramid of Marvie & Bouatouch; it "
+                "cannot average in linear light (--srgb)");
   if (options.image_names.size() > options.inputs.size())
     return fail(ErrorCode::kInvalidArgument, "more image names than inputs");
   for (const std::string& input : options.inputs) {
@@ -332,7 +412,7 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
       for (uint32_t l = 0; l < info.level_count; ++l)
         spooled[i].entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
       EncodingSink sink(info, spooled[i], context, pool, buffers, options.inputs[i]);
-      PyramidBuilder pyramid(info, sink);
+      PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
       const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
       const uint32_t band_rows = natural >= info.tile_size_px
                                      ? std::min(natural, 4 * info.tile_size_px)
@@ -388,7 +468,9 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
         {"quality", options.quality},
         {"effort", options.effort},
         {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
-        {"downsample", options.srgb_downsample ? "box-linear-light" : "box"},
+        {"downsample", options.codec == Codec::kPtm ? "box-floor"
+                       : options.srgb_downsample    ? "box-linear-light"
+                                                    : "box"},
         {"order", options.order == TileOrder::kHilbert    ? "hilbert"
                   : options.order == TileOrder::kQuadtree ? "quadtree"
                                                           : "row-major"}}},

@@ -50,6 +50,23 @@ void averagePlain(const uint8_t* top, const uint8_t* bottom, uint32_t width, uin
   }
 }
 
+template <uint32_t kChannels>
+void averageFloor(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint8_t* out) {
+  const uint32_t pairs = width / 2;
+  for (uint32_t i = 0; i < pairs; ++i) {
+    const uint8_t* a = top + 2 * i * kChannels;
+    const uint8_t* b = bottom + 2 * i * kChannels;
+    for (uint32_t c = 0; c < kChannels; ++c)
+      out[i * kChannels + c] = uint8_t((a[c] + a[c + kChannels] + b[c] + b[c + kChannels]) >> 2);
+  }
+  if (width & 1) {
+    const uint8_t* a = top + (width - 1) * kChannels;
+    const uint8_t* b = bottom + (width - 1) * kChannels;
+    for (uint32_t c = 0; c < kChannels; ++c)
+      out[pairs * kChannels + c] = uint8_t((2 * a[c] + 2 * b[c]) >> 2);
+  }
+}
+
 // The general path: alpha weighting and/or linear light, one output texel at a time.
 void averageGeneral(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint32_t channels,
                     bool srgb, uint8_t* out) {
@@ -107,6 +124,16 @@ void downsampleRowPair(const uint8_t* top, const uint8_t* bottom, uint32_t width
     }
   }
   averageGeneral(top, bottom, width, channels, srgb, out);
+}
+
+void downsampleRowPairFloor(const uint8_t* top, const uint8_t* bottom, uint32_t width,
+                            uint32_t channels, uint8_t* out) {
+  switch (channels) {
+    case 1: return averageFloor<1>(top, bottom, width, out);
+    case 2: return averageFloor<2>(top, bottom, width, out);
+    case 3: return averageFloor<3>(top, bottom, width, out);
+    default: return averageFloor<4>(top, bottom, width, out);
+  }
 }
 
 }  // namespace tessera::detail

@@ -13,4 +13,12 @@ namespace tessera::detail {
 void downsampleRowPair(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint32_t channels,
                        bool srgb, uint8_t* out);
 
+/// The integer pyramid of progressive texture maps (Marvie & Bouatouch, eq. 1 with the integer
+/// solution of eq. 3): every channel, alpha included and unweighted, is floor(sum / 4), so the
+/// remainder sum % 4 lets a child be rebuilt from its parent. Same geometry as
+/// downsampleRowPair: an odd last row or column is averaged with itself, as if the level were
+/// extended by replicating its edge, which is what tiles' padding does (docs/format.md, "ptm").
+void downsampleRowPairFloor(const uint8_t* top, const uint8_t* bottom, uint32_t width,
+                            uint32_t channels, uint8_t* out);
+
 }  // namespace tessera::detail

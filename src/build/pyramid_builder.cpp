@@ -27,7 +27,9 @@ struct PyramidBuilder::Level final : LevelRows {
   uint8_t* mutableRow(uint32_t y) { return ring.data() + size_t(y % ring_rows) * row_bytes; }
 };
 
-PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink) : info_(info), sink_(sink) {
+PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average)
+    : info_(info), sink_(sink), floor_average_(floor_average) {
+  TESSERA_CHECK(!floor_average || !info.srgb_downsample) << "floor average is in sRGB codes only";
   for (uint32_t l = 0; l < info.level_count; ++l) {
     auto level = std::make_unique<Level>();
     level->width_px = info.levelWidthPx(l);
@@ -66,8 +68,12 @@ Result<void> PyramidBuilder::addRow(uint32_t level_index, const uint8_t* row) {
     const bool odd_last_row = (y & 1) == 0 && y + 1 == level.height_px;
     if (pair_complete || odd_last_row) {
       const uint8_t* top = level.row(pair_complete ? y - 1 : y);
-      downsampleRowPair(top, level.row(y), level.width_px, info_.channels, info_.srgb_downsample,
-                        level.downsampled.data());
+      if (floor_average_)
+        downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels,
+                               level.downsampled.data());
+      else
+        downsampleRowPair(top, level.row(y), level.width_px, info_.channels, info_.srgb_downsample,
+                          level.downsampled.data());
       TESSERA_TRY(addRow(level_index + 1, level.downsampled.data()));
     }
   }

@@ -28,8 +28,10 @@ class TileSink {
 /// Owned by one thread.
 class PyramidBuilder {
  public:
-  /// `info` gives size, channels, tile size, border, level count and the sRGB flag.
-  PyramidBuilder(const ImageInfo& info, TileSink& sink);
+  /// `info` gives size, channels, tile size, border, level count and the sRGB flag. With
+  /// `floor_average` levels are the unweighted floor average of downsampleRowPairFloor (the
+  /// ptm codec's pyramid) and the sRGB flag must be off.
+  PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average = false);
   ~PyramidBuilder();
 
   /// Adds `count` level-0 rows (tightly packed). Fails if the sink fails.
@@ -45,6 +47,7 @@ class PyramidBuilder {
 
   ImageInfo info_;
   TileSink& sink_;
+  bool floor_average_;
   std::vector<std::unique_ptr<Level>> levels_;
 };
 

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -22,6 +23,13 @@ uint64_t levelKey(uint32_t image, uint32_t level) {
 
 uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
   return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
+}
+
+// Images < 2^16, levels < 2^5 and tile columns and rows < 2^18 (kMaxImageSidePx over the
+// smallest tile) pack into 57 bits.
+uint64_t tileKey(const TileId& tile) {
+  return (uint64_t(tile.image) << 41) | (uint64_t(tile.level) << 36) | (uint64_t(tile.x) << 18) |
+         tile.y;
 }
 
 }  // namespace
@@ -236,6 +244,52 @@ Result<Image> Archive::decodeTile(const TileId& tile, const TileEntry& entry,
 Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
                                      std::span<const uint8_t> payload, Image& image,
                                      detail::CodecScratch* scratch) const {
+  return decodeWithParent(tile, entry, payload, image, nullptr, scratch);
+}
+
+Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                     std::span<const uint8_t> payload, Image& image,
+                                     const Image& parent, detail::CodecScratch* scratch) const {
+  return decodeWithParent(tile, entry, payload, image, &parent, scratch);
+}
+
+std::shared_ptr<const Image> Archive::Impl::cachedParent(const TileId& tile) {
+  std::lock_guard lock(parent_mutex);
+  auto it = parents.find(tileKey(tile));
+  return it == parents.end() ? nullptr : it->second;
+}
+
+void Archive::Impl::cacheParent(const TileId& tile, std::shared_ptr<const Image> image) {
+  std::lock_guard lock(parent_mutex);
+  const uint64_t key = tileKey(tile);
+  if (parents.count(key) != 0) return;
+  parent_bytes += image->texels.size();
+  parents.emplace(key, std::move(image));
+  parent_order.push_back(key);
+  while (parent_bytes > kParentCacheBytes && parent_order.size() > 1) {
+    auto it = parents.find(parent_order.front());
+    parent_bytes -= it->second->texels.size();
+    parents.erase(it);
+    parent_order.pop_front();
+  }
+}
+
+Result<std::shared_ptr<const Image>> Archive::decodedParent(const TileId& tile,
+                                                            detail::CodecScratch* scratch) const {
+  const TileId parent = parentTile(tile);
+  if (auto cached = impl_->cachedParent(parent)) return cached;
+  Result<Image> decoded = readTile(parent, scratch);
+  if (!decoded)
+    return fail(decoded.error().code, fmt::format("{}: its parent cannot be decoded: {}",
+                                                  impl_->tileName(tile), decoded.error().message));
+  auto shared = std::make_shared<const Image>(std::move(*decoded));
+  impl_->cacheParent(parent, shared);
+  return shared;
+}
+
+Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entry,
+                                       std::span<const uint8_t> payload, Image& image,
+                                       const Image* parent, detail::CodecScratch* scratch) const {
   const ImageInfo& info = impl_->infos.at(tile.image);
   uint32_t side = info.storedTileSidePx();
   image.width_px = side;
@@ -260,11 +314,29 @@ Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
     }
     case TileKind::kEncoded: {
       const detail::CodecFunctions* codec = detail::findCodec(entry.codec);
-      if (!codec || codec->needs_parent)
+      if (!codec)
         return fail(ErrorCode::kUnsupported,
                     fmt::format("{}: codec {} is not supported by this build",
                                 impl_->tileName(tile), codecName(entry.codec)));
-      Result<void> decoded = codec->decode(payload, image, nullptr, scratch);
+      std::optional<detail::ParentTexels> parent_texels;
+      std::shared_ptr<const Image> owned_parent;
+      if (codec->needs_parent && tile.level + 1 < info.level_count) {
+        if (parent == nullptr) {
+          TESSERA_ASSIGN_OR_RETURN(owned_parent, decodedParent(tile, scratch));
+          parent = owned_parent.get();
+        }
+        if (parent->width_px != side || parent->height_px != side ||
+            parent->channels != info.channels ||
+            parent->texels.size() != size_t(side) * side * info.channels)
+          return fail(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: parent tile given as {}x{}x{}, expected {}x{}x{}",
+                                  impl_->tileName(tile), parent->width_px, parent->height_px,
+                                  parent->channels, side, side, info.channels));
+        parent_texels = detail::ParentTexels{parent->view(), tile.x & 1, tile.y & 1,
+                                             info.tile_size_px, info.border_px};
+      }
+      Result<void> decoded =
+          codec->decode(payload, image, parent_texels ? &*parent_texels : nullptr, scratch);
       if (!decoded)
         return fail(decoded.error().code,
                     fmt::format("{}: {}", impl_->tileName(tile), decoded.error().message));

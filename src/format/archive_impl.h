@@ -45,6 +45,16 @@ struct Archive::Impl {
   Result<std::shared_ptr<const std::vector<TileEntry>>> page(uint32_t image, uint32_t level,
                                                              uint32_t page_x, uint32_t page_y);
   std::string tileName(const TileId& tile) const;
+
+  /// Decoded parents of parent-coded (ptm) tiles, so that the four children of a parent, read
+  /// one after another (a region, verify, extract), decode it once. FIFO within a byte budget.
+  static constexpr size_t kParentCacheBytes = 32u << 20;
+  std::mutex parent_mutex;  // guards parents, parent_order and parent_bytes
+  std::unordered_map<uint64_t, std::shared_ptr<const Image>> parents;
+  std::deque<uint64_t> parent_order;
+  size_t parent_bytes = 0;
+  std::shared_ptr<const Image> cachedParent(const TileId& tile);
+  void cacheParent(const TileId& tile, std::shared_ptr<const Image> image);
 };
 
 }  // namespace tessera

@@ -23,10 +23,16 @@ struct EncodeOptions {
 
 /// Decoded texels of the parent tile, for codecs that code a tile relative to it
 /// (Marvie & Bouatouch's progressive texture maps). Null for other codecs.
+///
+/// Child stored texel (i, j) lies in the 2x2 block whose parent stored texel is
+/// ((quadrant_x * tile_size_px + border_px + i) / 2, (quadrant_y * tile_size_px + border_px + j)
+/// / 2): both tiles start `border_px` texels before their tile's origin (docs/format.md, "Tiles").
 struct ParentTexels {
-  ImageView texels;         ///< the parent's stored tile, borders included
-  uint32_t quadrant_x = 0;  ///< which quarter of the parent this tile refines: 0 left, 1 right
-  uint32_t quadrant_y = 0;  ///< 0 top, 1 bottom
+  ImageView texels;           ///< the parent's stored tile, borders included
+  uint32_t quadrant_x = 0;    ///< which quarter of the parent this tile refines: 0 left, 1 right
+  uint32_t quadrant_y = 0;    ///< 0 top, 1 bottom
+  uint32_t tile_size_px = 0;  ///< the image's tile size (even), borders excluded
+  uint32_t border_px = 0;     ///< the image's border, the same at both levels
 };
 
 /// Per-thread reusable state for codecs whose libraries are costly to set up per call
@@ -64,8 +70,7 @@ struct CodecFunctions {
                          CodecScratch* scratch);
 };
 
-/// The table entry for `codec`, or null for codecs this build does not implement
-/// (`Codec::kPtm` until it lands).
+/// The table entry for `codec`, or null for codec values this build does not know.
 const CodecFunctions* findCodec(Codec codec);
 
 /// Convenience: looks up the codec and encodes; an unimplemented codec is kUnsupported.

@@ -88,6 +88,23 @@ Result<std::vector<uint8_t>> encodeWebp(const ImageView& tile, const EncodeOptio
                                         CodecScratch* scratch);
 Result<void> decodeWebp(std::span<const uint8_t> payload, Image& out, CodecScratch* scratch);
 
+/// How a ptm payload predicts the texels it codes (docs/codecs.md, "ptm (6)"); stored in the
+/// payload's first byte.
+enum class Predictor : uint8_t {
+  kRoot = 0,            ///< no parent: LOCO-I median of left, up and up-left texels
+  kParentNearest = 1,   ///< the parent texel of the child's 2x2 block
+  kParentBilinear = 2,  ///< the parent bilinearly upsampled (weights 9, 3, 3, 1 / 16)
+};
+
+/// Encodes a ptm payload with `predictor` (kRoot when `parent` is null). The codec table's
+/// entry uses the default predictor; the codec study compares the others.
+Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent, Predictor predictor,
+                                       CodecScratch* scratch);
+/// Decodes any ptm payload; `parent` is required unless the payload is kRoot.
+Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
+                       CodecScratch* scratch);
+
 /// Compresses `bytes` into one zstd frame with its content size, using (and creating on first
 /// use) the scratch's compression context. The JPEG codec stores its alpha plane this way.
 Result<std::vector<uint8_t>> compressZstdFrame(std::span<const uint8_t> bytes, int level,

@@ -94,7 +94,9 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_option("--border", args->options.border_px, "Border texels per tile side (0..16)")
       ->capture_default_str();
-  cmd->add_option("--codec", args->codec, "raw, zstd, lz4, jpeg, png or webp")
+  cmd->add_option(
+         "--codec", args->codec,
+         "raw, zstd, lz4, jpeg, png, webp or ptm (lossless, coded against the parent level)")
       ->capture_default_str();
   cmd->add_option("--quality", args->options.quality, "JPEG quality (1..100)")
       ->capture_default_str();

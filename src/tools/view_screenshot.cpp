@@ -4,7 +4,6 @@
 
 #include <fmt/format.h>
 
-
 namespace tessera::cli {
 
 std::string nextScreenshotPath(const std::string& dir) {

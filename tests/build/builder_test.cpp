@@ -333,6 +333,157 @@ std::vector<uint8_t> fixtureBytes(const std::string& kind, const std::string& pa
   return test::readFileBytes(path);
 }
 
+// ---- ptm: tiles coded against their parent -------------------------------------------------
+
+TEST(BuilderPtm, EveryLevelDecodesToTheFloorAveragePyramidForOddSizesAndAllChannels) {
+  const std::string dir = test::testTempDir();
+  struct Case {
+    uint32_t width, height, channels, border;
+  };
+  for (const Case& c :
+       {Case{333, 201, 1, 0}, Case{257, 190, 2, 1}, Case{300, 129, 3, 3}, Case{129, 260, 4, 2}}) {
+    // The synthetic source makes RGB and RGBA; gray and gray+alpha come from it through PNG.
+    const std::string synthetic = "synthetic:" + std::to_string(c.width) + "x" +
+                                  std::to_string(c.height) +
+                                  ":5:" + std::to_string(c.channels == 2 ? 4 : 3);
+    std::string source = synthetic;
+    if (c.channels <= 2) {
+      Image rgb = test::readSource(synthetic);
+      const uint32_t from = rgb.channels;
+      std::vector<uint8_t> pixels;
+      for (size_t i = 0; i < size_t(c.width) * c.height; ++i) {
+        pixels.push_back(rgb.texels[i * from]);
+        if (c.channels == 2) pixels.push_back(rgb.texels[i * from + 3]);
+      }
+      source = dir + "gray" + std::to_string(c.channels) + ".png";
+      test::PngSpec spec{.width_px = c.width, .height_px = c.height};
+      spec.colour = c.channels == 1 ? test::PngColour::kGray : test::PngColour::kGrayAlpha;
+      ASSERT_EQ(test::writePng(source, spec, pixels), "");
+    }
+    BuildOptions options;
+    options.inputs = {source};
+    options.output = dir + "ptm.tess";
+    options.codec = Codec::kPtm;
+    options.tile_size_px = 64;
+    options.border_px = c.border;
+    options.threads = 2;
+    auto report = buildArchive(options);
+    ASSERT_TRUE(report) << report.error().message;
+    EXPECT_GT(report->tiles_encoded, 0u);
+    auto archive = Archive::openFile(options.output);
+    ASSERT_TRUE(archive) << archive.error().message;
+    EXPECT_EQ((*archive)->metadata()["build"]["downsample"], "box-floor");
+    test::ReferencePyramid reference(test::readSource(source), /*floor_average=*/true);
+    expectArchiveEqualsReference(**archive, reference);
+    VerifyReport verified = (*archive)->verify();
+    EXPECT_TRUE(verified.ok()) << (verified.faults.empty() ? "" : verified.faults[0]);
+    EXPECT_EQ(verified.payloads_checked, report->tiles_encoded);
+  }
+}
+
+TEST(BuilderPtm, OtherCodecsKeepTheRoundedPyramid) {
+  const std::string dir = test::testTempDir();
+  BuildOptions options;
+  options.inputs = {"synthetic:150x150:2:3"};
+  options.output = dir + "zstd.tess";
+  options.codec = Codec::kZstd;
+  options.tile_size_px = 64;
+  ASSERT_TRUE(buildArchive(options));
+  auto archive = Archive::openFile(options.output);
+  ASSERT_TRUE(archive);
+  test::ReferencePyramid rounded(test::readSource("synthetic:150x150:2:3"));
+  expectArchiveEqualsReference(**archive, rounded);
+}
+
+// Corrupts one byte in the middle of `tile`'s payload in the archive file.
+void corruptPayload(const std::string& path, const TileId& tile) {
+  auto archive = Archive::openFile(path);
+  ASSERT_TRUE(archive);
+  auto entry = (*archive)->tileEntry(tile);
+  ASSERT_TRUE(entry);
+  ASSERT_EQ(entry->kind, TileKind::kEncoded);
+  std::vector<uint8_t> bytes = test::readFileBytes(path);
+  bytes[entry->offset_bytes + entry->length_bytes / 2] ^= 0x20;
+  ASSERT_TRUE(test::writeFileBytes(path, bytes));
+}
+
+TEST(BuilderPtm, ACorruptParentOrResidualFailsTheTileNamingItAndNeverYieldsPixels) {
+  const std::string dir = test::testTempDir();
+  BuildOptions options;
+  options.inputs = {"synthetic:500x400:9:3"};
+  options.output = dir + "good.tess";
+  options.codec = Codec::kPtm;
+  options.tile_size_px = 64;
+  options.border_px = 1;
+  ASSERT_TRUE(buildArchive(options));
+  const std::vector<uint8_t> good = test::readFileBytes(options.output);
+  const std::string path = dir + "bad.tess";
+
+  // A corrupt parent (level 1) fails its four children and their descendants, naming it.
+  ASSERT_TRUE(test::writeFileBytes(path, good));
+  corruptPayload(path, {0, 1, 1, 1});
+  auto archive = Archive::openFile(path);
+  ASSERT_TRUE(archive);
+  int encoded_children = 0;
+  for (uint32_t y = 2; y < 4; ++y)
+    for (uint32_t x = 2; x < 4; ++x) {
+      auto entry = (*archive)->tileEntry({0, 0, x, y});
+      ASSERT_TRUE(entry);
+      if (entry->kind != TileKind::kEncoded) continue;  // uniform tiles need no parent
+      ++encoded_children;
+      auto child = (*archive)->readTile({0, 0, x, y});
+      ASSERT_FALSE(child) << x << "," << y;
+      EXPECT_NE(child.error().message.find("tile (1,1,1) checksum mismatch"), std::string::npos)
+          << child.error().message;
+      EXPECT_NE(child.error().message.find("parent"), std::string::npos);
+    }
+  EXPECT_GE(encoded_children, 2);
+  EXPECT_TRUE((*archive)->readTile({0, 0, 0, 0}));  // another parent's child is unaffected
+  VerifyReport report = (*archive)->verify();
+  EXPECT_FALSE(report.ok());
+  // The parent's checksum and each encoded child.
+  EXPECT_EQ(report.fault_count, 1u + encoded_children);
+  EXPECT_FALSE((*archive)->readRegion(0, 0, {128, 128, 128, 128}));
+
+  // A corrupt residual payload fails that tile only.
+  ASSERT_TRUE(test::writeFileBytes(path, good));
+  corruptPayload(path, {0, 0, 3, 2});
+  archive = Archive::openFile(path);
+  ASSERT_TRUE(archive);
+  auto tile = (*archive)->readTile({0, 0, 3, 2});
+  ASSERT_FALSE(tile);
+  EXPECT_NE(tile.error().message.find("tile (0,3,2) checksum mismatch"), std::string::npos);
+  EXPECT_TRUE((*archive)->readTile({0, 0, 2, 2}));
+  EXPECT_EQ((*archive)->verify().fault_count, 1u);
+}
+
+TEST(BuilderPtm, DecodingWithACallerSuppliedParentEqualsReadTile) {
+  const std::string dir = test::testTempDir();
+  BuildOptions options;
+  options.inputs = {"synthetic:200x200:4:4"};
+  options.output = dir + "ptm.tess";
+  options.codec = Codec::kPtm;
+  options.tile_size_px = 64;
+  ASSERT_TRUE(buildArchive(options));
+  auto archive = Archive::openFile(options.output);
+  ASSERT_TRUE(archive);
+  const TileId tile{0, 0, 3, 1};
+  auto parent = (*archive)->readTile(Archive::parentTile(tile));
+  ASSERT_TRUE(parent);
+  auto entry = (*archive)->tileEntry(tile);
+  ASSERT_TRUE(entry);
+  ASSERT_EQ(entry->kind, TileKind::kEncoded);
+  auto payload = (*archive)->readPayload(tile, *entry);
+  ASSERT_TRUE(payload);
+  Image out;
+  ASSERT_TRUE((*archive)->decodeTileInto(tile, *entry, *payload, out, *parent));
+  auto expected = (*archive)->readTile(tile);
+  ASSERT_TRUE(expected);
+  EXPECT_EQ(out.texels, expected->texels);
+  Image wrong_size(8, 8, 4);
+  EXPECT_FALSE((*archive)->decodeTileInto(tile, *entry, *payload, out, wrong_size));
+}
+
 TEST(BuilderBadInput, EachFailsNamingTheFileAndLeavesNoOutput) {
   const std::string dir = test::testTempDir();
   struct Bad {
@@ -419,7 +570,8 @@ TEST(BuilderBadInput, InvalidOptionsAreRejectedBeforeAnyOutput) {
   bad[4].quality = 0;
   bad[5].inputs.clear();
   bad[6].output.clear();
-  bad[7].codec = Codec::kPtm;
+  bad[7].codec = Codec::kPtm;  // the floor-average pyramid cannot be averaged in linear light
+  bad[7].srgb_downsample = true;
   for (size_t i = 0; i < bad.size(); ++i) {
     auto report = buildArchive(bad[i]);
     EXPECT_FALSE(report) << i;

@@ -52,10 +52,25 @@ Image referenceDownsample(const Image& level) {
   return out;
 }
 
-ReferencePyramid::ReferencePyramid(Image level0) {
+Image referenceFloorDownsample(const Image& level) {
+  const uint32_t w = level.width_px, h = level.height_px, channels = level.channels;
+  Image out((w + 1) / 2, (h + 1) / 2, channels);
+  for (uint32_t oy = 0; oy < out.height_px; ++oy)
+    for (uint32_t ox = 0; ox < out.width_px; ++ox)
+      for (uint32_t c = 0; c < channels; ++c) {
+        uint32_t sum = 0;
+        for (uint32_t y : {2 * oy, std::min(2 * oy + 1, h - 1)})
+          for (uint32_t x : {2 * ox, std::min(2 * ox + 1, w - 1)}) sum += texelAt(level, x, y)[c];
+        out.row(oy)[size_t(ox) * channels + c] = uint8_t(sum / 4);
+      }
+  return out;
+}
+
+ReferencePyramid::ReferencePyramid(Image level0, bool floor_average) {
   levels_.push_back(std::move(level0));
   while (levels_.back().width_px > 1 || levels_.back().height_px > 1)
-    levels_.push_back(referenceDownsample(levels_.back()));
+    levels_.push_back(floor_average ? referenceFloorDownsample(levels_.back())
+                                    : referenceDownsample(levels_.back()));
 }
 
 uint32_t ReferencePyramid::levelCount(uint32_t tile_size_px) const {

@@ -22,8 +22,9 @@ struct ReferenceTile {
 /// Every level of an image, level 0 first.
 class ReferencePyramid {
  public:
-  /// Builds every level from `level0` down to 1 x 1.
-  explicit ReferencePyramid(Image level0);
+  /// Builds every level from `level0` down to 1 x 1, with referenceDownsample or, when
+  /// `floor_average`, referenceFloorDownsample (the ptm codec's pyramid).
+  explicit ReferencePyramid(Image level0, bool floor_average = false);
 
   /// Levels an archive with `tile_size_px` tiles holds: up to the first that fits one tile.
   uint32_t levelCount(uint32_t tile_size_px) const;
@@ -47,6 +48,10 @@ class ReferencePyramid {
 /// (sum + 2) >> 2 per channel; with alpha (2 or 4 channels) colour weighted by alpha,
 /// (sum c*a + A/2) / A, alpha (A + 2) >> 2, and a fully transparent block all zero.
 Image referenceDownsample(const Image& level);
+
+/// The integer pyramid step of Marvie & Bouatouch (eq. 1 and 3): floor(sum / 4) per channel,
+/// alpha unweighted, odd edges averaged with themselves.
+Image referenceFloorDownsample(const Image& level);
 
 /// Test pixels with the features kinds depend on: a flat opaque block (uniform tiles), with
 /// alpha an all-zero block (empty tiles) and scattered transparent and translucent texels

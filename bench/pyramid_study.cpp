@@ -1,0 +1,235 @@
+// tessera-pyramid-study: bytes and decode speed of whole tile pyramids per codec, for the ptm
+// codec study (docs/benchmarks.md, "Progressive lossless pyramids (ptm): codec study").
+//
+// For each input (a synthetic:WxH:seed:channels spec, a PNG/JPEG/TIFF path, or a .webp photo)
+// it builds the pyramid in memory exactly as `tessera build` would (rounded box average for the
+// other codecs, the floor average for ptm; 256-px tiles, no border), encodes every tile with each
+// codec and reports, against the raw base level (level 0 tiles as stored, padding included):
+// the whole pyramid's bytes, ptm's overhead over its own base level, and single-thread decode
+// throughput in megapixels of pyramid per second (ptm decoded coarse to fine against the
+// decoded parents, as a reader does).
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+#include <webp/decode.h>
+
+#include "build/band_reader.h"
+#include "build/downsample.h"
+#include "format/codec.h"
+#include "format/codec_internal.h"
+
+using namespace tessera;
+using namespace tessera::detail;
+
+namespace {
+
+constexpr uint32_t kTilePx = 256;
+
+Image readInput(const std::string& input) {
+  if (input.size() > 5 && input.substr(input.size() - 5) == ".webp") {
+    FILE* file = std::fopen(input.c_str(), "rb");
+    if (!file) return {};
+    std::vector<uint8_t> bytes;
+    uint8_t chunk[65536];
+    for (size_t n; (n = std::fread(chunk, 1, sizeof chunk, file)) > 0;)
+      bytes.insert(bytes.end(), chunk, chunk + n);
+    std::fclose(file);
+    int width = 0, height = 0;
+    uint8_t* rgb = WebPDecodeRGB(bytes.data(), bytes.size(), &width, &height);
+    if (!rgb) return {};
+    Image image(uint32_t(width), uint32_t(height), 3);
+    std::memcpy(image.texels.data(), rgb, image.texels.size());
+    WebPFree(rgb);
+    return image;
+  }
+  auto reader = openBandReader(input);
+  if (!reader) {
+    fmt::print(stderr, "{}\n", reader.error().message);
+    return {};
+  }
+  const SourceInfo& info = (*reader)->info();
+  Image image(info.width_px, info.height_px, info.channels);
+  if (!(*reader)->readRows(info.height_px, image.texels)) return {};
+  return image;
+}
+
+std::vector<Image> makePyramid(Image level0, bool floor_average) {
+  std::vector<Image> levels{std::move(level0)};
+  while (levels.back().width_px > kTilePx || levels.back().height_px > kTilePx) {
+    const Image& from = levels.back();
+    Image next((from.width_px + 1) / 2, (from.height_px + 1) / 2, from.channels);
+    for (uint32_t y = 0; y < next.height_px; ++y) {
+      const uint8_t* top = from.row(2 * y);
+      const uint8_t* bottom = from.row(std::min(2 * y + 1, from.height_px - 1));
+      if (floor_average)
+        downsampleRowPairFloor(top, bottom, from.width_px, from.channels, next.row(y));
+      else
+        downsampleRowPair(top, bottom, from.width_px, from.channels, false, next.row(y));
+    }
+    levels.push_back(std::move(next));
+  }
+  return levels;
+}
+
+Image cutTile(const Image& level, uint32_t x, uint32_t y) {
+  Image tile(kTilePx, kTilePx, level.channels);
+  for (uint32_t j = 0; j < kTilePx; ++j) {
+    const uint32_t ly = std::min(y * kTilePx + j, level.height_px - 1);
+    for (uint32_t i = 0; i < kTilePx; ++i) {
+      const uint32_t lx = std::min(x * kTilePx + i, level.width_px - 1);
+      std::memcpy(tile.row(j) + size_t(i) * level.channels,
+                  level.row(ly) + size_t(lx) * level.channels, level.channels);
+    }
+  }
+  return tile;
+}
+
+struct Variant {
+  std::string name;
+  Codec codec;
+  int effort;
+  Predictor predictor;  ///< ptm only
+};
+
+struct Tiles {
+  std::vector<std::vector<Image>> levels;  ///< [level][y * tiles_x + x]
+  std::vector<uint32_t> tiles_x;
+};
+
+Tiles cutAll(const std::vector<Image>& pyramid) {
+  Tiles tiles;
+  for (const Image& level : pyramid) {
+    const uint32_t tx = (level.width_px + kTilePx - 1) / kTilePx;
+    const uint32_t ty = (level.height_px + kTilePx - 1) / kTilePx;
+    tiles.tiles_x.push_back(tx);
+    tiles.levels.emplace_back();
+    for (uint32_t y = 0; y < ty; ++y)
+      for (uint32_t x = 0; x < tx; ++x) tiles.levels.back().push_back(cutTile(level, x, y));
+  }
+  return tiles;
+}
+
+void study(const std::string& input, double min_seconds) {
+  Image level0 = readInput(input);
+  if (level0.texels.empty()) {
+    fmt::print(stderr, "{}: cannot read\n", input);
+    return;
+  }
+  const Tiles rounded = cutAll(makePyramid(level0, false));
+  const Tiles floored = cutAll(makePyramid(level0, true));
+  const double raw_base = double(rounded.levels[0].size()) * kTilePx * kTilePx * level0.channels;
+  double pyramid_px = 0;
+  for (const auto& level : rounded.levels) pyramid_px += double(level.size()) * kTilePx * kTilePx;
+  fmt::print("\n{} ({}x{}x{}, {} levels, raw base {:.1f} MB, pyramid {:.1f} MP)\n", input,
+             level0.width_px, level0.height_px, level0.channels, rounded.levels.size(),
+             raw_base / 1e6, pyramid_px / 1e6);
+  fmt::print(
+      "| codec | pyramid / raw base | raw base : pyramid | pyramid over base coded alone | decode "
+      "MP/s per core |\n|---|---:|---:|---:|---:|\n");
+  const std::vector<Variant> variants = {
+      {"raw", Codec::kRaw, 0, Predictor::kRoot},
+      {"lz4", Codec::kLz4, 0, Predictor::kRoot},
+      {"zstd-1", Codec::kZstd, 1, Predictor::kRoot},
+      {"zstd-3", Codec::kZstd, 3, Predictor::kRoot},
+      {"zstd-9", Codec::kZstd, 9, Predictor::kRoot},
+      {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot},
+      {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot},
+      {"ptm nearest-parent + zstd (default)", Codec::kPtm, 0, Predictor::kParentNearest},
+      {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear},
+  };
+  CodecScratch scratch;
+  for (const Variant& variant : variants) {
+    const bool ptm = variant.codec == Codec::kPtm;
+    const Tiles& tiles = ptm ? floored : rounded;
+    std::vector<std::vector<std::vector<uint8_t>>> payloads(tiles.levels.size());
+    double total = 0, level0_bytes = 0;
+    EncodeOptions options;
+    options.effort = variant.effort;
+    for (size_t l = tiles.levels.size(); l-- > 0;) {
+      for (size_t i = 0; i < tiles.levels[l].size(); ++i) {
+        const Image& tile = tiles.levels[l][i];
+        std::optional<ParentTexels> parent;
+        if (ptm && l + 1 < tiles.levels.size()) {
+          const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
+          parent = ParentTexels{tiles.levels[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
+                                x & 1, y & 1, kTilePx, 0};
+        }
+        Result<std::vector<uint8_t>> payload =
+            ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
+                            &scratch)
+                : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+        if (!payload) {
+          fmt::print(stderr, "{}: {}\n", variant.name, payload.error().message);
+          return;
+        }
+        total += payload->size();
+        if (l == 0) level0_bytes += payload->size();
+        payloads[l].push_back(std::move(*payload));
+      }
+    }
+    // Decode the whole pyramid, coarse to fine, until min_seconds have passed.
+    std::vector<std::vector<Image>> decoded(tiles.levels.size());
+    for (size_t l = 0; l < tiles.levels.size(); ++l)
+      decoded[l].assign(tiles.levels[l].size(), Image(kTilePx, kTilePx, level0.channels));
+    int rounds = 0;
+    bool exact = true;
+    const auto start = std::chrono::steady_clock::now();
+    double elapsed = 0;
+    do {
+      for (size_t l = tiles.levels.size(); l-- > 0;) {
+        for (size_t i = 0; i < payloads[l].size(); ++i) {
+          std::optional<ParentTexels> parent;
+          if (ptm && l + 1 < tiles.levels.size()) {
+            const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
+            parent = ParentTexels{decoded[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
+                                  x & 1, y & 1, kTilePx, 0};
+          }
+          if (!decodeTile(variant.codec, payloads[l][i], decoded[l][i], parent ? &*parent : nullptr,
+                          &scratch))
+            exact = false;
+        }
+      }
+      ++rounds;
+      elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    } while (elapsed < min_seconds);
+    for (size_t l = 0; l < tiles.levels.size() && exact; ++l)
+      for (size_t i = 0; i < tiles.levels[l].size(); ++i)
+        if (decoded[l][i].texels != tiles.levels[l][i].texels) exact = false;
+    // Seed 003's overhead: the whole pyramid against the base level coded on its own by the
+    // same codec (for ptm: its parentless mode), not against ptm's parent-coded level 0.
+    double base_alone = 0;
+    for (const Image& tile : tiles.levels[0]) {
+      auto alone = ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, &scratch)
+                       : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+      base_alone += alone ? double(alone->size()) : 0;
+    }
+    (void)level0_bytes;
+    fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} |\n", variant.name, total / raw_base,
+               raw_base / total, 100.0 * (total - base_alone) / base_alone,
+               pyramid_px * rounds / elapsed / 1e6, exact ? "" : " (NOT EXACT)");
+  }
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc < 2) {
+    fmt::print(stderr, "usage: {} [--seconds S] INPUT...\n", argv[0]);
+    return 2;
+  }
+  double seconds = 0.5;
+  for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--seconds" && i + 1 < argc) {
+      seconds = std::atof(argv[++i]);
+      continue;
+    }
+    study(argv[i], seconds);
+  }
+  return 0;
+}
