@@ -50,5 +50,6 @@ void registerVerifyCommand(CLI::App& app, int& exit_code);
 void registerExtractCommand(CLI::App& app, int& exit_code);
 void registerFlyCommand(CLI::App& app, int& exit_code);
 void registerViewCommand(CLI::App& app, int& exit_code);
+void registerDemoCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

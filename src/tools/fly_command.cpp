@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -18,6 +19,8 @@
 
 #include "format/codec.h"
 #include "tools/camera_path.h"
+#include "tools/fly_command.h"
+#include "tools/fly_render.h"
 #include "tools/cli.h"
 
 namespace tessera::cli {
@@ -25,29 +28,6 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-struct FlyArgs {
-  std::string archive;
-  std::string path = "pan";
-  double speed_px_s = 1000;
-  double duration_s = 10;
-  std::string viewport = "1920x1080";
-  double fps = 60;
-  size_t cache_mib = 512;
-  std::string eviction = "viewer-shift";
-  uint32_t threads = 0;
-  uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
-  uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
-  uint64_t merge_gap_kib = StreamerOptions{}.merge_gap_bytes >> 10;
-  uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
-  std::string loader_priority = "idle";
-  uint32_t image = 0;
-  std::string out_dir = "fly-out";
-  bool json = false;
-  bool quiet = false;
-  bool cold = false;
-  bool decode_bound = false;
-};
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -87,6 +67,8 @@ struct JumpTiming {
   double clip_region_ms = -1;
   std::vector<TileId> uploaded;  ///< tiles uploaded until the next jump
   double decode_bound_ms = -1;   ///< --decode-bound: those tiles decoded on every thread
+  double rest_psnr_db = -1;      ///< --render: the picture before the next jump against the
+  uint32_t rest_max_abs = 0;     ///< reference of the same resident tiles
 };
 
 /// The decode part of the physical bound on a jump's load time: the tiles it uploaded,
@@ -135,6 +117,8 @@ Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> til
   return ms;
 }
 
+}  // namespace
+
 int runFly(const FlyArgs& args) {
   uint32_t viewport_w = 0, viewport_h = 0;
   if (std::sscanf(args.viewport.c_str(), "%ux%u", &viewport_w, &viewport_h) != 2 ||
@@ -165,6 +149,28 @@ int runFly(const FlyArgs& args) {
   options.loader_idle_priority = args.loader_priority == "idle";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
+  std::unique_ptr<FlyRenderer> gpu;
+  if (args.render != "none") {
+    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(
+        args.render == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads, info);
+    if (!created) return reportError(created.error());
+    gpu = std::move(*created);
+  }
+  std::vector<double> render_ms;
+  std::vector<ReportFrame> report_frames;
+  std::vector<ReportPicture> report_pictures;
+  // A picture of the GPU's last frame to a PNG in the output folder, kept for the report.
+  auto savePicture = [&](const Picture& picture, const std::string& name,
+                         const std::string& caption) -> Result<void> {
+    const std::string file = args.out_dir + "/" + name;
+    TESSERA_TRY(writePng(picture, file));
+    if (args.report) {
+      std::ifstream in(file, std::ios::binary);
+      report_pictures.push_back(
+          {caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
+    }
+    return {};
+  };
 
   std::error_code ec;
   std::filesystem::create_directories(args.out_dir, ec);
@@ -172,7 +178,8 @@ int runFly(const FlyArgs& args) {
   if (!csv) return reportError({ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write"});
   csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
          "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
-         "tiles_loaded,load_failures,update_ms\n";
+         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms\n";
+  std::vector<std::string> csv_rows;  // written after the flight, when GPU times are known
 
   std::vector<double> update_ms;
   std::vector<JumpTiming> jumps{{0}};
@@ -201,9 +208,14 @@ int runFly(const FlyArgs& args) {
     view.image = args.image;
     view.ortho = path->at(t_s, viewport_w, viewport_h);
     const FrameUpdate& update = (*streamer)->update(view);
-    for (const auto& tile : update.uploads) {
-      (*streamer)->uploaded(tile->id);
-      if (args.decode_bound) jumps.back().uploaded.push_back(tile->id);
+    if (args.decode_bound)
+      for (const auto& tile : update.uploads) jumps.back().uploaded.push_back(tile->id);
+    double frame_render_ms = -1;
+    if (gpu) {
+      frame_render_ms = gpu->frame(k, view, update, **streamer);
+      render_ms.push_back(frame_render_ms);
+    } else {
+      for (const auto& tile : update.uploads) (*streamer)->uploaded(tile->id);  // null renderer
     }
     const FrameReport& r = update.report;
     last = r;
@@ -223,13 +235,61 @@ int runFly(const FlyArgs& args) {
       double idle_s = std::chrono::duration<double>(r.loader_idle_since - start).count();
       jump.clip_region_ms = std::clamp((idle_s - jump.at_s) * 1000, 0.0, since_ms);
     }
-    csv << fmt::format(
-        "{},{:.2f},{:.1f},{:.1f},{:.4f},{},{},{:.4f},{},{},{},{},{},{},{},{},{:.4f}\n", k,
+    csv_rows.push_back(fmt::format(
+        "{},{:.2f},{:.1f},{:.1f},{:.4f},{},{},{:.4f},{},{},{},{},{},{},{},{},{:.4f},{:.4f}", k,
         now_s * 1000, view.ortho.centre_x, view.ortho.centre_y, view.ortho.texels_per_pixel,
         r.desired_level, r.finest_full_level, r.coverage_desired, r.fully_covered ? 1 : 0,
         r.queue_length, r.in_flight, r.uploads, r.upload_bytes, r.bytes_read_total,
-        r.tiles_loaded_total, r.load_failures_total, r.update_ms);
+        r.tiles_loaded_total, r.load_failures_total, r.update_ms, frame_render_ms));
+    report_frames.push_back({now_s * 1000, r.update_ms, frame_render_ms, -1, r.coverage_desired,
+                             r.fully_covered, r.bytes_read_total});
+    if (gpu) {
+      if (std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
+          args.screenshot_frames.end()) {
+        Result<void> saved =
+            savePicture(gpu->renderer().readPixels(), fmt::format("frame-{}.png", k),
+                        fmt::format("frame {} ({:.2f} s)", k, t_s));
+        if (!saved) return reportError(saved.error());
+      }
+      // At rest: the last frame before the next jump (or the end), against the reference of
+      // the tiles resident then.
+      const double next_t = (k + 1) / args.fps;
+      if (next_t > duration || path->jumpsBetween(t_s, next_t)) {
+        const size_t index = jumps.size() - 1;
+        Picture picture = gpu->renderer().readPixels();
+        ReferenceOptions reference_options;
+        reference_options.available = [&](const TileId& id) {
+          return gpu->renderer().resident(id);
+        };
+        Result<Picture> reference = renderReference(**archive, view, reference_options);
+        if (!reference) return reportError(reference.error());
+        Result<PictureDifference> difference = comparePictures(picture, *reference);
+        if (!difference) return reportError(difference.error());
+        jump.rest_psnr_db = difference->psnr_db;
+        jump.rest_max_abs = difference->max_abs;
+        Result<void> saved =
+            savePicture(picture, fmt::format("rest-{}.png", index),
+                        fmt::format("at rest before jump {}: {:.1f} dB against the CPU reference",
+                                    index + 1, std::min(difference->psnr_db, 99.0)));
+        if (!saved) return reportError(saved.error());
+        saved = savePicture(levelOverlay(picture, view, info, reference_options.available),
+                            fmt::format("rest-{}-levels.png", index),
+                            fmt::format("the same, tinted by the level that draws each pixel"));
+        if (!saved) return reportError(saved.error());
+      }
+    }
   }
+  if (gpu) {
+    std::vector<double> gpu_ms = gpu->finishGpuTimes();
+    for (size_t i = 0; i < report_frames.size() && i < gpu_ms.size(); ++i)
+      report_frames[i].gpu_ms = gpu_ms[i];
+  }
+  for (size_t i = 0; i < csv_rows.size(); ++i)
+    csv << csv_rows[i] << ","
+        << (i < report_frames.size() && report_frames[i].gpu_ms >= 0
+                ? fmt::format("{:.4f}", report_frames[i].gpu_ms)
+                : std::string("-1"))
+        << "\n";
   CacheStats cache = (*streamer)->cacheStats();
   const std::string policy_name = (*streamer)->cache().policyName();
   const uint32_t threads =
@@ -250,6 +310,12 @@ int runFly(const FlyArgs& args) {
          j.full_detail_ms < 0 ? nlohmann::json() : nlohmann::json(j.full_detail_ms)},
         {"clip_region_ms",
          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}};
+    if (gpu) {
+      entry["rest_psnr_db"] = j.rest_psnr_db < 0           ? nlohmann::json()
+                              : std::isinf(j.rest_psnr_db) ? nlohmann::json(999.0)
+                                                           : nlohmann::json(j.rest_psnr_db);
+      entry["rest_max_abs"] = j.rest_max_abs;
+    }
     if (args.decode_bound) {
       entry["tiles_uploaded"] = j.uploaded.size();
       entry["decode_bound_ms"] = j.decode_bound_ms;
@@ -294,7 +360,26 @@ int runFly(const FlyArgs& args) {
         {"evictions", cache.evictions},
         {"peak_bytes", cache.peak_bytes}}},
       {"peak_rss_bytes", peakRssBytes()}};
+  if (gpu) {
+    std::vector<double> gpu_ms;
+    for (const ReportFrame& f : report_frames)
+      if (f.gpu_ms >= 0) gpu_ms.push_back(f.gpu_ms);
+    auto stats = [](const std::vector<double>& v) {
+      return nlohmann::json{{"p50", percentile(v, 50)},
+                            {"p99", percentile(v, 99)},
+                            {"max", v.empty() ? 0 : *std::max_element(v.begin(), v.end())}};
+    };
+    summary["renderer"] = args.render;
+    summary["gl"] = gpu->description();
+    summary["render_ms"] = stats(render_ms);
+    summary["gpu_ms"] = stats(gpu_ms);
+  }
   std::ofstream(args.out_dir + "/summary.json") << summary.dump(2) << "\n";
+  if (args.report) {
+    Result<void> written =
+        writeFlyReport(args.out_dir + "/report.html", summary, report_frames, report_pictures);
+    if (!written) return reportError(written.error());
+  }
   if (args.json) {
     std::printf("%s\n", summary.dump(2).c_str());
   } else if (!args.quiet) {
@@ -309,8 +394,6 @@ int runFly(const FlyArgs& args) {
   }
   return kExitOk;
 }
-
-}  // namespace
 
 void registerFlyCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FlyArgs>();
@@ -357,6 +440,15 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_flag("--decode-bound", args->decode_bound,
                 "After the flight, time decoding each jump's uploaded tiles on every thread "
                 "from memory (the decode part of the physical bound)");
+  cmd->add_option("--render", args->render,
+                  "Draw every frame headless: tile-quads or clipmap (none: no GPU work)")
+      ->check(CLI::IsMember({"none", "tile-quads", "clipmap"}))
+      ->capture_default_str();
+  cmd->add_option("--screenshots", args->screenshot_frames,
+                  "Frames to save as frame-N.png (with --render)")
+      ->delimiter(',');
+  cmd->add_flag("--report", args->report,
+                "Write report.html: plots and pictures in one self-contained page");
   cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
   cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
 }

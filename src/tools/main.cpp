@@ -70,6 +70,7 @@ int main(int argc, char** argv) {
   registerVerifyCommand(app, exit_code);
   registerExtractCommand(app, exit_code);
   registerFlyCommand(app, exit_code);
+  registerDemoCommand(app, exit_code);
   registerViewCommand(app, exit_code);
   try {
     app.parse(argc, argv);

@@ -23,6 +23,7 @@
 
 #include "tools/cli.h"
 #include "tools/view_camera.h"
+#include "tools/view_command.h"
 #include "tools/view_overlay.h"
 #include "tools/view_screenshot.h"
 
@@ -31,17 +32,6 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-struct ViewArgs {
-  std::string archive;
-  std::string renderer = "tile-quads";
-  uint32_t image = 0;
-  std::string size = "1280x720";
-  size_t cache_mib = 512;
-  bool perspective = false;
-  std::string screenshot_dir = ".";
-  uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
-};
 
 constexpr double kFlyPitchRad = -0.6;
 constexpr size_t kFrameHistory = 300;
@@ -375,6 +365,8 @@ Result<std::unique_ptr<GlRenderer>> switchRenderer(
   return GlRenderer::create(kind, info);
 }
 
+}  // namespace
+
 int runView(const ViewArgs& args) {
   uint32_t window_w = 0, window_h = 0;
   if (std::sscanf(args.size.c_str(), "%ux%u", &window_w, &window_h) != 2 || window_w == 0 ||
@@ -506,8 +498,6 @@ int runView(const ViewArgs& args) {
   }
   return exit_code;
 }
-
-}  // namespace
 
 void registerViewCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ViewArgs>();

@@ -295,6 +295,37 @@ TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
   EXPECT_GT(summary["tiles_loaded"].get<uint64_t>(), 0u);
   EXPECT_EQ(summary["load_failures"].get<uint64_t>(), 0u);
 
+  // Rendered headless (EGL on llvmpipe in CI): GPU and render-thread times, pictures at rest
+  // against the CPU reference, screenshots and the self-contained report.
+  const std::string bordered = work_ + "fly-b1.tess";
+  ASSERT_EQ(run({"build", "synthetic:4096x2048:2:3", "-o", bordered, "--tile", "128", "--border",
+                 "1", "--codec", "png", "-q"})
+                .exit_code,
+            0);
+  for (const std::string renderer : {"tile-quads", "clipmap"}) {
+    SCOPED_TRACE(renderer);
+    const std::string rendered = work_ + "fly-" + renderer;
+    RunResult drawn =
+        run({"fly", bordered, "--path", path_file, "--fps", "30", "--viewport", "160x120",
+             "--render", renderer, "--screenshots", "3,20", "--report", "-q", "--out", rendered});
+    ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+    nlohmann::json s = nlohmann::json::parse(slurp(rendered + "/summary.json"));
+    EXPECT_EQ(s["renderer"], renderer);
+    EXPECT_GT(s["render_ms"]["p50"].get<double>(), 0);
+    EXPECT_GT(s["gpu_ms"]["max"].get<double>(), 0);
+    for (const auto& jump : s["jumps"]) EXPECT_GE(jump["rest_psnr_db"].get<double>(), 45.0);
+    for (const char* file : {"frame-3.png", "frame-20.png", "rest-0.png", "rest-1.png",
+                             "rest-1-levels.png", "report.html"})
+      EXPECT_TRUE(std::filesystem::exists(rendered + "/" + file)) << file;
+    const std::string html = slurp(rendered + "/report.html");
+    EXPECT_NE(html.find("<svg"), std::string::npos);
+    EXPECT_NE(html.find("data:image/png;base64,iVBORw0KGgo"), std::string::npos);  // a PNG
+    EXPECT_EQ(html.find("http"), html.find("http://www.w3.org/2000/svg"))
+        << "the report fetches nothing";
+  }
+  RunResult bogus = run({"fly", bordered, "--render", "vulkan", "-q", "--out", out});
+  EXPECT_EQ(bogus.exit_code, 2);
+
   // A path file with a bad line fails naming the file; no archive fails naming it.
   std::ofstream(work_ + "bad.path") << "0 600 600 1\n0.5 six hundred 600 1\n";
   RunResult bad_path = run({"fly", archive, "--path", work_ + "bad.path", "-q", "--out", out});

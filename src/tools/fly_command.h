@@ -1,0 +1,43 @@
+#pragma once
+// `tessera fly`, callable from other commands (`tessera demo` flies its standard paths).
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include <tessera/stream.h>
+
+namespace tessera::cli {
+
+/// Every option of `tessera fly` (docs/fly.md).
+struct FlyArgs {
+  std::string archive;
+  std::string path = "pan";
+  double speed_px_s = 1000;
+  double duration_s = 10;
+  std::string viewport = "1920x1080";
+  double fps = 60;
+  size_t cache_mib = 512;
+  std::string eviction = "viewer-shift";
+  uint32_t threads = 0;
+  uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
+  uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
+  uint64_t merge_gap_kib = StreamerOptions{}.merge_gap_bytes >> 10;
+  uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
+  std::string loader_priority = "idle";
+  uint32_t image = 0;
+  std::string out_dir = "fly-out";
+  bool json = false;
+  bool quiet = false;
+  bool cold = false;
+  bool decode_bound = false;
+  std::string render = "none";
+  std::vector<uint64_t> screenshot_frames;
+  bool report = false;
+};
+
+/// Flies and writes frames.csv, summary.json (and with `report`, report.html) to `out_dir`.
+/// Returns the command's exit code, having printed any error.
+int runFly(const FlyArgs& args);
+
+}  // namespace tessera::cli

@@ -1,0 +1,25 @@
+#pragma once
+// `tessera view`, callable from other commands (`tessera demo --view`).
+
+#include <cstdint>
+#include <string>
+
+namespace tessera::cli {
+
+/// Every option of `tessera view` (docs/view.md).
+struct ViewArgs {
+  std::string archive;
+  std::string renderer = "tile-quads";
+  uint32_t image = 0;
+  std::string size = "1280x720";
+  size_t cache_mib = 512;
+  bool perspective = false;
+  std::string screenshot_dir = ".";
+  uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
+};
+
+/// Opens the window and runs until it closes. Returns the command's exit code, having printed
+/// any error (no display included).
+int runView(const ViewArgs& args);
+
+}  // namespace tessera::cli
