@@ -10,6 +10,7 @@
 #include <set>
 #include <sstream>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -334,6 +335,26 @@ TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
   RunResult missing = run({"fly", work_ + "none.tess", "-q", "--out", out});
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find("none.tess"), std::string::npos) << missing.err;
+}
+
+TEST_F(Cli, DemoBuildsOnceFliesTheStandardPathsAndLinksTheirReports) {
+  const std::string dir = work_ + "demo";
+  RunResult first =
+      run({"demo", "--dir", dir, "--size", "2048x1024", "--seconds", "1", "--viewport", "160x120"});
+  ASSERT_EQ(first.exit_code, 0) << first.err;
+  EXPECT_NE(first.out.find("building"), std::string::npos);
+  EXPECT_NE(first.out.find(dir + "/demo.html"), std::string::npos) << first.out;
+  const std::string index = slurp(dir + "/demo.html");
+  for (const char* path : {"jump", "pan", "zoom"}) {
+    EXPECT_NE(index.find(fmt::format("demo/{}/report.html", path)), std::string::npos) << path;
+    EXPECT_TRUE(std::filesystem::exists(dir + "/demo/" + path + "/report.html")) << path;
+    nlohmann::json s = nlohmann::json::parse(slurp(dir + "/demo/" + path + "/summary.json"));
+    EXPECT_EQ(s["frames_fully_covered_pct"].get<double>(), 100.0) << path;
+  }
+  RunResult second = run(
+      {"demo", "--dir", dir, "--size", "2048x1024", "--seconds", "0.5", "--viewport", "160x120"});
+  ASSERT_EQ(second.exit_code, 0) << second.err;
+  EXPECT_NE(second.out.find("up to date"), std::string::npos) << second.out;
 }
 
 TEST_F(Cli, BadInputsFailNamingTheFileAndLeaveNoOutput) {
