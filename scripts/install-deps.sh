@@ -10,6 +10,7 @@ packages=(
   libcli11-dev libfmt-dev nlohmann-json3-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri libimgui-dev
+  xvfb
 )
 
 missing=()

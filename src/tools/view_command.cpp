@@ -410,6 +410,11 @@ int runView(const ViewArgs& args) {
     v.view.ortho = fitImage(info, uint32_t(std::max(1, fw)), uint32_t(std::max(1, fh)));
   }
   if (args.perspective) togglePerspective(v);
+  for (const std::string& name : args.overlays) {
+    v.overlays.levels |= name == "levels";
+    v.overlays.clip_regions |= name == "clip";
+    v.overlays.grid |= name == "grid";
+  }
   glfwSetWindowUserPointer(window, &v);
   glfwSetScrollCallback(window, onScroll);
   glfwSetMouseButtonCallback(window, onMouseButton);
@@ -512,6 +517,10 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--cache-mib", args->cache_mib, "Tile cache budget in MiB")
       ->capture_default_str();
   cmd->add_flag("--perspective", args->perspective, "Start in the perspective fly-over");
+  cmd->add_option("--overlays", args->overlays,
+                  "Overlays on from the start: levels, clip, grid (comma-separated)")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"levels", "clip", "grid"}));
   cmd->add_option("--screenshot-dir", args->screenshot_dir, "Folder for tessera-screenshot-<n>.png")
       ->capture_default_str();
   // For tests and scripted runs: an empty group hides it from --help.

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace tessera::cli {
 
@@ -15,6 +16,8 @@ struct ViewArgs {
   size_t cache_mib = 512;
   bool perspective = false;
   std::string screenshot_dir = ".";
+  /// Overlays on from the start: any of "levels", "clip", "grid" (also toggled by L, C, G).
+  std::vector<std::string> overlays;
   uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
 };
 

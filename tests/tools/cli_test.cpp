@@ -484,6 +484,35 @@ TEST_F(Cli, ViewUnderXvfbDrawsFramesAndWritesAScreenshot) {
         colours.insert(p[0] | p[1] << 8 | p[2] << 16);
       }
     EXPECT_GT(colours.size(), 20u) << renderer << ": the screenshot is nearly blank";
+
+    // The same view with every overlay on (screenshots include them), and the fly-over.
+    const std::string overlaid = work_ + renderer + "-overlays";
+    std::filesystem::create_directories(overlaid);
+    RunResult with_overlays =
+        runProgram(xvfb_run,
+                   {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive,
+                    "--renderer", renderer, "--size", "320x240", "--frames", "30", "--overlays",
+                    "levels,clip,grid", "--screenshot-dir", overlaid},
+                   logs_);
+    ASSERT_EQ(with_overlays.exit_code, 0) << with_overlays.err;
+    const std::string tinted = slurp(overlaid + "/tessera-screenshot-1.png");
+    Image overlay_picture(320, 240, 4);
+    ASSERT_TRUE(detail::decodeTile(Codec::kPng,
+                                   {reinterpret_cast<const uint8_t*>(tinted.data()), tinted.size()},
+                                   overlay_picture));
+    size_t changed = 0;
+    for (size_t i = 0; i < picture.texels.size(); i += 4)
+      changed += std::abs(int(picture.texels[i]) - int(overlay_picture.texels[i])) > 8 ||
+                 std::abs(int(picture.texels[i + 2]) - int(overlay_picture.texels[i + 2])) > 8;
+    EXPECT_GT(changed, picture.texels.size() / 4 / 4) << renderer << ": overlays not drawn";
+    RunResult fly_over =
+        runProgram(xvfb_run,
+                   {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive,
+                    "--renderer", renderer, "--size", "320x240", "--frames", "20", "--perspective",
+                    "--screenshot-dir", overlaid},
+                   logs_);
+    EXPECT_EQ(fly_over.exit_code, 0) << fly_over.err;
+    EXPECT_TRUE(std::filesystem::exists(overlaid + "/tessera-screenshot-2.png"));
   }
 }
 
