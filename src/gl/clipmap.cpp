@@ -99,7 +99,7 @@ void main() {
 }
 )";
 
-class ClipmapRenderer final : public GlRenderer {
+class ClipmapRenderer final : public TargetRenderer {
  public:
   ClipmapRenderer(const ImageInfo& info, const GlRendererOptions& options)
       : info_(info), options_(options) {}
@@ -129,7 +129,6 @@ class ClipmapRenderer final : public GlRenderer {
     anchor_frac_uniform_ = glGetUniformLocation(p, "u_anchor_frac");
     slots_uniform_ = glGetUniformLocation(p, "u_slots");
     vertex_array_ = createVertexArray();
-    upload_buffer_ = createBuffer();
     return {};
   }
 
@@ -155,13 +154,11 @@ class ClipmapRenderer final : public GlRenderer {
     }
 
     struct Pending {
-      const DecodedTile* tile;
+      const DecodedTile* tile;  ///< null when a later tile of this frame took its slot
       uint32_t slot;
-      size_t offset;
     };
     std::vector<Pending> pending;
     std::unordered_map<TileId, size_t, TileIdHash> pending_index;
-    size_t total = 0;
     for (const auto& tile : update.uploads) {
       const TileId& id = tile->id;
       if (tile->texels.channels != info_.channels ||
@@ -198,20 +195,14 @@ class ClipmapRenderer final : public GlRenderer {
       setOwner(id.level, slot, &id);
       slot_of_[id] = slot;
       pending_index[id] = pending.size();
-      pending.push_back({tile.get(), slot, total});
-      total += tile->texels.texels.size();
+      pending.push_back({tile.get(), slot});
     }
     if (!pending.empty()) {
-      glNamedBufferData(upload_buffer_.get(), GLsizeiptr(total), nullptr, GL_STREAM_DRAW);
-      auto* mapped = static_cast<uint8_t*>(
-          glMapNamedBufferRange(upload_buffer_.get(), 0, GLsizeiptr(total),
-                                GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+      std::vector<std::pair<const uint8_t*, size_t>> sources;
       for (const Pending& p : pending)
         if (p.tile)
-          std::memcpy(mapped + p.offset, p.tile->texels.texels.data(),
-                      p.tile->texels.texels.size());
-      glUnmapNamedBuffer(upload_buffer_.get());
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, upload_buffer_.get());
+          sources.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
+      staging_.stage(sources);
       // The tile's interior only: its borders are its neighbours' texels, which sit beside it
       // in the layer already.
       glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
@@ -219,12 +210,14 @@ class ClipmapRenderer final : public GlRenderer {
       glPixelStorei(GL_UNPACK_SKIP_PIXELS, GLint(info_.border_px));
       glPixelStorei(GL_UNPACK_SKIP_ROWS, GLint(info_.border_px));
       const GLsizei t = GLsizei(info_.tile_size_px);
+      size_t offset = 0;  // staged one after the other, in this order
       for (const Pending& p : pending) {
         if (!p.tile) continue;
         const GLint sx = GLint(p.slot % slots_) * t, sy = GLint(p.slot / slots_) * t;
         glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(p.tile->id.level), t, t, 1,
-                            pixelFormat(), GL_UNSIGNED_BYTE,
-                            reinterpret_cast<const void*>(p.offset));
+                            tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                            reinterpret_cast<const void*>(offset));
+        offset += p.tile->texels.texels.size();
         streamer.uploaded(p.tile->id);
         ++stats_.uploads;
         stats_.upload_bytes += p.tile->texels.texels.size();
@@ -232,7 +225,7 @@ class ClipmapRenderer final : public GlRenderer {
       glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
       glPixelStorei(GL_UNPACK_SKIP_PIXELS, 0);
       glPixelStorei(GL_UNPACK_SKIP_ROWS, 0);
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+      staging_.unbind();
     }
     stats_.resident_tiles = uint32_t(slot_of_.size());
     stats_.apply_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
@@ -281,18 +274,6 @@ class ClipmapRenderer final : public GlRenderer {
     stats_.draw_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   }
 
-  Picture readPixels() override {
-    Picture picture;
-    picture.width = target_.width();
-    picture.height = target_.height();
-    target_.read(picture.rgba);
-    return picture;
-  }
-
-  void present(uint32_t window_width, uint32_t window_height) override {
-    target_.blitToWindow(window_width, window_height);
-  }
-
   bool resident(const TileId& tile) const override { return slot_of_.count(tile) > 0; }
   const RenderStats& stats() const override { return stats_; }
   RendererKind kind() const override { return RendererKind::kClipmap; }
@@ -307,21 +288,12 @@ class ClipmapRenderer final : public GlRenderer {
     layer.owners = owners_[level];
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glGetTextureSubImage(texels_.get(), 0, 0, 0, GLint(level), GLsizei(layer.side),
-                         GLsizei(layer.side), 1, pixelFormat(), GL_UNSIGNED_BYTE,
+                         GLsizei(layer.side), 1, tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
                          GLsizei(layer.texels.size()), layer.texels.data());
     return layer;
   }
 
  private:
-  GLenum pixelFormat() const {
-    switch (info_.channels) {
-      case 1: return GL_RED;
-      case 2: return GL_RG;
-      case 3: return GL_RGB;
-      default: return GL_RGBA;
-    }
-  }
-
   uint32_t slotOf(const TileId& id) const { return (id.y % slots_) * slots_ + (id.x % slots_); }
 
   bool inRegion(const TileId& id) const {
@@ -341,14 +313,7 @@ class ClipmapRenderer final : public GlRenderer {
     slots_ = slots;
     const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
     const GLsizei levels = GLsizei(info_.level_count);
-    static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
-    texels_ = createTexture(GL_TEXTURE_2D_ARRAY);
-    glTextureStorage3D(texels_.get(), 1, kInternal[info_.channels - 1], side, side, levels);
-    const GLint swizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
-                                  {GL_RED, GL_RED, GL_RED, GL_GREEN},
-                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
-                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
-    glTextureParameteriv(texels_.get(), GL_TEXTURE_SWIZZLE_RGBA, swizzles[info_.channels - 1]);
+    texels_ = createTileArray(info_.channels, side, levels);
     owner_ = createTexture(GL_TEXTURE_2D_ARRAY);
     glTextureStorage3D(owner_.get(), 1, GL_RG32UI, GLsizei(slots_), GLsizei(slots_), levels);
     // An integer texture with a linear filter is incomplete, and fetches from it return 0.
@@ -371,9 +336,8 @@ class ClipmapRenderer final : public GlRenderer {
   std::vector<std::vector<std::optional<TileId>>> owners_;  ///< per level, per slot
   std::unordered_map<TileId, uint32_t, TileIdHash> slot_of_;
   std::vector<TileRect> regions_;  ///< this frame's clip region per level
-  Buffer upload_buffer_;
+  UploadStaging staging_;
   VertexArray vertex_array_;
-  ColourTarget target_;
   RenderStats stats_;
 };
 

@@ -1,5 +1,6 @@
 #include "gl/gl_objects.h"
 
+#include <algorithm>
 #include <cstring>
 #include <vector>
 
@@ -81,6 +82,58 @@ Result<Program> linkProgram(const char* name, const std::string& vertex_source,
                 fmt::format("{} program does not link: {}", name, log.c_str()));
   }
   return program;
+}
+
+GLenum tilePixelFormat(uint32_t channels) {
+  switch (channels) {
+    case 1: return GL_RED;
+    case 2: return GL_RG;
+    case 3: return GL_RGB;
+    default: return GL_RGBA;
+  }
+}
+
+Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers) {
+  static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
+  static const GLint kSwizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
+                                        {GL_RED, GL_RED, GL_RED, GL_GREEN},
+                                        {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
+                                        {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
+  const uint32_t c = std::clamp<uint32_t>(channels, 1, 4) - 1;
+  Texture texture = createTexture(GL_TEXTURE_2D_ARRAY);
+  while (glGetError() != GL_NO_ERROR) {
+  }
+  glTextureStorage3D(texture.get(), 1, kInternal[c], side, side, layers);
+  if (glGetError() != GL_NO_ERROR) return Texture();
+  glTextureParameteri(texture.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTextureParameteri(texture.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  glTextureParameteriv(texture.get(), GL_TEXTURE_SWIZZLE_RGBA, kSwizzles[c]);
+  return texture;
+}
+
+void UploadStaging::stage(const std::vector<std::pair<const uint8_t*, size_t>>& sources) {
+  if (!buffer_) buffer_ = createBuffer();
+  size_t total = 0;
+  for (const auto& source : sources) total += source.second;
+  glNamedBufferData(buffer_.get(), GLsizeiptr(std::max<size_t>(total, 1)), nullptr, GL_STREAM_DRAW);
+  if (total > 0) {
+    auto* mapped = static_cast<uint8_t*>(glMapNamedBufferRange(
+        buffer_.get(), 0, GLsizeiptr(total), GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+    size_t offset = 0;
+    for (const auto& [data, length] : sources) {
+      std::memcpy(mapped + offset, data, length);
+      offset += length;
+    }
+    glUnmapNamedBuffer(buffer_.get());
+  }
+  glBindBuffer(GL_PIXEL_UNPACK_BUFFER, buffer_.get());
+  glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+}
+
+void UploadStaging::unbind() {
+  glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
 }
 
 void ColourTarget::bind(uint32_t width, uint32_t height) {

@@ -75,6 +75,29 @@ Framebuffer createFramebuffer();
 [[nodiscard]] Result<Program> linkProgram(const char* name, const std::string& vertex_source,
                                           const std::string& fragment_source);
 
+/// Pixel transfer format of a tile with `channels` channels: GL_RED, GL_RG, GL_RGB, GL_RGBA.
+GLenum tilePixelFormat(uint32_t channels);
+
+/// A 2D array texture that stores tiles of `channels` channels as they are stored
+/// (GL_R8 ... GL_RGBA8), with a swizzle that shows grey as (g, g, g, 1), grey+alpha as
+/// (g, g, g, a) and RGB as opaque, as tessera/render.h's Picture does. Linear filtering,
+/// clamped at the edges. Null when the driver cannot allocate it.
+Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers);
+
+/// A frame's upload staging: the bytes of every tile copied into one pixel-unpack buffer,
+/// orphaned each frame so the driver never waits for the previous frame's transfer.
+class UploadStaging {
+ public:
+  /// Copies `sources` (pointer, length) one after the other and leaves the buffer bound as
+  /// GL_PIXEL_UNPACK_BUFFER; texture updates then take their offsets as pointers.
+  void stage(const std::vector<std::pair<const uint8_t*, size_t>>& sources);
+  /// Unbinds the buffer (later pixel transfers read client memory again).
+  void unbind();
+
+ private:
+  Buffer buffer_;
+};
+
 /// An RGBA8 colour target of a given size, drawn into and read back.
 class ColourTarget {
  public:

@@ -79,6 +79,18 @@ ViewTransform viewTransform(const View& view, const ImageInfo& info) {
   return t;
 }
 
+Picture TargetRenderer::readPixels() {
+  Picture picture;
+  picture.width = target_.width();
+  picture.height = target_.height();
+  target_.read(picture.rgba);
+  return picture;
+}
+
+void TargetRenderer::present(uint32_t window_width, uint32_t window_height) {
+  target_.blitToWindow(window_width, window_height);
+}
+
 }  // namespace gl
 
 Result<std::unique_ptr<GlRenderer>> GlRenderer::create(RendererKind kind, const ImageInfo& info,

@@ -7,6 +7,8 @@
 
 #include <tessera/gl.h>
 
+#include "gl/gl_objects.h"
+
 namespace tessera::gl {
 
 /// Maps level-0 texel coordinates, taken relative to `anchor` (the ortho view's centre or the
@@ -19,6 +21,17 @@ struct ViewTransform {
 /// The transform of tessera::textureAt: a point the view shows at screen position (sx, sy)
 /// lands on that pixel.
 ViewTransform viewTransform(const View& view, const ImageInfo& info);
+
+/// What both renderers share: the colour target a view is drawn into, read back from and
+/// presented from.
+class TargetRenderer : public GlRenderer {
+ public:
+  Picture readPixels() override;
+  void present(uint32_t window_width, uint32_t window_height) override;
+
+ protected:
+  ColourTarget target_;
+};
 
 [[nodiscard]] Result<std::unique_ptr<GlRenderer>> createTileQuadsRenderer(
     const ImageInfo& info, const GlRendererOptions& options);

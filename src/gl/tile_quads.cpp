@@ -86,7 +86,7 @@ struct Instance {
   int32_t info[4];
 };
 
-class TileQuadsRenderer final : public GlRenderer {
+class TileQuadsRenderer final : public TargetRenderer {
  public:
   TileQuadsRenderer(const ImageInfo& info, const GlRendererOptions& options)
       : info_(info), options_(options) {}
@@ -120,7 +120,6 @@ class TileQuadsRenderer final : public GlRenderer {
     glEnableVertexArrayAttrib(vao, 2);
     glVertexArrayAttribIFormat(vao, 2, 4, GL_INT, offsetof(Instance, info));
     glVertexArrayAttribBinding(vao, 2, 0);
-    upload_buffer_ = createBuffer();
     return {};
   }
 
@@ -159,26 +158,20 @@ class TileQuadsRenderer final : public GlRenderer {
       total += tile->texels.texels.size();
     }
     if (!pending.empty()) {
-      // One pixel-buffer copy for the frame, orphaned so the driver never waits for the last
-      // frame's transfer; the texture updates then read from it.
-      glNamedBufferData(upload_buffer_.get(), GLsizeiptr(total), nullptr, GL_STREAM_DRAW);
-      auto* mapped = static_cast<uint8_t*>(
-          glMapNamedBufferRange(upload_buffer_.get(), 0, GLsizeiptr(total),
-                                GL_MAP_WRITE_BIT | GL_MAP_INVALIDATE_BUFFER_BIT));
+      std::vector<std::pair<const uint8_t*, size_t>> sources;
       for (const Pending& p : pending)
-        std::memcpy(mapped + p.offset, p.tile->texels.texels.data(), p.tile->texels.texels.size());
-      glUnmapNamedBuffer(upload_buffer_.get());
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, upload_buffer_.get());
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        sources.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
+      staging_.stage(sources);
       const GLsizei side = GLsizei(info_.storedTileSidePx());
       for (const Pending& p : pending) {
-        glTextureSubImage3D(tiles_.get(), 0, 0, 0, p.layer, side, side, 1, pixelFormat(),
-                            GL_UNSIGNED_BYTE, reinterpret_cast<const void*>(p.offset));
+        glTextureSubImage3D(tiles_.get(), 0, 0, 0, p.layer, side, side, 1,
+                            tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                            reinterpret_cast<const void*>(p.offset));
         streamer.uploaded(p.tile->id);
         ++stats_.uploads;
         stats_.upload_bytes += p.tile->texels.texels.size();
       }
-      glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
+      staging_.unbind();
     }
     stats_.resident_tiles = uint32_t(layers_.size());
     stats_.apply_cpu_ms = msSince(started);
@@ -245,53 +238,19 @@ class TileQuadsRenderer final : public GlRenderer {
     stats_.draw_cpu_ms = msSince(started);
   }
 
-  Picture readPixels() override {
-    Picture picture;
-    picture.width = target_.width();
-    picture.height = target_.height();
-    target_.read(picture.rgba);
-    return picture;
-  }
-
-  void present(uint32_t window_width, uint32_t window_height) override {
-    target_.blitToWindow(window_width, window_height);
-  }
-
   bool resident(const TileId& tile) const override { return layers_.count(tile) > 0; }
   const RenderStats& stats() const override { return stats_; }
   RendererKind kind() const override { return RendererKind::kTileQuads; }
 
  private:
-  GLenum pixelFormat() const {
-    switch (info_.channels) {
-      case 1: return GL_RED;
-      case 2: return GL_RG;
-      case 3: return GL_RGB;
-      default: return GL_RGBA;
-    }
-  }
-
   /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
   Result<void> growLayers(uint32_t layers) {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
-    static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
-    Texture grown = createTexture(GL_TEXTURE_2D_ARRAY);
-    glGetError();
-    glTextureStorage3D(grown.get(), 1, kInternal[info_.channels - 1], side, side, GLsizei(layers));
-    if (glGetError() != GL_NO_ERROR)
+    Texture grown = createTileArray(info_.channels, side, GLsizei(layers));
+    if (!grown)
       return fail(
           ErrorCode::kTooLarge,
           fmt::format("tile array of {} layers of {} px does not fit in GPU memory", layers, side));
-    glTextureParameteri(grown.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-    glTextureParameteri(grown.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-    glTextureParameteri(grown.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-    glTextureParameteri(grown.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    // Grey and grey+alpha tiles show as grey, RGB as opaque (tessera/render.h's Picture).
-    const GLint swizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
-                                  {GL_RED, GL_RED, GL_RED, GL_GREEN},
-                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
-                                  {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
-    glTextureParameteriv(grown.get(), GL_TEXTURE_SWIZZLE_RGBA, swizzles[info_.channels - 1]);
     if (tiles_ && layer_capacity_ > 0)
       glCopyImageSubData(tiles_.get(), GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, grown.get(),
                          GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, side, side, GLsizei(layer_capacity_));
@@ -332,10 +291,9 @@ class TileQuadsRenderer final : public GlRenderer {
   std::vector<GLint> free_layers_;
   std::unordered_map<TileId, GLint, TileIdHash> layers_;
   Buffer instances_buffer_;
-  Buffer upload_buffer_;
+  UploadStaging staging_;
   VertexArray vertex_array_;
   std::vector<Instance> instances_;
-  ColourTarget target_;
   RenderStats stats_;
 };
 
