@@ -36,15 +36,20 @@ const char* kVertexShader = R"(#version 450 core
 layout(location = 0) in vec4 a_rect;
 layout(location = 1) in vec4 a_origins;
 layout(location = 2) in ivec4 a_info;
+layout(location = 3) in ivec2 a_tile;  // the tile's (x, y) at its level
 uniform mat4 u_view_projection;
 out vec2 v_world;
 flat out vec4 v_origins;
 flat out ivec4 v_info;
+flat out ivec2 v_tile;
+flat out int v_instance;
 void main() {
   vec2 corner = vec2(gl_VertexID & 1, gl_VertexID >> 1);
   v_world = mix(a_rect.xy, a_rect.zw, corner);
   v_origins = a_origins;
   v_info = a_info;
+  v_tile = a_tile;
+  v_instance = gl_InstanceID;
   gl_Position = u_view_projection * vec4(v_world, 0.0, 1.0);
 }
 )";
@@ -53,16 +58,46 @@ const char* kFragmentShader = R"(#version 450 core
 in vec2 v_world;
 flat in vec4 v_origins;
 flat in ivec4 v_info;
+flat in ivec2 v_tile;
+flat in int v_instance;
 uniform sampler2DArray u_tiles;
 uniform float u_tile_size;
 uniform float u_border;
 uniform float u_stored_side;
+uniform ivec2 u_level_size[32];  // level width and height in texels
+// Without borders: per instance, the layers of the 3 x 3 tiles around the tile, then around
+// its parent (-1 where not resident).
+layout(std430, binding = 0) readonly buffer Neighbours { int neighbours[]; };
 out vec4 o_colour;
 // Bilinear at `level` inside one stored tile; its border holds the neighbours' texels, so the
 // four texels around any point of the tile are in it.
 vec4 sampleTile(vec2 world, vec2 origin, int level, int layer) {
   vec2 texel = (world - origin) * exp2(-float(level)) + u_border;
   return texture(u_tiles, vec3(texel / u_stored_side, float(layer)));
+}
+// Tiles stored without borders: the four texels come from whichever of the 3 x 3 tiles
+// around `tile` holds them, indices clamped to the level's image as the reference clamps
+// them. A neighbour that is not resident lends nothing: its texel is taken from the nearest
+// texel of this tile instead.
+vec4 sampleBorderless(vec2 world, vec2 origin, int level, ivec2 tile, int table) {
+  int t = int(u_tile_size);
+  vec2 local = (world - origin) * exp2(-float(level)) - 0.5;
+  vec2 base = floor(local);
+  vec2 f = local - base;
+  ivec2 last = u_level_size[level] - 1;
+  vec4 texels[4];
+  for (int k = 0; k < 4; ++k) {
+    ivec2 global = clamp(tile * t + ivec2(base) + ivec2(k & 1, k >> 1), ivec2(0), last);
+    ivec2 d = clamp(global / t - tile, ivec2(-1), ivec2(1));
+    int layer = neighbours[v_instance * 18 + table + (d.y + 1) * 3 + (d.x + 1)];
+    if (layer < 0) {
+      d = ivec2(0);
+      layer = neighbours[v_instance * 18 + table + 4];
+      global = clamp(global, tile * t, tile * t + t - 1);
+    }
+    texels[k] = texelFetch(u_tiles, ivec3(global - (tile + d) * t, layer), 0);
+  }
+  return mix(mix(texels[0], texels[1], f.x), mix(texels[2], texels[3], f.x), f.y);
 }
 void main() {
   // OpenGL's rho: the longer screen-axis derivative of the level-0 texel coordinate.
@@ -71,9 +106,12 @@ void main() {
   int level = v_info.x;
   bool coarsest = v_info.w != 0;
   if (!coarsest && lambda >= float(level + 1)) discard;  // a coarser tile beneath draws here
-  vec4 colour = sampleTile(v_world, v_origins.xy, level, v_info.y);
+  bool borderless = u_border == 0.0;
+  vec4 colour = borderless ? sampleBorderless(v_world, v_origins.xy, level, v_tile, 0)
+                           : sampleTile(v_world, v_origins.xy, level, v_info.y);
   if (lambda > float(level) && v_info.z >= 0) {
-    vec4 parent = sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
+    vec4 parent = borderless ? sampleBorderless(v_world, v_origins.zw, level + 1, v_tile / 2, 9)
+                             : sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
     colour = mix(colour, parent, clamp(lambda - float(level), 0.0, 1.0));
   }
   o_colour = colour;
@@ -84,6 +122,7 @@ struct Instance {
   float rect[4];
   float origins[4];
   int32_t info[4];
+  int32_t tile[2];
 };
 
 class TileQuadsRenderer final : public TargetRenderer {
@@ -120,6 +159,17 @@ class TileQuadsRenderer final : public TargetRenderer {
     glEnableVertexArrayAttrib(vao, 2);
     glVertexArrayAttribIFormat(vao, 2, 4, GL_INT, offsetof(Instance, info));
     glVertexArrayAttribBinding(vao, 2, 0);
+    glEnableVertexArrayAttrib(vao, 3);
+    glVertexArrayAttribIFormat(vao, 3, 2, GL_INT, offsetof(Instance, tile));
+    glVertexArrayAttribBinding(vao, 3, 0);
+    neighbours_buffer_ = createBuffer();
+    std::vector<GLint> sizes;
+    for (uint32_t level = 0; level < std::min(info_.level_count, 32u); ++level) {
+      sizes.push_back(GLint(info_.levelWidthPx(level)));
+      sizes.push_back(GLint(info_.levelHeightPx(level)));
+    }
+    glProgramUniform2iv(program_.get(), glGetUniformLocation(program_.get(), "u_level_size"),
+                        GLsizei(sizes.size() / 2), sizes.data());
     return {};
   }
 
@@ -214,6 +264,8 @@ class TileQuadsRenderer final : public TargetRenderer {
           instance.origins[3] = float(parent.y * 2 * span - transform.anchor_y);
         }
       }
+      instance.tile[0] = int32_t(id.x);
+      instance.tile[1] = int32_t(id.y);
       instance.info[0] = int32_t(id.level);
       instance.info[1] = layer;
       instance.info[2] = parent_layer;
@@ -227,6 +279,30 @@ class TileQuadsRenderer final : public TargetRenderer {
     if (!instances_.empty()) {
       glNamedBufferData(instances_buffer_.get(), GLsizeiptr(instances_.size() * sizeof(Instance)),
                         instances_.data(), GL_STREAM_DRAW);
+      if (info_.border_px == 0) {
+        // Borderless tiles filter across their edges with texels of their resident
+        // neighbours: the layers of the 3 x 3 tiles around each tile and around its parent.
+        neighbours_.clear();
+        auto layerOf = [&](uint32_t level, int64_t x, int64_t y) {
+          if (x < 0 || y < 0) return GLint(-1);
+          auto it = layers_.find({view.image, level, uint32_t(x), uint32_t(y)});
+          return it == layers_.end() ? GLint(-1) : it->second;
+        };
+        for (const Instance& instance : instances_) {
+          const uint32_t level = uint32_t(instance.info[0]);
+          for (int generation = 0; generation < 2; ++generation) {
+            const int64_t x = instance.tile[0] >> generation, y = instance.tile[1] >> generation;
+            for (int dy = -1; dy <= 1; ++dy)
+              for (int dx = -1; dx <= 1; ++dx)
+                neighbours_.push_back(level + generation < info_.level_count
+                                          ? layerOf(level + generation, x + dx, y + dy)
+                                          : GLint(-1));
+          }
+        }
+        glNamedBufferData(neighbours_buffer_.get(), GLsizeiptr(neighbours_.size() * sizeof(GLint)),
+                          neighbours_.data(), GL_STREAM_DRAW);
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, neighbours_buffer_.get());
+      }
       glUseProgram(program_.get());
       glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
                                 transform.view_projection);
@@ -294,6 +370,8 @@ class TileQuadsRenderer final : public TargetRenderer {
   UploadStaging staging_;
   VertexArray vertex_array_;
   std::vector<Instance> instances_;
+  Buffer neighbours_buffer_;
+  std::vector<GLint> neighbours_;
   RenderStats stats_;
 };
 

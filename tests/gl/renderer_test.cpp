@@ -1,6 +1,7 @@
 // The OpenGL backend, headless on EGL's surfaceless platform (Mesa llvmpipe in CI): a real
 // streamer feeds a real renderer; pictures are read back and checked texel by texel.
 #include <algorithm>
+#include <map>
 #include <memory>
 
 #include <gtest/gtest.h>
@@ -246,96 +247,108 @@ std::vector<NamedView> restViews() {
 }
 
 TEST_P(Renderers, AtRestTheyMatchTheReferenceOnALosslessArchive) {
-  test::SyntheticArchiveSpec spec;
-  spec.codec = Codec::kPng;
-  spec.border_px = 1;
-  Rig rig(spec, GetParam());
-  ASSERT_TRUE(rig.ready());
-  for (const NamedView& named : restViews()) {
-    SCOPED_TRACE(named.name);
-    rig.settle(named.view);
-    rig.frame(named.view);
-    Picture gpu = rig.renderer->readPixels();
-    ReferenceOptions options;
-    options.available = [&](const TileId& id) { return rig.renderer->resident(id); };
-    auto reference = renderReference(*rig.archive, named.view, options);
-    ASSERT_TRUE(reference) << reference.error().message;
-    auto difference = comparePictures(gpu, *reference);
-    ASSERT_TRUE(difference) << difference.error().message;
-    EXPECT_GE(difference->psnr_db, 45.0) << "max difference " << difference->max_abs;
-    // Not trivially equal: the view shows texture, not a cleared screen.
-    size_t opaque = 0;
-    for (size_t i = 3; i < gpu.rgba.size(); i += 4) opaque += gpu.rgba[i] == 255;
-    EXPECT_GT(opaque, gpu.rgba.size() / 16);
+  for (uint32_t border : {0u, 1u}) {
+    SCOPED_TRACE(border);
+    test::SyntheticArchiveSpec spec;
+    spec.codec = Codec::kPng;
+    spec.border_px = border;
+    Rig rig(spec, GetParam());
+    ASSERT_TRUE(rig.ready());
+    for (const NamedView& named : restViews()) {
+      SCOPED_TRACE(named.name);
+      rig.settle(named.view);
+      rig.frame(named.view);
+      Picture gpu = rig.renderer->readPixels();
+      ReferenceOptions options;
+      options.available = [&](const TileId& id) { return rig.renderer->resident(id); };
+      auto reference = renderReference(*rig.archive, named.view, options);
+      ASSERT_TRUE(reference) << reference.error().message;
+      auto difference = comparePictures(gpu, *reference);
+      ASSERT_TRUE(difference) << difference.error().message;
+      EXPECT_GE(difference->psnr_db, 45.0) << "max difference " << difference->max_abs;
+      // Not trivially equal: the view shows texture, not a cleared screen.
+      size_t opaque = 0;
+      for (size_t i = 3; i < gpu.rgba.size(); i += 4) opaque += gpu.rgba[i] == 255;
+      EXPECT_GT(opaque, gpu.rgba.size() / 16);
+    }
   }
 }
 
 /// An archive whose 64-px tiles are each one flat colour, unlike their neighbours: any texel
 /// a renderer takes from the wrong tile, or any edge it clamps instead of filtering across,
 /// shows as a seam.
-std::shared_ptr<Archive> checkerArchive() {
-  static std::vector<uint8_t> bytes = [] {
-    const uint32_t w = 512, h = 384, t = 64;
-    std::vector<uint8_t> pixels(size_t(w) * h * 3);
-    for (uint32_t y = 0; y < h; ++y)
-      for (uint32_t x = 0; x < w; ++x) {
-        const uint32_t tile = (y / t) * 97 + (x / t) * 31;
-        uint8_t* p = &pixels[(size_t(y) * w + x) * 3];
-        p[0] = uint8_t((tile * 73) % 256);
-        p[1] = uint8_t((tile * 151 + 80) % 256);
-        p[2] = uint8_t(((x / t + y / t) % 2) * 200 + 20);
-      }
-    const std::string dir = test::testTempDir();
-    test::PngSpec png;
-    png.width_px = w;
-    png.height_px = h;
-    const std::string input = dir + "checker.png", output = dir + "checker.tess";
-    EXPECT_EQ(test::writePng(input, png, pixels), "");
-    BuildOptions options;
-    options.inputs = {input};
-    options.output = output;
-    options.tile_size_px = t;
-    options.border_px = 1;
-    options.codec = Codec::kPng;
-    auto built = buildArchive(options);
-    EXPECT_TRUE(built) << built.error().message;
-    return test::readFileBytes(output);
-  }();
+std::shared_ptr<Archive> checkerArchive(uint32_t border_px) {
+  static std::map<uint32_t, std::vector<uint8_t>> built;
+  auto& bytes = built[border_px];
+  if (bytes.empty())
+    bytes = [border_px] {
+      const uint32_t w = 512, h = 384, t = 64;
+      std::vector<uint8_t> pixels(size_t(w) * h * 3);
+      for (uint32_t y = 0; y < h; ++y)
+        for (uint32_t x = 0; x < w; ++x) {
+          const uint32_t tile = (y / t) * 97 + (x / t) * 31;
+          uint8_t* p = &pixels[(size_t(y) * w + x) * 3];
+          p[0] = uint8_t((tile * 73) % 256);
+          p[1] = uint8_t((tile * 151 + 80) % 256);
+          p[2] = uint8_t(((x / t + y / t) % 2) * 200 + 20);
+        }
+      const std::string dir = test::testTempDir();
+      test::PngSpec png;
+      png.width_px = w;
+      png.height_px = h;
+      const std::string input = dir + "checker.png",
+                        output = dir + "checker-" + std::to_string(border_px) + ".tess";
+      EXPECT_EQ(test::writePng(input, png, pixels), "");
+      BuildOptions options;
+      options.inputs = {input};
+      options.output = output;
+      options.tile_size_px = t;
+      options.border_px = border_px;
+      options.codec = Codec::kPng;
+      auto report = buildArchive(options);
+      EXPECT_TRUE(report) << report.error().message;
+      return test::readFileBytes(output);
+    }();
   return test::openArchiveOrFail(makeMemorySource(bytes, "mem:checker.tess"));
 }
 
 TEST_P(Renderers, TileEdgesShowNoSeamsMagnifiedOrMinified) {
   sharedContext();
-  std::shared_ptr<Archive> archive = checkerArchive();
-  ASSERT_TRUE(archive);
-  StreamerOptions options;
-  options.loader_threads = 2;
-  auto streamer = TileStreamer::create(archive, options);
-  auto renderer = GlRenderer::create(GetParam(), archive->images()[0]);
-  ASSERT_TRUE(streamer && renderer);
-  for (double tpp : {0.25, 0.6, 1.0, 2.5, 3.7}) {
-    SCOPED_TRACE(tpp);
-    // Centred on a corner where four tiles meet (and at the coarser levels too).
-    const View view = orthoAt(256.3, 192.4, tpp, 160, 120);
-    for (int i = 0; i < 200; ++i) {
-      const FrameUpdate& update = (*streamer)->update(view);
-      (*renderer)->apply(update, **streamer);
-      if (update.uploads.empty() && update.report.queue_length == 0 &&
-          update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
-        break;
-      (*streamer)->waitIdleForTesting();
+  // With borders the tile quads filter inside each tile; without, across tiles from their
+  // resident neighbours; the clipmap needs no borders either way.
+  for (uint32_t border : {0u, 1u}) {
+    SCOPED_TRACE(border);
+    std::shared_ptr<Archive> archive = checkerArchive(border);
+    ASSERT_TRUE(archive);
+    StreamerOptions options;
+    options.loader_threads = 2;
+    auto streamer = TileStreamer::create(archive, options);
+    auto renderer = GlRenderer::create(GetParam(), archive->images()[0]);
+    ASSERT_TRUE(streamer && renderer);
+    for (double tpp : {0.25, 0.6, 1.0, 2.5, 3.7}) {
+      SCOPED_TRACE(tpp);
+      // Centred on a corner where four tiles meet (and at the coarser levels too).
+      const View view = orthoAt(256.3, 192.4, tpp, 160, 120);
+      for (int i = 0; i < 200; ++i) {
+        const FrameUpdate& update = (*streamer)->update(view);
+        (*renderer)->apply(update, **streamer);
+        if (update.uploads.empty() && update.report.queue_length == 0 &&
+            update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
+          break;
+        (*streamer)->waitIdleForTesting();
+      }
+      (*renderer)->draw(view);
+      Picture gpu = (*renderer)->readPixels();
+      ReferenceOptions reference_options;
+      reference_options.available = [&](const TileId& id) { return (*renderer)->resident(id); };
+      auto reference = renderReference(*archive, view, reference_options);
+      ASSERT_TRUE(reference);
+      auto difference = comparePictures(gpu, *reference);
+      ASSERT_TRUE(difference);
+      // A seam is a whole row or column of texels off by up to half the colour step (~100).
+      EXPECT_LE(difference->max_abs, 6u);
+      EXPECT_GE(difference->psnr_db, 45.0);
     }
-    (*renderer)->draw(view);
-    Picture gpu = (*renderer)->readPixels();
-    ReferenceOptions reference_options;
-    reference_options.available = [&](const TileId& id) { return (*renderer)->resident(id); };
-    auto reference = renderReference(*archive, view, reference_options);
-    ASSERT_TRUE(reference);
-    auto difference = comparePictures(gpu, *reference);
-    ASSERT_TRUE(difference);
-    // A seam is a whole row or column of texels off by up to half the colour step (~100).
-    EXPECT_LE(difference->max_abs, 6u);
-    EXPECT_GE(difference->psnr_db, 45.0);
   }
 }
 
