@@ -239,7 +239,29 @@ class TileQuadsRenderer final : public TargetRenderer {
     const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
     instances_.clear();
     const uint32_t t = info_.tile_size_px;
+    // An orthographic view has one level of detail everywhere: tiles finer than it would
+    // discard every fragment, and a coarser tile whose children are all resident is hidden
+    // under them. Skipping both keeps overdraw near one layer instead of one per resident
+    // level (on llvmpipe, 9 levels cost 120 ms a 1280x720 frame). Perspective views keep
+    // every level: their level of detail varies across a tile.
+    const bool ortho = view.kind == View::Kind::kOrtho;
+    const uint32_t finest_drawn =
+        ortho ? desiredLevelFor(view.ortho.texels_per_pixel > 0 ? view.ortho.texels_per_pixel : 1,
+                                info_.level_count)
+              : 0;
+    auto hiddenByChildren = [&](const TileId& id) {
+      if (!ortho || id.level == 0 || id.level - 1 < finest_drawn) return false;
+      const uint32_t child_level = id.level - 1;
+      for (uint32_t dy = 0; dy < 2; ++dy)
+        for (uint32_t dx = 0; dx < 2; ++dx) {
+          const uint32_t cx = id.x * 2 + dx, cy = id.y * 2 + dy;
+          if (cx >= info_.tilesX(child_level) || cy >= info_.tilesY(child_level)) continue;
+          if (!layers_.count({id.image, child_level, cx, cy})) return false;
+        }
+      return true;
+    };
     for (const auto& [id, layer] : layers_) {
+      if (id.level < finest_drawn || hiddenByChildren(id)) continue;
       const double span = std::ldexp(double(t), int(id.level));
       double x0 = id.x * span, y0 = id.y * span;
       double x1 = std::min(x0 + span, double(info_.width_px));
