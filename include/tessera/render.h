@@ -65,6 +65,12 @@ struct ReferenceOptions {
 [[nodiscard]] Result<Picture> renderReference(const Archive& archive, const View& view,
                                               const ReferenceOptions& options = {});
 
+/// The level each pixel of `view` shows by the sampling rules (the finest available level at
+/// or above floor(lambda); the next level may blend in), row-major, -1 outside the image or
+/// where nothing is available. Reads no tile: for level overlays (Backes et al., Fig. 1).
+[[nodiscard]] Result<std::vector<int32_t>> levelsShown(const Archive& archive, const View& view,
+                                                       const ReferenceOptions& options = {});
+
 /// How far two pictures of the same size are apart, over all four channels.
 struct PictureDifference {
   double psnr_db = 0;    ///< +infinity when identical

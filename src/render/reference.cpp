@@ -72,14 +72,10 @@ class ReferenceRenderer {
         if (!mapping.map(px + 0.5, py + 0.5, point)) continue;
         if (!(point.u >= 0 && point.u < image_w && point.v >= 0 && point.v < image_h)) continue;
         const double lambda = point.lambda;
-        // L = floor(lambda) clamped to the levels; below 0 is magnification of level 0.
-        const uint32_t level =
-            lambda >= 1 ? uint32_t(std::min(std::floor(lambda), double(coarsest))) : 0;
-        uint32_t shown = level;
-        if (options_.available) {
-          while (shown <= coarsest && !isAvailable(shown, point.u, point.v)) ++shown;
-          if (shown > coarsest) continue;  // nothing resident covers it: transparent
-        }
+        const uint32_t level = wantedLevel(lambda);
+        const int32_t shown_or_none = shownLevel(point);
+        if (shown_or_none < 0) continue;  // nothing resident covers it: transparent
+        const uint32_t shown = uint32_t(shown_or_none);
         double colour[4];
         if (!bilinear(shown, point.u, point.v, colour)) return Unexpected(std::move(error_));
         const double blend =
@@ -99,7 +95,36 @@ class ReferenceRenderer {
     return picture;
   }
 
+  /// The level each pixel shows, row-major; -1 outside the image or where nothing is
+  /// available.
+  std::vector<int32_t> levels(const View& view) {
+    const uint32_t width = view.viewportWidth(), height = view.viewportHeight();
+    std::vector<int32_t> out(size_t(width) * height, -1);
+    const detail::ScreenMapping mapping(view);
+    detail::TexelPoint point;
+    for (uint32_t py = 0; py < height; ++py)
+      for (uint32_t px = 0; px < width; ++px)
+        if (mapping.map(px + 0.5, py + 0.5, point) && point.u >= 0 && point.u < info_.width_px &&
+            point.v >= 0 && point.v < info_.height_px)
+          out[size_t(py) * width + px] = shownLevel(point);
+    return out;
+  }
+
  private:
+  /// L = floor(lambda) clamped to the levels; below 0 is magnification of level 0.
+  uint32_t wantedLevel(double lambda) const {
+    const uint32_t coarsest = info_.level_count - 1;
+    return lambda >= 1 ? uint32_t(std::min(std::floor(lambda), double(coarsest))) : 0;
+  }
+
+  /// The finest available level at or above the wanted one at a point of the image, or -1.
+  int32_t shownLevel(const detail::TexelPoint& point) {
+    uint32_t shown = wantedLevel(point.lambda);
+    if (options_.available)
+      while (shown < info_.level_count && !isAvailable(shown, point.u, point.v)) ++shown;
+    return shown < info_.level_count ? int32_t(shown) : -1;
+  }
+
   static uint64_t keyOf(uint32_t level, int64_t tile_x, int64_t tile_y) {
     return uint64_t(level) << 58 | uint64_t(tile_x) << 29 | uint64_t(tile_y);
   }
@@ -221,6 +246,16 @@ Result<Picture> renderReference(const Archive& archive, const View& view,
   const ImageInfo& info = archive.images()[view.image];
   ReferenceRenderer renderer(archive, info, view.image, options);
   return renderer.render(view);
+}
+
+Result<std::vector<int32_t>> levelsShown(const Archive& archive, const View& view,
+                                         const ReferenceOptions& options) {
+  if (view.image >= archive.images().size())
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: no image {} (archive has {})", archive.name(), view.image,
+                            archive.images().size()));
+  ReferenceRenderer renderer(archive, archive.images()[view.image], view.image, options);
+  return renderer.levels(view);
 }
 
 }  // namespace tessera

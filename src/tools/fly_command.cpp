@@ -272,9 +272,11 @@ int runFly(const FlyArgs& args) {
                         fmt::format("at rest before jump {}: {:.1f} dB against the CPU reference",
                                     index + 1, std::min(difference->psnr_db, 99.0)));
         if (!saved) return reportError(saved.error());
-        saved = savePicture(levelOverlay(picture, view, info, reference_options.available),
-                            fmt::format("rest-{}-levels.png", index),
-                            fmt::format("the same, tinted by the level that draws each pixel"));
+        Result<Picture> tinted =
+            levelOverlay(picture, **archive, view, reference_options.available);
+        if (!tinted) return reportError(tinted.error());
+        saved = savePicture(*tinted, fmt::format("rest-{}-levels.png", index),
+                            "the same, tinted by the level that draws each pixel");
         if (!saved) return reportError(saved.error());
       }
     }

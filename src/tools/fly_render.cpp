@@ -85,27 +85,19 @@ std::vector<double> FlyRenderer::finishGpuTimes() {
   return gpu_ms_;
 }
 
-Picture levelOverlay(const Picture& picture, const View& view, const ImageInfo& info,
-                     const std::function<bool(const TileId&)>& resident) {
+Result<Picture> levelOverlay(const Picture& picture, const Archive& archive, const View& view,
+                             const std::function<bool(const TileId&)>& resident) {
+  ReferenceOptions options;
+  options.available = resident;
+  Result<std::vector<int32_t>> levels = levelsShown(archive, view, options);
+  if (!levels) return forwardError(levels);
   Picture out = picture;
-  const uint32_t coarsest = info.level_count - 1;
-  for (uint32_t py = 0; py < picture.height; ++py) {
-    for (uint32_t px = 0; px < picture.width; ++px) {
-      double u = 0, v = 0;
-      if (!textureAt(view, px + 0.5, py + 0.5, u, v) || u < 0 || v < 0 || u >= info.width_px ||
-          v >= info.height_px)
-        continue;
-      const double lambda = levelOfDetailAt(view, px, py);
-      uint32_t level = lambda <= 0 ? 0 : uint32_t(std::min<double>(std::floor(lambda), coarsest));
-      for (; level < coarsest; ++level) {
-        const double span = std::ldexp(double(info.tile_size_px), int(level));
-        if (resident({view.image, level, uint32_t(u / span), uint32_t(v / span)})) break;
-      }
-      const LevelColour colour = levelColour(level);
-      uint8_t* p = &out.rgba[(size_t(py) * picture.width + px) * 4];
-      const float tint[3] = {colour.r, colour.g, colour.b};
-      for (int c = 0; c < 3; ++c) p[c] = uint8_t(std::lround(p[c] * 0.5 + tint[c] * 127.5));
-    }
+  for (size_t i = 0; i < levels->size() && i * 4 < out.rgba.size(); ++i) {
+    if ((*levels)[i] < 0) continue;
+    const LevelColour colour = levelColour(uint32_t((*levels)[i]));
+    const float tint[3] = {colour.r, colour.g, colour.b};
+    for (int c = 0; c < 3; ++c)
+      out.rgba[i * 4 + c] = uint8_t(std::lround(out.rgba[i * 4 + c] * 0.5 + tint[c] * 127.5));
   }
   return out;
 }

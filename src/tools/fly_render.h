@@ -50,10 +50,11 @@ class FlyRenderer {
   std::vector<double> gpu_ms_;
 };
 
-/// The picture with each pixel tinted by the level that draws it (Backes et al., Fig. 1): the
-/// finest resident level at or above the one the pixel's level of detail asks for.
-Picture levelOverlay(const Picture& picture, const View& view, const ImageInfo& info,
-                     const std::function<bool(const TileId&)>& resident);
+/// The picture with each pixel tinted by the level that draws it (Backes et al., Fig. 1), as
+/// tessera::levelsShown finds it for the resident tiles.
+[[nodiscard]] Result<Picture> levelOverlay(const Picture& picture, const Archive& archive,
+                                           const View& view,
+                                           const std::function<bool(const TileId&)>& resident);
 
 /// One frame of the flight for the report's plots.
 struct ReportFrame {

@@ -269,6 +269,28 @@ TEST(RenderReference, OneMissingTileFallsBackOnlyWhereItLies) {
   EXPECT_GT(differenceOf(*picture, level0).max_abs, 10u);
 }
 
+TEST(RenderReference, LevelsShownNameTheLevelEachPixelDrawsFrom) {
+  Fixture f(131, 77, 3, 0, Codec::kZstd);
+  ASSERT_TRUE(f.archive);
+  // The image's top-left corner mid-screen at 1 texel per pixel, level-0 tile (1, 0) missing.
+  const View view = orthoView(80, 0, 1, 40, 10);
+  ReferenceOptions options;
+  options.available = [](const TileId& id) { return !(id.level == 0 && id.x == 1 && id.y == 0); };
+  Result<std::vector<int32_t>> levels = levelsShown(*f.archive, view, options);
+  ASSERT_TRUE(levels) << levels.error().message;
+  ASSERT_EQ(levels->size(), 400u);
+  for (uint32_t y = 0; y < 10; ++y)
+    for (uint32_t x = 0; x < 40; ++x) {
+      const double u = 60.5 + x, v = double(y) - 4.5;
+      const int32_t want = v < 0 ? -1 : (u >= kTile && u < 2 * kTile ? 1 : 0);
+      EXPECT_EQ((*levels)[size_t(y) * 40 + x], want) << x << "," << y;
+    }
+  // Zoomed out to 3 texels per pixel: level 1 wherever the image is.
+  Result<std::vector<int32_t>> zoomed = levelsShown(*f.archive, orthoView(65, 38, 3, 20, 10));
+  ASSERT_TRUE(zoomed);
+  EXPECT_EQ(std::count(zoomed->begin(), zoomed->end(), 1), 200);
+}
+
 TEST(RenderReference, NothingAvailableIsTransparent) {
   Fixture f(131, 77, 3, 0, Codec::kZstd);
   ASSERT_TRUE(f.archive);
