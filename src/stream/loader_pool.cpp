@@ -24,6 +24,21 @@ constexpr int kLoaderNiceness = 5;
 /// Requests of the same level considered for merging with the one a worker takes.
 constexpr size_t kMergeCandidates = 32;
 
+/// Adds a payload, in file order, to `runs`: into the last run when the gap to it is at most
+/// `gap_bytes` (one read, gap included), else as a new run. Returns the run's index. The
+/// loader's reads and its read-ahead hints merge by this one rule.
+size_t addToRuns(std::vector<ByteRange>& runs, uint64_t offset, uint64_t length,
+                 uint64_t gap_bytes) {
+  if (runs.empty() || offset > runs.back().offset_bytes + runs.back().length_bytes + gap_bytes) {
+    runs.push_back({offset, length, nullptr});
+  } else {
+    ByteRange& run = runs.back();
+    run.length_bytes =
+        std::max(run.offset_bytes + run.length_bytes, offset + length) - run.offset_bytes;
+  }
+  return runs.size() - 1;
+}
+
 /// Tiles one worker looks up for read-ahead per batch it takes: bounds the time a worker
 /// spends on hints before its own read.
 constexpr size_t kReadAheadTilesPerCall = 512;
@@ -262,16 +277,9 @@ void LoaderPool::hintReadAhead(std::span<const TileId> tiles) {
   // Neighbours in the file merged as the loader's own reads merge them: one hint per run.
   std::sort(ranges.begin(), ranges.end(),
             [](const ByteRange& a, const ByteRange& b) { return a.offset_bytes < b.offset_bytes; });
-  std::vector<ByteRange> runs{ranges.front()};
-  for (size_t i = 1; i < ranges.size(); ++i) {
-    ByteRange& run = runs.back();
-    const uint64_t run_end = run.offset_bytes + run.length_bytes;
-    if (ranges[i].offset_bytes <= run_end + options_.merge_gap_bytes)
-      run.length_bytes =
-          std::max(run_end, ranges[i].offset_bytes + ranges[i].length_bytes) - run.offset_bytes;
-    else
-      runs.push_back(ranges[i]);
-  }
+  std::vector<ByteRange> runs;
+  for (const ByteRange& range : ranges)
+    addToRuns(runs, range.offset_bytes, range.length_bytes, options_.merge_gap_bytes);
   const uint64_t asked = archive_->source().prefetch(runs);
   std::lock_guard lock(mutex_);
   stats_.hinted_bytes += asked;
@@ -371,8 +379,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   // in one call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set
   // on one bad read, and the loader must count the reads and bytes it makes.
   struct Run {
-    uint64_t begin = 0;
-    uint64_t end = 0;
+    ByteRange span;
     std::vector<uint8_t> bytes;
     Result<void> read;
   };
@@ -382,19 +389,18 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   std::sort(encoded.begin(), encoded.end(), [](const Batch::Item* a, const Batch::Item* b) {
     return a->entry.offset_bytes < b->entry.offset_bytes;
   });
-  std::vector<Run> runs;
+  std::vector<ByteRange> spans;
   std::vector<size_t> run_of_item(batch.items.size());
-  for (const Batch::Item* item : encoded) {
-    const uint64_t offset = item->entry.offset_bytes;
-    if (runs.empty() || offset > runs.back().end + options_.merge_gap_bytes)
-      runs.push_back({offset, offset, {}, {}});
-    runs.back().end = std::max(runs.back().end, offset + item->entry.length_bytes);
-    run_of_item[size_t(item - batch.items.data())] = runs.size() - 1;
-  }
+  for (const Batch::Item* item : encoded)
+    run_of_item[size_t(item - batch.items.data())] = addToRuns(
+        spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
+  std::vector<Run> runs(spans.size());
   uint64_t bytes_read = 0;
-  for (Run& run : runs) {
-    run.bytes.resize(run.end - run.begin);
-    run.read = archive.source().read(run.begin, run.bytes);
+  for (size_t i = 0; i < runs.size(); ++i) {
+    Run& run = runs[i];
+    run.span = spans[i];
+    run.bytes.resize(run.span.length_bytes);
+    run.read = archive.source().read(run.span.offset_bytes, run.bytes);
     bytes_read += run.bytes.size();
   }
   if (!runs.empty()) {
@@ -414,8 +420,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
         finish(item.id, {item.id, false, false, run.read.error().message}, true);
         continue;
       }
-      payload = std::span<const uint8_t>(run.bytes).subspan(item.entry.offset_bytes - run.begin,
-                                                            item.entry.length_bytes);
+      payload = std::span<const uint8_t>(run.bytes).subspan(
+          item.entry.offset_bytes - run.span.offset_bytes, item.entry.length_bytes);
       if (Result<void> verified = archive.verifyPayload(item.id, item.entry, payload); !verified) {
         finish(item.id, {item.id, false, false, verified.error().message}, true);
         continue;
