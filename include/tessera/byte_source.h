@@ -3,6 +3,7 @@
 /// Byte sources: where archive bytes come from (a local file, memory, later HTTP ranges).
 /// The archive reader and the loader pool see only this interface.
 
+#include <atomic>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -47,6 +48,14 @@ class ByteSource {
   /// which keeps a disk busy with many requests instead of one at a time. Never fails; the
   /// default does nothing. Returns the bytes it asked for (0 when it does nothing).
   virtual uint64_t prefetch(std::span<const ByteRange> ranges) const;
+
+  /// `read`, for a reader that may stop wanting the bytes while they are on their way: once
+  /// `cancel` becomes true a source whose reads take a network round trip abandons the read
+  /// and fails it with ErrorCode::kCancelled, so a request no view wants any more stops using
+  /// the link (Marvie & Bouatouch, part III: requests that left the view are cancelled). The
+  /// default checks `cancel` once, before reading; a local read is too short to interrupt.
+  [[nodiscard]] virtual Result<void> readCancellable(uint64_t offset_bytes, std::span<uint8_t> out,
+                                                     const std::atomic<bool>& cancel) const;
 };
 
 /// Opens a local file for positional reads (pread: thread-safe without a shared file offset,

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstring>
 #include <numeric>
+#include <string>
 
 namespace tessera {
 
@@ -47,6 +48,14 @@ Result<void> ByteSource::readMany(std::span<const ByteRange> ranges) const {
 
 uint64_t ByteSource::prefetch(std::span<const ByteRange>) const {
   return 0;
+}
+
+Result<void> ByteSource::readCancellable(uint64_t offset_bytes, std::span<uint8_t> out,
+                                         const std::atomic<bool>& cancel) const {
+  if (cancel.load(std::memory_order_acquire))
+    return Unexpected(ErrorCode::kCancelled,
+                      name() + ": read at offset " + std::to_string(offset_bytes) + " cancelled");
+  return read(offset_bytes, out);
 }
 
 }  // namespace tessera

@@ -1,6 +1,8 @@
 // The pread-based file source: exact reads, errors that name the file, readMany.
 #include <tessera/byte_source.h>
 
+#include <algorithm>
+#include <atomic>
 #include <thread>
 
 #include <gtest/gtest.h>
@@ -141,6 +143,22 @@ TEST(MemorySource, PrefetchIsANoOp) {
   auto source = makeMemorySource(countingBytes(100), "mem:hint");
   const ByteRange range{0, 100, nullptr};
   EXPECT_EQ(source->prefetch({&range, 1}), 0u);
+}
+
+TEST(ByteSource, ReadCancellableReadsUntilCancelledThenFailsAsCancelled) {
+  const std::vector<uint8_t> bytes = countingBytes(1000);
+  auto source = makeMemorySource(bytes, "mem:cancel");
+  std::atomic<bool> cancel{false};
+  std::vector<uint8_t> out(10);
+  ASSERT_TRUE(source->readCancellable(500, out, cancel));
+  EXPECT_TRUE(std::equal(out.begin(), out.end(), bytes.begin() + 500));
+  cancel = true;
+  std::fill(out.begin(), out.end(), uint8_t(0));
+  auto cancelled = source->readCancellable(500, out, cancel);
+  ASSERT_FALSE(cancelled);
+  EXPECT_EQ(cancelled.error().code, ErrorCode::kCancelled);
+  EXPECT_NE(cancelled.error().message.find("mem:cancel"), std::string::npos);
+  EXPECT_TRUE(std::all_of(out.begin(), out.end(), [](uint8_t b) { return b == 0; }));
 }
 
 TEST(FileSource, ConcurrentReadsSeeTheirOwnRanges) {
