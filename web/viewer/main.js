@@ -248,6 +248,7 @@ class Viewer {
       settled:
         progress.complete && progress.idle && this.inFlight.size === 0 && !this.dirty && this.drawnSinceChange,
       inFlight: this.inFlight.size,
+      inFlightKeys: [...this.inFlight.keys()],
       maxInFlight: this.maxInFlight,
       cacheTiles: this.cache.size,
       cacheCapacity: this.cache.capacity,
