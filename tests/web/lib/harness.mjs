@@ -153,6 +153,8 @@ export function startStatic(roots) {
  */
 export async function launchChromium(options = {}) {
   const { chromium } = playwright();
+  if (!fs.existsSync(chromiumPath()))
+    throw new Error(`no Chromium at ${chromiumPath()}: scripts/install-deps.sh installs Debian's chromium`);
   const profile = tempDir('profile');
   const context = await chromium.launchPersistentContext(profile, {
     executablePath: chromiumPath(),
