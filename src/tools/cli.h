@@ -52,5 +52,6 @@ void registerFlyCommand(CLI::App& app, int& exit_code);
 void registerViewCommand(CLI::App& app, int& exit_code);
 void registerDemoCommand(CLI::App& app, int& exit_code);
 void registerRenderCommand(CLI::App& app, int& exit_code);
+void registerServeCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

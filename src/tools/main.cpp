@@ -73,6 +73,7 @@ int main(int argc, char** argv) {
   registerDemoCommand(app, exit_code);
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
+  registerServeCommand(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
