@@ -13,7 +13,7 @@ import {
   visibleTileRange,
   zoomAbout,
 } from './view.js';
-import { LruCache, RateMeter, planRequests, tileUrl, viewProgress } from './schedule.js';
+import { LruCache, RateMeter, planRequests, tileUrl, uniformColour, viewProgress } from './schedule.js';
 import { LEVEL_COLOURS, TileRenderer } from './renderer.js';
 
 const DEFAULT_MAX_IN_FLIGHT = 6; // Chromium's and Firefox's HTTP/1.1 connections per host
@@ -136,15 +136,24 @@ class Viewer {
     };
     try {
       const response = await fetch(new URL(path, document.baseURI), { signal: controller.signal });
-      if (!response.ok) {
-        // Uniform and empty tiles have no stored payload to send as they are: ask for the
-        // transcoded tile once, then give up on the tile.
-        if (!forcePng && response.status !== 404) {
+      if (!response.ok) throw new Error(`${path}: HTTP ${response.status}`);
+      if (response.status === 204) {
+        // No stored payload (docs/serve.md): a uniform tile's colour comes in a header and
+        // fills a 1x1 texture (every texel of the stored tile, borders included, is that
+        // colour); an empty tile is asked for again as a transcoded PNG.
+        const colour =
+          response.headers.get('X-Tessera-Tile-Kind') === 'uniform'
+            ? uniformColour(response.headers.get('X-Tessera-Uniform-Rgba'), this.image.channels)
+            : null;
+        if (!colour) {
           done();
+          if (forcePng) throw new Error(`${path}: no content`);
           if (generation === this.generation && !controller.signal.aborted) this.fetchTile(tile, true);
           return;
         }
-        throw new Error(`${path}: HTTP ${response.status}`);
+        if (controller.signal.aborted || generation !== this.generation) return;
+        this.store(tile, this.renderer.uploadPixels(new Uint8Array(colour), 1, 1), 0, done);
+        return;
       }
       const blob = await response.blob();
       const bitmap = await createImageBitmap(blob, {
@@ -162,12 +171,7 @@ class Viewer {
       }
       const entry = this.renderer.upload(bitmap);
       bitmap.close();
-      this.rate.add(blob.size, performance.now());
-      this.counters.bytes += blob.size;
-      this.counters.loaded += 1;
-      done();
-      this.cache.set(tile.key, entry, this.protectedKeys());
-      this.changed();
+      this.store(tile, entry, blob.size, done);
     } catch (error) {
       done();
       if (controller.signal.aborted || error.name === 'AbortError') return;
@@ -177,6 +181,15 @@ class Viewer {
       console.warn(`tessera viewer: tile ${tile.key}: ${error.message || error}`);
       this.changed();
     }
+  }
+
+  store(tile, entry, bytes, done) {
+    this.rate.add(bytes, performance.now());
+    this.counters.bytes += bytes;
+    this.counters.loaded += 1;
+    done();
+    this.cache.set(tile.key, entry, this.protectedKeys());
+    this.changed();
   }
 
   /** Keys the current frame draws: never evicted for another tile of the same frame. */

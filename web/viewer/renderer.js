@@ -113,6 +113,20 @@ export class TileRenderer {
     return { texture, width: source.width, height: source.height, bytes: source.width * source.height * 4 };
   }
 
+  /** A texture of RGBA8 pixels (a uniform tile: 1x1, stretched over the tile's quad). */
+  uploadPixels(rgba, width, height) {
+    const gl = this.gl;
+    const texture = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, texture);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, width, height, 0, gl.RGBA, gl.UNSIGNED_BYTE, rgba);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    return { texture, width, height, bytes: width * height * 4 };
+  }
+
   release(entry) {
     this.gl.deleteTexture(entry.texture);
   }

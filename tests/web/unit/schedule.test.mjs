@@ -2,7 +2,14 @@
 import assert from 'node:assert/strict';
 import { test } from 'node:test';
 
-import { LruCache, RateMeter, planRequests, tileUrl, viewProgress } from '../../../web/viewer/schedule.js';
+import {
+  LruCache,
+  RateMeter,
+  planRequests,
+  tileUrl,
+  uniformColour,
+  viewProgress,
+} from '../../../web/viewer/schedule.js';
 
 const tiles = (...keys) => keys.map((key) => ({ key }));
 
@@ -106,4 +113,15 @@ test('the byte rate counts the last window only', () => {
   assert.equal(meter.rate(900), 4000);
   assert.equal(meter.rate(1200), 3000);
   assert.equal(meter.rate(2000), 0);
+});
+
+test('a uniform tile colour expands its channels as every renderer does', () => {
+  // uniform_rgba little-endian: bytes r=0x11 g=0x22 b=0x33 a=0x44 print as 44332211.
+  assert.deepEqual(uniformColour('44332211', 4), [0x11, 0x22, 0x33, 0x44]);
+  assert.deepEqual(uniformColour('00332211', 3), [0x11, 0x22, 0x33, 255]);
+  assert.deepEqual(uniformColour('00008011', 2), [0x11, 0x11, 0x11, 0x80]);
+  assert.deepEqual(uniformColour('000000ff', 1), [255, 255, 255, 255]);
+  assert.equal(uniformColour('xyz', 3), null);
+  assert.equal(uniformColour(null, 3), null);
+  assert.equal(uniformColour('123456789', 3), null);
 });
