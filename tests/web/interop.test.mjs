@@ -28,7 +28,22 @@ const VIEWPORT = { width: 640, height: 480 };
 // and every integer zoom is an archive level (docs/serve.md), as every Deep Zoom level is.
 const WIDTH = 2048;
 const HEIGHT = 1536;
-const THRESHOLDS = JSON.parse(fs.readFileSync(path.join(path.dirname(new URL(import.meta.url).pathname), 'interop-thresholds.json'), 'utf8'));
+// Thresholds. Aligned views (texel edges on pixel edges, 1, 2 or 4 texels per pixel) show
+// the archive's own texels of one level, tile for tile, in both libraries, as in the
+// reference: measured exact (Leaflet; OpenSeadragon at 1 texel per pixel) or 60-61 dB, largest
+// difference 1 (OpenSeadragon's canvas at 2 and 4). So 50 dB and no more than 0.01% of the
+// pixels off by more than 8. Between levels (1.37 texels per pixel, off the texel grid) each
+// library draws one level scaled by the browser's image filter (OpenSeadragon level 0,
+// Leaflet level 0 at zoom 3 scaled by 0.73) where the reference blends levels 0 and 1
+// (trilinear), so fine detail differs: measured 48.8 dB (OpenSeadragon) and 41.9 dB, 1.0% of
+// pixels off by more than 8 (Leaflet). For scale: the reference against itself shifted by one
+// screen pixel is 37.6 dB with 1.7% off, and zoomed by 2% is 29.2 dB with 6.2% off; the
+// thresholds (44 and 40 dB) fail both.
+const ALIGNED = { psnr: 50, overPercent: 0.01 };
+const THRESHOLDS = {
+  openseadragon: { aligned0: ALIGNED, aligned1: ALIGNED, between: { psnr: 44, overPercent: 1 }, whole: ALIGNED },
+  leaflet: { aligned0: ALIGNED, aligned1: ALIGNED, between: { psnr: 40, overPercent: 1.5 }, whole: ALIGNED },
+};
 
 let dir;
 let archive;
