@@ -17,6 +17,7 @@
 #include <boost/asio/steady_timer.hpp>
 #include <boost/asio/strand.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
+#include <boost/beast/core/string.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/error.hpp>
 #include <boost/beast/http/read.hpp>
@@ -170,14 +171,21 @@ class Connection : public std::enable_shared_from_this<Connection> {
     parser_->header_limit(options().header_limit_bytes);
     parser_->body_limit(options().body_limit_bytes);
     stream_.expires_after(std::chrono::milliseconds(options().header_timeout_ms));
-    http::async_read_header(
-        stream_, buffer_, *parser_,
-        [self = shared_from_this()](beast::error_code ec, size_t) { self->onHeader(ec); });
+    http::async_read_header(stream_, buffer_, *parser_,
+                            [self = shared_from_this()](beast::error_code ec, size_t bytes) {
+                              self->onHeader(ec, bytes);
+                            });
   }
 
-  void onHeader(beast::error_code ec) {
+  void onHeader(beast::error_code ec, size_t header_bytes) {
     if (ec) return onReadError(ec);
     started_ = Clock::now();
+    // Beast bounds the bytes it scans for the end of a header, not a complete header that
+    // arrived in one read; the limit applies to both.
+    if (header_bytes > options().header_limit_bytes)
+      return refuse(
+          http::status::request_header_fields_too_large,
+          fmt::format("the request header exceeds {} bytes", options().header_limit_bytes));
     const Request& request = parser_->get();
     // Request smuggling: a message with both framings is refused outright (RFC 9112,
     // section 6.1 allows treating it as an error, and a front end may disagree on which wins).
@@ -187,6 +195,11 @@ class Connection : public std::enable_shared_from_this<Connection> {
                     "both Content-Length and Transfer-Encoding are present");
     if (request.count(http::field::content_length) > 1)
       return refuse(http::status::bad_request, "more than one Content-Length field");
+    // Only "chunked" is understood; anything else would leave the body's end unknown.
+    if (request.count(http::field::transfer_encoding) > 0 &&
+        !beast::iequals(request[http::field::transfer_encoding], "chunked"))
+      return refuse(http::status::not_implemented,
+                    "the only transfer coding accepted in requests is chunked");
     if (!parser_->is_done()) {
       stream_.expires_after(std::chrono::milliseconds(options().body_timeout_ms));
       http::async_read(stream_, buffer_, *parser_,
