@@ -109,6 +109,32 @@ test('at rest the viewer draws the reference picture of its view', async () => {
   assert.equal(coarse.requested - requested, 6 + 2 + 1);
 });
 
+test('tiles are requested coarse level first, then centre-out', async () => {
+  await page.evaluate(() => window.tessera.open('scene', 0));
+  await settle(); // the fitted view: levels 2-4 resident
+  const requested = [];
+  const onRequest = (request) => {
+    const match = /\/scene\/0\/(\d+)\/(\d+)\/(\d+)$/.exec(new URL(request.url()).pathname);
+    if (match) requested.push(match.slice(1).map(Number));
+  };
+  page.on('request', onRequest);
+  const view = { cx: 1400, cy: 900, tpp: 1 };
+  await setView(view);
+  page.off('request', onRequest);
+  // Levels 1 and 0 (the blend's level 1 first), each tile once, each level centre-out.
+  assert.deepEqual([...new Set(requested.map(([level]) => level))], [1, 0]);
+  assert.equal(new Set(requested.map((t) => t.join('/'))).size, requested.length);
+  const distance = ([level, x, y]) => {
+    const span = 256 * 2 ** level;
+    return Math.hypot((x + 0.5) * span - view.cx, (y + 0.5) * span - view.cy);
+  };
+  for (let i = 1; i < requested.length; i += 1)
+    if (requested[i][0] === requested[i - 1][0])
+      assert.ok(distance(requested[i]) >= distance(requested[i - 1]), `request ${i} ${requested[i]} is nearer the centre than ${requested[i - 1]}`);
+  // The first level-0 request is the tile under the centre: (1400, 900) / 256 -> (5, 3).
+  assert.deepEqual(requested.find(([level]) => level === 0), [0, 5, 3]);
+});
+
 test('uniform tiles and transparency: an RGBA archive at rest matches the reference', async () => {
   const uniform = [];
   const transcoded = [];
