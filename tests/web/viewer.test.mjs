@@ -278,3 +278,11 @@ test('the level overlay tints each pixel by its level, and the stats panel repor
   assert.match(text, /cache \d+\/384 tiles/);
   await page.evaluate(() => window.tessera.showPanels(false));
 });
+
+test('an unknown archive in the address is reported on the page, not thrown away', async () => {
+  const other = await browser.context.newPage();
+  await other.goto(`${server.url}/#archive=nope`);
+  await other.waitForFunction(() => document.getElementById('error').textContent !== '');
+  assert.match(await other.locator('#error').textContent(), /no archive named 'nope'/);
+  await other.close();
+});

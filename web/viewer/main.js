@@ -442,8 +442,16 @@ async function start() {
   setInterval(() => viewer.updatePanel(performance.now()), 250);
   new ResizeObserver(() => viewer.resize()).observe(viewer.canvas);
   bindInput(viewer);
-  archiveSelect.addEventListener('change', () => viewer.open(archiveSelect.value, 0));
-  $('image').addEventListener('change', () => viewer.open(viewer.archive.name, Number($('image').value)));
+  const showError = (error) => {
+    $('error').textContent = String(error.message || error);
+    console.error(error);
+  };
+  const openAndReport = (name, image) => {
+    $('error').textContent = '';
+    viewer.open(name, image).catch(showError);
+  };
+  archiveSelect.addEventListener('change', () => openAndReport(archiveSelect.value, 0));
+  $('image').addEventListener('change', () => openAndReport(viewer.archive.name, Number($('image').value)));
   $('overlay').addEventListener('change', () => viewer.setOverlay($('overlay').checked));
 
   const params = new URLSearchParams(location.hash.slice(1));
