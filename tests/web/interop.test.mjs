@@ -65,7 +65,11 @@ before(async () => {
 after(async () => {
   if (browser) await browser.close();
   if (pages) await pages.stop();
-  if (server) await server.stop();
+  if (server) {
+    // A clean exit after SIGTERM: under the sanitizers a report would end it otherwise.
+    const exit = await server.stop();
+    assert.deepEqual(exit, { code: 0, signal: null }, `tessera serve: ${server.log()}`);
+  }
   if (dir) fs.rmSync(dir, { recursive: true, force: true });
 });
 
