@@ -5,7 +5,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
+#include <thread>
 #include <mutex>
 
 #include <boost/asio/connect.hpp>
@@ -169,6 +171,15 @@ std::string RawConnection::readOneResponse() {
     }
     pending_.append(chunk, size_t(n));
   }
+}
+
+bool eventually(const std::function<bool()>& condition) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!condition()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::yield();
+  }
+  return true;
 }
 
 unsigned statusOf(const std::string& bytes) {
