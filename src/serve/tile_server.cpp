@@ -1,6 +1,6 @@
 // TileServer: the accept loop and one Connection per socket, over Boost.Beast and Asio. Each
-// connection runs on its own strand; request handling (pread, decode, encode) runs on the
-// I/O threads, which is cheap for stored tiles and bounded for transcodes by the cache.
+// connection lives on one I/O thread's io_context; request handling (pread, decode, encode)
+// runs there too, which is cheap for stored tiles and bounded for transcodes by the cache.
 #include <tessera/serve.h>
 
 #include <chrono>
@@ -15,9 +15,9 @@
 #include <boost/asio/executor_work_guard.hpp>
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/steady_timer.hpp>
-#include <boost/asio/strand.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/string.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
