@@ -497,7 +497,8 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
           return std::move(out.bytes);
         },
         pictureContentType(*format));
-    response.set("X-Tessera-Codec", *format == PictureFormat::kPng ? "png" : "jpeg");
+    if (response.result() == http::status::ok || response.result() == http::status::not_modified)
+      response.set("X-Tessera-Codec", *format == PictureFormat::kPng ? "png" : "jpeg");
     return response;
   }
   Result<TileEntry> entry = archive.tileEntry(id);
