@@ -359,6 +359,10 @@ void TileServer::Impl::accept() {
       beast::error_code ignored;
       socket.close(ignored);
     } else {
+      // Responses leave in one write; Nagle's algorithm would only hold back the tail of a
+      // large one behind a delayed ACK.
+      beast::error_code ignored;
+      socket.set_option(tcp::no_delay(true), ignored);
       std::make_shared<Connection>(*this, std::move(socket))->start();
     }
     accept();
