@@ -64,7 +64,8 @@ trap cleanup EXIT
 # tessera serve: the port comes from its first line.
 mkfifo "$RUN/tessera.out"
 "$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" >"$RUN/tessera.out" 2>"$RUN/tessera.err" &
-PIDS+=($!)
+TESSERA_PID=$!
+PIDS+=($TESSERA_PID)
 exec 3<"$RUN/tessera.out"
 read -r line <&3
 TESSERA_PORT=${line##*:}
@@ -225,6 +226,11 @@ for target in tessera nginx; do
   exec 4<&-
 done
 
+# Memory: the server's peak and current resident set after all runs (1000 slow clients
+# included), from /proc.
+rss() { awk -v k="$1" '$1 == k ":" {printf "%.1f MiB", $2 / 1024}' "/proc/$TESSERA_PID/status"; }
+echo
+echo "tessera serve memory: peak RSS $(rss VmHWM), now $(rss VmRSS)"
 echo
 echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket errors | non-2xx |"
 echo "|---|---:|---:|---:|---:|---:|---|---:|"
@@ -233,7 +239,6 @@ echo
 awk -F'\t' '
   { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6 }
   END {
-    for (c in a) {}
     split("64 1000", conns, " ")
     for (i = 1; i <= 2; ++i) {
       k = conns[i]
