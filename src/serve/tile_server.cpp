@@ -23,6 +23,7 @@
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/error.hpp>
 #include <boost/beast/http/read.hpp>
+#include <boost/beast/http/serializer.hpp>
 #include <boost/beast/http/write.hpp>
 #include <fmt/format.h>
 
@@ -253,10 +254,19 @@ class Connection : public std::enable_shared_from_this<Connection> {
   }
 
   void write() {
+    serializer_.emplace(response_);
+    writeSome();
+  }
+
+  // The send timeout runs per write, not per response: a large archive download to a slow but
+  // live client keeps going, while a client that stops reading is closed.
+  void writeSome() {
     stream_.expires_after(std::chrono::milliseconds(options().send_timeout_ms));
-    http::async_write(
-        stream_, response_,
-        [self = shared_from_this()](beast::error_code ec, size_t) { self->onWritten(ec); });
+    http::async_write_some(stream_, *serializer_,
+                           [self = shared_from_this()](beast::error_code ec, size_t) {
+                             if (!ec && !self->serializer_->is_done()) return self->writeSome();
+                             self->onWritten(ec);
+                           });
   }
 
   void onWritten(beast::error_code ec) {
@@ -267,6 +277,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     server_.metrics.recordResponse(endpoint_, status, ec ? 0 : body_bytes, double(micros) / 1e6);
     server_.access_log.write(peer_, method_, target_, status, ec ? 0 : body_bytes, micros);
     const bool keep_alive = response_.keep_alive();
+    serializer_.reset();
     response_ = {};
     if (ec) return onSocketError(ec);
     if (!keep_alive) return lingeringClose();
@@ -333,6 +344,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   detail::Response response_;
+  std::optional<http::serializer<false, detail::PartsBody>> serializer_;  // of response_
   std::string peer_, method_, target_;
   detail::Endpoint endpoint_ = detail::Endpoint::kOther;
   Clock::time_point started_{};

@@ -24,14 +24,20 @@ namespace http = boost::beast::http;
 
 namespace {
 
+// The archives of this process, removed when it exits.
+struct SuiteFolder {
+  std::filesystem::path path =
+      std::filesystem::path(::testing::TempDir()) / fmt::format("tessera_serve_{}", ::getpid());
+  SuiteFolder() { std::filesystem::create_directories(path); }
+  ~SuiteFolder() {
+    std::error_code ignored;
+    std::filesystem::remove_all(path, ignored);
+  }
+};
+
 std::string suiteFolder() {
-  static const std::string folder = [] {
-    auto path =
-        std::filesystem::path(::testing::TempDir()) / fmt::format("tessera_serve_{}", ::getpid());
-    std::filesystem::create_directories(path);
-    return path.string();
-  }();
-  return folder;
+  static const SuiteFolder folder;
+  return folder.path.string();
 }
 
 }  // namespace

@@ -26,6 +26,7 @@ class HostileTest : public ::testing::Test {
     options.header_timeout_ms = 300;
     options.body_timeout_ms = 300;
     options.idle_timeout_ms = 300;
+    options.send_timeout_ms = 300;
     options.header_limit_bytes = 4096;
     options.body_limit_bytes = 1024;
     options.max_ranges = 8;
@@ -215,6 +216,17 @@ TEST_F(HostileTest, SlowBodyIsTimedOut) {
   bool timed_out = false;
   slow.readUntilClosed(&timed_out);
   EXPECT_FALSE(timed_out);
+}
+
+TEST_F(HostileTest, ClientThatStopsReadingIsTimedOut) {
+  const uint64_t timeouts_before = server_->stats().timeouts;
+  RawConnection reader(port_);
+  // Far more response bytes than the socket buffers hold, and the client reads none of them.
+  std::string requests;
+  for (int i = 0; i < 200; ++i) requests += "GET /hostile.tess HTTP/1.1\r\nHost: x\r\n\r\n";
+  ASSERT_TRUE(reader.send(requests));
+  EXPECT_TRUE(eventually([&] { return server_->stats().timeouts > timeouts_before; }));
+  expectStillServing();
 }
 
 TEST_F(HostileTest, IdleConnectionIsClosedAfterTheIdleTimeout) {
