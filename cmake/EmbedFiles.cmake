@@ -1,6 +1,7 @@
 # Generates a .cpp defining tessera::detail::viewerAssets() from files under BASE_DIR.
 # Run as: cmake -DOUTPUT=x.cpp -DBASE_DIR=dir -DFILES=a|b|c -P EmbedFiles.cmake
 # (FILES is '|'-separated because a ';' list does not survive add_custom_command intact.)
+cmake_policy(SET CMP0007 NEW)
 string(REPLACE "|" ";" files "${FILES}")
 list(SORT files)
 set(arrays "")

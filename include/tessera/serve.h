@@ -26,7 +26,7 @@ struct ServeOptions {
   uint32_t header_timeout_ms = 10000;      ///< from a request's first byte to its complete header
   uint32_t body_timeout_ms = 10000;        ///< to receive a request body
   uint32_t idle_timeout_ms = 60000;        ///< a kept-alive connection waiting for its next request
-  uint32_t send_timeout_ms = 60000;        ///< to write one response
+  uint32_t send_timeout_ms = 60000;        ///< a response write making no progress
   uint32_t header_limit_bytes = 8192;      ///< request line + header fields; larger -> 431
   uint32_t body_limit_bytes = 65536;       ///< request body; larger -> 413
   uint32_t max_ranges = 16;                ///< byte ranges per request; more -> 416

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <utility>
 #include <vector>
 
@@ -20,13 +21,34 @@
 
 namespace tessera::detail {
 
-/// One part: `bytes` when set, else `length_bytes` of `source` from `offset_bytes`.
+/// One part: bytes in memory (`memory`, kept alive by `owner`; no owner for static data), or,
+/// when `source` is set, `length_bytes` of it from `offset_bytes`.
 struct BodyPart {
-  std::shared_ptr<const std::string> bytes;
+  std::shared_ptr<const void> owner;
+  std::string_view memory;
   std::shared_ptr<const ByteSource> source;  ///< kept alive while the response is written
   uint64_t offset_bytes = 0;
   uint64_t length_bytes = 0;
-  uint64_t size() const { return bytes ? bytes->size() : length_bytes; }
+  uint64_t size() const { return source ? length_bytes : memory.size(); }
+
+  static BodyPart text(std::shared_ptr<const std::string> bytes) {
+    std::string_view view(*bytes);
+    return {std::move(bytes), view, nullptr, 0, 0};
+  }
+  static BodyPart text(std::string bytes) {
+    return text(std::make_shared<const std::string>(std::move(bytes)));
+  }
+  static BodyPart payload(std::vector<uint8_t> bytes) {
+    auto owned = std::make_shared<const std::vector<uint8_t>>(std::move(bytes));
+    std::string_view view(reinterpret_cast<const char*>(owned->data()), owned->size());
+    return {std::move(owned), view, nullptr, 0, 0};
+  }
+  /// Bytes with static storage duration (the embedded viewer).
+  static BodyPart staticBytes(std::string_view bytes) { return {nullptr, bytes, nullptr, 0, 0}; }
+  static BodyPart file(std::shared_ptr<const ByteSource> source, uint64_t offset_bytes,
+                       uint64_t length_bytes) {
+    return {nullptr, {}, std::move(source), offset_bytes, length_bytes};
+  }
 };
 
 struct PartsBody {
@@ -59,9 +81,9 @@ struct PartsBody {
       if (index_ >= parts_.size()) return boost::none;
       const BodyPart& part = parts_[index_];
       const bool later_parts = index_ + 1 < parts_.size();
-      if (part.bytes) {
+      if (!part.source) {
         offset_ = part.size();
-        return {{boost::asio::buffer(*part.bytes), later_parts}};
+        return {{boost::asio::buffer(part.memory.data(), part.memory.size()), later_parts}};
       }
       uint64_t length = std::min<uint64_t>(kChunkBytes, part.length_bytes - offset_);
       chunk_.resize(size_t(length));

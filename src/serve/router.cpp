@@ -254,9 +254,8 @@ Response Router::errorResponse(unsigned version, http::status status,
   addCommonHeaders(response);
   response.set(http::field::content_type, "text/plain; charset=utf-8");
   response.set(http::field::cache_control, "no-store");
-  response.body().push_back(
-      {shared(fmt::format("{} {}: {}\n", unsigned(status), http::obsolete_reason(status), reason)),
-       nullptr, 0, 0});
+  response.body().push_back(BodyPart::text(
+      fmt::format("{} {}: {}\n", unsigned(status), http::obsolete_reason(status), reason)));
   response.prepare_payload();
   return response;
 }
@@ -264,6 +263,11 @@ Response Router::errorResponse(unsigned version, http::status status,
 Response Router::bytesResponse(const Request& request, std::shared_ptr<const std::string> body,
                                std::string_view content_type, std::string_view etag,
                                std::string_view cache_control) {
+  return bytesResponse(request, BodyPart::text(std::move(body)), content_type, etag, cache_control);
+}
+
+Response Router::bytesResponse(const Request& request, BodyPart body, std::string_view content_type,
+                               std::string_view etag, std::string_view cache_control) {
   Response response{http::status::ok, request.version()};
   addCommonHeaders(response);
   if (!etag.empty()) response.set(http::field::etag, etag);
@@ -273,7 +277,7 @@ Response Router::bytesResponse(const Request& request, std::shared_ptr<const std
     return response;
   }
   response.set(http::field::content_type, content_type);
-  response.body().push_back({std::move(body), nullptr, 0, 0});
+  response.body().push_back(std::move(body));
   response.prepare_payload();
   return response;
 }
@@ -493,7 +497,8 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
           return std::move(out.bytes);
         },
         pictureContentType(*format));
-    response.set("X-Tessera-Codec", *format == PictureFormat::kPng ? "png" : "jpeg");
+    if (response.result() == http::status::ok || response.result() == http::status::not_modified)
+      response.set("X-Tessera-Codec", *format == PictureFormat::kPng ? "png" : "jpeg");
     return response;
   }
   Result<TileEntry> entry = archive.tileEntry(id);
@@ -527,7 +532,7 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
     return errorResponse(version, http::status::internal_server_error, payload.error().message);
   }
   response.set(http::field::content_type, codecContentType(entry->codec));
-  response.body().push_back({shared(std::string(payload->begin(), payload->end())), nullptr, 0, 0});
+  response.body().push_back(BodyPart::payload(std::move(*payload)));
   response.prepare_payload();
   return response;
 }
@@ -548,7 +553,7 @@ Response Router::archiveFile(const Request& request, const ServedArchive& served
   }
   auto whole = [&]() {
     response.set(http::field::content_type, "application/octet-stream");
-    response.body().push_back({nullptr, served.source, 0, size});
+    response.body().push_back(BodyPart::file(served.source, 0, size));
     response.prepare_payload();
     return std::move(response);
   };
@@ -582,7 +587,7 @@ Response Router::archiveFile(const Request& request, const ServedArchive& served
     response.set(http::field::content_type, "application/octet-stream");
     response.set(http::field::content_range,
                  fmt::format("bytes {}-{}/{}", range.first, range.first + range.length - 1, size));
-    response.body().push_back({nullptr, served.source, range.first, range.length});
+    response.body().push_back(BodyPart::file(served.source, range.first, range.length));
     response.prepare_payload();
     return response;
   }
@@ -590,15 +595,13 @@ Response Router::archiveFile(const Request& request, const ServedArchive& served
   response.set(http::field::content_type, "multipart/byteranges; boundary=" + boundary);
   for (size_t i = 0; i < ranges.ranges.size(); ++i) {
     const ResolvedRange& range = ranges.ranges[i];
-    response.body().push_back(
-        {shared(fmt::format("{}--{}\r\nContent-Type: application/octet-stream\r\n"
-                            "Content-Range: bytes {}-{}/{}\r\n\r\n",
-                            i == 0 ? "" : "\r\n", boundary, range.first,
-                            range.first + range.length - 1, size)),
-         nullptr, 0, 0});
-    response.body().push_back({nullptr, served.source, range.first, range.length});
+    response.body().push_back(BodyPart::text(fmt::format(
+        "{}--{}\r\nContent-Type: application/octet-stream\r\n"
+        "Content-Range: bytes {}-{}/{}\r\n\r\n",
+        i == 0 ? "" : "\r\n", boundary, range.first, range.first + range.length - 1, size)));
+    response.body().push_back(BodyPart::file(served.source, range.first, range.length));
   }
-  response.body().push_back({shared(fmt::format("\r\n--{}--\r\n", boundary)), nullptr, 0, 0});
+  response.body().push_back(BodyPart::text(fmt::format("\r\n--{}--\r\n", boundary)));
   response.prepare_payload();
   return response;
 }
@@ -611,8 +614,7 @@ Response Router::viewerFile(const Request& request, std::string_view path) {
   if (it == files.end() || it->path != path)
     return errorResponse(request.version(), http::status::not_found,
                          fmt::format("the viewer has no file {}", path));
-  auto body = shared(std::string(it->bytes));
-  return bytesResponse(request, body, contentTypeForPath(path),
+  return bytesResponse(request, BodyPart::staticBytes(it->bytes), contentTypeForPath(path),
                        fmt::format("\"{:x}\"", std::hash<std::string_view>{}(it->bytes)),
                        kRevalidate);
 }

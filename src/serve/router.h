@@ -58,6 +58,8 @@ class Router {
   Response bytesResponse(const Request& request, std::shared_ptr<const std::string> body,
                          std::string_view content_type, std::string_view etag,
                          std::string_view cache_control);
+  Response bytesResponse(const Request& request, BodyPart body, std::string_view content_type,
+                         std::string_view etag, std::string_view cache_control);
   void addCommonHeaders(Response& response) const;
 
   const Catalog catalog_;

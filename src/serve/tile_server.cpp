@@ -1,6 +1,6 @@
 // TileServer: the accept loop and one Connection per socket, over Boost.Beast and Asio. Each
-// connection runs on its own strand; request handling (pread, decode, encode) runs on the
-// I/O threads, which is cheap for stored tiles and bounded for transcodes by the cache.
+// connection lives on one I/O thread's io_context; request handling (pread, decode, encode)
+// runs there too, which is cheap for stored tiles and bounded for transcodes by the cache.
 #include <tessera/serve.h>
 
 #include <chrono>
@@ -12,15 +12,18 @@
 #include <thread>
 #include <unordered_map>
 
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
 #include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
 #include <boost/asio/steady_timer.hpp>
-#include <boost/asio/strand.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/string.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/error.hpp>
 #include <boost/beast/http/read.hpp>
+#include <boost/beast/http/serializer.hpp>
 #include <boost/beast/http/write.hpp>
 #include <fmt/format.h>
 
@@ -96,11 +99,16 @@ struct TileServer::Impl {
   std::mutex registry_mutex;  // guards connections; taken after no other lock
   std::condition_variable registry_changed;
   std::unordered_map<Connection*, std::weak_ptr<Connection>> connections;
-  // Declared after everything a connection touches: destroying the io_context destroys the
+  // One io_context per thread, each run by that thread alone (nginx's worker model): a
+  // connection's handlers never change threads, so it needs no strand and a request wakes no
+  // other thread. Connections are dealt to the contexts in turn as they are accepted.
+  // Declared after everything a connection touches: destroying a context destroys the
   // handlers that still own connections, whose destructors use the members above.
-  net::io_context ioc;
-  tcp::acceptor acceptor{ioc};
-  net::steady_timer accept_retry{ioc};
+  std::vector<std::unique_ptr<net::io_context>> contexts;
+  std::vector<net::executor_work_guard<net::io_context::executor_type>> keep_running;
+  std::unique_ptr<tcp::acceptor> acceptor;          // on contexts[0]
+  std::unique_ptr<net::steady_timer> accept_retry;  // on contexts[0]
+  uint32_t next_context = 0;                        // used by the accept handler only
   std::vector<std::thread> threads;
   uint16_t port = 0;
   std::string address;
@@ -246,10 +254,19 @@ class Connection : public std::enable_shared_from_this<Connection> {
   }
 
   void write() {
+    serializer_.emplace(response_);
+    writeSome();
+  }
+
+  // The send timeout runs per write, not per response: a large archive download to a slow but
+  // live client keeps going, while a client that stops reading is closed.
+  void writeSome() {
     stream_.expires_after(std::chrono::milliseconds(options().send_timeout_ms));
-    http::async_write(
-        stream_, response_,
-        [self = shared_from_this()](beast::error_code ec, size_t) { self->onWritten(ec); });
+    http::async_write_some(stream_, *serializer_,
+                           [self = shared_from_this()](beast::error_code ec, size_t) {
+                             if (!ec && !self->serializer_->is_done()) return self->writeSome();
+                             self->onWritten(ec);
+                           });
   }
 
   void onWritten(beast::error_code ec) {
@@ -260,6 +277,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     server_.metrics.recordResponse(endpoint_, status, ec ? 0 : body_bytes, double(micros) / 1e6);
     server_.access_log.write(peer_, method_, target_, status, ec ? 0 : body_bytes, micros);
     const bool keep_alive = response_.keep_alive();
+    serializer_.reset();
     response_ = {};
     if (ec) return onSocketError(ec);
     if (!keep_alive) return lingeringClose();
@@ -326,6 +344,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   detail::Response response_;
+  std::optional<http::serializer<false, detail::PartsBody>> serializer_;  // of response_
   std::string peer_, method_, target_;
   detail::Endpoint endpoint_ = detail::Endpoint::kOther;
   Clock::time_point started_{};
@@ -335,13 +354,14 @@ class Connection : public std::enable_shared_from_this<Connection> {
 };
 
 void TileServer::Impl::accept() {
-  acceptor.async_accept(net::make_strand(ioc), [this](beast::error_code ec, tcp::socket socket) {
+  net::io_context& context = *contexts[next_context++ % contexts.size()];
+  acceptor->async_accept(context, [this](beast::error_code ec, tcp::socket socket) {
     if (ec == net::error::operation_aborted || stopping.load()) return;
     if (ec) {
       // Out of descriptors and the like: try again shortly instead of spinning.
       metrics.recordError(detail::ServeError::kIo);
-      accept_retry.expires_after(std::chrono::milliseconds(50));
-      accept_retry.async_wait([this](beast::error_code wait_ec) {
+      accept_retry->expires_after(std::chrono::milliseconds(50));
+      accept_retry->async_wait([this](beast::error_code wait_ec) {
         if (!wait_ec) accept();
       });
       return;
@@ -351,6 +371,10 @@ void TileServer::Impl::accept() {
       beast::error_code ignored;
       socket.close(ignored);
     } else {
+      // Responses leave in one write; Nagle's algorithm would only hold back the tail of a
+      // large one behind a delayed ACK.
+      beast::error_code ignored;
+      socket.set_option(tcp::no_delay(true), ignored);
       std::make_shared<Connection>(*this, std::move(socket))->start();
     }
     accept();
@@ -375,24 +399,30 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   if (ec)
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("serve: \"{}\" is not an IP address", options.bind_address));
+  const uint32_t threads =
+      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  for (uint32_t i = 0; i < threads; ++i) {
+    impl->contexts.push_back(std::make_unique<net::io_context>(1));
+    impl->keep_running.push_back(net::make_work_guard(*impl->contexts.back()));
+  }
+  impl->acceptor = std::make_unique<tcp::acceptor>(*impl->contexts[0]);
+  impl->accept_retry = std::make_unique<net::steady_timer>(*impl->contexts[0]);
   tcp::endpoint endpoint(address, options.port);
   const std::string where = fmt::format("{}:{}", options.bind_address, options.port);
-  if (impl->acceptor.open(endpoint.protocol(), ec); ec)
+  if (impl->acceptor->open(endpoint.protocol(), ec); ec)
     return fail(ErrorCode::kIo,
                 fmt::format("serve: cannot open a socket for {}: {}", where, ec.message()));
-  impl->acceptor.set_option(net::socket_base::reuse_address(true), ec);
-  if (impl->acceptor.bind(endpoint, ec); ec)
+  impl->acceptor->set_option(net::socket_base::reuse_address(true), ec);
+  if (impl->acceptor->bind(endpoint, ec); ec)
     return fail(ErrorCode::kIo, fmt::format("serve: cannot bind {}: {}", where, ec.message()));
-  if (impl->acceptor.listen(net::socket_base::max_listen_connections, ec); ec)
+  if (impl->acceptor->listen(net::socket_base::max_listen_connections, ec); ec)
     return fail(ErrorCode::kIo, fmt::format("serve: cannot listen on {}: {}", where, ec.message()));
-  impl->port = impl->acceptor.local_endpoint().port();
+  impl->port = impl->acceptor->local_endpoint().port();
   impl->address = address.to_string();
 
   impl->accept();
-  const uint32_t threads =
-      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
   for (uint32_t i = 0; i < threads; ++i)
-    impl->threads.emplace_back([raw = impl.get()] { raw->ioc.run(); });
+    impl->threads.emplace_back([context = impl->contexts[i].get()] { context->run(); });
   return std::unique_ptr<TileServer>(new TileServer(std::move(impl)));
 }
 
@@ -443,10 +473,10 @@ void TileServer::stop(uint32_t grace_ms) {
   if (impl_->stopped) return;
   impl_->stopped = true;
   impl_->stopping = true;
-  net::post(impl_->acceptor.get_executor(), [impl = impl_.get()] {
+  net::post(impl_->acceptor->get_executor(), [impl = impl_.get()] {
     beast::error_code ignored;
-    impl->acceptor.close(ignored);
-    impl->accept_retry.cancel();
+    impl->acceptor->close(ignored);
+    impl->accept_retry->cancel();
   });
   auto signalAll = [&](bool force) {
     std::vector<std::shared_ptr<Connection>> live;
@@ -469,7 +499,7 @@ void TileServer::stop(uint32_t grace_ms) {
     impl_->registry_changed.wait_for(lock, std::chrono::milliseconds(1000),
                                      [&] { return impl_->connections.empty(); });
   }
-  impl_->ioc.stop();
+  for (auto& context : impl_->contexts) context->stop();
   for (std::thread& thread : impl_->threads) thread.join();
   impl_->threads.clear();
 }

@@ -80,7 +80,8 @@ void registerServeCommand(CLI::App& app, int& exit_code) {
                   "A kept-alive connection waiting for its next request")
       ->capture_default_str()
       ->check(CLI::Range(1u, 3600000u));
-  cmd->add_option("--send-timeout-ms", options->send_timeout_ms, "To write one response")
+  cmd->add_option("--send-timeout-ms", options->send_timeout_ms,
+                  "A response write making no progress (client not reading)")
       ->capture_default_str()
       ->check(CLI::Range(1u, 3600000u));
   cmd->add_option("--header-limit", options->header_limit_bytes,

@@ -5,7 +5,9 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <filesystem>
+#include <thread>
 #include <mutex>
 
 #include <boost/asio/connect.hpp>
@@ -22,14 +24,20 @@ namespace http = boost::beast::http;
 
 namespace {
 
+// The archives of this process, removed when it exits.
+struct SuiteFolder {
+  std::filesystem::path path =
+      std::filesystem::path(::testing::TempDir()) / fmt::format("tessera_serve_{}", ::getpid());
+  SuiteFolder() { std::filesystem::create_directories(path); }
+  ~SuiteFolder() {
+    std::error_code ignored;
+    std::filesystem::remove_all(path, ignored);
+  }
+};
+
 std::string suiteFolder() {
-  static const std::string folder = [] {
-    auto path =
-        std::filesystem::path(::testing::TempDir()) / fmt::format("tessera_serve_{}", ::getpid());
-    std::filesystem::create_directories(path);
-    return path.string();
-  }();
-  return folder;
+  static const SuiteFolder folder;
+  return folder.path.string();
 }
 
 }  // namespace
@@ -169,6 +177,15 @@ std::string RawConnection::readOneResponse() {
     }
     pending_.append(chunk, size_t(n));
   }
+}
+
+bool eventually(const std::function<bool()>& condition) {
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!condition()) {
+    if (std::chrono::steady_clock::now() > deadline) return false;
+    std::this_thread::yield();
+  }
+  return true;
 }
 
 unsigned statusOf(const std::string& bytes) {

@@ -3,6 +3,7 @@
 // Beast client for well-formed requests and a raw socket for hostile ones.
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -62,6 +63,10 @@ class RawConnection {
   int fd_ = -1;
   std::string pending_;
 };
+
+/// Polls `condition` until it holds or 10 s pass; returns its last value. For counters the
+/// server updates just after a response's last byte is written, which a client can see first.
+bool eventually(const std::function<bool()>& condition);
 
 /// The status code of the first response in `bytes` ("HTTP/1.1 404 ..." -> 404), 0 if none.
 unsigned statusOf(const std::string& bytes);
