@@ -6,6 +6,7 @@
 /// viewer. The endpoints, limits and status codes are specified in docs/serve.md.
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -36,6 +37,10 @@ struct ServeOptions {
   std::string cors_origin;
   /// Access log: a path, "-" for stdout, empty for none. One line per request.
   std::string access_log;
+  /// Called once by `start`, on the calling thread, after the socket is bound and before any
+  /// connection is accepted, with the bound address and port: the CLI prints its "listening
+  /// on" line here, so that line precedes every access log line on stdout. May be empty.
+  std::function<void(const std::string& address, uint16_t port)> on_listening;
 };
 
 /// Counters since start, for tests and the CLI. All values are monotonic except the gauges

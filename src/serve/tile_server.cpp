@@ -420,6 +420,7 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   impl->port = impl->acceptor->local_endpoint().port();
   impl->address = address.to_string();
 
+  if (options.on_listening) options.on_listening(impl->address, impl->port);
   impl->accept();
   for (uint32_t i = 0; i < threads; ++i)
     impl->threads.emplace_back([context = impl->contexts[i].get()] { context->run(); });

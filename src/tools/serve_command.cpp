@@ -25,15 +25,16 @@ int runServe(const ServeOptions& options, double cache_mib) {
   sigaddset(&signals, SIGTERM);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
+  resolved.on_listening = [](const std::string& address, uint16_t port) {
+    const bool v6 = address.find(':') != std::string::npos;
+    // The first line on stdout, flushed: scripts and tests read the port from it.
+    std::printf("listening on http://%s%s%s:%u\n", v6 ? "[" : "", address.c_str(), v6 ? "]" : "",
+                unsigned(port));
+    std::fflush(stdout);
+  };
   Result<std::unique_ptr<TileServer>> started = TileServer::start(resolved);
   if (!started) return reportError(started.error());
   TileServer& server = **started;
-  const std::string address = server.address();
-  const bool v6 = address.find(':') != std::string::npos;
-  // The first line on stdout, flushed: scripts and tests read the port from it.
-  std::printf("listening on http://%s%s%s:%u\n", v6 ? "[" : "", address.c_str(), v6 ? "]" : "",
-              unsigned(server.port()));
-  std::fflush(stdout);
   std::fprintf(stderr, "tessera serve: %zu archive(s):", server.archiveNames().size());
   for (const std::string& name : server.archiveNames()) std::fprintf(stderr, " %s", name.c_str());
   std::fprintf(stderr, "\n");

@@ -490,6 +490,24 @@ TEST(TileServer, StartFailsNamingTheProblem) {
   EXPECT_FALSE(TileServer::start(options));
 }
 
+TEST(TileServer, OnListeningReportsTheBoundPortOnce) {
+  ServeOptions options;
+  int calls = 0;
+  uint16_t reported = 0;
+  std::string address;
+  options.on_listening = [&](const std::string& bound, uint16_t port) {
+    ++calls;
+    address = bound;
+    reported = port;
+  };
+  std::unique_ptr<TileServer> server = startServer({pngArchive()}, options);
+  ASSERT_NE(server, nullptr);
+  EXPECT_EQ(calls, 1);
+  EXPECT_EQ(address, "127.0.0.1");
+  EXPECT_EQ(reported, server->port());
+  EXPECT_NE(reported, 0);
+}
+
 TEST(TileServer, FolderServesEveryArchiveInside) {
   const std::string path = pngArchive();
   std::unique_ptr<TileServer> server =
