@@ -34,6 +34,7 @@ const VIEWPORT = { width: 640, height: 480 };
 let dir;
 let archive;
 let ocean;
+let packed;
 let server;
 let browser;
 let page;
@@ -44,7 +45,9 @@ before(async () => {
   // RGBA with transparent surroundings, and many uniform tiles (sea), which the server sends
   // as a colour in a header instead of a payload.
   ocean = await buildArchive('synthetic:3000x2000', path.join(dir, 'ocean.tess'), '--codec', 'png', '--border', '1');
-  server = await startServe([archive, ocean]);
+  // A codec browsers cannot decode: tiles come as `?format=png` transcodes.
+  packed = await buildArchive('synthetic:1000x700:3:3', path.join(dir, 'packed.tess'), '--codec', 'zstd', '--border', '1');
+  server = await startServe([archive, ocean, packed]);
   browser = await launchChromium({ viewport: VIEWPORT, hasTouch: true });
   page = await browser.context.newPage();
   page.on('pageerror', (error) => console.error(`page error: ${error.message}`));
@@ -75,7 +78,7 @@ async function setView(view) {
 async function compareWithReference() {
   const { view, archive: name } = await status();
   const shot = screenshotPicture(await page.locator('#view').screenshot(), dir);
-  const reference = await referencePicture({ scene: archive, ocean }[name], view, BACKGROUND, dir);
+  const reference = await referencePicture({ scene: archive, ocean, packed }[name], view, BACKGROUND, dir);
   return { view, ...compare(shot, reference) };
 }
 
@@ -162,6 +165,26 @@ test('uniform tiles and transparency: an RGBA archive at rest matches the refere
   // Uniform tiles came as a colour (204 and a header), none as a transcoded picture.
   assert.ok(uniform.length >= 1, 'no uniform tile was fetched');
   assert.deepEqual(transcoded, []);
+  await page.evaluate(() => window.tessera.open('scene', 0));
+  await settle();
+});
+
+test('tiles of a codec browsers cannot decode come as PNG transcodes and match the reference', async () => {
+  const urls = [];
+  const onRequest = (request) => {
+    if (new URL(request.url()).pathname.startsWith('/packed/0/')) urls.push(request.url());
+  };
+  page.on('request', onRequest);
+  await page.evaluate(() => window.tessera.open('packed', 0));
+  await setView({ cx: 480.5, cy: 333.25, tpp: 1.6 });
+  page.off('request', onRequest);
+  assert.ok(urls.length >= 3, `only ${urls.length} tile requests`);
+  for (const url of urls) assert.match(url, /\?format=png$/);
+  const result = await compareWithReference();
+  assert.ok(
+    result.psnr >= MIN_PSNR_DB && result.overShare <= MAX_OVER_SHARE,
+    `zstd archive: PSNR ${result.psnr.toFixed(1)} dB, ${result.overShare * 100}% of pixels off by more than 8`,
+  );
   await page.evaluate(() => window.tessera.open('scene', 0));
   await settle();
 });
