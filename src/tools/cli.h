@@ -51,5 +51,7 @@ void registerExtractCommand(CLI::App& app, int& exit_code);
 void registerFlyCommand(CLI::App& app, int& exit_code);
 void registerViewCommand(CLI::App& app, int& exit_code);
 void registerDemoCommand(CLI::App& app, int& exit_code);
+void registerRenderCommand(CLI::App& app, int& exit_code);
+void registerServeCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli
