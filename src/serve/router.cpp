@@ -1,6 +1,7 @@
 #include "serve/router.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <ctime>
 #include <functional>
 #include <random>
@@ -91,6 +92,21 @@ std::string randomBoundary() {
 
 std::string derivedEtag(const ServedArchive& served, std::string_view resource) {
   return fmt::format("\"{:x}\"", std::hash<std::string>{}(served.etag + std::string(resource)));
+}
+
+// An archive error for a client: the server's file path becomes the archive's public name
+// (clients need not learn the server's layout); the operator gets the full message on stderr.
+std::string publicMessage(const ServedArchive& served, const Error& error) {
+  std::string message = error.message;
+  const std::string public_name = served.name + ".tess";
+  for (size_t at = message.find(served.path); at != std::string::npos && !served.path.empty();
+       at = message.find(served.path, at + public_name.size()))
+    message.replace(at, served.path.size(), public_name);
+  return message;
+}
+
+void logArchiveError(const Error& error) {
+  std::fprintf(stderr, "tessera serve: %s\n", error.message.c_str());
 }
 
 }  // namespace
@@ -442,11 +458,15 @@ Response Router::picture(const Request& request, const ServedArchive& served,
     if (!rendered) {
       const Error& error = rendered.error();
       if (error.code == ErrorCode::kNotFound)
-        return errorResponse(request.version(), http::status::not_found, error.message);
+        return errorResponse(request.version(), http::status::not_found,
+                             publicMessage(served, error));
       if (error.code == ErrorCode::kInvalidArgument)
-        return errorResponse(request.version(), http::status::not_found, error.message);
+        return errorResponse(request.version(), http::status::not_found,
+                             publicMessage(served, error));
+      logArchiveError(error);
       metrics_.recordError(ServeError::kArchive);
-      return errorResponse(request.version(), http::status::internal_server_error, error.message);
+      return errorResponse(request.version(), http::status::internal_server_error,
+                           publicMessage(served, error));
     }
     body = shared(std::move(*rendered));
     cache_.insert(cache_key, body);
@@ -504,7 +524,9 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   Result<TileEntry> entry = archive.tileEntry(id);
   if (!entry) {
     metrics_.recordError(ServeError::kArchive);
-    return errorResponse(version, http::status::internal_server_error, entry.error().message);
+    logArchiveError(entry.error());
+    return errorResponse(version, http::status::internal_server_error,
+                         publicMessage(served, entry.error()));
   }
   Response response{http::status::ok, version};
   addCommonHeaders(response);
@@ -529,7 +551,9 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   Result<std::vector<uint8_t>> payload = archive.readPayload(id, *entry);
   if (!payload) {
     metrics_.recordError(ServeError::kArchive);
-    return errorResponse(version, http::status::internal_server_error, payload.error().message);
+    logArchiveError(payload.error());
+    return errorResponse(version, http::status::internal_server_error,
+                         publicMessage(served, payload.error()));
   }
   response.set(http::field::content_type, codecContentType(entry->codec));
   response.body().push_back(BodyPart::payload(std::move(*payload)));

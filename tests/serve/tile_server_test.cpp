@@ -490,6 +490,41 @@ TEST(TileServer, StartFailsNamingTheProblem) {
   EXPECT_FALSE(TileServer::start(options));
 }
 
+TEST(TileServer, CorruptPayloadIs500NamingTheTile) {
+  // A copy of an archive with one payload byte flipped: the checksum catches it.
+  const std::string source = pngArchive();
+  const std::string damaged =
+      (std::filesystem::path(source).parent_path() / "damaged.tess").string();
+  std::filesystem::copy_file(source, damaged, std::filesystem::copy_options::overwrite_existing);
+  std::shared_ptr<Archive> archive = Archive::openFile(source).value();
+  const TileEntry entry = archive->tileEntry({0, 0, 1, 1}).value();
+  ASSERT_EQ(entry.kind, TileKind::kEncoded);
+  {
+    std::fstream file(damaged, std::ios::in | std::ios::out | std::ios::binary);
+    file.seekg(std::streamoff(entry.offset_bytes + entry.length_bytes / 2));
+    char byte = 0;
+    file.read(&byte, 1);
+    byte = char(byte ^ 0x5a);
+    file.seekp(std::streamoff(entry.offset_bytes + entry.length_bytes / 2));
+    file.write(&byte, 1);
+  }
+  std::unique_ptr<TileServer> server = startServer({damaged});
+  ASSERT_NE(server, nullptr);
+  HttpReply reply = httpRequest(server->port(), "/damaged/0/0/1/1");
+  EXPECT_EQ(reply.status, 500u);
+  // The message names the archive by its public name and the tile; the server's path stays
+  // private.
+  EXPECT_NE(reply.body.find("damaged.tess: tile (0,1,1) checksum mismatch"), std::string::npos)
+      << reply.body;
+  EXPECT_EQ(reply.body.find(damaged), std::string::npos) << reply.body;
+  EXPECT_EQ(httpRequest(server->port(), "/damaged/0_files/10/1_1.png").status, 500u);
+  // Other tiles are still served.
+  EXPECT_EQ(httpRequest(server->port(), "/damaged/0/0/0/0").status, 200u);
+  const std::string metrics = httpRequest(server->port(), "/metrics").body;
+  EXPECT_NE(metrics.find("tessera_http_errors_total{kind=\"archive\"} 2"), std::string::npos);
+  std::filesystem::remove(damaged);
+}
+
 TEST(TileServer, OnListeningReportsTheBoundPortOnce) {
   ServeOptions options;
   int calls = 0;
