@@ -535,8 +535,14 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   if (entry->kind != TileKind::kEncoded) {
     // No payload to send: the kind (and colour) say everything; ?format= gives pixels.
     response.result(http::status::no_content);
-    if (entry->kind == TileKind::kUniform)
-      response.set("X-Tessera-Uniform-Rgba", fmt::format("{:08x}", entry->uniform_rgba));
+    if (entry->kind == TileKind::kUniform) {
+      // Channel 0 first (rrggbbaa), the order people read colours in, whatever the
+      // in-memory byte order of uniform_rgba.
+      const uint32_t rgba = entry->uniform_rgba;
+      response.set("X-Tessera-Uniform-Rgba",
+                   fmt::format("{:02x}{:02x}{:02x}{:02x}", rgba & 0xff, (rgba >> 8) & 0xff,
+                               (rgba >> 16) & 0xff, rgba >> 24));
+    }
     response.set(http::field::etag,
                  fmt::format("\"{}-{:08x}\"", tileKindName(entry->kind), entry->uniform_rgba));
     return response;

