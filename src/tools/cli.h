@@ -62,5 +62,6 @@ void registerExtractCommand(CLI::App& app, int& exit_code);
 void registerFlyCommand(CLI::App& app, int& exit_code);
 void registerViewCommand(CLI::App& app, int& exit_code);
 void registerDemoCommand(CLI::App& app, int& exit_code);
+void registerServeCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

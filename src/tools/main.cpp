@@ -80,6 +80,7 @@ int main(int argc, char** argv) {
   registerFlyCommand(app, exit_code);
   registerDemoCommand(app, exit_code);
   registerViewCommand(app, exit_code);
+  registerServeCommand(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
