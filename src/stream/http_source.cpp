@@ -169,8 +169,7 @@ struct Transfer {
   curl_slist* headers = nullptr;
   CURL* easy = nullptr;
   uint64_t probe_total = 0;  ///< the probe: the file size
-  std::string new_version;   ///< kHeadAfterChange: what the server now reports
-  Error change_error;        ///< kHeadAfterChange: the message, completed with new_version
+  Error change_error;        ///< kHeadAfterChange: the message, completed with the HEAD's version
 
   bool done = false;
   Result<void> result;
@@ -186,6 +185,7 @@ struct PrefetchEntry {
   uint64_t taken_bytes = 0;  ///< bytes readers copied out: the entry goes once all are taken
 };
 
+/// Thread-safe (ByteSource). The I/O thread owns libcurl; callers hand it transfers and wait.
 class HttpSource final : public ByteSource {
  public:
   HttpSource(std::string url, HttpOptions options)
@@ -980,8 +980,10 @@ class HttpSource final : public ByteSource {
   mutable std::vector<std::shared_ptr<Transfer>> submitted_;      ///< waiting for the I/O thread
   mutable std::list<std::shared_ptr<PrefetchEntry>> prefetched_;  ///< oldest first
   mutable uint64_t prefetch_bytes_ = 0;  ///< sum of prefetched_ sizes, <= prefetch_buffer_bytes
-  Error changed_;                        ///< set once the file changed: every read fails so
-  mutable LinkStats stats_;              ///< totals (recent kept apart)
+  /// Set once the file changed on the server: every later read fails with it, so no reader
+  /// gets bytes of the new version under the old one's directory.
+  Error changed_;
+  mutable LinkStats stats_;  ///< totals (recent kept apart)
   mutable std::deque<LinkSample> recent_;
 };
 
