@@ -65,7 +65,8 @@ class ByteSource {
 
   /// Reads several ranges (any order, may overlap). The default sorts them and reads ranges
   /// closer than 64 KiB as one (at most 16 MiB per read), which suits disks and HTTP alike;
-  /// sources may override it. Fails as a whole if any read fails.
+  /// sources may override it (the HTTP source sends those reads at once, in parallel). Fails
+  /// as a whole if any read fails.
   [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
 
   /// A hint that these ranges will be read soon (`out` is ignored). A source that can fetch
