@@ -385,21 +385,27 @@ TEST(HttpSourceTest, WithoutAnEtagReadsSendIfUnmodifiedSince) {
 }
 
 TEST_F(FaultTest, TransientErrorsAreRetriedThenSucceed) {
-  auto source = open();
+  HttpOptions options = quickOptions();
+  options.max_attempts = 4;
+  auto source = open(options);
   ASSERT_TRUE(source);
-  // Requests 1 and 2 (after the open) fail: a 503 with Retry-After far beyond the cap (the
-  // read would take 100 s if it were not capped), then a 429.
+  // Requests 1 to 3 (after the open) fail: a 503 with Retry-After far beyond the cap (the
+  // read would take 100 s if it were not capped), a 429, a 503 with a Retry-After date in
+  // the past (retry at once).
   server_.setPlan([](uint64_t n) {
     if (n == 1) return test::RangeReply{test::RangeReply::Kind::kStatus, 503, "100"};
     if (n == 2) return test::RangeReply{test::RangeReply::Kind::kStatus, 429, "1"};
+    if (n == 3)
+      return test::RangeReply{test::RangeReply::Kind::kStatus, 503,
+                              "Wed, 21 Oct 2015 07:28:00 GMT"};
     return test::RangeReply{};
   });
   const auto started = std::chrono::steady_clock::now();
   EXPECT_EQ(readRange(*source, 30000, 5000), slice(bytes_, 30000, 5000));
   EXPECT_LT(std::chrono::steady_clock::now() - started, std::chrono::seconds(50));
   const LinkStats stats = *source->linkStats();
-  EXPECT_EQ(stats.retries, 2u);
-  EXPECT_EQ(stats.requests, 4u);
+  EXPECT_EQ(stats.retries, 3u);
+  EXPECT_EQ(stats.requests, 5u);
   EXPECT_EQ(stats.errors, 0u);
 }
 
