@@ -780,10 +780,7 @@ class HttpSource final : public ByteSource {
       return retryOrFail(
           ErrorCode::kIo, status_line,
           status == 429 || status == 503 ? retryAfter(transfer) : std::chrono::milliseconds(0));
-    complete(transfer,
-             fail(status == 401 || status == 403 ? ErrorCode::kNotFound : ErrorCode::kIo,
-                  fmt::format("{}: {}", what, status_line)),
-             true);
+    complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, status_line)), true);
     return false;
   }
 

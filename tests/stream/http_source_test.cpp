@@ -420,6 +420,7 @@ TEST_F(FaultTest, ClientErrorsAreNotRetried) {
   ASSERT_FALSE(read);
   EXPECT_NE(read.error().message.find("bytes=20000-20009: HTTP 403"), std::string::npos)
       << read.error().message;
+  EXPECT_EQ(read.error().code, ErrorCode::kIo);
   EXPECT_EQ(server_.seen().size(), 2u);
   EXPECT_EQ(source->linkStats()->retries, 0u);
   EXPECT_EQ(source->linkStats()->errors, 1u);
