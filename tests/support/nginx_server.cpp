@@ -5,6 +5,7 @@
 #include <netinet/in.h>
 #include <signal.h>
 #include <spawn.h>
+#include <sys/prctl.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -154,19 +155,28 @@ Result<std::unique_ptr<NginxServer>> NginxServer::start(const std::string& root,
     const std::string conf = dir + "/nginx.conf";
     std::ofstream(conf) << config(absolute_root, dir, port, h2c_port, tls_port);
     const std::string log = dir + "/nginx.out";
-    posix_spawn_file_actions_t actions;
-    posix_spawn_file_actions_init(&actions);
-    posix_spawn_file_actions_addopen(&actions, 1, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&actions, 1, 2);
     std::vector<std::string> args = {kBinary, "-p", dir + "/",         "-c",
                                      conf,    "-e", dir + "/error.log"};
     std::vector<char*> argv;
     for (std::string& arg : args) argv.push_back(arg.data());
     argv.push_back(nullptr);
-    pid_t pid = 0;
-    const int spawned = posix_spawn(&pid, kBinary, &actions, nullptr, argv.data(), environ);
-    posix_spawn_file_actions_destroy(&actions);
-    if (spawned != 0) return fail(ErrorCode::kIo, fmt::format("{}: cannot run", kBinary));
+    const pid_t parent = ::getpid();
+    // fork + exec rather than posix_spawn, for PR_SET_PDEATHSIG: nginx dies with the test
+    // even when the test is killed before its destructor runs. Only async-signal-safe calls
+    // between fork and exec.
+    const pid_t pid = ::fork();
+    if (pid < 0) return fail(ErrorCode::kIo, fmt::format("{}: cannot fork", kBinary));
+    if (pid == 0) {
+      ::prctl(PR_SET_PDEATHSIG, SIGTERM);
+      if (::getppid() != parent) ::_exit(127);
+      const int out = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+      if (out >= 0) {
+        ::dup2(out, 1);
+        ::dup2(out, 2);
+      }
+      ::execv(kBinary, argv.data());
+      ::_exit(127);
+    }
     if (waitForPort(port, pid) && waitForPort(h2c_port, pid) &&
         (tls_port == 0 || waitForPort(tls_port, pid)))
       return std::unique_ptr<NginxServer>(new NginxServer(pid, port, h2c_port, tls_port, dir));
