@@ -528,6 +528,28 @@ TEST_F(FaultTest, CancelAbortsATransferInFlight) {
   EXPECT_EQ(server_.seen().size(), requests);
 }
 
+TEST_F(FaultTest, CancelStopsAReaderWaitingForFetchedAheadBytes) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  server_.setPlan([](uint64_t n) {
+    return n == 1 ? test::RangeReply{test::RangeReply::Kind::kStall} : test::RangeReply{};
+  });
+  std::vector<ByteRange> hints = {{50000, 100000, nullptr}};
+  ASSERT_EQ(source->prefetch(hints), 100000u);
+  server_.waitStalled();
+  // The read lies inside the hinted range, whose transfer is stalled: it would wait forever
+  // but for its flag (seen before or while it waits). The source then closes with that
+  // fetch still in flight.
+  std::atomic<bool> cancel{false};
+  Result<void> result;
+  std::vector<uint8_t> out(1000);
+  std::thread reader([&] { result = source->readCancellable(60000, out, cancel); });
+  cancel.store(true, std::memory_order_release);
+  reader.join();
+  ASSERT_FALSE(result);
+  EXPECT_EQ(result.error().code, ErrorCode::kCancelled);
+}
+
 TEST_F(FaultTest, StalledTransferTimesOutAndIsRetried) {
   HttpOptions options = quickOptions();
   options.stall_timeout = std::chrono::milliseconds(1000);
