@@ -9,8 +9,8 @@ packages=(
   gdal-bin       # gdal_translate -of COG
   libtiff-tools  # tiffinfo, to check the peers' tile layout and photometric
   time           # /usr/bin/time -v: wall time and peak RSS
-  nginx          # later: static range-request serving baseline
-  wrk            # later: HTTP load generator
+  nginx-light    # static serving baseline (serve_bench.sh, link_bench.sh)
+  wrk            # HTTP load generator (serve_bench.sh)
 )
 
 missing=()

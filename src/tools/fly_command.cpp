@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/byte_source.h>
 #include <tessera/stream.h>
 
 #include "format/codec.h"
@@ -126,7 +127,7 @@ int runFly(const FlyArgs& args) {
     return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
   if (!(args.fps > 0 && args.fps <= 1000))
     return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
-  Result<std::shared_ptr<Archive>> archive = Archive::openFile(args.archive);
+  Result<std::shared_ptr<Archive>> archive = Archive::openUri(args.archive);
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())
     return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
@@ -144,7 +145,8 @@ int runFly(const FlyArgs& args) {
   options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
-  options.merge_gap_bytes = args.merge_gap_kib << 10;
+  options.merge_gap_bytes =
+      args.merge_gap_kib ? *args.merge_gap_kib << 10 : defaultMergeGapBytes(args.archive);
   options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
@@ -189,7 +191,8 @@ int runFly(const FlyArgs& args) {
   size_t startup_frames = 0;
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
-  if (args.cold) dropFromPageCache(args.archive);
+  const bool remote = isRemoteUri(args.archive);
+  if (args.cold && !remote) dropFromPageCache(args.archive);
   const auto start = Clock::now();
   const double duration = path->durationS();
   FrameReport last{};
@@ -201,7 +204,7 @@ int runFly(const FlyArgs& args) {
         start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
     double now_s = std::chrono::duration<double>(Clock::now() - start).count();
     if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) {
-      if (args.cold) dropFromPageCache(args.archive);
+      if (args.cold && !remote) dropFromPageCache(args.archive);
       jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
     }
     View view;
@@ -331,7 +334,10 @@ int runFly(const FlyArgs& args) {
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
-      {"page_cache", args.cold ? "cold (posix_fadvise DONTNEED before each jump)" : "as found"},
+      {"page_cache", remote      ? "remote (HTTP)"
+                     : args.cold ? "cold (posix_fadvise DONTNEED before each jump)"
+                                 : "as found"},
+      {"merge_gap_bytes", options.merge_gap_bytes},
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
@@ -362,6 +368,24 @@ int runFly(const FlyArgs& args) {
         {"evictions", cache.evictions},
         {"peak_bytes", cache.peak_bytes}}},
       {"peak_rss_bytes", peakRssBytes()}};
+  if (std::optional<LinkStats> link = (*archive)->source().linkStats()) {
+    // Over a network: what the link did, and what the requests saw of it (the last ones).
+    std::vector<double> mib_s, first_byte_ms;
+    for (const LinkSample& sample : link->recent) {
+      if (sample.seconds > 0) mib_s.push_back(double(sample.bytes) / sample.seconds / 1048576.0);
+      first_byte_ms.push_back(sample.first_byte_seconds * 1000);
+    }
+    summary["link"] = {{"requests", link->requests},
+                       {"bytes_received", link->bytes_received},
+                       {"retries", link->retries},
+                       {"errors", link->errors},
+                       {"cancelled", link->cancelled},
+                       {"prefetched_bytes", link->prefetched_bytes},
+                       {"prefetch_hit_bytes", link->prefetch_hit_bytes},
+                       {"recent_requests", link->recent.size()},
+                       {"recent_mib_s_p50", percentile(mib_s, 50)},
+                       {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
+  }
   if (gpu) {
     std::vector<double> gpu_ms;
     for (const ReportFrame& f : report_frames)
@@ -401,7 +425,7 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FlyArgs>();
   CLI::App* cmd = app.add_subcommand(
       "fly", "Fly a camera path headless in real time and report streaming figures");
-  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("--path", args->path, "pan, zoom, jump, spiral, or a keyframe file (docs/fly.md)")
       ->capture_default_str();
   cmd->add_option("--speed", args->speed_px_s, "Pan speed in level-0 pixels per second")
@@ -428,8 +452,8 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
-                  "Reads of tiles closer than this in the file are merged into one")
-      ->capture_default_str();
+                  "Reads of tiles closer than this in the file are merged into one (default: 16 "
+                  "for a file, 64 for a URL)");
   cmd->add_option("--read-ahead-kib", args->read_ahead_kib,
                   "Payload bytes at the head of the loader's queue fetched ahead (0 = off)")
       ->capture_default_str();

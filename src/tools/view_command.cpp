@@ -376,7 +376,7 @@ int runView(const ViewArgs& args) {
   const RendererKind kind =
       args.renderer == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads;
 
-  Result<std::shared_ptr<Archive>> archive = Archive::openFile(args.archive);
+  Result<std::shared_ptr<Archive>> archive = Archive::openUri(args.archive);
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())
     return reportError(
@@ -393,6 +393,7 @@ int runView(const ViewArgs& args) {
 
   StreamerOptions options;
   options.cache_budget_bytes = args.cache_mib << 20;
+  options.merge_gap_bytes = defaultMergeGapBytes(args.archive);
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
@@ -508,7 +509,7 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ViewArgs>();
   CLI::App* cmd = app.add_subcommand(
       "view", "Open an archive in a window: pan, zoom, fly over, overlays (docs/view.md)");
-  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("--renderer", args->renderer, "tile-quads or clipmap")
       ->check(CLI::IsMember({"tile-quads", "clipmap"}))
       ->capture_default_str();

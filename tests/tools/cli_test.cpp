@@ -18,6 +18,7 @@
 
 #include "format/codec.h"
 #include "support/archive_fixture.h"
+#include "support/nginx_server.h"
 #include "support/reference_pyramid.h"
 #include "support/test_images.h"
 
@@ -436,6 +437,68 @@ TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
   RunResult missing = run({"fly", work_ + "none.tess", "-q", "--out", out});
   EXPECT_EQ(missing.exit_code, 1);
   EXPECT_NE(missing.err.find("none.tess"), std::string::npos) << missing.err;
+}
+
+// The same commands on a URL: nginx serves the archive statically; every subcommand reads it
+// through the HTTP source and must see what it sees in the local file.
+TEST_F(Cli, InfoVerifyExtractAndFlyReadAnArchiveOverHttp) {
+  if (!test::NginxServer::available())
+    GTEST_SKIP() << test::NginxServer::kBinary
+                 << " is not installed (scripts/install-deps.sh installs nginx-light)";
+  std::filesystem::create_directories(work_ + "www");
+  const std::string archive = work_ + "www/remote.tess";
+  ASSERT_EQ(
+      run({"build", "synthetic:4096x2048:2:3", "-o", archive, "--tile", "128", "-q"}).exit_code, 0);
+  auto nginx = test::NginxServer::start(work_ + "www", work_ + "nginx");
+  ASSERT_TRUE(nginx) << nginx.error().message;
+  const std::string url = (*nginx)->url("remote.tess");
+
+  RunResult local_info = run({"info", archive, "--json"});
+  RunResult remote_info = run({"info", url, "--json"});
+  ASSERT_EQ(remote_info.exit_code, 0) << remote_info.err;
+  nlohmann::json local = nlohmann::json::parse(local_info.out);
+  nlohmann::json remote = nlohmann::json::parse(remote_info.out);
+  EXPECT_EQ(remote["path"], url);
+  EXPECT_EQ(remote["images"], local["images"]);  // level tables included: every directory page
+  EXPECT_EQ(remote["file_bytes"], local["file_bytes"]);
+
+  RunResult verified = run({"verify", url});
+  EXPECT_EQ(verified.exit_code, 0) << verified.err;
+  for (const std::string& source : {archive, url}) {
+    RunResult extracted = run({"extract", source, "--level", "1", "--rect", "100,50,300,200", "-o",
+                               work_ + (source == url ? "remote.png" : "local.png")});
+    ASSERT_EQ(extracted.exit_code, 0) << extracted.err;
+  }
+  EXPECT_EQ(slurp(work_ + "remote.png"), slurp(work_ + "local.png"));
+
+  const std::string out = work_ + "fly-remote";
+  RunResult flown =
+      run({"fly", url, "--duration", "1", "--path", "pan", "--speed", "2000", "--fps", "30",
+           "--viewport", "320x240", "--loader-priority", "nice", "-q", "--out", out});
+  ASSERT_EQ(flown.exit_code, 0) << flown.err;
+  nlohmann::json summary = nlohmann::json::parse(slurp(out + "/summary.json"));
+  EXPECT_EQ(summary["archive"], url);
+  EXPECT_EQ(summary["merge_gap_bytes"], 64 * 1024);  // the remote default
+  EXPECT_GT(summary["tiles_loaded"].get<uint64_t>(), 0u);
+  EXPECT_EQ(summary["load_failures"].get<uint64_t>(), 0u);
+  ASSERT_TRUE(summary.contains("link")) << summary.dump();
+  EXPECT_GT(summary["link"]["requests"].get<uint64_t>(), 1u);
+  EXPECT_EQ(summary["link"]["errors"].get<uint64_t>(), 0u);
+  EXPECT_GT(summary["link"]["bytes_received"].get<uint64_t>(), 0u);
+  // A local flight keeps the disk default.
+  RunResult local_fly = run({"fly", archive, "--duration", "0.2", "--fps", "10", "--viewport",
+                             "320x240", "-q", "--out", out});
+  ASSERT_EQ(local_fly.exit_code, 0) << local_fly.err;
+  EXPECT_EQ(nlohmann::json::parse(slurp(out + "/summary.json"))["merge_gap_bytes"], 16 * 1024);
+
+  RunResult missing = run({"info", (*nginx)->url("missing.tess")});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find("missing.tess: bytes=0-16383: HTTP 404"), std::string::npos)
+      << missing.err;
+  RunResult no_ranges = run({"info", (*nginx)->url("noranges/remote.tess")});
+  EXPECT_EQ(no_ranges.exit_code, 1);
+  EXPECT_NE(no_ranges.err.find("server does not honour byte ranges"), std::string::npos)
+      << no_ranges.err;
 }
 
 TEST_F(Cli, DemoBuildsOnceFliesTheStandardPathsAndLinksTheirReports) {
