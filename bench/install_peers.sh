@@ -32,6 +32,6 @@ echo "install_peers: installing ${missing[*]}"
 "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
   "${missing[@]}"
 # nginx starts a service on install in some setups; the benchmarks start their own instance.
-if [[ " ${missing[*]} " == *" nginx "* ]] && command -v systemctl >/dev/null 2>&1; then
+if [[ " ${missing[*]} " == *" nginx-light "* ]] && command -v systemctl >/dev/null 2>&1; then
   "${sudo_cmd[@]}" systemctl disable --now nginx >/dev/null 2>&1 || true
 fi
