@@ -1,6 +1,8 @@
 #include "serve/catalog.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -45,11 +47,27 @@ Result<void> addArchive(const std::string& path, Catalog& catalog) {
   served->etag =
       fmt::format("\"{:x}-{:x}-{:x}\"", served->file_bytes, mtime_ns, uint64_t(status.st_ino));
   served->modified = status.st_mtim.tv_sec;
+  served->mtime_ns = mtime_ns;
+  served->stat_fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (served->stat_fd < 0)
+    return Unexpected(ErrorCode::kIo, fmt::format("{}: cannot open the file", path));
   catalog[name] = std::move(served);
   return {};
 }
 
 }  // namespace
+
+ServedArchive::~ServedArchive() {
+  if (stat_fd >= 0) ::close(stat_fd);
+}
+
+bool ServedArchive::unchangedOnDisk() const {
+  struct stat status {};
+  if (stat_fd < 0 || ::fstat(stat_fd, &status) != 0) return false;
+  const uint64_t now_ns =
+      uint64_t(status.st_mtim.tv_sec) * 1000000000ull + uint64_t(status.st_mtim.tv_nsec);
+  return uint64_t(status.st_size) == file_bytes && now_ns == mtime_ns;
+}
 
 Result<Catalog> loadCatalog(const std::vector<std::string>& paths) {
   Catalog catalog;

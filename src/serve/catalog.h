@@ -24,6 +24,17 @@ struct ServedArchive {
   /// server treats archives as immutable; replacing a file needs a restart.
   std::string etag;
   std::time_t modified = 0;  ///< for Last-Modified and If-Range dates
+  /// A descriptor of the served file kept only to fstat it: a file rewritten in place (same
+  /// inode) would otherwise be served as new bytes under the old ETag, which no client can
+  /// detect. A file replaced by rename keeps being served from the old inode, consistently.
+  int stat_fd = -1;
+  uint64_t mtime_ns = 0;
+  ServedArchive() = default;
+  ServedArchive(const ServedArchive&) = delete;
+  ServedArchive& operator=(const ServedArchive&) = delete;
+  ~ServedArchive();
+  /// False once the file's size or modification time differ from those at start.
+  bool unchangedOnDisk() const;
 };
 
 /// Archives by name.

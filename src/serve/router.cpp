@@ -66,6 +66,18 @@ bool ifNoneMatchHits(std::string_view header, std::string_view etag) {
   return false;
 }
 
+// If-Match uses the strong comparison (RFC 9110, section 13.1.1): weak tags never match.
+bool strongMatchIn(std::string_view header, std::string_view etag) {
+  while (!header.empty()) {
+    size_t comma = header.find(',');
+    std::string_view item = trim(header.substr(0, comma));
+    if (!item.starts_with("W/") && item == etag) return true;
+    if (comma == std::string_view::npos) break;
+    header.remove_prefix(comma + 1);
+  }
+  return false;
+}
+
 // Strict: digits only, at most 10 of them, and within uint32_t.
 std::optional<uint32_t> parseIndex(std::string_view text) {
   if (text.empty() || text.size() > 10) return std::nullopt;
@@ -366,12 +378,15 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
   if (seg.size() == 1 && seg[0].size() > 5 && seg[0].ends_with(".tess")) {
     auto it = catalog_.find(seg[0].substr(0, seg[0].size() - 5));
     if (it == catalog_.end()) return notFound(Endpoint::kArchiveFile, "no such archive");
+    if (!it->second->unchangedOnDisk())
+      return {Endpoint::kArchiveFile, changedOnDisk(version, *it->second)};
     return {Endpoint::kArchiveFile, archiveFile(request, *it->second)};
   }
   if (seg.size() < 2) return notFound(Endpoint::kOther, "no such resource");
   auto it = catalog_.find(seg[0]);
   if (it == catalog_.end()) return notFound(Endpoint::kOther, "no such archive");
   const ServedArchive& served = *it->second;
+  if (!served.unchangedOnDisk()) return {Endpoint::kOther, changedOnDisk(version, served)};
   const Archive& archive = *served.archive;
   const int quality = options_.jpeg_quality;
 
@@ -567,6 +582,17 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   return response;
 }
 
+Response Router::changedOnDisk(unsigned version, const ServedArchive& served) const {
+  // Logged on every request, which is what an operator who rewrote a served file needs to see.
+  std::fprintf(stderr,
+               "tessera serve: %s changed on disk since the server started; restart to serve it\n",
+               served.path.c_str());
+  return errorResponse(version, http::status::service_unavailable,
+                       fmt::format("archive {} changed on disk since the server started; the "
+                                   "server must be restarted to serve it",
+                                   served.name));
+}
+
 Response Router::archiveFile(const Request& request, const ServedArchive& served) {
   const unsigned version = request.version();
   const uint64_t size = served.file_bytes;
@@ -577,6 +603,17 @@ Response Router::archiveFile(const Request& request, const ServedArchive& served
   response.set(http::field::etag, served.etag);
   response.set(http::field::last_modified, last_modified);
   response.set(http::field::cache_control, kRevalidate);
+  // If-Match (RFC 9110, 13.1.1): a client holding bytes of one version asks for more of that
+  // version only; any other version is 412, never bytes to mix with what it has.
+  if (std::string_view if_match = trim(request[http::field::if_match]);
+      !if_match.empty() && if_match != "*" && !strongMatchIn(if_match, served.etag)) {
+    Response refused =
+        errorResponse(version, http::status::precondition_failed,
+                      fmt::format("{}.tess is not the version asked for (If-Match); it is now {}",
+                                  served.name, served.etag));
+    refused.set(http::field::etag, served.etag);
+    return refused;
+  }
   if (ifNoneMatchHits(request[http::field::if_none_match], served.etag)) {
     response.result(http::status::not_modified);
     return response;

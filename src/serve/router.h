@@ -50,6 +50,8 @@ class Router {
  private:
   RoutedResponse route(const Request& request, const Target& target);
   Response archiveFile(const Request& request, const ServedArchive& served);
+  /// 503 for an archive whose file was modified in place after start (ServedArchive).
+  Response changedOnDisk(unsigned version, const ServedArchive& served) const;
   Response tile(const Request& request, const ServedArchive& served, const Target& target);
   Response dziDescriptor(const Request& request, const ServedArchive& served, uint32_t image);
   Response picture(const Request& request, const ServedArchive& served, const std::string& key,

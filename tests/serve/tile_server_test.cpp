@@ -1,6 +1,7 @@
 // The endpoints of docs/serve.md against an in-process server on an ephemeral port: stored
 // tiles, the archive file with byte ranges, info documents, Deep Zoom, XYZ, transcoding,
 // metrics, the viewer, CORS and the access log.
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -242,6 +243,56 @@ TEST_F(TileServerTest, OverlappingRangesAreCoalesced) {
   ASSERT_EQ(reply.status, 206u);
   EXPECT_EQ(reply.header("content-range"), fmt::format("bytes 0-149/{}", bytes.size()));
   EXPECT_EQ(reply.body, bytes.substr(0, 150));
+}
+
+TEST_F(TileServerTest, IfMatchOnTheArchiveFileRefusesAnyOtherVersion) {
+  const std::string bytes = fileBytes(paths_[0]);
+  const std::string etag = httpRequest(port_, "/pngb1.tess", {}, "HEAD").header("etag");
+  HttpReply same = httpRequest(port_, "/pngb1.tess", {{"Range", "bytes=5-14"}, {"If-Match", etag}});
+  EXPECT_EQ(same.status, 206u);
+  EXPECT_EQ(same.body, bytes.substr(5, 10));
+  HttpReply listed =
+      httpRequest(port_, "/pngb1.tess", {{"Range", "bytes=5-14"}, {"If-Match", "\"x\", " + etag}});
+  EXPECT_EQ(listed.status, 206u);
+  HttpReply any = httpRequest(port_, "/pngb1.tess", {{"Range", "bytes=5-14"}, {"If-Match", "*"}});
+  EXPECT_EQ(any.status, 206u);
+  // Another version, or this one compared weakly: 412 and no bytes of the file.
+  for (const std::string& other : {std::string("\"old\""), "W/" + etag}) {
+    HttpReply refused =
+        httpRequest(port_, "/pngb1.tess", {{"Range", "bytes=5-14"}, {"If-Match", other}});
+    EXPECT_EQ(refused.status, 412u) << other;
+    EXPECT_EQ(refused.header("etag"), etag);
+    EXPECT_EQ(refused.body.find(bytes.substr(5, 10)), std::string::npos);
+  }
+}
+
+TEST(TileServerChange, AnArchiveRewrittenInPlaceIsRefusedNotServedUnderItsOldEtag) {
+  const std::string original = servedArchive("pngb1", 1000, 700, 3, Codec::kPng, 128, 1);
+  const std::string path = ::testing::TempDir() + "/rewritten-in-place.tess";
+  std::filesystem::copy_file(original, path, std::filesystem::copy_options::overwrite_existing);
+  std::unique_ptr<TileServer> server = startServer({path});
+  ASSERT_NE(server, nullptr);
+  const uint16_t port = server->port();
+  ASSERT_EQ(httpRequest(port, "/rewritten-in-place.tess", {{"Range", "bytes=0-9"}}).status, 206u);
+  ASSERT_EQ(httpRequest(port, "/rewritten-in-place/0/0/0/0").status, 200u);
+  {
+    // Same inode, same size, new bytes and modification time: what an in-place rewrite does.
+    std::fstream file(path, std::ios::binary | std::ios::in | std::ios::out);
+    file.seekp(20000);
+    file.put('\x5a');
+  }
+  const auto later = std::filesystem::last_write_time(path) + std::chrono::seconds(2);
+  std::filesystem::last_write_time(path, later);
+  for (const std::string& target :
+       {std::string("/rewritten-in-place.tess"), std::string("/rewritten-in-place/0/0/0/0"),
+        std::string("/rewritten-in-place/info.json")}) {
+    HttpReply reply = httpRequest(port, target, {{"Range", "bytes=0-9"}});
+    EXPECT_EQ(reply.status, 503u) << target;
+    EXPECT_NE(reply.body.find("changed on disk"), std::string::npos) << reply.body;
+  }
+  EXPECT_EQ(httpRequest(port, "/healthz").status, 200u);
+  server->stop();
+  std::filesystem::remove(path);
 }
 
 TEST_F(TileServerTest, IfRangeAndIfNoneMatchOnTheArchiveFile) {
