@@ -210,6 +210,28 @@ Result<TileEntry> Archive::tileEntry(const TileId& tile) const {
                     (tile.x - geometry.first_tile_x)];
 }
 
+std::optional<TileEntry> Archive::tileEntryIfCached(const TileId& tile) const {
+  if (tile.image >= impl_->infos.size()) return std::nullopt;
+  const ImageInfo& info = impl_->infos[tile.image];
+  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
+      tile.y >= info.tilesY(tile.level))
+    return std::nullopt;
+  const uint32_t shift = info.page_tiles_log2;
+  const uint32_t page_x = tile.x >> shift, page_y = tile.y >> shift;
+  const uint64_t key =
+      pageKey(tile.image, tile.level, page_y * detail::pagesX(info, tile.level) + page_x);
+  std::shared_ptr<const std::vector<TileEntry>> entries;
+  {
+    std::lock_guard lock(impl_->cache_mutex);
+    auto it = impl_->pages.find(key);
+    if (it == impl_->pages.end()) return std::nullopt;
+    entries = it->second;
+  }
+  detail::PageGeometry geometry = detail::pageGeometry(info, tile.level, page_x, page_y);
+  return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
+                    (tile.x - geometry.first_tile_x)];
+}
+
 Result<void> Archive::verifyPayload(const TileId& tile, const TileEntry& entry,
                                     std::span<const uint8_t> payload) const {
   if (payload.size() != entry.length_bytes)
