@@ -25,9 +25,9 @@ struct LinkEstimate {
   /// Bytes delivered per second of wall time while at least one read was in flight: what the
   /// reader achieves with the parallelism it uses, latency included. 0 until a read finished.
   double bytes_per_s = 0;
-  /// Time from a request to its first byte, estimated as the smallest (duration - bytes /
-  /// bytes_per_s) over recent reads: a read that had the link to itself gives exactly its
-  /// latency, a read sharing it gives more, so the minimum is the best bound.
+  /// Time from a request to its first byte, bounded from above by the shortest recent read
+  /// (a min-filter: the smallest reads are mostly round trip). The first byte's time is not
+  /// visible through ByteSource::read.
   double latency_s = 0;
   /// Time a tile waited from being requested to its read starting (an average over recent
   /// tiles): how far behind the loader's queue is.
@@ -130,8 +130,8 @@ class ThrottledSource final : public ByteSource {
   std::shared_ptr<ByteSource> inner_;
   LinkModel link_;
   std::string name_;
-  mutable std::mutex mutex_;  // guards everything below
-  mutable std::condition_variable wait_;  ///< timed waits only
+  mutable std::mutex mutex_;                  // guards everything below
+  mutable std::condition_variable wait_;      ///< timed waits only
   mutable Clock::time_point link_free_at_{};  ///< the link carries reserved slices until then
   mutable LinkStatsTotal totals_;
 };

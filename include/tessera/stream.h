@@ -143,11 +143,11 @@ struct FrameReport {
   double update_ms = 0;             ///< render-thread time of this update() call
 
   // The link as the loader measures it (every source, adaptive or not; docs/runtime.md).
-  double link_bytes_per_s = 0;  ///< throughput estimate, 0 before the first read
-  double link_latency_ms = 0;   ///< latency estimate (request to first byte)
-  double queue_wait_ms = 0;     ///< recent tiles' wait from request to read
-  uint64_t cancelled_total = 0;       ///< queued requests dropped as no longer wanted
-  uint64_t reads_cancelled_total = 0; ///< reads abandoned in flight (every tile left the view)
+  double link_bytes_per_s = 0;         ///< throughput estimate, 0 before the first read
+  double link_latency_ms = 0;          ///< latency estimate (request to first byte)
+  double queue_wait_ms = 0;            ///< recent tiles' wait from request to read
+  uint64_t cancelled_total = 0;        ///< queued requests dropped as no longer wanted
+  uint64_t reads_cancelled_total = 0;  ///< reads abandoned in flight (every tile left the view)
 
   // Adaptive scheduling (StreamerOptions::adaptive; Marvie & Bouatouch, part III).
   bool adaptive = false;    ///< the adaptive policy chose this frame's requests

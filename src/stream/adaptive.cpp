@@ -44,8 +44,8 @@ bool AdaptiveScheduler::observe(const View& view, Clock::time_point now) {
   return std::chrono::duration<double>(now - last_change_).count() >= options_.still_after_s;
 }
 
-void AdaptiveScheduler::schedule(const View& view, Clock::time_point now,
-                                 const LinkEstimate& link, std::span<const TileRequest> wanted,
+void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const LinkEstimate& link,
+                                 std::span<const TileRequest> wanted,
                                  const std::function<TileFacts(const TileId&)>& facts,
                                  std::vector<TileRequest>& requests, FrameReport& report) {
   const bool still = observe(view, now);
@@ -127,7 +127,7 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now,
   report.view_still = still;
   report.requested_level = level;
   report.budget_bytes =
-      std::isfinite(byte_budget) ? uint64_t(std::max(0.0, byte_budget)) : UINT64_MAX;
+      std::isfinite(byte_budget) ? uint64_t(std::llround(std::max(0.0, byte_budget))) : UINT64_MAX;
   report.memory_budget_bytes = memory_budget;
   report.memory_bytes = memory;
   report.requested_bytes = requested_bytes;

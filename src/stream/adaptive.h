@@ -18,8 +18,8 @@ namespace tessera::detail {
 
 /// What the streamer knows about one wanted tile.
 struct TileFacts {
-  bool held = false;       ///< loaded or resident: occupies memory, needs no transfer
-  bool in_flight = false;  ///< being read: its bytes are on their way
+  bool held = false;           ///< loaded or resident: occupies memory, needs no transfer
+  bool in_flight = false;      ///< being read: its bytes are on their way
   uint64_t payload_bytes = 0;  ///< what its transfer costs (an estimate when not yet known)
 };
 

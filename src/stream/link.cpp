@@ -54,8 +54,8 @@ void LinkEstimator::readFinished(Clock::time_point started, Clock::time_point fi
 void LinkEstimator::queueWait(Clock::duration waited) {
   const double s = std::max(0.0, std::chrono::duration<double>(waited).count());
   std::lock_guard lock(mutex_);
-  queue_wait_s_ = queue_wait_s_ < 0 ? s
-                                    : queue_wait_s_ + options_.queue_wait_weight * (s - queue_wait_s_);
+  queue_wait_s_ =
+      queue_wait_s_ < 0 ? s : queue_wait_s_ + options_.queue_wait_weight * (s - queue_wait_s_);
 }
 
 LinkEstimate LinkEstimator::estimate() const {
@@ -68,8 +68,7 @@ LinkEstimate LinkEstimator::estimate() const {
   // Reads that took no measurable time (memory, page cache) bound the rate only from below.
   e.bytes_per_s = weighted_bytes_ / std::max(weighted_busy_s_, 1e-9);
   double latency = 1e300;
-  for (const auto& [duration, bytes] : recent_)
-    latency = std::min(latency, std::max(0.0, duration - bytes / e.bytes_per_s));
+  for (const auto& sample : recent_) latency = std::min(latency, sample.first);
   e.latency_s = latency;
   return e;
 }
@@ -127,8 +126,8 @@ constexpr uint64_t kMinSliceBytes = 1500;
 ThrottledSource::ThrottledSource(std::shared_ptr<ByteSource> inner, const LinkModel& link)
     : inner_(std::move(inner)),
       link_(link),
-      name_(fmt::format("{} (via {:g} Mbit/s, {:g} ms link)", inner_->name(),
-                        link.bits_per_s / 1e6, link.rtt_s * 1e3)) {}
+      name_(fmt::format("{} (via {:g} Mbit/s, {:g} ms link)", inner_->name(), link.bits_per_s / 1e6,
+                        link.rtt_s * 1e3)) {}
 
 uint64_t ThrottledSource::sizeBytes() const {
   return inner_->sizeBytes();
@@ -143,8 +142,7 @@ LinkStatsTotal ThrottledSource::totals() const {
   return totals_;
 }
 
-bool ThrottledSource::waitUntil(Clock::time_point deadline,
-                                const std::atomic<bool>* cancel) const {
+bool ThrottledSource::waitUntil(Clock::time_point deadline, const std::atomic<bool>* cancel) const {
   std::unique_lock lock(mutex_);
   for (;;) {
     if (cancel && cancel->load(std::memory_order_acquire)) return false;

@@ -438,9 +438,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       // A run whose tiles all left while the batch's earlier runs were read is not read.
       std::lock_guard lock(mutex_);
       if (!anyWantedLocked(active.tiles)) {
-        run.read = fail(ErrorCode::kCancelled,
-                        fmt::format("{}: read at offset {} no longer wanted", archive.name(),
-                                    run.span.offset_bytes));
+        run.read = fail(ErrorCode::kCancelled, fmt::format("{}: read at offset {} no longer wanted",
+                                                           archive.name(), run.span.offset_bytes));
         continue;
       }
       active_reads_.push_back(&active);

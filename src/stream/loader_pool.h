@@ -44,8 +44,8 @@ struct LoaderOptions {
 struct LoadEvent {
   TileId id;
   bool ok = false;
-  bool stale = false;  ///< decoded but no longer wanted: dropped, not cached
-  std::string error;   ///< names the archive, the tile and the problem
+  bool stale = false;      ///< decoded but no longer wanted: dropped, not cached
+  std::string error;       ///< names the archive, the tile and the problem
   bool cancelled = false;  ///< its read was abandoned in flight (also stale): not a failure
 };
 
@@ -89,6 +89,8 @@ class LoaderPool {
   /// True when the tile is queued or being loaded.
   bool isRequested(const TileId& id) const;
   LoaderStats stats() const;
+  /// The link as measured so far (without the pool's lock).
+  LinkEstimate linkEstimate() const { return link_.estimate(); }
   /// Idle tile buffers kept for the next decodes (recycled or prewarmed).
   uint64_t idleBufferBytes() const { return texel_pool_->idleBytes(); }
   /// Blocks until the idle workers have filled the buffer pool as far as they will (up to

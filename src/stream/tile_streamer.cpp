@@ -198,7 +198,6 @@ const FrameUpdate& TileStreamer::update(const View& view) {
             [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
   FrameReport& report = out.report;
   report = {};
-  const detail::LoaderStats loader_stats = s.loader->stats();
   report.requested_level = plan.desired_level;
   if (s.options.adaptive.enabled) {
     if (!s.adaptive[image])
@@ -215,7 +214,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
       return f;
     };
     const auto now = s.options.adaptive.clock ? s.options.adaptive.clock() : Clock::now();
-    s.adaptive[image]->schedule(view, now, loader_stats.link, plan.wanted, facts, s.requests,
+    s.adaptive[image]->schedule(view, now, s.loader->linkEstimate(), plan.wanted, facts, s.requests,
                                 report);
   }
   s.loader->setWanted(s.requests);
@@ -234,6 +233,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   residency.measureCoverage(
       [&](const TileId& id) { return s.resident.count(id) > 0 || uploading.count(id) > 0; },
       report);
+  const detail::LoaderStats loader_stats = s.loader->stats();
   report.queue_length = loader_stats.queued;
   report.in_flight = loader_stats.in_flight;
   report.loader_idle_since = loader_stats.idle_since;
