@@ -205,8 +205,9 @@ struct AdaptiveOptions {
   double still_after_s = 1.0;
   AdaptiveBudget moving{size_t(256) << 20, 2.0};
   AdaptiveBudget still{0, 30.0};
-  /// Throughput assumed until the first read is measured.
-  double assumed_bytes_per_s = 1e6;
+  /// Throughput assumed until the first read is measured; 0: request only the coarsest level
+  /// until then (one round trip on a remote link, a frame on a local disk).
+  double assumed_bytes_per_s = 0;
   /// The time source for the still/moving switch; tests inject one. Empty: steady_clock.
   std::function<std::chrono::steady_clock::time_point()> clock;
 };

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "format/codec.h"
@@ -28,6 +29,10 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// Loader threads over a simulated link when --threads is 0: reads there wait a round trip
+/// each, so more of them in flight than cores keep the link busy.
+constexpr uint32_t kLinkLoaderThreads = 8;
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -126,8 +131,26 @@ int runFly(const FlyArgs& args) {
     return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
   if (!(args.fps > 0 && args.fps <= 1000))
     return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
-  Result<std::shared_ptr<Archive>> archive = Archive::openFile(args.archive);
+  // Over --link, the archive is read through a simulated network link: the header too, as a
+  // remote client would.
+  std::shared_ptr<ThrottledSource> link;
+  Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
+  if (!args.link.empty()) {
+    Result<LinkModel> model = parseLinkModel(args.link);
+    if (!model) return reportError(model.error());
+    Result<std::shared_ptr<ByteSource>> file = openFileSource(args.archive);
+    if (!file) return reportError(file.error());
+    link = makeThrottledSource(*file, *model);
+    archive = Archive::open(link);
+  } else {
+    archive = Archive::openFile(args.archive);
+  }
   if (!archive) return reportError(archive.error());
+  if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
+    return reportError({ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off"});
+  if (!(args.still_after_s >= 0))
+    return reportError({ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds"});
+  const bool adaptive = args.adaptive == "on" || (args.adaptive == "auto" && link);
   if (args.image >= (*archive)->images().size())
     return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
   const ImageInfo& info = (*archive)->images()[args.image];
@@ -147,6 +170,15 @@ int runFly(const FlyArgs& args) {
   options.merge_gap_bytes = args.merge_gap_kib << 10;
   options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
+  // Over a link the loaders mostly wait for bytes: more reads in flight than cores.
+  if (link && args.threads == 0)
+    options.loader_threads = std::max(kLinkLoaderThreads, std::thread::hardware_concurrency());
+  // Over a link every read is a round trip: gaps up to the batch gap are cheaper read than
+  // asked for again (StreamerOptions::merge_gap_bytes), unless --merge-gap-kib says otherwise.
+  if (link && args.merge_gap_kib == FlyArgs{}.merge_gap_kib)
+    options.merge_gap_bytes = options.batch_gap_bytes;
+  options.adaptive.enabled = adaptive;
+  options.adaptive.still_after_s = args.still_after_s;
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   std::unique_ptr<FlyRenderer> gpu;
@@ -178,8 +210,11 @@ int runFly(const FlyArgs& args) {
   if (!csv) return reportError({ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write"});
   csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
          "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
-         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms\n";
+         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
+         "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
+         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
   std::vector<std::string> csv_rows;  // written after the flight, when GPU times are known
+  std::vector<std::string> csv_tails;  // the columns after gpu_ms
 
   std::vector<double> update_ms;
   std::vector<JumpTiming> jumps{{0}};
@@ -241,8 +276,14 @@ int runFly(const FlyArgs& args) {
         r.desired_level, r.finest_full_level, r.coverage_desired, r.fully_covered ? 1 : 0,
         r.queue_length, r.in_flight, r.uploads, r.upload_bytes, r.bytes_read_total,
         r.tiles_loaded_total, r.load_failures_total, r.update_ms, frame_render_ms));
+    csv_tails.push_back(fmt::format(
+        "{:.0f},{:.2f},{:.2f},{},{},{},{},{},{},{},{},{}", r.link_bytes_per_s, r.link_latency_ms,
+        r.queue_wait_ms, r.adaptive ? 1 : 0, r.view_still ? 1 : 0, r.requested_level,
+        r.budget_bytes == UINT64_MAX ? int64_t(-1) : int64_t(r.budget_bytes), r.memory_bytes,
+        r.requested_bytes, r.deferred_tiles, r.cancelled_total, r.reads_cancelled_total));
     report_frames.push_back({now_s * 1000, r.update_ms, frame_render_ms, -1, r.coverage_desired,
-                             r.fully_covered, r.bytes_read_total});
+                             r.fully_covered, r.bytes_read_total, r.link_bytes_per_s,
+                             r.desired_level, r.requested_level, r.finest_full_level});
     if (gpu) {
       if (std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
           args.screenshot_frames.end()) {
@@ -291,7 +332,7 @@ int runFly(const FlyArgs& args) {
         << (i < report_frames.size() && report_frames[i].gpu_ms >= 0
                 ? fmt::format("{:.4f}", report_frames[i].gpu_ms)
                 : std::string("-1"))
-        << "\n";
+        << "," << csv_tails[i] << "\n";
   CacheStats cache = (*streamer)->cacheStats();
   const std::string policy_name = (*streamer)->cache().policyName();
   const uint32_t threads =
@@ -361,7 +402,20 @@ int runFly(const FlyArgs& args) {
          cache.hits + cache.misses ? double(cache.hits) / (cache.hits + cache.misses) : 0},
         {"evictions", cache.evictions},
         {"peak_bytes", cache.peak_bytes}}},
-      {"peak_rss_bytes", peakRssBytes()}};
+      {"peak_rss_bytes", peakRssBytes()},
+      {"adaptive", adaptive ? "on" : "off"},
+      {"link", link ? args.link : "none (local file)"},
+      {"link_bytes_per_s", last.link_bytes_per_s},
+      {"link_latency_ms", last.link_latency_ms},
+      {"requests_cancelled", last.cancelled_total},
+      {"reads_cancelled", last.reads_cancelled_total}};
+  if (link) {
+    const LinkStatsTotal totals = link->totals();
+    summary["link_transferred_bytes"] = totals.bytes;
+    summary["link_reads"] = totals.reads;
+    summary["link_reads_cancelled"] = totals.reads_cancelled;
+  }
+  if (adaptive) summary["still_after_s"] = args.still_after_s;
   if (gpu) {
     std::vector<double> gpu_ms;
     for (const ReportFrame& f : report_frames)
@@ -451,6 +505,17 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->delimiter(',');
   cmd->add_flag("--report", args->report,
                 "Write report.html: plots and pictures in one self-contained page");
+  cmd->add_option("--link", args->link,
+                  "Read the archive through a simulated network link RATE:RTT, e.g. 20mbit:40ms "
+                  "or 2mbit:150ms (rate in bit/kbit/mbit/gbit per second, round trip in us/ms/s)");
+  cmd->add_option("--adaptive", args->adaptive,
+                  "Adaptive scheduling (request only what the measured link delivers within the "
+                  "time limits, refine when the view is still): auto (on with --link), on, off")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+  cmd->add_option("--still-after", args->still_after_s,
+                  "Seconds without a view change before the still budgets apply (adaptive)")
+      ->capture_default_str();
   cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
   cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
 }

@@ -154,6 +154,18 @@ TEST_F(AdaptivePolicyTest, TheCoarsestLevelIsRequestedWhateverTheBudget) {
   EXPECT_EQ(requests[0].id.level, 3u);
 }
 
+TEST_F(AdaptivePolicyTest, BeforeTheFirstReadOnlyTheCoarsestLevelIsRequested) {
+  AdaptiveScheduler policy = make();
+  std::vector<TileRequest> requests = schedule(policy, 0, LinkEstimate{});
+  EXPECT_EQ(report_.requested_level, 3u);
+  EXPECT_EQ(requests.size(), 1u);
+  // With a throughput assumed until then, the levels that fit it.
+  options_.assumed_bytes_per_s = 100e3;
+  AdaptiveScheduler assuming = make();
+  schedule(assuming, 0, LinkEstimate{});
+  EXPECT_EQ(report_.requested_level, 1u);  // 200 kB in 2 s: levels 2 and 1
+}
+
 TEST_F(AdaptivePolicyTest, TilesHeldOrArrivedCostNoTransferAndLevelsRefineAsTheyArrive) {
   AdaptiveScheduler policy = make();
   // 190 kB a level: level 0's 640 kB does not fit...
