@@ -102,8 +102,8 @@ struct LinkStatsTotal {
 };
 
 /// A byte source behind a simulated link: each read waits its round trip, then its bytes
-/// cross a link of `bits_per_s` shared by all reads in flight (fair, in slices of a couple of
-/// milliseconds of link time), then comes from `inner`. `readCancellable` stops at the next
+/// cross a link of `bits_per_s` shared by all reads in flight (fair, in slices of 5 ms of
+/// link time), then comes from `inner`. `readCancellable` stops at the next
 /// slice once its flag is set, counting only the bytes that crossed. Prefetch hints are not
 /// passed on: the link is the bottleneck being simulated. The waits are the simulation, not
 /// synchronisation.

@@ -115,9 +115,9 @@ Result<LinkModel> parseLinkModel(const std::string& text) {
 namespace {
 
 /// How often a waiting read looks at its cancel flag.
-constexpr auto kCancelCheck = std::chrono::milliseconds(2);
+constexpr auto kCancelCheck = std::chrono::milliseconds(5);
 /// Link time of one slice: reads in flight take turns at this granularity.
-constexpr double kSliceS = 0.002;
+constexpr double kSliceS = 0.005;
 /// The smallest slice: one Ethernet frame's payload.
 constexpr uint64_t kMinSliceBytes = 1500;
 
@@ -174,24 +174,24 @@ Result<void> ThrottledSource::transfer(uint64_t offset_bytes, std::span<uint8_t>
                             offset_bytes, crossed, out.size()));
   };
   // The request's trip out and the first byte's trip back.
-  if (!waitUntil(Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                    std::chrono::duration<double>(link_.rtt_s)),
-                 cancel))
-    return cancelled();
+  Clock::time_point due = Clock::now() + std::chrono::duration_cast<Clock::duration>(
+                                             std::chrono::duration<double>(link_.rtt_s));
+  if (!waitUntil(due, cancel)) return cancelled();
   // Then the bytes, a slice at a time on the shared link: each read in flight reserves its
   // next slice only when its last one has crossed, so they take turns (fair sharing) and the
-  // link never carries more than its rate.
+  // link never carries more than its rate. Slices are placed on the read's own timeline
+  // (`due`), not at the moment its thread wakes: a thread the scheduler wakes late finds its
+  // bytes arrived, as a socket's buffer would hold them, so a busy CPU does not slow the link.
   while (crossed < out.size()) {
     const uint64_t bytes = std::min<uint64_t>(slice, out.size() - crossed);
-    Clock::time_point end;
     {
       std::lock_guard lock(mutex_);
-      const Clock::time_point begin = std::max(Clock::now(), link_free_at_);
-      end = begin + std::chrono::duration_cast<Clock::duration>(
+      const Clock::time_point begin = std::max(due, link_free_at_);
+      due = begin + std::chrono::duration_cast<Clock::duration>(
                         std::chrono::duration<double>(double(bytes) / bytes_per_s));
-      link_free_at_ = end;
+      link_free_at_ = due;
     }
-    if (!waitUntil(end, cancel)) return cancelled();
+    if (!waitUntil(due, cancel)) return cancelled();
     crossed += bytes;
   }
   {

@@ -453,7 +453,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       std::lock_guard lock(mutex_);
       active_reads_.erase(std::find(active_reads_.begin(), active_reads_.end(), &active));
     }
-    bytes_read += run.bytes.size();
+    // An abandoned read delivered nothing (a failed one is counted, as it always was).
+    if (run.read || run.read.error().code != ErrorCode::kCancelled) bytes_read += run.bytes.size();
     ++reads;
   }
   if (reads) {

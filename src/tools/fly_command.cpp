@@ -177,6 +177,9 @@ int runFly(const FlyArgs& args) {
   // asked for again (StreamerOptions::merge_gap_bytes), unless --merge-gap-kib says otherwise.
   if (link && args.merge_gap_kib == FlyArgs{}.merge_gap_kib)
     options.merge_gap_bytes = options.batch_gap_bytes;
+  // The simulated link does not fetch ahead (its hints would only make the loaders look up
+  // directory pages across the link before their own reads), unless --read-ahead-kib says.
+  if (link && args.read_ahead_kib == FlyArgs{}.read_ahead_kib) options.read_ahead_bytes = 0;
   options.adaptive.enabled = adaptive;
   options.adaptive.still_after_s = args.still_after_s;
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
@@ -213,7 +216,7 @@ int runFly(const FlyArgs& args) {
          "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
          "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
          "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
-  std::vector<std::string> csv_rows;  // written after the flight, when GPU times are known
+  std::vector<std::string> csv_rows;   // written after the flight, when GPU times are known
   std::vector<std::string> csv_tails;  // the columns after gpu_ms
 
   std::vector<double> update_ms;
