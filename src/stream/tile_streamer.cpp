@@ -37,6 +37,7 @@ struct TileStreamer::Impl {
   // Adaptive scheduling (options.adaptive): per image, lazily.
   std::vector<std::unique_ptr<detail::AdaptiveScheduler>> adaptive;
   /// Payload sizes of tiles whose directory page was in memory when first asked.
+  static constexpr size_t kMaxKnownSizes = size_t(1) << 20;
   std::unordered_map<TileId, uint32_t, TileIdHash> payload_sizes;
   /// Per image and level: sum and count of known payload sizes, to estimate unknown ones.
   std::vector<std::vector<std::pair<uint64_t, uint64_t>>> size_sums;
@@ -52,6 +53,9 @@ uint64_t TileStreamer::Impl::payloadBytes(const TileId& id) {
   if (auto it = payload_sizes.find(id); it != payload_sizes.end()) return it->second;
   auto& sums = size_sums[id.image];
   if (std::optional<TileEntry> entry = archive->tileEntryIfCached(id)) {
+    // Bounded like the archive's own page cache: a long flight over a terapixel image would
+    // otherwise remember every tile it passed. The per-level means survive.
+    if (payload_sizes.size() >= kMaxKnownSizes) payload_sizes.clear();
     const uint32_t bytes = entry->kind == TileKind::kEncoded ? entry->length_bytes : 0;
     payload_sizes.emplace(id, bytes);
     sums[id.level].first += bytes;

@@ -450,6 +450,14 @@ int runFly(const FlyArgs& args) {
         summary["frames_fully_covered_pct"].get<double>(), percentile(update_ms, 50),
         percentile(update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
         summary["read_amplification"].get<double>(), jumps[0].full_detail_ms, args.out_dir.c_str());
+    if (link)
+      std::printf(
+          "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
+          "latency; adaptive scheduling %s\n",
+          args.link.c_str(), formatBytes(link->totals().bytes).c_str(),
+          (unsigned long long)last.reads_cancelled_total,
+          formatBytes(uint64_t(last.link_bytes_per_s)).c_str(), last.link_latency_ms,
+          adaptive ? "on" : "off");
   }
   return kExitOk;
 }
