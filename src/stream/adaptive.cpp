@@ -93,12 +93,17 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
   last_level_ = level;
   last_still_ = still;
 
-  // Admit: every request of the view's tiles at accepted levels; the rest of the regions and
-  // the prefetch at accepted levels while the bytes on their way and the memory fit.
+  // Admit: every request of the view's tiles at accepted levels; then, once all of those have
+  // arrived, the rest of the regions and the prefetch at accepted levels while the bytes on
+  // their way and the memory fit. Over a link that is the bottleneck, a ring tile read beside
+  // a visible one halves the visible one's share: the screen refines first.
   double on_the_way = 0;
+  bool view_pending = false;
   for (const TileRequest& request : requests)
-    if (request.urgency <= 1 && request.id.level >= level)
+    if (request.urgency <= 1 && request.id.level >= level) {
       on_the_way += double(facts(request.id).payload_bytes);
+      view_pending = true;
+    }
   memory += held_other;
   uint64_t deferred = 0;
   uint64_t requested_bytes = 0;
@@ -107,7 +112,8 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
     bool admit = request.id.level >= level;
     const uint64_t payload = facts(request.id).payload_bytes;
     if (admit && request.urgency > 1) {
-      admit = on_the_way + double(payload) <= byte_budget && memory + tile_bytes_ <= memory_budget;
+      admit = !view_pending && on_the_way + double(payload) <= byte_budget &&
+              memory + tile_bytes_ <= memory_budget;
       if (admit) {
         on_the_way += double(payload);
         memory += tile_bytes_;

@@ -36,9 +36,10 @@ class AdaptiveScheduler {
   /// accepted coarse to fine while the visible tiles (urgency 0-1) each level still misses
   /// can arrive within the mode's time limit (link.bytesWithin) and everything accepted fits
   /// the memory budget; the first level that does not fit ends refinement. The coarsest
-  /// level is always requested. The rest of the clip regions and the prefetch (urgency 2-3)
-  /// at accepted levels follow while the bytes on their way fit the time limit's bytes and
-  /// the memory budget. Fills the adaptive fields of `report`.
+  /// level is always requested. Once every visible tile of the accepted levels has arrived,
+  /// the rest of the clip regions and the prefetch (urgency 2-3) at accepted levels follow
+  /// while the bytes on their way fit the time limit's bytes and the memory budget. Fills the
+  /// adaptive fields of `report`.
   void schedule(const View& view, Clock::time_point now, const LinkEstimate& link,
                 std::span<const TileRequest> wanted,
                 const std::function<TileFacts(const TileId&)>& facts,

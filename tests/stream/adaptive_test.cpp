@@ -123,26 +123,38 @@ TEST_F(AdaptivePolicyTest, RequestsCoarseLevelsFirstAndOnlyWhatCanArriveInTime) 
   for (size_t i = 1; i < requests.size(); ++i)
     EXPECT_LT(requests[i - 1].priority, requests[i].priority);
 
-  // Ten times the rate: level 0 fits (640 kB of 1.9 MB), and the ring follows while the bytes
-  // on their way fit: 1 + 4 + 16 + 64 tiles are 850 kB, 36 ring tiles 360 kB more.
+  // Ten times the rate: level 0 fits (640 kB of 1.9 MB). The ring waits for the view's tiles.
   AdaptiveScheduler faster = make();
   requests = schedule(faster, 0, linkOf(1e6, 0.1));
   EXPECT_EQ(report_.requested_level, 0u);
   EXPECT_EQ(countAt(requests, 0, 1), 64u);
+  EXPECT_EQ(countAt(requests, 0, 2), 0u);
+  EXPECT_EQ(report_.deferred_tiles, 36u);
+}
+
+TEST_F(AdaptivePolicyTest, TheRingFollowsOnceTheViewHasArrivedWhileItsBytesFit) {
+  // Every tile the view shows is held: the ring's 36 tiles (360 kB) follow as far as they fit.
+  for (const TileRequest& r : wanted_)
+    if (r.urgency <= 1) held_.insert(key(r.id));
+  AdaptiveScheduler faster = make();
+  std::vector<TileRequest> requests = schedule(faster, 0, linkOf(1e6, 0.1));  // 1.9 MB
+  EXPECT_EQ(report_.requested_level, 0u);
   EXPECT_EQ(countAt(requests, 0, 2), 36u);
   EXPECT_EQ(report_.deferred_tiles, 0u);
-
-  // At 500 kB/s and 90 ms, level 0 fits (955 kB budget) but only 10 ring tiles do (850 +
-  // 100 kB).
-  AdaptiveScheduler middle = make();
-  requests = schedule(middle, 0, linkOf(500e3, 0.09));
-  EXPECT_EQ(report_.requested_level, 0u);
-  EXPECT_EQ(countAt(requests, 0, 2), 10u);
-  // The ring tiles admitted are the first ones by priority.
-  for (const TileRequest& r : requests)
-    if (r.urgency == 2) {
-      EXPECT_LT(r.id.x, 110u);
-    }
+  // At 100 kB/s and 90 ms, 191 kB: 19 ring tiles, the first by priority.
+  AdaptiveScheduler slower = make();
+  requests = schedule(slower, 0, linkOf(100e3, 0.09));
+  EXPECT_EQ(countAt(requests, 0, 2), 19u);
+  for (const TileRequest& r : requests) {
+    EXPECT_EQ(r.urgency, 2u);
+    EXPECT_LT(r.id.x, 119u);
+  }
+  // One visible tile missing again: the ring waits.
+  held_.erase(key(wanted_[30].id));
+  AdaptiveScheduler waiting = make();
+  requests = schedule(waiting, 0, linkOf(1e6, 0.1));
+  EXPECT_EQ(requests.size(), 1u);
+  EXPECT_EQ(countAt(requests, 0, 2), 0u);
 }
 
 TEST_F(AdaptivePolicyTest, TheCoarsestLevelIsRequestedWhateverTheBudget) {
@@ -187,13 +199,16 @@ TEST_F(AdaptivePolicyTest, MemoryBudgetLimitsTheLevelsAndTheRing) {
   EXPECT_EQ(report_.memory_budget_bytes, 20 * kTileBytes);
   EXPECT_LE(report_.memory_bytes, report_.memory_budget_bytes);
   EXPECT_EQ(requests.size(), 5u);
-  // 90 tiles: every level of the view (85), and 5 ring tiles.
+  // 90 tiles: every level of the view (85), and, once the view is held, 5 ring tiles.
   options_.moving.memory_bytes = 90 * kTileBytes;
+  for (const TileRequest& r : wanted_)
+    if (r.urgency <= 1) held_.insert(key(r.id));
   AdaptiveScheduler roomier = make();
   requests = schedule(roomier, 0, linkOf(1e9, 0));
   EXPECT_EQ(report_.requested_level, 0u);
   EXPECT_EQ(countAt(requests, 0, 2), 5u);
   EXPECT_EQ(report_.memory_bytes, 90 * kTileBytes);
+  held_.clear();
   // The cache budget is the ceiling of any memory budget.
   AdaptiveScheduler capped = make(20 * kTileBytes);
   schedule(capped, 0, linkOf(1e9, 0));
