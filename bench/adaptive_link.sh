@@ -58,7 +58,7 @@ for link in ["20mbit:40ms", "2mbit:150ms"]:
             pan_full.append(p["frames_full_detail_pct"])
             rows = list(csv.DictReader(open(f"{work}/{link}-{adaptive}-pan-{r}/frames.csv")))
             moved.append(statistics.median(int(x["finest_full_level"]) for x in rows))
-            transferred.append((j["link_transferred_bytes"] + p["link_transferred_bytes"]) / 2**20)
+            transferred.append((j["link"]["bytes_received"] + p["link"]["bytes_received"]) / 2**20)
             cancelled.append(j["reads_cancelled"] + p["reads_cancelled"])
         print(f"| {link} | {adaptive} | {fmt(med(startup))} | {fmt(med(first))} | {fmt(med(after))} "
               f"| {fmt(med(reached))} of {len(j['jumps']) - 1} | {fmt(med(pan_full), '%')} "

@@ -9,8 +9,8 @@ packages=(
   gdal-bin       # gdal_translate -of COG
   libtiff-tools  # tiffinfo, to check the peers' tile layout and photometric
   time           # /usr/bin/time -v: wall time and peak RSS
-  nginx          # later: static range-request serving baseline
-  wrk            # later: HTTP load generator
+  nginx-light    # static serving baseline (serve_bench.sh, link_bench.sh)
+  wrk            # HTTP load generator (serve_bench.sh)
 )
 
 missing=()
@@ -32,6 +32,6 @@ echo "install_peers: installing ${missing[*]}"
 "${sudo_cmd[@]}" env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
   "${missing[@]}"
 # nginx starts a service on install in some setups; the benchmarks start their own instance.
-if [[ " ${missing[*]} " == *" nginx "* ]] && command -v systemctl >/dev/null 2>&1; then
+if [[ " ${missing[*]} " == *" nginx-light "* ]] && command -v systemctl >/dev/null 2>&1; then
   "${sudo_cmd[@]}" systemctl disable --now nginx >/dev/null 2>&1 || true
 fi

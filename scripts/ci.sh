@@ -38,6 +38,22 @@ stage_result() {  # stage_result NAME STATUS DETAIL
 
 scripts/install-deps.sh || { echo "ci: scripts/install-deps.sh failed" >&2; exit 1; }
 
+# The web tests' npm packages (web/package-lock.json: OpenSeadragon, Leaflet, playwright-core),
+# installed by `npm ci` only when the lock file changed since the last install, so a second run
+# neither downloads nor rewrites web/node_modules.
+web_deps() {
+  local stamp=web/node_modules/.tessera-lock.sha256 want
+  want=$(sha256sum web/package-lock.json | cut -d' ' -f1)
+  if [[ -f $stamp && $(cat "$stamp") == "$want" ]]; then
+    echo "ci: web/node_modules matches web/package-lock.json"
+    return 0
+  fi
+  npm ci --prefix web --no-audit --no-fund && echo "$want" >"$stamp"
+}
+if command -v npm >/dev/null 2>&1; then
+  web_deps || { echo "ci: npm ci --prefix web failed" >&2; exit 1; }
+fi
+
 # Sanitizer runtime options: fail on the first report, with symbolized stacks.
 export ASAN_OPTIONS=${ASAN_OPTIONS:-abort_on_error=1:detect_leaks=1:strict_string_checks=1:detect_stack_use_after_return=1}
 export UBSAN_OPTIONS=${UBSAN_OPTIONS:-print_stacktrace=1:halt_on_error=1}

@@ -7,11 +7,19 @@ packages=(
   build-essential cmake ninja-build pkg-config git clang-format
   libtiff-dev libjpeg62-turbo-dev libturbojpeg0-dev libpng-dev libwebp-dev
   libzstd-dev liblz4-dev libxxhash-dev
-  libcli11-dev libfmt-dev nlohmann-json3-dev
+  libcli11-dev libfmt-dev nlohmann-json3-dev libboost-dev libcurl4-openssl-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri libimgui-dev
-  xvfb
+  xvfb nginx-light openssl
+  chromium
 )
+
+# Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and
+# npm 11 from NodeSource on the CI image) is kept; only a machine without `node` gets Debian's
+# nodejs and npm (Debian's npm conflicts with NodeSource's nodejs, so never both).
+if ! command -v node >/dev/null 2>&1 || ! command -v npm >/dev/null 2>&1; then
+  packages+=(nodejs npm)
+fi
 
 missing=()
 for p in "${packages[@]}"; do

@@ -65,6 +65,10 @@ class Archive {
   [[nodiscard]] static Result<std::shared_ptr<Archive>> open(std::shared_ptr<ByteSource> source);
   /// Opens a local file (pread-based byte source).
   [[nodiscard]] static Result<std::shared_ptr<Archive>> openFile(const std::string& path);
+  /// Opens a local file or an http(s):// URL (openByteSource): over HTTP the open costs one
+  /// request, the ranged GET of the first 16 KiB the HTTP source makes when it opens
+  /// (docs/remote.md), plus one per block outside it.
+  [[nodiscard]] static Result<std::shared_ptr<Archive>> openUri(const std::string& path_or_url);
 
   ~Archive();
   Archive(const Archive&) = delete;

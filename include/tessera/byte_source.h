@@ -1,11 +1,13 @@
 #pragma once
 /// \file
-/// Byte sources: where archive bytes come from (a local file, memory, later HTTP ranges).
-/// The archive reader and the loader pool see only this interface.
+/// Byte sources: where archive bytes come from (a local file, memory, HTTP ranges:
+/// tessera/http_source.h). The archive reader and the loader pool see only this interface.
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -19,6 +21,30 @@ struct ByteRange {
   uint64_t offset_bytes = 0;
   uint64_t length_bytes = 0;
   uint8_t* out = nullptr;
+};
+
+/// One finished request of a remote source: what a bandwidth or latency estimate is made of.
+struct LinkSample {
+  std::chrono::steady_clock::time_point finished;  ///< when its last byte arrived
+  uint64_t bytes = 0;                              ///< body bytes received
+  double seconds = 0;                              ///< from the request's start to its last byte
+  double first_byte_seconds = 0;  ///< from the request's start to its first byte (latency)
+};
+
+/// Counters of a source whose reads cross a network link (ByteSource::linkStats). Totals
+/// since the source was opened; every request counts, prefetches and retries included.
+struct LinkStats {
+  uint64_t requests = 0;            ///< requests sent (each retry is one more)
+  uint64_t bytes_received = 0;      ///< body bytes received, including aborted transfers
+  uint64_t retries = 0;             ///< requests that were a retry of a failed one
+  uint64_t errors = 0;              ///< reads (and prefetches) that failed after their retries
+  uint64_t cancelled = 0;           ///< reads abandoned through readCancellable
+  uint64_t prefetched_bytes = 0;    ///< bytes fetched ahead on a prefetch hint
+  uint64_t prefetch_hit_bytes = 0;  ///< bytes reads then took from fetched-ahead data
+  uint32_t in_flight = 0;           ///< requests on the wire now
+  /// The last (at most 64) successful requests, oldest first: bytes over seconds is the
+  /// throughput one request saw, first_byte_seconds the round trip plus server time.
+  std::vector<LinkSample> recent;
 };
 
 /// Random-access, read-only bytes. Thread-safe: `read` may be called from many threads at once.
@@ -39,7 +65,8 @@ class ByteSource {
 
   /// Reads several ranges (any order, may overlap). The default sorts them and reads ranges
   /// closer than 64 KiB as one (at most 16 MiB per read), which suits disks and HTTP alike;
-  /// sources may override it. Fails as a whole if any read fails.
+  /// sources may override it (the HTTP source sends those reads at once, in parallel). Fails
+  /// as a whole if any read fails.
   [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
 
   /// A hint that these ranges will be read soon (`out` is ignored). A source that can fetch
@@ -56,11 +83,25 @@ class ByteSource {
   /// default checks `cancel` once, before reading; a local read is too short to interrupt.
   [[nodiscard]] virtual Result<void> readCancellable(uint64_t offset_bytes, std::span<uint8_t> out,
                                                      const std::atomic<bool>& cancel) const;
+
+  /// For sources that read over a network link: request, byte, retry and error counts and
+  /// the latest per-request throughput and latency samples (the HTTP source; a scheduler
+  /// adapts to the link by them). Local sources return nullopt, the default. Thread-safe;
+  /// a snapshot, cheap enough to call once per frame.
+  virtual std::optional<LinkStats> linkStats() const { return std::nullopt; }
 };
 
 /// Opens a local file for positional reads (pread: thread-safe without a shared file offset,
 /// and an I/O error is an error value, not a SIGBUS as with mmap). Fails naming the path.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openFileSource(const std::string& path);
+
+/// True when `path_or_url` starts with http:// or https:// (case-insensitive scheme).
+bool isRemoteUri(const std::string& path_or_url);
+
+/// Opens an archive's bytes wherever they are: an http:// or https:// URL through
+/// openHttpSource (tessera/http_source.h) with default HttpOptions, anything else as a local
+/// file (openFileSource). Fails as those do, naming the path or URL.
+[[nodiscard]] Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url);
 
 /// Wraps bytes held in memory; `name` is used in messages.
 std::shared_ptr<ByteSource> makeMemorySource(std::vector<uint8_t> bytes, std::string name);

@@ -13,6 +13,7 @@
 #include <deque>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 
 #include <tessera/byte_source.h>
@@ -117,6 +118,9 @@ class ThrottledSource final : public ByteSource {
                                              const std::atomic<bool>& cancel) const override;
   const LinkModel& link() const { return link_; }
   LinkStatsTotal totals() const;
+  /// The same figures as a network source gives them (requests, bytes received, cancelled,
+  /// in flight, the last 64 reads with their round trip as the first byte's time).
+  std::optional<LinkStats> linkStats() const override;
 
  private:
   using Clock = std::chrono::steady_clock;
@@ -134,6 +138,8 @@ class ThrottledSource final : public ByteSource {
   mutable std::condition_variable wait_;      ///< timed waits only
   mutable Clock::time_point link_free_at_{};  ///< the link carries reserved slices until then
   mutable LinkStatsTotal totals_;
+  mutable uint32_t in_flight_ = 0;
+  mutable std::deque<LinkSample> recent_;
 };
 
 /// `inner` behind a simulated link.

@@ -7,41 +7,60 @@
 #include <numeric>
 #include <string>
 
+#include "format/read_plan.h"
+
 namespace tessera {
 
-Result<void> ByteSource::readMany(std::span<const ByteRange> ranges) const {
-  // Ranges closer than this are read as one: one request instead of two costs less than
-  // the gap's bytes on every source we know (disk seek, HTTP round trip).
-  constexpr uint64_t kMergeGapBytes = 64 * 1024;
-  constexpr uint64_t kMaxMergedBytes = 16u << 20;
+namespace detail {
+
+std::vector<ReadRun> planReadRuns(std::span<const ByteRange> ranges, uint64_t gap_bytes,
+                                  uint64_t max_bytes) {
   std::vector<size_t> order(ranges.size());
   std::iota(order.begin(), order.end(), 0);
   std::sort(order.begin(), order.end(),
             [&](size_t a, size_t b) { return ranges[a].offset_bytes < ranges[b].offset_bytes; });
-  std::vector<uint8_t> merged;
-  for (size_t i = 0; i < order.size();) {
-    const ByteRange& first = ranges[order[i]];
-    uint64_t begin = first.offset_bytes, end = first.offset_bytes + first.length_bytes;
-    size_t j = i + 1;
-    while (j < order.size()) {
-      const ByteRange& next = ranges[order[j]];
-      uint64_t next_end = std::max(end, next.offset_bytes + next.length_bytes);
-      if (next.offset_bytes > end + kMergeGapBytes || next_end - begin > kMaxMergedBytes) break;
-      end = next_end;
-      ++j;
-    }
-    if (j == i + 1) {
-      TESSERA_TRY(read(first.offset_bytes, {first.out, size_t(first.length_bytes)}));
-    } else {
-      merged.resize(end - begin);
-      TESSERA_TRY(read(begin, merged));
-      for (size_t k = i; k < j; ++k) {
-        const ByteRange& range = ranges[order[k]];
-        if (range.length_bytes)
-          std::memcpy(range.out, merged.data() + (range.offset_bytes - begin), range.length_bytes);
+  std::vector<ReadRun> runs;
+  for (size_t i : order) {
+    const ByteRange& range = ranges[i];
+    const uint64_t range_end = range.offset_bytes + range.length_bytes;
+    if (!runs.empty()) {
+      ReadRun& last = runs.back();
+      const uint64_t end = last.offset_bytes + last.length_bytes;
+      const uint64_t merged_end = std::max(end, range_end);
+      if (range.offset_bytes <= end + gap_bytes && merged_end - last.offset_bytes <= max_bytes) {
+        last.length_bytes = merged_end - last.offset_bytes;
+        last.members.push_back(i);
+        continue;
       }
     }
-    i = j;
+    runs.push_back({range.offset_bytes, range.length_bytes, {i}});
+  }
+  return runs;
+}
+
+void scatterRun(const ReadRun& run, std::span<const ByteRange> ranges,
+                std::span<const uint8_t> bytes) {
+  for (size_t i : run.members) {
+    const ByteRange& range = ranges[i];
+    if (range.length_bytes)
+      std::memcpy(range.out, bytes.data() + (range.offset_bytes - run.offset_bytes),
+                  range.length_bytes);
+  }
+}
+
+}  // namespace detail
+
+Result<void> ByteSource::readMany(std::span<const ByteRange> ranges) const {
+  std::vector<uint8_t> merged;
+  for (const detail::ReadRun& run : detail::planReadRuns(ranges)) {
+    if (run.members.size() == 1) {
+      const ByteRange& range = ranges[run.members[0]];
+      TESSERA_TRY(read(range.offset_bytes, {range.out, size_t(range.length_bytes)}));
+    } else {
+      merged.resize(run.length_bytes);
+      TESSERA_TRY(read(run.offset_bytes, merged));
+      detail::scatterRun(run, ranges, merged);
+    }
   }
   return {};
 }

@@ -9,4 +9,9 @@ Result<std::shared_ptr<Archive>> Archive::openFile(const std::string& path) {
   return open(std::move(source));
 }
 
+Result<std::shared_ptr<Archive>> Archive::openUri(const std::string& path_or_url) {
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ByteSource> source, openByteSource(path_or_url));
+  return open(std::move(source));
+}
+
 }  // namespace tessera

@@ -118,6 +118,8 @@ namespace {
 constexpr auto kCancelCheck = std::chrono::milliseconds(5);
 /// Link time of one slice: reads in flight take turns at this granularity.
 constexpr double kSliceS = 0.005;
+/// Reads kept for linkStats().recent, as the HTTP source keeps.
+constexpr size_t kRecentSamples = 64;
 /// The smallest slice: one Ethernet frame's payload.
 constexpr uint64_t kMinSliceBytes = 1500;
 
@@ -142,6 +144,17 @@ LinkStatsTotal ThrottledSource::totals() const {
   return totals_;
 }
 
+std::optional<LinkStats> ThrottledSource::linkStats() const {
+  std::lock_guard lock(mutex_);
+  LinkStats stats;
+  stats.requests = totals_.reads;
+  stats.bytes_received = totals_.bytes;
+  stats.cancelled = totals_.reads_cancelled;
+  stats.in_flight = in_flight_;
+  stats.recent.assign(recent_.begin(), recent_.end());
+  return stats;
+}
+
 bool ThrottledSource::waitUntil(Clock::time_point deadline, const std::atomic<bool>* cancel) const {
   std::unique_lock lock(mutex_);
   for (;;) {
@@ -157,9 +170,11 @@ Result<void> ThrottledSource::transfer(uint64_t offset_bytes, std::span<uint8_t>
   // A range past the end fails at once, as the inner source says, without using the link.
   if (offset_bytes > inner_->sizeBytes() || out.size() > inner_->sizeBytes() - offset_bytes)
     return inner_->read(offset_bytes, out);
+  const Clock::time_point started = Clock::now();
   {
     std::lock_guard lock(mutex_);
     ++totals_.reads;
+    ++in_flight_;
   }
   const double bytes_per_s = link_.bits_per_s / 8;
   const uint64_t slice =
@@ -167,6 +182,7 @@ Result<void> ThrottledSource::transfer(uint64_t offset_bytes, std::span<uint8_t>
   uint64_t crossed = 0;
   auto cancelled = [&]() -> Result<void> {
     std::lock_guard lock(mutex_);
+    --in_flight_;
     totals_.bytes += crossed;
     ++totals_.reads_cancelled;
     return fail(ErrorCode::kCancelled,
@@ -174,9 +190,10 @@ Result<void> ThrottledSource::transfer(uint64_t offset_bytes, std::span<uint8_t>
                             offset_bytes, crossed, out.size()));
   };
   // The request's trip out and the first byte's trip back.
-  Clock::time_point due = Clock::now() + std::chrono::duration_cast<Clock::duration>(
-                                             std::chrono::duration<double>(link_.rtt_s));
+  Clock::time_point due = started + std::chrono::duration_cast<Clock::duration>(
+                                        std::chrono::duration<double>(link_.rtt_s));
   if (!waitUntil(due, cancel)) return cancelled();
+  const double first_byte_s = std::chrono::duration<double>(Clock::now() - started).count();
   // Then the bytes, a slice at a time on the shared link: each read in flight reserves its
   // next slice only when its last one has crossed, so they take turns (fair sharing) and the
   // link never carries more than its rate. Slices are placed on the read's own timeline
@@ -196,7 +213,12 @@ Result<void> ThrottledSource::transfer(uint64_t offset_bytes, std::span<uint8_t>
   }
   {
     std::lock_guard lock(mutex_);
+    --in_flight_;
     totals_.bytes += crossed;
+    const Clock::time_point finished = Clock::now();
+    recent_.push_back({finished, crossed, std::chrono::duration<double>(finished - started).count(),
+                       first_byte_s});
+    while (recent_.size() > kRecentSamples) recent_.pop_front();
   }
   return inner_->read(offset_bytes, out);
 }

@@ -36,7 +36,7 @@ int runExtract(const ExtractArgs& args) {
   if (args.tile.empty() == args.rect.empty())
     return reportError(
         {ErrorCode::kInvalidArgument, "give exactly one of --tile X,Y or --rect X,Y,W,H"});
-  Result<std::shared_ptr<Archive>> opened = Archive::openFile(args.archive);
+  Result<std::shared_ptr<Archive>> opened = Archive::openUri(args.archive);
   if (!opened) return reportError(opened.error());
   const Archive& archive = **opened;
   Result<Image> image = Unexpected(ErrorCode::kInternal, "unset");
@@ -72,7 +72,7 @@ int runExtract(const ExtractArgs& args) {
 void registerExtractCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ExtractArgs>();
   CLI::App* cmd = app.add_subcommand("extract", "Write a tile or a rectangle of a level to PNG");
-  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("-o,--output", args->output, "PNG to write")->required();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
   cmd->add_option("--level", args->level, "Level (0 = full resolution)")->capture_default_str();

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/byte_source.h>
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
@@ -131,26 +132,28 @@ int runFly(const FlyArgs& args) {
     return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
   if (!(args.fps > 0 && args.fps <= 1000))
     return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
-  // Over --link, the archive is read through a simulated network link: the header too, as a
-  // remote client would.
+  // Over --link, the archive (a file or a URL) is read through a simulated network link: the
+  // header too, as a remote client would.
   std::shared_ptr<ThrottledSource> link;
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
   if (!args.link.empty()) {
     Result<LinkModel> model = parseLinkModel(args.link);
     if (!model) return reportError(model.error());
-    Result<std::shared_ptr<ByteSource>> file = openFileSource(args.archive);
-    if (!file) return reportError(file.error());
-    link = makeThrottledSource(*file, *model);
+    Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
+    if (!inner) return reportError(inner.error());
+    link = makeThrottledSource(*inner, *model);
     archive = Archive::open(link);
   } else {
-    archive = Archive::openFile(args.archive);
+    archive = Archive::openUri(args.archive);
   }
   if (!archive) return reportError(archive.error());
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return reportError({ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off"});
   if (!(args.still_after_s >= 0))
     return reportError({ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds"});
-  const bool adaptive = args.adaptive == "on" || (args.adaptive == "auto" && link);
+  // Auto: on wherever reads cross a network, simulated or real.
+  const bool adaptive =
+      args.adaptive == "on" || (args.adaptive == "auto" && (link || isRemoteUri(args.archive)));
   if (args.image >= (*archive)->images().size())
     return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
   const ImageInfo& info = (*archive)->images()[args.image];
@@ -167,16 +170,16 @@ int runFly(const FlyArgs& args) {
   options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
-  options.merge_gap_bytes = args.merge_gap_kib << 10;
+  // Over a link every read is a round trip: gaps up to the batch gap are cheaper read than
+  // asked for again, as over HTTP (defaultMergeGapBytes).
+  options.merge_gap_bytes = args.merge_gap_kib ? *args.merge_gap_kib << 10
+                            : link             ? options.batch_gap_bytes
+                                               : defaultMergeGapBytes(args.archive);
   options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
   // Over a link the loaders mostly wait for bytes: more reads in flight than cores.
   if (link && args.threads == 0)
     options.loader_threads = std::max(kLinkLoaderThreads, std::thread::hardware_concurrency());
-  // Over a link every read is a round trip: gaps up to the batch gap are cheaper read than
-  // asked for again (StreamerOptions::merge_gap_bytes), unless --merge-gap-kib says otherwise.
-  if (link && args.merge_gap_kib == FlyArgs{}.merge_gap_kib)
-    options.merge_gap_bytes = options.batch_gap_bytes;
   // The simulated link does not fetch ahead (its hints would only make the loaders look up
   // directory pages across the link before their own reads), unless --read-ahead-kib says.
   if (link && args.read_ahead_kib == FlyArgs{}.read_ahead_kib) options.read_ahead_bytes = 0;
@@ -227,7 +230,8 @@ int runFly(const FlyArgs& args) {
   size_t startup_frames = 0;
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
-  if (args.cold) dropFromPageCache(args.archive);
+  const bool remote = isRemoteUri(args.archive);
+  if (args.cold && !remote) dropFromPageCache(args.archive);
   const auto start = Clock::now();
   const double duration = path->durationS();
   FrameReport last{};
@@ -239,7 +243,7 @@ int runFly(const FlyArgs& args) {
         start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
     double now_s = std::chrono::duration<double>(Clock::now() - start).count();
     if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) {
-      if (args.cold) dropFromPageCache(args.archive);
+      if (args.cold && !remote) dropFromPageCache(args.archive);
       jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
     }
     View view;
@@ -375,7 +379,10 @@ int runFly(const FlyArgs& args) {
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
-      {"page_cache", args.cold ? "cold (posix_fadvise DONTNEED before each jump)" : "as found"},
+      {"page_cache", remote      ? "remote (HTTP)"
+                     : args.cold ? "cold (posix_fadvise DONTNEED before each jump)"
+                                 : "as found"},
+      {"merge_gap_bytes", options.merge_gap_bytes},
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
@@ -407,18 +414,30 @@ int runFly(const FlyArgs& args) {
         {"peak_bytes", cache.peak_bytes}}},
       {"peak_rss_bytes", peakRssBytes()},
       {"adaptive", adaptive ? "on" : "off"},
-      {"link", link ? args.link : "none (local file)"},
+      {"simulated_link", link ? args.link : "none"},
       {"link_bytes_per_s", last.link_bytes_per_s},
       {"link_latency_ms", last.link_latency_ms},
       {"requests_cancelled", last.cancelled_total},
       {"reads_cancelled", last.reads_cancelled_total}};
-  if (link) {
-    const LinkStatsTotal totals = link->totals();
-    summary["link_transferred_bytes"] = totals.bytes;
-    summary["link_reads"] = totals.reads;
-    summary["link_reads_cancelled"] = totals.reads_cancelled;
-  }
   if (adaptive) summary["still_after_s"] = args.still_after_s;
+  if (std::optional<LinkStats> link_stats = (*archive)->source().linkStats()) {
+    // Over a network: what the link did, and what the requests saw of it (the last ones).
+    std::vector<double> mib_s, first_byte_ms;
+    for (const LinkSample& sample : link_stats->recent) {
+      if (sample.seconds > 0) mib_s.push_back(double(sample.bytes) / sample.seconds / 1048576.0);
+      first_byte_ms.push_back(sample.first_byte_seconds * 1000);
+    }
+    summary["link"] = {{"requests", link_stats->requests},
+                       {"bytes_received", link_stats->bytes_received},
+                       {"retries", link_stats->retries},
+                       {"errors", link_stats->errors},
+                       {"cancelled", link_stats->cancelled},
+                       {"prefetched_bytes", link_stats->prefetched_bytes},
+                       {"prefetch_hit_bytes", link_stats->prefetch_hit_bytes},
+                       {"recent_requests", link_stats->recent.size()},
+                       {"recent_mib_s_p50", percentile(mib_s, 50)},
+                       {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
+  }
   if (gpu) {
     std::vector<double> gpu_ms;
     for (const ReportFrame& f : report_frames)
@@ -466,7 +485,7 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FlyArgs>();
   CLI::App* cmd = app.add_subcommand(
       "fly", "Fly a camera path headless in real time and report streaming figures");
-  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("--path", args->path, "pan, zoom, jump, spiral, or a keyframe file (docs/fly.md)")
       ->capture_default_str();
   cmd->add_option("--speed", args->speed_px_s, "Pan speed in level-0 pixels per second")
@@ -493,8 +512,8 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
-                  "Reads of tiles closer than this in the file are merged into one")
-      ->capture_default_str();
+                  "Reads of tiles closer than this in the file are merged into one (default: 16 "
+                  "for a file, 64 for a URL)");
   cmd->add_option("--read-ahead-kib", args->read_ahead_kib,
                   "Payload bytes at the head of the loader's queue fetched ahead (0 = off)")
       ->capture_default_str();
@@ -519,9 +538,10 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--link", args->link,
                   "Read the archive through a simulated network link RATE:RTT, e.g. 20mbit:40ms "
                   "or 2mbit:150ms (rate in bit/kbit/mbit/gbit per second, round trip in us/ms/s)");
-  cmd->add_option("--adaptive", args->adaptive,
-                  "Adaptive scheduling (request only what the measured link delivers within the "
-                  "time limits, refine when the view is still): auto (on with --link), on, off")
+  cmd->add_option(
+         "--adaptive", args->adaptive,
+         "Adaptive scheduling (request only what the measured link delivers within the "
+         "time limits, refine when the view is still): auto (on with --link or a URL), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   cmd->add_option("--still-after", args->still_after_s,

@@ -2,6 +2,7 @@
 // `tessera fly`, callable from other commands (`tessera demo` flies its standard paths).
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -22,7 +23,8 @@ struct FlyArgs {
   uint32_t threads = 0;
   uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
   uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
-  uint64_t merge_gap_kib = StreamerOptions{}.merge_gap_bytes >> 10;
+  /// Unset: by where the archive is (defaultMergeGapBytes: 16 KiB for a file, 64 for a URL).
+  std::optional<uint64_t> merge_gap_kib;
   uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
   std::string loader_priority = "idle";
   uint32_t image = 0;

@@ -223,9 +223,8 @@ Result<void> writeFlyReport(const std::string& path, const nlohmann::json& summa
   html += "<h2>Summary</h2><table>";
   for (const char* key :
        {"frames", "frames_full_detail_pct", "frames_fully_covered_pct", "startup_ms", "bytes_read",
-        "read_amplification", "tiles_loaded", "load_failures", "peak_rss_bytes", "link", "adaptive",
-        "link_transferred_bytes", "reads_cancelled", "requests_cancelled", "link_bytes_per_s",
-        "link_latency_ms"})
+        "read_amplification", "tiles_loaded", "load_failures", "peak_rss_bytes", "simulated_link",
+        "adaptive", "reads_cancelled", "requests_cancelled", "link_bytes_per_s", "link_latency_ms"})
     if (summary.contains(key))
       html += fmt::format("<tr><td>{}</td><td>{}</td></tr>", key, cell(summary[key]));
   for (const char* key : {"update_ms", "render_ms", "gpu_ms"})

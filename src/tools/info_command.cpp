@@ -34,7 +34,7 @@ Result<LevelCounts> countLevel(const Archive& archive, uint32_t image, uint32_t 
 }
 
 int runInfo(const std::string& path, bool json, bool levels) {
-  Result<std::shared_ptr<Archive>> opened = Archive::openFile(path);
+  Result<std::shared_ptr<Archive>> opened = Archive::openUri(path);
   if (!opened) return reportError(opened.error());
   const Archive& archive = **opened;
   nlohmann::json out = {{"path", path},
@@ -113,7 +113,7 @@ void registerInfoCommand(CLI::App& app, int& exit_code) {
   auto no_levels = std::make_shared<bool>(false);
   CLI::App* cmd =
       app.add_subcommand("info", "Describe an archive: images, levels, tiles, metadata");
-  cmd->add_option("archive", *path, "Archive file")->required();
+  cmd->add_option("archive", *path, kArchiveArgumentHelp)->required();
   cmd->add_flag("--json", *json, "Machine-readable output");
   cmd->add_flag("--no-levels", *no_levels, "Skip the per-level table (reads no directory pages)");
   cmd->callback([=, &exit_code] { exit_code = runInfo(*path, *json, !*no_levels); });

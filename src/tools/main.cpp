@@ -5,6 +5,9 @@
 
 #include <fmt/format.h>
 
+#include <tessera/byte_source.h>
+#include <tessera/stream.h>
+
 #include "tools/cli.h"
 
 namespace tessera::cli {
@@ -18,6 +21,11 @@ int reportError(const Error& error) {
 
 bool stderrIsTerminal() {
   return ::isatty(STDERR_FILENO) == 1;
+}
+
+uint64_t defaultMergeGapBytes(const std::string& path_or_url) {
+  const StreamerOptions defaults;
+  return isRemoteUri(path_or_url) ? defaults.batch_gap_bytes : defaults.merge_gap_bytes;
 }
 
 std::string formatBytes(uint64_t bytes) {
@@ -72,6 +80,8 @@ int main(int argc, char** argv) {
   registerFlyCommand(app, exit_code);
   registerDemoCommand(app, exit_code);
   registerViewCommand(app, exit_code);
+  registerRenderCommand(app, exit_code);
+  registerServeCommand(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

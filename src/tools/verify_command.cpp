@@ -10,7 +10,7 @@ namespace tessera::cli {
 namespace {
 
 int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
-  Result<std::shared_ptr<Archive>> opened = Archive::openFile(path);
+  Result<std::shared_ptr<Archive>> opened = Archive::openUri(path);
   if (!opened) {
     if (json)
       std::printf("%s\n", nlohmann::json({{"path", path},
@@ -67,7 +67,7 @@ void registerVerifyCommand(CLI::App& app, int& exit_code) {
   auto quiet = std::make_shared<bool>(false);
   CLI::App* cmd = app.add_subcommand(
       "verify", "Check every checksum and structural invariant; exit 3 on faults");
-  cmd->add_option("archive", *path, "Archive file")->required();
+  cmd->add_option("archive", *path, kArchiveArgumentHelp)->required();
   cmd->add_flag("--json", *json, "Machine-readable report");
   cmd->add_flag("--no-decode", *no_decode, "Check checksums only, do not decode payloads");
   cmd->add_flag("-q,--quiet", *quiet, "Print only faults");

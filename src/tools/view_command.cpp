@@ -410,12 +410,12 @@ int runView(const ViewArgs& args) {
   if (!args.link.empty()) {
     Result<LinkModel> model = parseLinkModel(args.link);
     if (!model) return reportError(model.error());
-    Result<std::shared_ptr<ByteSource>> file = openFileSource(args.archive);
-    if (!file) return reportError(file.error());
-    archive = Archive::open(makeThrottledSource(*file, *model));
+    Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
+    if (!inner) return reportError(inner.error());
+    archive = Archive::open(makeThrottledSource(*inner, *model));
     over_link = true;
   } else {
-    archive = Archive::openFile(args.archive);
+    archive = Archive::openUri(args.archive);
   }
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())
@@ -433,7 +433,9 @@ int runView(const ViewArgs& args) {
 
   StreamerOptions options;
   options.cache_budget_bytes = args.cache_mib << 20;
-  options.adaptive.enabled = args.adaptive == "on" || (args.adaptive == "auto" && over_link);
+  options.merge_gap_bytes = defaultMergeGapBytes(args.archive);
+  options.adaptive.enabled = args.adaptive == "on" ||
+                             (args.adaptive == "auto" && (over_link || isRemoteUri(args.archive)));
   if (over_link) {
     // As fly over a link: more reads in flight than cores, and gaps up to the batch gap read
     // rather than asked for again (docs/runtime.md).
@@ -557,7 +559,7 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ViewArgs>();
   CLI::App* cmd = app.add_subcommand(
       "view", "Open an archive in a window: pan, zoom, fly over, overlays (docs/view.md)");
-  cmd->add_option("archive", args->archive, "Archive file")->required();
+  cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("--renderer", args->renderer, "tile-quads or clipmap")
       ->check(CLI::IsMember({"tile-quads", "clipmap"}))
       ->capture_default_str();
@@ -576,7 +578,7 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--link", args->link,
                   "Read the archive through a simulated network link RATE:RTT, e.g. 20mbit:40ms");
   cmd->add_option("--adaptive", args->adaptive,
-                  "Adaptive scheduling: auto (on with --link), on, off")
+                  "Adaptive scheduling: auto (on with --link or a URL), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
   cmd->add_option("--frames", args->frames,

@@ -18,6 +18,7 @@
 
 #include "format/codec.h"
 #include "support/archive_fixture.h"
+#include "support/nginx_server.h"
 #include "support/reference_pyramid.h"
 #include "support/test_images.h"
 
@@ -212,6 +213,103 @@ TEST_F(Cli, BuildInfoVerifyCorruptVerifyExtract) {
   EXPECT_FALSE(std::filesystem::exists(work_ + "bad.png"));
 }
 
+// `tessera render` draws the reference picture of an orthographic view. Checked against pixels
+// known without the renderer: at 1 texel per pixel with pixel centres on texel centres each
+// pixel is its level-0 texel; at 2 texels per pixel, on level-1 texel centres, its level-1
+// texel; outside the image transparent black; a 90-degree rotation swaps the axes.
+TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
+  const std::string archive_path = work_ + "r.tess";
+  const std::string source = "synthetic:300x200:5:3";
+  RunResult built = run({"build", source, "-o", archive_path, "--tile", "64", "--border", "1",
+                         "--codec", "png", "--quiet"});
+  ASSERT_EQ(built.exit_code, 0) << built.err;
+  const Image texels = test::readSource(source);
+  ASSERT_EQ(texels.channels, 3u);
+  auto archive = Archive::openFile(archive_path);
+  ASSERT_TRUE(archive);
+  // Expects pixel (px, py) of `picture` to be RGB `rgb` with alpha 255.
+  auto expectPixel = [](const Image& picture, uint32_t px, uint32_t py, const uint8_t* rgb,
+                        const std::string& what) {
+    const uint8_t* got = picture.row(py) + px * 4;
+    EXPECT_TRUE(got[0] == rgb[0] && got[1] == rgb[1] && got[2] == rgb[2] && got[3] == 255)
+        << what << " pixel (" << px << "," << py << "): got " << int(got[0]) << "," << int(got[1])
+        << "," << int(got[2]) << "," << int(got[3]) << " want " << int(rgb[0]) << "," << int(rgb[1])
+        << "," << int(rgb[2]);
+  };
+
+  // 1 texel per pixel across tile edges (64, 128, 192): texel (110 + px, 70 + py).
+  RunResult one = run({"render", archive_path, "--centre", "150,100", "--texels-per-pixel", "1",
+                       "--viewport", "80x60", "-o", work_ + "one.png"});
+  ASSERT_EQ(one.exit_code, 0) << one.err;
+  EXPECT_NE(one.out.find("80x60, level 0 of"), std::string::npos) << one.out;
+  Image picture = test::readImagePng(work_ + "one.png");
+  ASSERT_EQ(picture.width_px, 80u);
+  ASSERT_EQ(picture.height_px, 60u);
+  ASSERT_EQ(picture.channels, 4u);
+  for (uint32_t py = 0; py < 60; ++py)
+    for (uint32_t px = 0; px < 80; ++px)
+      expectPixel(picture, px, py, texels.row(70 + py) + (110 + px) * 3, "1 tpp");
+
+  // Over the image's top-left corner: the first 10 columns and rows lie outside.
+  RunResult corner = run({"render", archive_path, "--centre", "10,10", "--viewport", "40x40", "-o",
+                          work_ + "corner.png"});
+  ASSERT_EQ(corner.exit_code, 0) << corner.err;
+  picture = test::readImagePng(work_ + "corner.png");
+  ASSERT_EQ(picture.channels, 4u);
+  for (uint32_t py = 0; py < 40; ++py)
+    for (uint32_t px = 0; px < 40; ++px) {
+      if (px < 10 || py < 10) {
+        const uint8_t* got = picture.row(py) + px * 4;
+        EXPECT_TRUE(got[0] == 0 && got[1] == 0 && got[2] == 0 && got[3] == 0)
+            << "outside pixel (" << px << "," << py << ") is not transparent black";
+      } else {
+        expectPixel(picture, px, py, texels.row(py - 10) + (px - 10) * 3, "corner");
+      }
+    }
+
+  // 2 texels per pixel: level 1 exactly (no blend with level 2), pixel centres on level-1
+  // texel centres: u = 100 + 2 (px + 0.5 - 20) = 2 (px + 30) + 1 -> level-1 texel px + 30.
+  RunResult two = run({"render", archive_path, "--centre", "100,80", "--texels-per-pixel", "2",
+                       "--viewport", "40x30", "-o", work_ + "two.png"});
+  ASSERT_EQ(two.exit_code, 0) << two.err;
+  EXPECT_NE(two.out.find("level 1 of"), std::string::npos) << two.out;
+  picture = test::readImagePng(work_ + "two.png");
+  Image level1 = *(*archive)->readRegion(0, 1, {30, 25, 40, 30});
+  ASSERT_EQ(level1.channels, 3u);
+  for (uint32_t py = 0; py < 30; ++py)
+    for (uint32_t px = 0; px < 40; ++px)
+      expectPixel(picture, px, py, level1.row(py) + px * 3, "2 tpp");
+
+  // Rotated 90 degrees: u = cx - dy, v = cy + dx, so pixel (px, py) of a 20x20 view centred on
+  // (150, 100) shows texel (150 + 10 - py - 1, 100 - 10 + px).
+  RunResult rotated = run({"render", archive_path, "--centre", "150,100", "--viewport", "20x20",
+                           "--rotation", "90", "-o", work_ + "rot.png"});
+  ASSERT_EQ(rotated.exit_code, 0) << rotated.err;
+  picture = test::readImagePng(work_ + "rot.png");
+  for (uint32_t py = 0; py < 20; ++py)
+    for (uint32_t px = 0; px < 20; ++px)
+      expectPixel(picture, px, py, texels.row(90 + px) + (159 - py) * 3, "rotated");
+
+  // Bad views are usage errors that write nothing; a missing archive is named.
+  const std::string bad_out = work_ + "bad.png";
+  for (const std::vector<std::string>& args : std::vector<std::vector<std::string>>{
+           {"render", archive_path, "--centre", "1,1", "--viewport", "0x10", "-o", bad_out},
+           {"render", archive_path, "--centre", "1,1", "--viewport", "-3x10", "-o", bad_out},
+           {"render", archive_path, "--centre", "1,1", "--viewport", "10x", "-o", bad_out},
+           {"render", archive_path, "--centre", "1,1", "--texels-per-pixel", "0", "-o", bad_out},
+           {"render", archive_path, "--centre", "1", "-o", bad_out},
+           {"render", archive_path, "--centre", "1,1", "--image", "1", "-o", bad_out},
+       }) {
+    RunResult result = run(args);
+    EXPECT_EQ(result.exit_code, 2) << args[3] << " " << args[4] << "\n" << result.err;
+    EXPECT_FALSE(result.err.empty());
+  }
+  RunResult missing = run({"render", work_ + "missing.tess", "--centre", "1,1", "-o", bad_out});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find("missing.tess"), std::string::npos) << missing.err;
+  EXPECT_FALSE(std::filesystem::exists(bad_out));
+}
+
 TEST_F(Cli, VerifyOfATruncatedArchiveExitsThree) {
   const std::string path = work_ + "t.tess";
   ASSERT_EQ(run({"build", "synthetic:100x100", "-o", path, "--codec", "lz4", "-q"}).exit_code, 0);
@@ -229,6 +327,7 @@ TEST_F(Cli, HelpOnEverySubcommandExitsZero) {
                                         {"info", "--help"},
                                         {"verify", "--help"},
                                         {"extract", "--help"},
+                                        {"render", "--help"},
                                         {"view", "--help"}}) {
     RunResult result = run(args);
     EXPECT_EQ(result.exit_code, 0) << args[0];
@@ -373,11 +472,12 @@ TEST_F(Cli, FlyOverASimulatedLinkReportsTheLinkAndTheScheduler) {
                            "--loader-priority", "nice", "-q", "--out", out});
     ASSERT_EQ(flown.exit_code, 0) << flown.err;
     nlohmann::json s = nlohmann::json::parse(slurp(out + "/summary.json"));
-    EXPECT_EQ(s["link"], "50mbit:5ms");
+    EXPECT_EQ(s["simulated_link"], "50mbit:5ms");
     EXPECT_EQ(s["adaptive"], adaptive == "auto" ? "on" : "off");
     // Every byte the loader read crossed the link (the header and directory pages too).
     EXPECT_GT(s["bytes_read"].get<uint64_t>(), 0u);
-    EXPECT_GE(s["link_transferred_bytes"].get<uint64_t>(), s["bytes_read"].get<uint64_t>());
+    EXPECT_GE(s["link"]["bytes_received"].get<uint64_t>(), s["bytes_read"].get<uint64_t>());
+    EXPECT_GT(s["link"]["requests"].get<uint64_t>(), 0u);
     EXPECT_GT(s["link_bytes_per_s"].get<double>(), 0);
     // A 50 Mbit/s link delivers no more than 6.25 MB/s, whatever the estimate's window.
     EXPECT_LT(s["link_bytes_per_s"].get<double>(), 6.25e6 * 1.01);
@@ -392,6 +492,68 @@ TEST_F(Cli, FlyOverASimulatedLinkReportsTheLinkAndTheScheduler) {
   RunResult bad = run({"fly", archive, "--link", "20mbit", "-q", "--out", work_ + "link-bad"});
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.err.find("'20mbit'"), std::string::npos) << bad.err;
+}
+
+// The same commands on a URL: nginx serves the archive statically; every subcommand reads it
+// through the HTTP source and must see what it sees in the local file.
+TEST_F(Cli, InfoVerifyExtractAndFlyReadAnArchiveOverHttp) {
+  if (!test::NginxServer::available())
+    GTEST_SKIP() << test::NginxServer::kBinary
+                 << " is not installed (scripts/install-deps.sh installs nginx-light)";
+  std::filesystem::create_directories(work_ + "www");
+  const std::string archive = work_ + "www/remote.tess";
+  ASSERT_EQ(
+      run({"build", "synthetic:4096x2048:2:3", "-o", archive, "--tile", "128", "-q"}).exit_code, 0);
+  auto nginx = test::NginxServer::start(work_ + "www", work_ + "nginx");
+  ASSERT_TRUE(nginx) << nginx.error().message;
+  const std::string url = (*nginx)->url("remote.tess");
+
+  RunResult local_info = run({"info", archive, "--json"});
+  RunResult remote_info = run({"info", url, "--json"});
+  ASSERT_EQ(remote_info.exit_code, 0) << remote_info.err;
+  nlohmann::json local = nlohmann::json::parse(local_info.out);
+  nlohmann::json remote = nlohmann::json::parse(remote_info.out);
+  EXPECT_EQ(remote["path"], url);
+  EXPECT_EQ(remote["images"], local["images"]);  // level tables included: every directory page
+  EXPECT_EQ(remote["file_bytes"], local["file_bytes"]);
+
+  RunResult verified = run({"verify", url});
+  EXPECT_EQ(verified.exit_code, 0) << verified.err;
+  for (const std::string& source : {archive, url}) {
+    RunResult extracted = run({"extract", source, "--level", "1", "--rect", "100,50,300,200", "-o",
+                               work_ + (source == url ? "remote.png" : "local.png")});
+    ASSERT_EQ(extracted.exit_code, 0) << extracted.err;
+  }
+  EXPECT_EQ(slurp(work_ + "remote.png"), slurp(work_ + "local.png"));
+
+  const std::string out = work_ + "fly-remote";
+  RunResult flown =
+      run({"fly", url, "--duration", "1", "--path", "pan", "--speed", "2000", "--fps", "30",
+           "--viewport", "320x240", "--loader-priority", "nice", "-q", "--out", out});
+  ASSERT_EQ(flown.exit_code, 0) << flown.err;
+  nlohmann::json summary = nlohmann::json::parse(slurp(out + "/summary.json"));
+  EXPECT_EQ(summary["archive"], url);
+  EXPECT_EQ(summary["merge_gap_bytes"], 64 * 1024);  // the remote default
+  EXPECT_GT(summary["tiles_loaded"].get<uint64_t>(), 0u);
+  EXPECT_EQ(summary["load_failures"].get<uint64_t>(), 0u);
+  ASSERT_TRUE(summary.contains("link")) << summary.dump();
+  EXPECT_GT(summary["link"]["requests"].get<uint64_t>(), 1u);
+  EXPECT_EQ(summary["link"]["errors"].get<uint64_t>(), 0u);
+  EXPECT_GT(summary["link"]["bytes_received"].get<uint64_t>(), 0u);
+  // A local flight keeps the disk default.
+  RunResult local_fly = run({"fly", archive, "--duration", "0.2", "--fps", "10", "--viewport",
+                             "320x240", "-q", "--out", out});
+  ASSERT_EQ(local_fly.exit_code, 0) << local_fly.err;
+  EXPECT_EQ(nlohmann::json::parse(slurp(out + "/summary.json"))["merge_gap_bytes"], 16 * 1024);
+
+  RunResult missing = run({"info", (*nginx)->url("missing.tess")});
+  EXPECT_EQ(missing.exit_code, 1);
+  EXPECT_NE(missing.err.find("missing.tess: bytes=0-16383: HTTP 404"), std::string::npos)
+      << missing.err;
+  RunResult no_ranges = run({"info", (*nginx)->url("noranges/remote.tess")});
+  EXPECT_EQ(no_ranges.exit_code, 1);
+  EXPECT_NE(no_ranges.err.find("server does not honour byte ranges"), std::string::npos)
+      << no_ranges.err;
 }
 
 TEST_F(Cli, DemoBuildsOnceFliesTheStandardPathsAndLinksTheirReports) {

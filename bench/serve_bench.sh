@@ -1,0 +1,249 @@
+#!/usr/bin/env bash
+# HTTP tile server load test (issue 5, item 7): `tessera serve` next to nginx serving the same
+# tile bytes as plain files, both on loopback, both measured by wrk in one run.
+#
+#   1. an archive (synthetic 8192 x 8192, 256-px JPEG q85 tiles, no border) is built once into
+#      $TESSERA_BENCH_DIR/serve (reused when present);
+#   2. tessera serve starts on an ephemeral port; every encoded tile of every level is fetched
+#      from it once into files at the same URL paths (tiles/<archive>/<image>/<level>/<x>/<y>),
+#      which both warms the page cache and gives nginx the identical bytes;
+#   3. nginx starts on loopback with its own config, pid and logs in a temp folder;
+#   4. wrk (random tiles from the list, --latency) runs against each server at 64 and 1000
+#      connections, then at 64 connections while a helper holds 1000 slow clients (partial
+#      headers, one byte every few seconds, reconnecting when closed) on the same server;
+#   5. a table of requests/s, MB/s and p50/p99 latency, and the tessera/nginx ratios, against
+#      the targets (throughput >= 0.8x nginx; p99 < 20 ms at 64 connections; p99 < 100 ms
+#      with 1000 slow clients).
+#
+# Both servers get the same number of worker threads (--threads, default: all cores). The
+# machine is shared: the 1-minute load average is printed before every run.
+#
+#   bench/serve_bench.sh [--duration 10] [--threads N] [--build-dir build]
+set -euo pipefail
+
+REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+WORK=${TESSERA_BENCH_DIR:-/tmp/tessera-bench}/serve
+BUILD_DIR=$REPO/build
+DURATION=10
+THREADS=$(nproc)
+while (($#)); do
+  case $1 in
+    --duration) DURATION=$2; shift 2 ;;
+    --threads) THREADS=$2; shift 2 ;;
+    --build-dir) BUILD_DIR=$2; shift 2 ;;
+    -h|--help) sed -n '2,24p' "$0"; exit 0 ;;
+    *) echo "serve_bench: unknown option $1" >&2; exit 2 ;;
+  esac
+done
+
+TESSERA=$BUILD_DIR/src/tools/tessera
+for tool in "$TESSERA" nginx wrk curl python3; do
+  command -v "$tool" >/dev/null || [[ -x $tool ]] || { echo "serve_bench: $tool not found" >&2; exit 1; }
+done
+NGINX=$(command -v nginx)
+
+mkdir -p "$WORK"
+ARCHIVE=$WORK/bench.tess
+if [[ ! -s $ARCHIVE ]]; then
+  echo "serve_bench: building $ARCHIVE"
+  "$TESSERA" build synthetic:8192x8192:2 -o "$ARCHIVE" --tile 256 --codec jpeg --quality 85 --quiet
+fi
+
+RUN=$(mktemp -d /tmp/tessera-serve-bench.XXXXXX)
+# nginx workers started by root run as an unprivileged user: they must be able to read the tiles.
+chmod 755 "$RUN"
+PIDS=()
+cleanup() {
+  for pid in "${PIDS[@]}"; do kill "$pid" 2>/dev/null || true; done
+  if [[ -f $RUN/nginx.pid ]]; then kill "$(cat "$RUN/nginx.pid")" 2>/dev/null || true; fi
+  wait 2>/dev/null || true
+  rm -rf "$RUN"
+}
+trap cleanup EXIT
+
+# tessera serve: the port comes from its first line.
+mkfifo "$RUN/tessera.out"
+"$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" >"$RUN/tessera.out" 2>"$RUN/tessera.err" &
+TESSERA_PID=$!
+PIDS+=($TESSERA_PID)
+exec 3<"$RUN/tessera.out"
+read -r line <&3
+TESSERA_PORT=${line##*:}
+echo "serve_bench: $line (threads $THREADS)"
+
+# Tile list and files: every encoded tile (204 = uniform or empty, no payload, skipped).
+python3 - "$TESSERA_PORT" "$RUN" <<'EOF'
+import http.client, json, os, sys
+port, run = int(sys.argv[1]), sys.argv[2]
+conn = http.client.HTTPConnection("127.0.0.1", port)
+def get(path):
+    conn.request("GET", path)
+    r = conn.getresponse()
+    return r.status, r.read()
+status, body = get("/bench/info.json")
+info = json.loads(body)
+paths = []
+for image in info["images"]:
+    for level in image["levels"]:
+        for y in range(level["tiles_y"]):
+            for x in range(level["tiles_x"]):
+                path = f"/bench/{image['index']}/{level['level']}/{x}/{y}"
+                status, payload = get(path)
+                if status != 200:
+                    continue
+                out = os.path.join(run, "tiles" + path)
+                os.makedirs(os.path.dirname(out), exist_ok=True)
+                with open(out, "wb") as f:
+                    f.write(payload)
+                paths.append(path)
+with open(os.path.join(run, "paths.txt"), "w") as f:
+    f.write("\n".join(paths) + "\n")
+total = sum(os.path.getsize(os.path.join(run, "tiles" + p)) for p in paths)
+print(f"serve_bench: {len(paths)} encoded tiles, {total / len(paths) / 1024:.1f} KiB on average")
+EOF
+
+chmod -R a+rX "$RUN/tiles"
+
+# nginx: its own config, pid and logs; the tiles as files; the same number of workers.
+NGINX_PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+mkdir -p "$RUN/nginx-tmp"
+cat >"$RUN/nginx.conf" <<EOF
+worker_processes $THREADS;
+pid $RUN/nginx.pid;
+error_log $RUN/nginx-error.log warn;
+events { worker_connections 4096; }
+http {
+  access_log off;
+  sendfile on;
+  tcp_nopush on;
+  keepalive_requests 1000000;
+  client_body_temp_path $RUN/nginx-tmp;
+  proxy_temp_path $RUN/nginx-tmp;
+  fastcgi_temp_path $RUN/nginx-tmp;
+  uwsgi_temp_path $RUN/nginx-tmp;
+  scgi_temp_path $RUN/nginx-tmp;
+  default_type application/octet-stream;
+  server {
+    listen 127.0.0.1:$NGINX_PORT;
+    root $RUN/tiles;
+    add_header Cache-Control "public, max-age=31536000, immutable";
+  }
+}
+EOF
+"$NGINX" -c "$RUN/nginx.conf" -p "$RUN" -g 'daemon on;'
+curl -sf -o /dev/null "http://127.0.0.1:$NGINX_PORT$(head -1 "$RUN/paths.txt")" ||
+  { echo "serve_bench: nginx does not serve the tiles" >&2; cat "$RUN/nginx-error.log" >&2; exit 1; }
+
+cat >"$RUN/random_tiles.lua" <<'EOF'
+local paths = {}
+for line in io.lines(os.getenv("TILE_LIST")) do paths[#paths + 1] = line end
+math.randomseed(os.time() + (tonumber(tostring({}):sub(8), 16) or 0))
+request = function()
+  return wrk.format("GET", paths[math.random(#paths)])
+end
+EOF
+
+# The slow clients: N connections that each send a partial header and then one more header
+# byte every few seconds, reconnecting when the server closes them.
+cat >"$RUN/slow_clients.py" <<'EOF'
+import selectors, socket, sys, time
+port, count = int(sys.argv[1]), int(sys.argv[2])
+sel = selectors.DefaultSelector()
+socks = {}
+def open_one():
+    s = socket.create_connection(("127.0.0.1", port))
+    s.setblocking(False)
+    s.send(b"GET /bench/0/0/0/0 HTTP/1.1\r\nHost: x\r\nX-Slow: ")
+    sel.register(s, selectors.EVENT_READ)
+    socks[s] = time.monotonic()
+for _ in range(count):
+    open_one()
+print("ready", flush=True)
+reconnects = 0
+while True:
+    for key, _ in sel.select(timeout=1.0):
+        s = key.fileobj
+        try:
+            data = s.recv(4096)
+        except OSError:
+            data = b""
+        if not data:
+            sel.unregister(s); s.close(); del socks[s]; reconnects += 1
+            open_one()
+    now = time.monotonic()
+    for s, last in list(socks.items()):
+        if now - last > 3:
+            try:
+                s.send(b"a")
+            except OSError:
+                pass
+            socks[s] = now
+EOF
+
+RESULTS=$RUN/results.txt
+: >"$RESULTS"
+run_wrk() {  # name port connections
+  local name=$1 port=$2 conns=$3
+  local wrk_threads=$((THREADS < 4 ? THREADS : 4))
+  echo "serve_bench: $name, $conns connections, ${DURATION}s, load average $(cut -d' ' -f1 /proc/loadavg)"
+  TILE_LIST=$RUN/paths.txt wrk -t"$wrk_threads" -c"$conns" -d"${DURATION}s" --latency \
+    -s "$RUN/random_tiles.lua" "http://127.0.0.1:$port" >"$RUN/wrk.txt" 2>&1
+  python3 - "$name" "$conns" "$RUN/wrk.txt" >>"$RESULTS" <<'EOF'
+import re, sys
+name, conns, path = sys.argv[1], sys.argv[2], sys.argv[3]
+text = open(path).read()
+def latency(label):
+    m = re.search(r"^\s+%s\s+([\d.]+)(us|ms|s)\s*$" % label, text, re.M)
+    if not m: return float("nan")
+    return float(m.group(1)) * {"us": 1e-3, "ms": 1.0, "s": 1e3}[m.group(2)]
+rps = float(re.search(r"Requests/sec:\s+([\d.]+)", text).group(1))
+mbs = re.search(r"Transfer/sec:\s+([\d.]+)(\w+)", text)
+mb = float(mbs.group(1)) * {"B": 1e-6, "KB": 1.024e-3, "MB": 1.048576, "GB": 1073.741824}[mbs.group(2)]
+errors = re.search(r"Socket errors: (.*)", text)
+non2xx = re.search(r"Non-2xx or 3xx responses: (\d+)", text)
+print(f"{name}\t{conns}\t{rps:.0f}\t{mb:.1f}\t{latency('50%'):.2f}\t{latency('99%'):.2f}\t"
+      f"{errors.group(1) if errors else '-'}\t{non2xx.group(1) if non2xx else 0}")
+EOF
+  tail -1 "$RESULTS"
+}
+
+run_wrk tessera "$TESSERA_PORT" 64
+run_wrk nginx "$NGINX_PORT" 64
+run_wrk tessera "$TESSERA_PORT" 1000
+run_wrk nginx "$NGINX_PORT" 1000
+
+for target in tessera nginx; do
+  port=$TESSERA_PORT
+  [[ $target == nginx ]] && port=$NGINX_PORT
+  mkfifo "$RUN/slow.$target"
+  python3 "$RUN/slow_clients.py" "$port" 1000 >"$RUN/slow.$target" &
+  slow_pid=$!
+  PIDS+=($slow_pid)
+  exec 4<"$RUN/slow.$target"
+  read -r _ <&4
+  run_wrk "$target+1000slow" "$port" 64
+  kill "$slow_pid" 2>/dev/null || true
+  exec 4<&-
+done
+
+# Memory: the server's peak and current resident set after all runs (1000 slow clients
+# included), from /proc.
+rss() { awk -v k="$1" '$1 == k ":" {printf "%.1f MiB", $2 / 1024}' "/proc/$TESSERA_PID/status"; }
+echo
+echo "tessera serve memory: peak RSS $(rss VmHWM), now $(rss VmRSS)"
+echo
+echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket errors | non-2xx |"
+echo "|---|---:|---:|---:|---:|---:|---|---:|"
+awk -F'\t' '{printf "| %s | %s | %s | %s | %s | %s | %s | %s |\n", $1, $2, $3, $4, $5, $6, $7, $8}' "$RESULTS"
+echo
+awk -F'\t' '
+  { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6 }
+  END {
+    split("64 1000", conns, " ")
+    for (i = 1; i <= 2; ++i) {
+      k = conns[i]
+      printf "throughput tessera/nginx at %s connections: %.2f (target >= 0.8)\n", k, rps["tessera@" k] / rps["nginx@" k]
+    }
+    printf "tessera p99 at 64 connections: %s ms (target < 20)\n", p99["tessera@64"]
+    printf "tessera p99 at 64 connections with 1000 slow clients: %s ms (target < 100); nginx: %s ms\n", p99["tessera+1000slow@64"], p99["nginx+1000slow@64"]
+  }' "$RESULTS"

@@ -1,0 +1,68 @@
+#pragma once
+/// \file
+/// A ByteSource over HTTP byte ranges (RFC 9110, section 14), on libcurl: an archive served by
+/// `tessera serve`, nginx, a CDN or any server that honours `Range`. The runtime uses it
+/// unchanged; docs/remote.md has the failure behaviour and the version (ETag) rule.
+
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <tessera/byte_source.h>
+#include <tessera/result.h>
+
+namespace tessera {
+
+/// How an HTTP source talks to its server. The defaults suit a server on the internet.
+struct HttpOptions {
+  /// Time to set up a connection (DNS, TCP, TLS) before the attempt fails (and is retried).
+  std::chrono::milliseconds connect_timeout{10'000};
+  /// Longest one attempt of one request may take, connect included; 0 = no limit. A range
+  /// of the loader is at most a few MiB, which this covers down to about 100 KiB/s.
+  std::chrono::milliseconds request_timeout{60'000};
+  /// An attempt that receives no byte for this long fails (and is retried): a stalled
+  /// connection is noticed well before request_timeout. 0 = off.
+  std::chrono::milliseconds stall_timeout{15'000};
+  /// Attempts per request, the first included: connection errors, timeouts, truncated
+  /// responses, 408, 429 and 5xx are retried; other 4xx and version changes never are.
+  uint32_t max_attempts = 4;
+  /// Backoff before retry n (1-based): retry_initial * 2^(n-1), at most retry_max, times a
+  /// random factor in [0.5, 1] (jitter, so clients that failed together do not retry together).
+  std::chrono::milliseconds retry_initial{100};
+  std::chrono::milliseconds retry_max{5'000};
+  /// A 429 or 503 with Retry-After waits what the server asks, but at most this.
+  std::chrono::milliseconds retry_after_max{10'000};
+  /// Connections to the server at most; more requests wait in libcurl's queue. Over HTTP/2
+  /// requests are streams of one connection and this limits connections only.
+  uint32_t max_connections = 8;
+  /// Bytes fetched ahead on ByteSource::prefetch hints and held until a read takes them: the
+  /// bound on that buffer. Hints beyond it are dropped, oldest unread data is evicted first.
+  /// 0 ignores hints.
+  uint64_t prefetch_buffer_bytes = 16u << 20;
+  /// Speak HTTP/2 from the first byte over plain http:// (h2c "prior knowledge"): only for a
+  /// server known to accept it. Over https:// HTTP/2 is negotiated (ALPN) without this.
+  bool http2_prior_knowledge = false;
+  /// Check the server's TLS certificate and host name (https://). Off only for tests.
+  bool verify_tls = true;
+  /// Sent as User-Agent.
+  std::string user_agent = "tessera/0.1";
+};
+
+/// Opens `url` (http:// or https://) with one request: a GET of the first 16 KiB, which
+/// yields the size (Content-Range), the version (the strong ETag, else Last-Modified) and
+/// proof that ranges are honoured, and whose bytes the archive open then reads without a
+/// request of its own. Fails (kNotFound on 404/410, kUnsupported when the server answers a
+/// range with the whole file: "server does not honour byte ranges", kIo otherwise) naming
+/// the URL and the cause.
+///
+/// Every later read asks for exactly its range with If-Match (or If-Unmodified-Since) on
+/// that version and checks the answer's Content-Range and ETag: when the file on the server
+/// changed, reads fail with kCorrupt "archive changed on the server (ETag was X, now Y)" and
+/// keep failing; bytes of two versions are never mixed. Thread-safe: reads from many threads
+/// run in parallel on keep-alive connections (HTTP/2 streams of one connection when the
+/// server offers h2), driven by one I/O thread per source.
+[[nodiscard]] Result<std::shared_ptr<ByteSource>> openHttpSource(const std::string& url,
+                                                                 const HttpOptions& options = {});
+
+}  // namespace tessera

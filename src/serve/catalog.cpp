@@ -1,0 +1,79 @@
+#include "serve/catalog.h"
+
+#include <sys/stat.h>
+
+#include <algorithm>
+#include <filesystem>
+
+#include <fmt/format.h>
+
+namespace tessera::detail {
+
+bool isValidArchiveName(std::string_view name) {
+  if (name.empty() || name == "." || name == "..") return false;
+  return std::all_of(name.begin(), name.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '.' ||
+           c == '_' || c == '-';
+  });
+}
+
+namespace {
+
+Result<void> addArchive(const std::string& path, Catalog& catalog) {
+  std::string name = std::filesystem::path(path).stem().string();
+  if (!isValidArchiveName(name))
+    return Unexpected(
+        ErrorCode::kInvalidArgument,
+        fmt::format("{}: archive name \"{}\" has characters outside [A-Za-z0-9._-]", path, name));
+  if (catalog.count(name))
+    return Unexpected(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: archive name \"{}\" is already served from {}", path, name,
+                                  catalog.at(name)->path));
+  struct stat status {};
+  if (::stat(path.c_str(), &status) != 0)
+    return Unexpected(ErrorCode::kNotFound, fmt::format("{}: cannot stat the file", path));
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ByteSource> source, openFileSource(path));
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<Archive> archive, Archive::open(source));
+  auto served = std::make_shared<ServedArchive>();
+  served->name = name;
+  served->path = path;
+  served->archive = archive;
+  served->source = source;
+  served->file_bytes = source->sizeBytes();
+  const uint64_t mtime_ns =
+      uint64_t(status.st_mtim.tv_sec) * 1000000000ull + uint64_t(status.st_mtim.tv_nsec);
+  served->etag =
+      fmt::format("\"{:x}-{:x}-{:x}\"", served->file_bytes, mtime_ns, uint64_t(status.st_ino));
+  served->modified = status.st_mtim.tv_sec;
+  catalog[name] = std::move(served);
+  return {};
+}
+
+}  // namespace
+
+Result<Catalog> loadCatalog(const std::vector<std::string>& paths) {
+  Catalog catalog;
+  for (const std::string& path : paths) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) {
+      std::vector<std::string> files;
+      for (const auto& entry : std::filesystem::directory_iterator(path, ec))
+        if (entry.path().extension() == ".tess" && entry.is_regular_file())
+          files.push_back(entry.path().string());
+      if (ec)
+        return Unexpected(ErrorCode::kIo,
+                          fmt::format("{}: cannot list the folder: {}", path, ec.message()));
+      if (files.empty())
+        return Unexpected(ErrorCode::kNotFound,
+                          fmt::format("{}: the folder holds no .tess archive", path));
+      std::sort(files.begin(), files.end());
+      for (const std::string& file : files) TESSERA_TRY(addArchive(file, catalog));
+    } else {
+      TESSERA_TRY(addArchive(path, catalog));
+    }
+  }
+  if (catalog.empty()) return Unexpected(ErrorCode::kInvalidArgument, "serve: no archive to serve");
+  return catalog;
+}
+
+}  // namespace tessera::detail

@@ -1,0 +1,111 @@
+// `tessera serve`: serves archives over HTTP until SIGINT or SIGTERM (docs/serve.md).
+#include <signal.h>
+
+#include <cstdio>
+#include <memory>
+
+#include <fmt/format.h>
+
+#include <tessera/serve.h>
+
+#include "tools/cli.h"
+
+namespace tessera::cli {
+
+namespace {
+
+int runServe(const ServeOptions& options, double cache_mib) {
+  ServeOptions resolved = options;
+  resolved.transcode_cache_bytes = uint64_t(cache_mib * 1024 * 1024);
+  // Block the stop signals before any server thread exists, so every thread inherits the
+  // mask and only sigwait below sees them.
+  sigset_t signals;
+  sigemptyset(&signals);
+  sigaddset(&signals, SIGINT);
+  sigaddset(&signals, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+  resolved.on_listening = [](const std::string& address, uint16_t port) {
+    const bool v6 = address.find(':') != std::string::npos;
+    // The first line on stdout, flushed: scripts and tests read the port from it.
+    std::printf("listening on http://%s%s%s:%u\n", v6 ? "[" : "", address.c_str(), v6 ? "]" : "",
+                unsigned(port));
+    std::fflush(stdout);
+  };
+  Result<std::unique_ptr<TileServer>> started = TileServer::start(resolved);
+  if (!started) return reportError(started.error());
+  TileServer& server = **started;
+  std::fprintf(stderr, "tessera serve: %zu archive(s):", server.archiveNames().size());
+  for (const std::string& name : server.archiveNames()) std::fprintf(stderr, " %s", name.c_str());
+  std::fprintf(stderr, "\n");
+
+  int received = 0;
+  sigwait(&signals, &received);
+  std::fprintf(stderr, "tessera serve: %s, finishing responses in flight\n",
+               received == SIGINT ? "SIGINT" : "SIGTERM");
+  server.stop();
+  const ServeStats stats = server.stats();
+  std::fprintf(stderr, "tessera serve: %llu requests, %s sent, %llu connections\n",
+               static_cast<unsigned long long>(stats.requests),
+               formatBytes(stats.body_bytes_sent).c_str(),
+               static_cast<unsigned long long>(stats.connections_accepted));
+  return kExitOk;
+}
+
+}  // namespace
+
+void registerServeCommand(CLI::App& app, int& exit_code) {
+  auto options = std::make_shared<ServeOptions>();
+  auto cache_mib = std::make_shared<double>(64);
+  CLI::App* cmd = app.add_subcommand(
+      "serve",
+      "Serve archives over HTTP: tiles, byte ranges, Deep Zoom, XYZ, metrics and the web viewer "
+      "(docs/serve.md)");
+  cmd->add_option("paths", options->paths, "Archives (.tess) or folders of them")->required();
+  cmd->add_option("--bind", options->bind_address, "Address to listen on")->capture_default_str();
+  cmd->add_option("--port", options->port, "TCP port; 0 picks a free one")->capture_default_str();
+  cmd->add_option("--threads", options->threads, "I/O threads; 0 = one per core")
+      ->capture_default_str();
+  cmd->add_option("--max-connections", options->max_connections,
+                  "Connections beyond this are closed on accept")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 1000000u));
+  cmd->add_option("--header-timeout-ms", options->header_timeout_ms,
+                  "From a request's first byte to its complete header")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 3600000u));
+  cmd->add_option("--body-timeout-ms", options->body_timeout_ms, "To receive a request body")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 3600000u));
+  cmd->add_option("--idle-timeout-ms", options->idle_timeout_ms,
+                  "A kept-alive connection waiting for its next request")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 3600000u));
+  cmd->add_option("--send-timeout-ms", options->send_timeout_ms,
+                  "A response write making no progress (client not reading)")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 3600000u));
+  cmd->add_option("--header-limit", options->header_limit_bytes,
+                  "Request line and header bytes (431 beyond)")
+      ->capture_default_str()
+      ->check(CLI::Range(256u, 1u << 20));
+  cmd->add_option("--body-limit", options->body_limit_bytes, "Request body bytes (413 beyond)")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 1u << 26));
+  cmd->add_option("--max-ranges", options->max_ranges, "Byte ranges per request (416 beyond)")
+      ->capture_default_str()
+      ->check(CLI::Range(1u, 1000u));
+  cmd->add_option("--cache-mib", *cache_mib, "Transcoded-tile cache budget in MiB")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1048576.0));
+  cmd->add_option("--jpeg-quality", options->jpeg_quality, "Quality of transcoded JPEG tiles")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 100));
+  cmd->add_option("--cors", options->cors_origin,
+                  "Send Access-Control-Allow-Origin with this origin (or *)");
+  cmd->add_option("--access-log", options->access_log,
+                  "One line per request to FILE, or - for stdout (after the listening line)");
+  cmd->callback([=, &exit_code] { exit_code = runServe(*options, *cache_mib); });
+}
+
+}  // namespace tessera::cli

@@ -1,0 +1,119 @@
+// The HTTP byte source against `tessera serve`'s archive endpoint (GET /<name>.tess with byte
+// ranges, docs/serve.md), the server running in this process on an ephemeral port.
+#include <tessera/http_source.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <thread>
+
+#include <gtest/gtest.h>
+
+#include <tessera/archive.h>
+#include <tessera/serve.h>
+
+#include "support/synthetic_archive.h"
+
+namespace tessera {
+namespace {
+
+class ServeTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = std::filesystem::temp_directory_path() /
+           ("tessera-http-serve-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::remove_all(dir_);
+    std::filesystem::create_directories(dir_);
+    test::SyntheticArchiveSpec spec;
+    spec.codec = Codec::kJpeg;
+    spec.width_px = 2048;
+    spec.height_px = 1536;
+    bytes_ = test::syntheticArchiveBytes(spec);
+    ASSERT_FALSE(bytes_.empty());
+    path_ = (dir_ / "earth.tess").string();
+    std::ofstream(path_, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes_.data()), std::streamsize(bytes_.size()));
+    ServeOptions options;
+    options.paths = {path_};
+    options.port = 0;
+    options.threads = 2;
+    auto server = TileServer::start(options);
+    ASSERT_TRUE(server) << server.error().message;
+    server_ = std::move(*server);
+    url_ = "http://127.0.0.1:" + std::to_string(server_->port()) + "/earth.tess";
+  }
+  void TearDown() override {
+    server_.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(dir_, ec);
+  }
+
+  std::filesystem::path dir_;
+  std::string path_, url_;
+  std::vector<uint8_t> bytes_;
+  std::unique_ptr<TileServer> server_;
+};
+
+TEST_F(ServeTest, ConcurrentRangeReadsEqualTheArchiveBytes) {
+  auto source = openHttpSource(url_);
+  ASSERT_TRUE(source) << source.error().message;
+  EXPECT_EQ((*source)->sizeBytes(), bytes_.size());
+  std::atomic<int> mismatches{0};
+  std::vector<std::thread> threads;
+  for (int t = 0; t < 4; ++t)
+    threads.emplace_back([&, t] {
+      std::mt19937 random(40 + t);
+      for (int i = 0; i < 30; ++i) {
+        const uint64_t offset = random() % bytes_.size();
+        const size_t length = 1 + random() % std::min<uint64_t>(50000, bytes_.size() - offset);
+        std::vector<uint8_t> out(length);
+        Result<void> read = (*source)->read(offset, out);
+        if (!read) ADD_FAILURE() << read.error().message;
+        if (!read || !std::equal(out.begin(), out.end(), bytes_.begin() + ptrdiff_t(offset)))
+          ++mismatches;
+      }
+    });
+  for (std::thread& thread : threads) thread.join();
+  EXPECT_EQ(mismatches.load(), 0);
+  EXPECT_EQ((*source)->linkStats()->errors, 0u);
+  // readMany: scattered ranges, several merged, all sent at once.
+  std::vector<std::vector<uint8_t>> outs(12);
+  std::vector<ByteRange> ranges;
+  for (size_t i = 0; i < outs.size(); ++i) {
+    outs[i].resize(1000 + i * 300);
+    ranges.push_back({(i * 7919 * 13) % (bytes_.size() - 5000), outs[i].size(), outs[i].data()});
+  }
+  ASSERT_TRUE((*source)->readMany(ranges));
+  for (size_t i = 0; i < outs.size(); ++i)
+    EXPECT_TRUE(std::equal(outs[i].begin(), outs[i].end(),
+                           bytes_.begin() + ptrdiff_t(ranges[i].offset_bytes)))
+        << i;
+}
+
+TEST_F(ServeTest, ArchiveOpensInOneRequestAndDecodesAsTheLocalFile) {
+  auto remote = Archive::openUri(url_);
+  ASSERT_TRUE(remote) << remote.error().message;
+  auto local = Archive::openFile(path_);
+  ASSERT_TRUE(local);
+  EXPECT_EQ((*remote)->source().linkStats()->requests, 1u);
+  for (const TileId& id : test::allTiles(**local)) {
+    Result<Image> a = (*remote)->readTile(id);
+    Result<Image> b = (*local)->readTile(id);
+    ASSERT_TRUE(a) << a.error().message;
+    ASSERT_TRUE(b);
+    ASSERT_EQ(a->texels, b->texels) << "tile " << id.level << "," << id.x << "," << id.y;
+  }
+}
+
+TEST_F(ServeTest, UnknownArchiveIsNotFound) {
+  const std::string url = "http://127.0.0.1:" + std::to_string(server_->port()) + "/moon.tess";
+  auto source = openHttpSource(url);
+  ASSERT_FALSE(source);
+  EXPECT_EQ(source.error().code, ErrorCode::kNotFound);
+  EXPECT_NE(source.error().message.find(url + ": bytes=0-16383: HTTP 404"), std::string::npos)
+      << source.error().message;
+}
+
+}  // namespace
+}  // namespace tessera

@@ -1,0 +1,81 @@
+#pragma once
+// A small HTTP/1.1 server of one file's byte ranges, for tests of clients: it answers each
+// request as a plan says (serve, an error status, a truncated or stalled body, the whole
+// file, a wrong range), so retries, version checks and cancellation are tested
+// deterministically. Keep-alive; one thread per connection.
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace tessera::test {
+
+/// How the server answers one request.
+struct RangeReply {
+  enum class Kind {
+    kServe,      ///< honour Range (206) and If-Match / If-Range as RFC 9110 says
+    kStatus,     ///< `status` with a short body (and Retry-After when set)
+    kWholeFile,  ///< 200 with the whole file, whatever was asked
+    kTruncate,   ///< the 206's headers, then half its body, then close the connection
+    kStall,      ///< the 206's headers and half its body, then nothing until the client leaves
+    kWrongRange  ///< a 206 one byte off what was asked
+  };
+  Kind kind = Kind::kServe;
+  int status = 200;
+  std::string retry_after;
+};
+
+/// What the server saw of one request.
+struct SeenRequest {
+  std::string method;
+  std::string range;     ///< the Range header, or empty
+  std::string if_match;  ///< If-Match, or empty
+  std::string if_range;  ///< If-Range, or empty
+  std::string if_unmodified_since;
+};
+
+/// Thread-safe.
+class RangeServer {
+ public:
+  /// Serves `bytes` on 127.0.0.1 at an ephemeral port. `etag` empty: no ETag header (then
+  /// Last-Modified is sent).
+  RangeServer(std::vector<uint8_t> bytes, std::string etag);
+  ~RangeServer();
+
+  std::string url() const;
+  /// Answers request n (0-based, counting every request) by `plan(n)`; the default serves.
+  void setPlan(std::function<RangeReply(uint64_t)> plan);
+  /// A new version of the file: new bytes and ETag. `honour_conditionals` false makes the
+  /// server ignore If-Match and If-Range (a broken cache in the way).
+  void replace(std::vector<uint8_t> bytes, std::string etag, bool honour_conditionals);
+  std::vector<SeenRequest> seen() const;
+  /// Blocks until a kStall reply has sent its partial body.
+  void waitStalled();
+
+ private:
+  void acceptLoop();
+  void serve(int fd);
+  bool handle(int fd, const SeenRequest& request);
+
+  int listen_fd_ = -1;
+  uint16_t port_ = 0;
+  std::thread acceptor_;
+  mutable std::mutex mutex_;  ///< guards everything below
+  std::condition_variable changed_;
+  std::vector<uint8_t> bytes_;
+  std::string etag_;
+  bool honour_conditionals_ = true;
+  std::function<RangeReply(uint64_t)> plan_;
+  std::vector<SeenRequest> seen_;
+  std::vector<std::thread> connections_;
+  std::vector<int> connection_fds_;
+  bool stalled_ = false;
+  bool stopping_ = false;
+};
+
+}  // namespace tessera::test
