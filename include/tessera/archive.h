@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -84,6 +85,10 @@ class Archive {
   /// The directory entry of a tile, reading and verifying its directory page on first use.
   /// An address outside the image's levels or tile grid is kInvalidArgument.
   [[nodiscard]] Result<TileEntry> tileEntry(const TileId& tile) const;
+  /// The directory entry of a tile if its page is in memory, without any read: for a caller
+  /// that must not wait (the render thread sizing its requests). Empty when the page is not
+  /// loaded yet or the address is outside the image.
+  std::optional<TileEntry> tileEntryIfCached(const TileId& tile) const;
 
   /// Reads a tile's payload and verifies its checksum. Only for kEncoded tiles.
   [[nodiscard]] Result<std::vector<uint8_t>> readPayload(const TileId& tile,

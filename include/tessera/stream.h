@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -140,6 +141,25 @@ struct FrameReport {
   double decode_ms_total = 0;       ///< worker time spent decoding since start
   uint64_t hinted_bytes_total = 0;  ///< bytes the byte source was told to fetch ahead
   double update_ms = 0;             ///< render-thread time of this update() call
+
+  // The link as the loader measures it (every source, adaptive or not; docs/runtime.md).
+  double link_bytes_per_s = 0;         ///< throughput estimate, 0 before the first read
+  double link_latency_ms = 0;          ///< latency estimate (request to first byte)
+  double queue_wait_ms = 0;            ///< recent tiles' wait from request to read
+  uint64_t cancelled_total = 0;        ///< queued requests dropped as no longer wanted
+  uint64_t reads_cancelled_total = 0;  ///< reads abandoned in flight (every tile left the view)
+
+  // Adaptive scheduling (StreamerOptions::adaptive; Marvie & Bouatouch, part III).
+  bool adaptive = false;    ///< the adaptive policy chose this frame's requests
+  bool view_still = false;  ///< still budgets: the view has not changed for still_after_s
+  /// Finest level requested this frame (coarser ones too); desired_level when not adaptive.
+  uint32_t requested_level = 0;
+  /// Payload bytes that can arrive within this mode's per-level time limit at the estimate.
+  uint64_t budget_bytes = 0;
+  uint64_t memory_budget_bytes = 0;  ///< this mode's client-memory budget
+  uint64_t memory_bytes = 0;         ///< decoded bytes of the wanted tiles held or requested
+  uint64_t requested_bytes = 0;      ///< payload bytes requested and not yet arrived
+  uint64_t deferred_tiles = 0;       ///< wanted tiles not requested (beyond the budgets)
 };
 
 /// What the renderer should do this frame.
@@ -159,6 +179,37 @@ struct FrameUpdate {
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
   FrameReport report;
+};
+
+/// Budgets for one mode of adaptive scheduling.
+struct AdaptiveBudget {
+  /// Decoded bytes of the wanted tiles held or requested; 0 = the cache budget, which is the
+  /// ceiling in any case. Limits what is requested; held tiles cost no transfer and stay
+  /// until the cache evicts them.
+  uint64_t memory_bytes = 0;
+  /// Seconds within which a level's missing tiles must be able to arrive at the estimated
+  /// throughput and latency for that level to be requested (0 = no limit). Levels are taken
+  /// coarse to fine and the first that does not fit ends the refinement.
+  double level_time_limit_s = 0;
+};
+
+/// Adaptive scheduling (Marvie & Bouatouch, "Remote Rendering of Massively Textured 3D
+/// Scenes Through Progressive Texture Maps", part III): from the loader's throughput and
+/// latency estimates, request only the levels whose tiles can arrive within a time limit and
+/// fit a memory budget, coarse first; one set of budgets while the view moves and a wider one
+/// once it has been still for `still_after_s` (the paper's n seconds), when refinement
+/// proceeds. Off by default: over a local disk every level fits and the policy only costs
+/// render-thread time (docs/runtime.md has the figures); `tessera fly --link` turns it on.
+struct AdaptiveOptions {
+  bool enabled = false;
+  double still_after_s = 1.0;
+  AdaptiveBudget moving{size_t(256) << 20, 2.0};
+  AdaptiveBudget still{0, 30.0};
+  /// Throughput assumed until the first read is measured; 0: request only the coarsest level
+  /// until then (one round trip on a remote link, a frame on a local disk).
+  double assumed_bytes_per_s = 0;
+  /// The time source for the still/moving switch; tests inject one. Empty: steady_clock.
+  std::function<std::chrono::steady_clock::time_point()> clock;
 };
 
 /// Everything `TileStreamer::create` can set.
@@ -195,6 +246,7 @@ struct StreamerOptions {
   /// Retry a failed read or checksum after this, doubling per failure up to the maximum.
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
+  AdaptiveOptions adaptive;
 };
 
 /// The runtime for one archive. `update`, `uploaded` and `release` are render-thread only and

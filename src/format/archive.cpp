@@ -87,39 +87,53 @@ Result<PageRef> Archive::Impl::pageRef(uint32_t image, uint32_t level, uint32_t 
   return (*shared)[page_index];
 }
 
-Result<std::shared_ptr<const std::vector<TileEntry>>> Archive::Impl::page(uint32_t image,
-                                                                          uint32_t level,
-                                                                          uint32_t page_x,
-                                                                          uint32_t page_y) {
+Archive::Impl::PageResult Archive::Impl::page(uint32_t image, uint32_t level, uint32_t page_x,
+                                              uint32_t page_y) {
   const ImageInfo& info = infos[image];
   uint32_t page_index = page_y * detail::pagesX(info, level) + page_x;
   uint64_t key = pageKey(image, level, page_index);
+  std::promise<PageResult> reading;
   {
-    std::lock_guard lock(cache_mutex);
+    std::unique_lock lock(cache_mutex);
     auto it = pages.find(key);
     if (it != pages.end()) return it->second;
+    auto loading = pages_loading.find(key);
+    if (loading != pages_loading.end()) {
+      std::shared_future<PageResult> pending = loading->second;
+      lock.unlock();
+      return pending.get();
+    }
+    pages_loading.emplace(key, reading.get_future().share());
   }
-  TESSERA_ASSIGN_OR_RETURN(PageRef ref, pageRef(image, level, page_index));
-  detail::PageGeometry geometry = detail::pageGeometry(info, level, page_x, page_y);
-  std::vector<TileEntry> entries;
-  if (ref.length_bytes == 0) {
-    entries.resize(size_t(geometry.columns) * geometry.rows);
-  } else {
-    std::string what = fmt::format("image {} level {} page ({},{})", image, level, page_x, page_y);
-    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readBlock(ref, what));
-    TESSERA_ASSIGN_OR_RETURN(entries,
-                             detail::decodeTileEntries(bytes, info, header, name + ": " + what));
-  }
-  auto shared = std::make_shared<const std::vector<TileEntry>>(std::move(entries));
-  std::lock_guard lock(cache_mutex);
-  if (pages.emplace(key, shared).second) {
-    page_order.push_back(key);
-    if (page_order.size() > kMaxCachedPages) {
-      pages.erase(page_order.front());
-      page_order.pop_front();
+  auto read = [&]() -> PageResult {
+    TESSERA_ASSIGN_OR_RETURN(PageRef ref, pageRef(image, level, page_index));
+    detail::PageGeometry geometry = detail::pageGeometry(info, level, page_x, page_y);
+    std::vector<TileEntry> entries;
+    if (ref.length_bytes == 0) {
+      entries.resize(size_t(geometry.columns) * geometry.rows);
+    } else {
+      std::string what =
+          fmt::format("image {} level {} page ({},{})", image, level, page_x, page_y);
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readBlock(ref, what));
+      TESSERA_ASSIGN_OR_RETURN(entries,
+                               detail::decodeTileEntries(bytes, info, header, name + ": " + what));
+    }
+    return std::make_shared<const std::vector<TileEntry>>(std::move(entries));
+  };
+  PageResult result = read();
+  {
+    std::lock_guard lock(cache_mutex);
+    pages_loading.erase(key);
+    if (result && pages.emplace(key, *result).second) {
+      page_order.push_back(key);
+      if (page_order.size() > kMaxCachedPages) {
+        pages.erase(page_order.front());
+        page_order.pop_front();
+      }
     }
   }
-  return shared;
+  reading.set_value(result);
+  return result;
 }
 
 Archive::Archive(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -206,6 +220,28 @@ Result<TileEntry> Archive::tileEntry(const TileId& tile) const {
                            impl_->page(tile.image, tile.level, tile.x >> shift, tile.y >> shift));
   detail::PageGeometry geometry =
       detail::pageGeometry(info, tile.level, tile.x >> shift, tile.y >> shift);
+  return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
+                    (tile.x - geometry.first_tile_x)];
+}
+
+std::optional<TileEntry> Archive::tileEntryIfCached(const TileId& tile) const {
+  if (tile.image >= impl_->infos.size()) return std::nullopt;
+  const ImageInfo& info = impl_->infos[tile.image];
+  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
+      tile.y >= info.tilesY(tile.level))
+    return std::nullopt;
+  const uint32_t shift = info.page_tiles_log2;
+  const uint32_t page_x = tile.x >> shift, page_y = tile.y >> shift;
+  const uint64_t key =
+      pageKey(tile.image, tile.level, page_y * detail::pagesX(info, tile.level) + page_x);
+  std::shared_ptr<const std::vector<TileEntry>> entries;
+  {
+    std::lock_guard lock(impl_->cache_mutex);
+    auto it = impl_->pages.find(key);
+    if (it == impl_->pages.end()) return std::nullopt;
+    entries = it->second;
+  }
+  detail::PageGeometry geometry = detail::pageGeometry(info, tile.level, page_x, page_y);
   return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
                     (tile.x - geometry.first_tile_x)];
 }

@@ -2,6 +2,7 @@
 // Archive internals shared by archive.cpp, region.cpp and verify.cpp.
 
 #include <deque>
+#include <future>
 #include <memory>
 #include <mutex>
 #include <unordered_map>
@@ -41,9 +42,13 @@ struct Archive::Impl {
                                          const std::string& what) const;
   /// The page reference for a page of a level.
   Result<detail::PageRef> pageRef(uint32_t image, uint32_t level, uint32_t page_index);
-  /// The decoded entries of one directory page.
-  Result<std::shared_ptr<const std::vector<TileEntry>>> page(uint32_t image, uint32_t level,
-                                                             uint32_t page_x, uint32_t page_y);
+  using PageResult = Result<std::shared_ptr<const std::vector<TileEntry>>>;
+  /// The decoded entries of one directory page. A page another thread is reading is waited
+  /// for, not read again: after a jump every loader thread wants the same pages at once, and
+  /// over a network link each duplicate read costs a round trip and the page's bytes.
+  PageResult page(uint32_t image, uint32_t level, uint32_t page_x, uint32_t page_y);
+  /// Pages being read now, by key (under cache_mutex).
+  std::unordered_map<uint64_t, std::shared_future<PageResult>> pages_loading;
   std::string tileName(const TileId& tile) const;
 
   /// Decoded parents of parent-coded (ptm) tiles, so that the four children of a parent, read

@@ -77,11 +77,15 @@ LoaderPool::~LoaderPool() {
 }
 
 void LoaderPool::setWanted(std::span<const TileRequest> requests) {
+  const auto now = Clock::now();
   {
     std::lock_guard lock(mutex_);
-    std::unordered_set<TileId, TileIdHash> wanted;
+    decltype(wanted_) wanted;
     wanted.reserve(requests.size() * 2);
-    for (const TileRequest& request : requests) wanted.insert(request.id);
+    for (const TileRequest& request : requests) {
+      auto previous = wanted_.find(request.id);
+      wanted.emplace(request.id, previous == wanted_.end() ? now : previous->second);
+    }
     for (const Pending& pending : queue_)
       if (!wanted.count(pending.id)) ++stats_.cancelled;
     queue_.clear();
@@ -89,6 +93,13 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
       if (!in_flight_.count(request.id))
         queue_.push_back({request.id, request.priority, request.urgency});
     wanted_ = std::move(wanted);
+    // Reads in flight whose every tile left: abandoned, so a network read stops using the
+    // link (Marvie & Bouatouch, part III). A read with one tile still wanted goes on.
+    for (ActiveRead* read : active_reads_)
+      if (!read->cancel.load(std::memory_order_relaxed) && !anyWantedLocked(read->tiles)) {
+        read->cancel.store(true, std::memory_order_release);
+        ++stats_.reads_cancelled;
+      }
     for (auto it = hinted_.begin(); it != hinted_.end();) {
       if (wanted_.count(it->first)) {
         ++it;
@@ -106,6 +117,11 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
   work_ready_.notify_all();
 }
 
+bool LoaderPool::anyWantedLocked(std::span<const TileId> tiles) const {
+  return std::any_of(tiles.begin(), tiles.end(),
+                     [&](const TileId& id) { return wanted_.count(id) > 0; });
+}
+
 void LoaderPool::noteIdleLocked() {
   const bool busy = !queue_.empty() || !in_flight_.empty();
   if (busy_ && !busy) stats_.idle_since = Clock::now();
@@ -116,6 +132,11 @@ void LoaderPool::poll(std::vector<LoadEvent>& out) {
   std::lock_guard lock(mutex_);
   for (LoadEvent& event : events_) out.push_back(std::move(event));
   events_.clear();
+}
+
+void LoaderPool::inFlight(std::unordered_set<TileId, TileIdHash>& out) const {
+  std::lock_guard lock(mutex_);
+  out = in_flight_;
 }
 
 bool LoaderPool::isRequested(const TileId& id) const {
@@ -129,6 +150,7 @@ LoaderStats LoaderPool::stats() const {
   LoaderStats stats = stats_;
   stats.queued = queue_.size();
   stats.in_flight = in_flight_.size();
+  stats.link = link_.estimate();
   return stats;
 }
 
@@ -155,6 +177,7 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
     batch.items.clear();
     queue_.erase(queue_.begin() + ptrdiff_t(i));
     in_flight_.insert(batch.first);
+    if (auto it = wanted_.find(batch.first); it != wanted_.end()) link_.queueWait(now - it->second);
     // A fair share of the class's queue at most, so the other workers decode the rest of the
     // screen in parallel instead of waiting for one worker's long batch.
     size_t same_class = 0;
@@ -314,6 +337,9 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
     if (wanted_.count(id)) queue_.push_back({id, 1e300, UINT32_MAX});
   } else {
     retries_.erase(id);
+    // Cancelled in flight, then wanted again before the read gave up: queued again at once
+    // (the next frame's setWanted gives it its place).
+    if (event.cancelled && wanted_.count(id)) queue_.push_back({id, 1e300, UINT32_MAX});
   }
   noteIdleLocked();
   events_.push_back(std::move(event));
@@ -363,6 +389,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     }
     // Claim the chosen ones that are still queued (another worker or a new frame may have
     // taken or cancelled them meanwhile).
+    const auto now = Clock::now();
     std::lock_guard lock(mutex_);
     for (const auto& item : chosen) {
       auto it = std::find_if(queue_.begin(), queue_.end(),
@@ -370,6 +397,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       if (it == queue_.end()) continue;
       queue_.erase(it);
       in_flight_.insert(item.id);
+      if (auto w = wanted_.find(item.id); w != wanted_.end()) link_.queueWait(now - w->second);
       batch.items.push_back(item);
     }
     stats_.queued = queue_.size();
@@ -395,17 +423,43 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     run_of_item[size_t(item - batch.items.data())] = addToRuns(
         spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
   std::vector<Run> runs(spans.size());
+  std::vector<std::vector<TileId>> run_tiles(spans.size());
+  for (size_t i = 0; i < batch.items.size(); ++i)
+    if (batch.items[i].entry.kind == TileKind::kEncoded)
+      run_tiles[run_of_item[i]].push_back(batch.items[i].id);
   uint64_t bytes_read = 0;
+  size_t reads = 0;
   for (size_t i = 0; i < runs.size(); ++i) {
     Run& run = runs[i];
     run.span = spans[i];
+    ActiveRead active;
+    active.tiles = std::move(run_tiles[i]);
+    {
+      // A run whose tiles all left while the batch's earlier runs were read is not read.
+      std::lock_guard lock(mutex_);
+      if (!anyWantedLocked(active.tiles)) {
+        run.read = fail(ErrorCode::kCancelled, fmt::format("{}: read at offset {} no longer wanted",
+                                                           archive.name(), run.span.offset_bytes));
+        continue;
+      }
+      active_reads_.push_back(&active);
+    }
     run.bytes.resize(run.span.length_bytes);
-    run.read = archive.source().read(run.span.offset_bytes, run.bytes);
-    bytes_read += run.bytes.size();
+    const auto started = Clock::now();
+    link_.readStarted(started);
+    run.read = archive.source().readCancellable(run.span.offset_bytes, run.bytes, active.cancel);
+    link_.readFinished(started, Clock::now(), run.read ? run.bytes.size() : 0);
+    {
+      std::lock_guard lock(mutex_);
+      active_reads_.erase(std::find(active_reads_.begin(), active_reads_.end(), &active));
+    }
+    // An abandoned read delivered nothing (a failed one is counted, as it always was).
+    if (run.read || run.read.error().code != ErrorCode::kCancelled) bytes_read += run.bytes.size();
+    ++reads;
   }
-  if (!runs.empty()) {
+  if (reads) {
     std::lock_guard lock(mutex_);
-    stats_.reads += runs.size();
+    stats_.reads += reads;
     stats_.bytes_read += bytes_read;
   }
 
@@ -416,6 +470,10 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     std::span<const uint8_t> payload;
     if (item.entry.kind == TileKind::kEncoded) {
       const Run& run = runs[run_of_item[i]];
+      if (!run.read && run.read.error().code == ErrorCode::kCancelled) {
+        finish(item.id, {item.id, false, true, "", true}, false);
+        continue;
+      }
       if (!run.read) {
         finish(item.id, {item.id, false, false, run.read.error().message}, true);
         continue;

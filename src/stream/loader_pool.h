@@ -19,6 +19,7 @@
 
 #include <tessera/archive.h>
 #include <tessera/cache.h>
+#include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "stream/texel_pool.h"
@@ -43,8 +44,9 @@ struct LoaderOptions {
 struct LoadEvent {
   TileId id;
   bool ok = false;
-  bool stale = false;  ///< decoded but no longer wanted: dropped, not cached
-  std::string error;   ///< names the archive, the tile and the problem
+  bool stale = false;      ///< decoded but no longer wanted: dropped, not cached
+  std::string error;       ///< names the archive, the tile and the problem
+  bool cancelled = false;  ///< its read was abandoned in flight (also stale): not a failure
 };
 
 struct LoaderStats {
@@ -57,6 +59,10 @@ struct LoaderStats {
   uint64_t stale_dropped = 0;  ///< finished requests dropped because no longer wanted
   uint64_t decode_ns = 0;
   uint64_t hinted_bytes = 0;  ///< bytes the byte source was told to fetch ahead
+  /// Reads abandoned in flight through readCancellable because every tile they carried left
+  /// the wanted set (their tiles are neither failures nor retried).
+  uint64_t reads_cancelled = 0;
+  LinkEstimate link;  ///< throughput, latency and queue wait measured on every read
   /// When the queue and in-flight set last became empty together (the end of a load).
   std::chrono::steady_clock::time_point idle_since{};
   size_t queued = 0;
@@ -78,9 +84,13 @@ class LoaderPool {
   void setWanted(std::span<const TileRequest> requests);
   /// Moves finished events into `out`. Never blocks on I/O or decoding.
   void poll(std::vector<LoadEvent>& out);
+  /// The tiles being read or decoded now, taking the lock once.
+  void inFlight(std::unordered_set<TileId, TileIdHash>& out) const;
   /// True when the tile is queued or being loaded.
   bool isRequested(const TileId& id) const;
   LoaderStats stats() const;
+  /// The link as measured so far (without the pool's lock).
+  LinkEstimate linkEstimate() const { return link_.estimate(); }
   /// Idle tile buffers kept for the next decodes (recycled or prewarmed).
   uint64_t idleBufferBytes() const { return texel_pool_->idleBytes(); }
   /// Blocks until the idle workers have filled the buffer pool as far as they will (up to
@@ -101,6 +111,14 @@ class LoaderPool {
     std::chrono::steady_clock::time_point not_before;
   };
   struct Batch;
+  /// A read in flight and the tiles it carries; setWanted sets `cancel` when none of them is
+  /// wanted any more, so a read over a network stops using the link.
+  struct ActiveRead {
+    std::vector<TileId> tiles;
+    std::atomic<bool> cancel{false};
+  };
+  /// True when any of `tiles` is wanted. Under mutex_.
+  bool anyWantedLocked(std::span<const TileId> tiles) const;
   void run(uint32_t worker_index);
   bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
   void loadBatch(Batch& batch, CodecScratch& scratch);
@@ -129,7 +147,10 @@ class LoaderPool {
   std::condition_variable work_ready_;
   std::condition_variable idle_;
   std::vector<Pending> queue_;  ///< sorted by priority
-  std::unordered_set<TileId, TileIdHash> wanted_;
+  /// Wanted tiles with the moment each became wanted (for the queue-wait estimate).
+  std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash> wanted_;
+  std::vector<ActiveRead*> active_reads_;
+  LinkEstimator link_;
   std::unordered_set<TileId, TileIdHash> in_flight_;
   std::unordered_map<TileId, RetryState, TileIdHash> retries_;
   /// Queued tiles whose payloads the byte source was told to fetch ahead, with their payload

@@ -3,10 +3,13 @@
 #include <tessera/stream.h>
 
 #include <algorithm>
+#include <optional>
+#include <unordered_map>
 #include <unordered_set>
 
 #include <fmt/format.h>
 
+#include "stream/adaptive.h"
 #include "stream/loader_pool.h"
 #include "stream/residency.h"
 
@@ -31,7 +34,42 @@ struct TileStreamer::Impl {
   std::vector<TileRequest> candidate_requests;
   std::vector<std::shared_ptr<const DecodedTile>> pinned;
   uint64_t load_failures = 0;
+  // Adaptive scheduling (options.adaptive): per image, lazily.
+  std::vector<std::unique_ptr<detail::AdaptiveScheduler>> adaptive;
+  /// Payload sizes of tiles whose directory page was in memory when first asked.
+  static constexpr size_t kMaxKnownSizes = size_t(1) << 20;
+  std::unordered_map<TileId, uint32_t, TileIdHash> payload_sizes;
+  /// Per image and level: sum and count of known payload sizes, to estimate unknown ones.
+  std::vector<std::vector<std::pair<uint64_t, uint64_t>>> size_sums;
+  std::unordered_set<TileId, TileIdHash> in_flight;
+
+  /// A tile's payload bytes, from its directory entry when its page is in memory (never a
+  /// read: the render thread must not wait), else the mean of known ones at its level, else
+  /// at any level, else the decoded size (an upper bound for every codec but raw's equal).
+  uint64_t payloadBytes(const TileId& id);
 };
+
+uint64_t TileStreamer::Impl::payloadBytes(const TileId& id) {
+  if (auto it = payload_sizes.find(id); it != payload_sizes.end()) return it->second;
+  auto& sums = size_sums[id.image];
+  if (std::optional<TileEntry> entry = archive->tileEntryIfCached(id)) {
+    // Bounded like the archive's own page cache: a long flight over a terapixel image would
+    // otherwise remember every tile it passed. The per-level means survive.
+    if (payload_sizes.size() >= kMaxKnownSizes) payload_sizes.clear();
+    const uint32_t bytes = entry->kind == TileKind::kEncoded ? entry->length_bytes : 0;
+    payload_sizes.emplace(id, bytes);
+    sums[id.level].first += bytes;
+    sums[id.level].second += 1;
+    return bytes;
+  }
+  if (sums[id.level].second) return sums[id.level].first / sums[id.level].second;
+  uint64_t sum = 0, count = 0;
+  for (const auto& [level_sum, level_count] : sums) {
+    sum += level_sum;
+    count += level_count;
+  }
+  return count ? sum / count : archive->images()[id.image].storedTileBytes();
+}
 
 TileStreamer::TileStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 
@@ -71,6 +109,9 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   loader_options.retry_max = options.retry_max;
   impl->loader = std::make_unique<detail::LoaderPool>(archive, *impl->cache, loader_options);
   impl->residency.resize(archive->images().size());
+  impl->adaptive.resize(archive->images().size());
+  for (const ImageInfo& info : archive->images())
+    impl->size_sums.emplace_back(info.level_count, std::pair<uint64_t, uint64_t>{0, 0});
   return std::unique_ptr<TileStreamer>(new TileStreamer(std::move(impl)));
 }
 
@@ -159,6 +200,27 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   }
   std::sort(s.requests.begin(), s.requests.end(),
             [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
+  FrameReport& report = out.report;
+  report = {};
+  report.requested_level = plan.desired_level;
+  if (s.options.adaptive.enabled) {
+    if (!s.adaptive[image])
+      s.adaptive[image] = std::make_unique<detail::AdaptiveScheduler>(
+          s.options.adaptive, info.level_count, info.storedTileBytes(),
+          s.options.cache_budget_bytes);
+    s.loader->inFlight(s.in_flight);
+    auto facts = [&](const TileId& id) {
+      detail::TileFacts f;
+      f.held = s.resident.count(id) || s.awaiting_upload.count(id) || s.loaded.count(id) ||
+               uploading.count(id);
+      f.in_flight = s.in_flight.count(id) > 0;
+      f.payload_bytes = s.payloadBytes(id);
+      return f;
+    };
+    const auto now = s.options.adaptive.clock ? s.options.adaptive.clock() : Clock::now();
+    s.adaptive[image]->schedule(view, now, s.loader->linkEstimate(), plan.wanted, facts, s.requests,
+                                report);
+  }
   s.loader->setWanted(s.requests);
 
   // Resident tiles that left every (expanded) region are released.
@@ -172,12 +234,10 @@ const FrameUpdate& TileStreamer::update(const View& view) {
     }
   }
 
-  FrameReport& report = out.report;
-  report = {};
   residency.measureCoverage(
       [&](const TileId& id) { return s.resident.count(id) > 0 || uploading.count(id) > 0; },
       report);
-  detail::LoaderStats loader_stats = s.loader->stats();
+  const detail::LoaderStats loader_stats = s.loader->stats();
   report.queue_length = loader_stats.queued;
   report.in_flight = loader_stats.in_flight;
   report.loader_idle_since = loader_stats.idle_since;
@@ -190,6 +250,11 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   report.load_failures_total = loader_stats.failures;
   report.decode_ms_total = loader_stats.decode_ns / 1e6;
   report.hinted_bytes_total = loader_stats.hinted_bytes;
+  report.link_bytes_per_s = loader_stats.link.bytes_per_s;
+  report.link_latency_ms = loader_stats.link.latency_s * 1e3;
+  report.queue_wait_ms = loader_stats.link.queue_wait_s * 1e3;
+  report.cancelled_total = loader_stats.cancelled;
+  report.reads_cancelled_total = loader_stats.reads_cancelled;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }

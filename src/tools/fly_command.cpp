@@ -16,6 +16,7 @@
 
 #include <tessera/archive.h>
 #include <tessera/byte_source.h>
+#include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "format/codec.h"
@@ -29,6 +30,10 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// Loader threads over a simulated link when --threads is 0: reads there wait a round trip
+/// each, so more of them in flight than cores keep the link busy.
+constexpr uint32_t kLinkLoaderThreads = 8;
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -127,8 +132,28 @@ int runFly(const FlyArgs& args) {
     return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
   if (!(args.fps > 0 && args.fps <= 1000))
     return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
-  Result<std::shared_ptr<Archive>> archive = Archive::openUri(args.archive);
+  // Over --link, the archive (a file or a URL) is read through a simulated network link: the
+  // header too, as a remote client would.
+  std::shared_ptr<ThrottledSource> link;
+  Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
+  if (!args.link.empty()) {
+    Result<LinkModel> model = parseLinkModel(args.link);
+    if (!model) return reportError(model.error());
+    Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
+    if (!inner) return reportError(inner.error());
+    link = makeThrottledSource(*inner, *model);
+    archive = Archive::open(link);
+  } else {
+    archive = Archive::openUri(args.archive);
+  }
   if (!archive) return reportError(archive.error());
+  if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
+    return reportError({ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off"});
+  if (!(args.still_after_s >= 0))
+    return reportError({ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds"});
+  // Auto: on wherever reads cross a network, simulated or real.
+  const bool adaptive =
+      args.adaptive == "on" || (args.adaptive == "auto" && (link || isRemoteUri(args.archive)));
   if (args.image >= (*archive)->images().size())
     return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
   const ImageInfo& info = (*archive)->images()[args.image];
@@ -145,10 +170,21 @@ int runFly(const FlyArgs& args) {
   options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
-  options.merge_gap_bytes =
-      args.merge_gap_kib ? *args.merge_gap_kib << 10 : defaultMergeGapBytes(args.archive);
+  // Over a link every read is a round trip: gaps up to the batch gap are cheaper read than
+  // asked for again, as over HTTP (defaultMergeGapBytes).
+  options.merge_gap_bytes = args.merge_gap_kib ? *args.merge_gap_kib << 10
+                            : link             ? options.batch_gap_bytes
+                                               : defaultMergeGapBytes(args.archive);
   options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
+  // Over a link the loaders mostly wait for bytes: more reads in flight than cores.
+  if (link && args.threads == 0)
+    options.loader_threads = std::max(kLinkLoaderThreads, std::thread::hardware_concurrency());
+  // The simulated link does not fetch ahead (its hints would only make the loaders look up
+  // directory pages across the link before their own reads), unless --read-ahead-kib says.
+  if (link && args.read_ahead_kib == FlyArgs{}.read_ahead_kib) options.read_ahead_bytes = 0;
+  options.adaptive.enabled = adaptive;
+  options.adaptive.still_after_s = args.still_after_s;
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   std::unique_ptr<FlyRenderer> gpu;
@@ -180,8 +216,11 @@ int runFly(const FlyArgs& args) {
   if (!csv) return reportError({ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write"});
   csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
          "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
-         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms\n";
-  std::vector<std::string> csv_rows;  // written after the flight, when GPU times are known
+         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
+         "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
+         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
+  std::vector<std::string> csv_rows;   // written after the flight, when GPU times are known
+  std::vector<std::string> csv_tails;  // the columns after gpu_ms
 
   std::vector<double> update_ms;
   std::vector<JumpTiming> jumps{{0}};
@@ -244,8 +283,14 @@ int runFly(const FlyArgs& args) {
         r.desired_level, r.finest_full_level, r.coverage_desired, r.fully_covered ? 1 : 0,
         r.queue_length, r.in_flight, r.uploads, r.upload_bytes, r.bytes_read_total,
         r.tiles_loaded_total, r.load_failures_total, r.update_ms, frame_render_ms));
+    csv_tails.push_back(fmt::format(
+        "{:.0f},{:.2f},{:.2f},{},{},{},{},{},{},{},{},{}", r.link_bytes_per_s, r.link_latency_ms,
+        r.queue_wait_ms, r.adaptive ? 1 : 0, r.view_still ? 1 : 0, r.requested_level,
+        r.budget_bytes == UINT64_MAX ? int64_t(-1) : int64_t(r.budget_bytes), r.memory_bytes,
+        r.requested_bytes, r.deferred_tiles, r.cancelled_total, r.reads_cancelled_total));
     report_frames.push_back({now_s * 1000, r.update_ms, frame_render_ms, -1, r.coverage_desired,
-                             r.fully_covered, r.bytes_read_total});
+                             r.fully_covered, r.bytes_read_total, r.link_bytes_per_s,
+                             r.desired_level, r.requested_level, r.finest_full_level});
     if (gpu) {
       if (std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
           args.screenshot_frames.end()) {
@@ -294,7 +339,7 @@ int runFly(const FlyArgs& args) {
         << (i < report_frames.size() && report_frames[i].gpu_ms >= 0
                 ? fmt::format("{:.4f}", report_frames[i].gpu_ms)
                 : std::string("-1"))
-        << "\n";
+        << "," << csv_tails[i] << "\n";
   CacheStats cache = (*streamer)->cacheStats();
   const std::string policy_name = (*streamer)->cache().policyName();
   const uint32_t threads =
@@ -367,22 +412,29 @@ int runFly(const FlyArgs& args) {
          cache.hits + cache.misses ? double(cache.hits) / (cache.hits + cache.misses) : 0},
         {"evictions", cache.evictions},
         {"peak_bytes", cache.peak_bytes}}},
-      {"peak_rss_bytes", peakRssBytes()}};
-  if (std::optional<LinkStats> link = (*archive)->source().linkStats()) {
+      {"peak_rss_bytes", peakRssBytes()},
+      {"adaptive", adaptive ? "on" : "off"},
+      {"simulated_link", link ? args.link : "none"},
+      {"link_bytes_per_s", last.link_bytes_per_s},
+      {"link_latency_ms", last.link_latency_ms},
+      {"requests_cancelled", last.cancelled_total},
+      {"reads_cancelled", last.reads_cancelled_total}};
+  if (adaptive) summary["still_after_s"] = args.still_after_s;
+  if (std::optional<LinkStats> link_stats = (*archive)->source().linkStats()) {
     // Over a network: what the link did, and what the requests saw of it (the last ones).
     std::vector<double> mib_s, first_byte_ms;
-    for (const LinkSample& sample : link->recent) {
+    for (const LinkSample& sample : link_stats->recent) {
       if (sample.seconds > 0) mib_s.push_back(double(sample.bytes) / sample.seconds / 1048576.0);
       first_byte_ms.push_back(sample.first_byte_seconds * 1000);
     }
-    summary["link"] = {{"requests", link->requests},
-                       {"bytes_received", link->bytes_received},
-                       {"retries", link->retries},
-                       {"errors", link->errors},
-                       {"cancelled", link->cancelled},
-                       {"prefetched_bytes", link->prefetched_bytes},
-                       {"prefetch_hit_bytes", link->prefetch_hit_bytes},
-                       {"recent_requests", link->recent.size()},
+    summary["link"] = {{"requests", link_stats->requests},
+                       {"bytes_received", link_stats->bytes_received},
+                       {"retries", link_stats->retries},
+                       {"errors", link_stats->errors},
+                       {"cancelled", link_stats->cancelled},
+                       {"prefetched_bytes", link_stats->prefetched_bytes},
+                       {"prefetch_hit_bytes", link_stats->prefetch_hit_bytes},
+                       {"recent_requests", link_stats->recent.size()},
                        {"recent_mib_s_p50", percentile(mib_s, 50)},
                        {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
   }
@@ -417,6 +469,14 @@ int runFly(const FlyArgs& args) {
         summary["frames_fully_covered_pct"].get<double>(), percentile(update_ms, 50),
         percentile(update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
         summary["read_amplification"].get<double>(), jumps[0].full_detail_ms, args.out_dir.c_str());
+    if (link)
+      std::printf(
+          "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
+          "latency; adaptive scheduling %s\n",
+          args.link.c_str(), formatBytes(link->totals().bytes).c_str(),
+          (unsigned long long)last.reads_cancelled_total,
+          formatBytes(uint64_t(last.link_bytes_per_s)).c_str(), last.link_latency_ms,
+          adaptive ? "on" : "off");
   }
   return kExitOk;
 }
@@ -475,6 +535,18 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->delimiter(',');
   cmd->add_flag("--report", args->report,
                 "Write report.html: plots and pictures in one self-contained page");
+  cmd->add_option("--link", args->link,
+                  "Read the archive through a simulated network link RATE:RTT, e.g. 20mbit:40ms "
+                  "or 2mbit:150ms (rate in bit/kbit/mbit/gbit per second, round trip in us/ms/s)");
+  cmd->add_option(
+         "--adaptive", args->adaptive,
+         "Adaptive scheduling (request only what the measured link delivers within the "
+         "time limits, refine when the view is still): auto (on with --link or a URL), on, off")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+  cmd->add_option("--still-after", args->still_after_s,
+                  "Seconds without a view change before the still budgets apply (adaptive)")
+      ->capture_default_str();
   cmd->add_flag("-q,--quiet", args->quiet, "Print nothing");
   cmd->callback([args, &exit_code] { exit_code = runFly(*args); });
 }

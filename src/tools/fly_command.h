@@ -36,6 +36,13 @@ struct FlyArgs {
   std::string render = "none";
   std::vector<uint64_t> screenshot_frames;
   bool report = false;
+  /// A simulated link between the archive and the loader, "RATE:RTT" (e.g. "20mbit:40ms");
+  /// empty: the file directly.
+  std::string link;
+  /// Adaptive scheduling: "auto" (on over --link, off for a local file), "on" or "off".
+  std::string adaptive = "auto";
+  /// Seconds the view must be still before the still budgets apply (AdaptiveOptions).
+  double still_after_s = AdaptiveOptions{}.still_after_s;
 };
 
 /// Flies and writes frames.csv, summary.json (and with `report`, report.html) to `out_dir`.

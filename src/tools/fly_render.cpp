@@ -223,7 +223,8 @@ Result<void> writeFlyReport(const std::string& path, const nlohmann::json& summa
   html += "<h2>Summary</h2><table>";
   for (const char* key :
        {"frames", "frames_full_detail_pct", "frames_fully_covered_pct", "startup_ms", "bytes_read",
-        "read_amplification", "tiles_loaded", "load_failures", "peak_rss_bytes"})
+        "read_amplification", "tiles_loaded", "load_failures", "peak_rss_bytes", "simulated_link",
+        "adaptive", "reads_cancelled", "requests_cancelled", "link_bytes_per_s", "link_latency_ms"})
     if (summary.contains(key))
       html += fmt::format("<tr><td>{}</td><td>{}</td></tr>", key, cell(summary[key]));
   for (const char* key : {"update_ms", "render_ms", "gpu_ms"})
@@ -268,6 +269,21 @@ Result<void> writeFlyReport(const std::string& path, const nlohmann::json& summa
   html += "<h2>Coverage</h2>" +
           svgPlot("Screen at the desired level", "time, s", "fraction", {coverage, covered}, 1);
   html += "<h2>Reading</h2>" + svgPlot("Bytes read since the start", "time, s", "MiB", {read});
+  // The link as measured and what the scheduler asked for (Marvie & Bouatouch, part III).
+  Series throughput{"throughput estimate, MB/s", "#8c564b", {}};
+  Series desired{"desired level", "#7f7f7f", {}};
+  Series requested{"finest level requested", "#d62728", {}};
+  Series finest{"finest level covering the view", "#2ca02c", {}};
+  for (const ReportFrame& f : frames) {
+    const double t = f.t_ms / 1000;
+    throughput.points.emplace_back(t, f.link_bytes_per_s / 1e6);
+    desired.points.emplace_back(t, f.desired_level);
+    requested.points.emplace_back(t, f.requested_level);
+    finest.points.emplace_back(t, f.finest_full_level);
+  }
+  html += "<h2>Link and levels</h2>" +
+          svgPlot("Throughput the loader measures", "time, s", "MB/s", {throughput}) +
+          svgPlot("Levels (0 = full resolution)", "time, s", "level", {desired, requested, finest});
   if (!pictures.empty()) {
     html += "<h2>Pictures</h2>";
     for (const ReportPicture& picture : pictures)

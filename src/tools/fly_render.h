@@ -65,6 +65,10 @@ struct ReportFrame {
   double coverage = 0;
   bool fully_covered = false;
   uint64_t bytes_read = 0;
+  double link_bytes_per_s = 0;  ///< the loader's throughput estimate
+  uint32_t desired_level = 0;
+  uint32_t requested_level = 0;  ///< finest level requested (adaptive scheduling)
+  uint32_t finest_full_level = 0;
 };
 
 /// A picture for the report, PNG bytes embedded as a data URI.

@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <thread>
 #include <unordered_set>
 
 #include <epoxy/gl.h>
@@ -19,6 +20,7 @@
 
 #include <tessera/archive.h>
 #include <tessera/gl.h>
+#include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "tools/cli.h"
@@ -241,13 +243,15 @@ class ReadRate {
 };
 
 struct FrameFigures {
-  std::array<float, kFrameHistory> frame_ms{};  ///< ring buffer, oldest at `next`
+  std::array<float, kFrameHistory> frame_ms{};   ///< ring buffer, oldest at `next`
+  std::array<float, kFrameHistory> link_mb_s{};  ///< throughput estimate, same ring
   size_t next = 0;
   size_t count = 0;
   double streaming_ms = 0;  ///< render-thread time of update + apply, this frame
   ReadRate read_rate;
-  void push(double ms) {
+  void push(double ms, double link_bytes_per_s) {
     frame_ms[next] = float(ms);
+    link_mb_s[next] = float(link_bytes_per_s / 1e6);
     next = (next + 1) % kFrameHistory;
     count = std::min(count + 1, kFrameHistory);
   }
@@ -321,6 +325,31 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
                 formatBytes(r.upload_bytes).c_str(), r.update_ms);
   }
 
+  // The link as the loader measures it and what adaptive scheduling made of it (Marvie &
+  // Bouatouch, part III).
+  if (ImGui::CollapsingHeader("Link and scheduling", ImGuiTreeNodeFlags_DefaultOpen)) {
+    ImGui::Text("throughput %s/s, latency %.1f ms, queue wait %.1f ms",
+                formatBytes(uint64_t(r.link_bytes_per_s)).c_str(), r.link_latency_ms,
+                r.queue_wait_ms);
+    float link_max = 0;
+    for (float mb_s : figures.link_mb_s) link_max = std::max(link_max, mb_s);
+    ImGui::PlotLines("##link", figures.link_mb_s.data(), int(kFrameHistory), int(figures.next),
+                     "MB/s", 0.0f, std::max(0.1f, link_max * 1.2f), ImVec2(-1, 40));
+    if (r.adaptive) {
+      ImGui::Text("adaptive: %s budgets, levels down to %u (desired %u)",
+                  r.view_still ? "still" : "moving", r.requested_level, r.desired_level);
+      ImGui::Text("per level %s, on the way %s, deferred %llu tiles",
+                  r.budget_bytes == UINT64_MAX ? "no limit" : formatBytes(r.budget_bytes).c_str(),
+                  formatBytes(r.requested_bytes).c_str(), (unsigned long long)r.deferred_tiles);
+      ImGui::Text("memory %s of %s", formatBytes(r.memory_bytes).c_str(),
+                  formatBytes(r.memory_budget_bytes).c_str());
+    } else {
+      ImGui::TextDisabled("adaptive scheduling off (--adaptive on)");
+    }
+    ImGui::Text("cancelled: %llu queued requests, %llu reads in flight",
+                (unsigned long long)r.cancelled_total, (unsigned long long)r.reads_cancelled_total);
+  }
+
   if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen)) {
     const CacheStats c = streamer.cacheStats();
     const uint64_t lookups = c.hits + c.misses;
@@ -376,7 +405,18 @@ int runView(const ViewArgs& args) {
   const RendererKind kind =
       args.renderer == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads;
 
-  Result<std::shared_ptr<Archive>> archive = Archive::openUri(args.archive);
+  Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
+  bool over_link = false;
+  if (!args.link.empty()) {
+    Result<LinkModel> model = parseLinkModel(args.link);
+    if (!model) return reportError(model.error());
+    Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
+    if (!inner) return reportError(inner.error());
+    archive = Archive::open(makeThrottledSource(*inner, *model));
+    over_link = true;
+  } else {
+    archive = Archive::openUri(args.archive);
+  }
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())
     return reportError(
@@ -394,6 +434,15 @@ int runView(const ViewArgs& args) {
   StreamerOptions options;
   options.cache_budget_bytes = args.cache_mib << 20;
   options.merge_gap_bytes = defaultMergeGapBytes(args.archive);
+  options.adaptive.enabled = args.adaptive == "on" ||
+                             (args.adaptive == "auto" && (over_link || isRemoteUri(args.archive)));
+  if (over_link) {
+    // As fly over a link: more reads in flight than cores, and gaps up to the batch gap read
+    // rather than asked for again (docs/runtime.md).
+    options.loader_threads = std::max(8u, std::thread::hardware_concurrency());
+    options.merge_gap_bytes = options.batch_gap_bytes;
+    options.read_ahead_bytes = 0;  // the simulated link does not fetch ahead
+  }
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
@@ -494,7 +543,8 @@ int runView(const ViewArgs& args) {
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     glfwSwapBuffers(window);
-    figures.push(std::chrono::duration<double, std::milli>(Clock::now() - now).count());
+    figures.push(std::chrono::duration<double, std::milli>(Clock::now() - now).count(),
+                 update.report.link_bytes_per_s);
 
     if (picked != (*renderer)->kind()) {
       renderer = switchRenderer(picked, info, **streamer, resident);
@@ -525,6 +575,12 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--screenshot-dir", args->screenshot_dir, "Folder for tessera-screenshot-<n>.png")
       ->capture_default_str();
   // For tests and scripted runs: an empty group hides it from --help.
+  cmd->add_option("--link", args->link,
+                  "Read the archive through a simulated network link RATE:RTT, e.g. 20mbit:40ms");
+  cmd->add_option("--adaptive", args->adaptive,
+                  "Adaptive scheduling: auto (on with --link or a URL), on, off")
+      ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
   cmd->add_option("--frames", args->frames,
                   "Quit after this many frames, once loading settles, writing a screenshot")
       ->group("");

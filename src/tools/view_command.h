@@ -18,6 +18,10 @@ struct ViewArgs {
   std::string screenshot_dir = ".";
   /// Overlays on from the start: any of "levels", "clip", "grid" (also toggled by L, C, G).
   std::vector<std::string> overlays;
+  /// A simulated network link "RATE:RTT" between the archive and the viewer (as `fly --link`).
+  std::string link;
+  /// Adaptive scheduling: "auto" (on over --link), "on" or "off".
+  std::string adaptive = "auto";
   uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
 };
 

@@ -1,8 +1,10 @@
 // Archive is thread-safe after open: many threads reading tiles (sharing the page cache)
 // see exactly what one thread sees. Run under ThreadSanitizer in CI (label "concurrency").
 #include <tessera/archive.h>
+#include <tessera/link.h>
 
 #include <algorithm>
+#include <barrier>
 #include <random>
 #include <thread>
 
@@ -78,6 +80,48 @@ TEST(ArchiveConcurrency, ConcurrentVerifyAndReadsAgree) {
     threads.emplace_back([&, t] { faults[t] = int((*archive)->verify().fault_count); });
   for (auto& thread : threads) thread.join();
   for (int f : faults) EXPECT_EQ(f, 0);
+}
+
+TEST(ArchiveConcurrency, ThreadsWantingTheSamePageReadItOnce) {
+  // After a jump every loader thread looks up tiles of the same directory pages at once; over
+  // a network each duplicate page read costs a round trip and the page's bytes. Behind a
+  // simulated link with a 100 ms round trip, eight threads starting together all ask while the
+  // first read is on its way: they must wait for it, not read the page again.
+  BuildOptions options;
+  options.tile_size_px = 64;
+  options.codec = Codec::kZstd;
+  options.threads = 2;
+  options.page_tiles_log2 = 3;
+  test::BuiltArchive built =
+      test::buildFromImage(test::makePatternImage(1100, 700, 4, 3), options, test::testTempDir());
+  auto file = openFileSource(built.path);
+  ASSERT_TRUE(file);
+  // The reads one thread needs for one lookup (page index and page, or fewer when they lie in
+  // the header region read at open).
+  auto alone_link = makeThrottledSource(*file, {1e9, 0});
+  auto alone = Archive::open(alone_link);
+  ASSERT_TRUE(alone);
+  const uint64_t opened_reads = alone_link->totals().reads;
+  ASSERT_TRUE((*alone)->tileEntry({0, 0, 0, 0}));
+  const uint64_t one_lookup = alone_link->totals().reads - opened_reads;
+
+  auto link = makeThrottledSource(*file, {1e9, 0.1});
+  auto archive = Archive::open(link);
+  ASSERT_TRUE(archive);
+  const uint64_t before = link->totals().reads;
+  constexpr int kThreads = 8;
+  std::barrier start(kThreads);
+  std::vector<std::thread> threads;
+  std::vector<int> failures(kThreads, 0);
+  for (int t = 0; t < kThreads; ++t)
+    threads.emplace_back([&, t] {
+      start.arrive_and_wait();
+      // Tiles (t % 8, t / 8) all lie in page (0, 0) of level 0 (8 x 8 tiles a page).
+      if (!(*archive)->tileEntry({0, 0, uint32_t(t % 8), uint32_t(t / 8)})) ++failures[t];
+    });
+  for (std::thread& thread : threads) thread.join();
+  for (int f : failures) EXPECT_EQ(f, 0);
+  EXPECT_EQ(link->totals().reads - before, one_lookup);
 }
 
 }  // namespace

@@ -439,6 +439,61 @@ TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
   EXPECT_NE(missing.err.find("none.tess"), std::string::npos) << missing.err;
 }
 
+TEST_F(Cli, FlyOverASimulatedLinkReportsTheLinkAndTheScheduler) {
+  const std::string archive = work_ + "link.tess";
+  ASSERT_EQ(
+      run({"build", "synthetic:4096x2048:2:3", "-o", archive, "--tile", "128", "-q"}).exit_code, 0);
+  const std::string path_file = work_ + "link.path";
+  std::ofstream(path_file) << "0 600 600 1\n0.49 600 600 1\n0.5 3500 1500 1 0 jump\n"
+                              "1.0 3500 1500 1\n";
+  // A column of frames.csv by name, every row.
+  auto column = [&](const std::string& dir, const std::string& name) {
+    std::istringstream csv(slurp(dir + "/frames.csv"));
+    std::string line, cell;
+    std::getline(csv, line);
+    std::istringstream header(line);
+    size_t index = 0, found = SIZE_MAX;
+    for (; std::getline(header, cell, ','); ++index)
+      if (cell == name) found = index;
+    EXPECT_NE(found, SIZE_MAX) << name;
+    std::vector<double> values;
+    while (std::getline(csv, line)) {
+      std::istringstream row(line);
+      for (size_t i = 0; std::getline(row, cell, ','); ++i)
+        if (i == found) values.push_back(std::stod(cell));
+    }
+    return values;
+  };
+  for (const std::string adaptive : {"auto", "off"}) {
+    SCOPED_TRACE(adaptive);
+    const std::string out = work_ + "link-" + adaptive;
+    RunResult flown = run({"fly", archive, "--path", path_file, "--fps", "30", "--viewport",
+                           "320x240", "--link", "50mbit:5ms", "--adaptive", adaptive,
+                           "--loader-priority", "nice", "-q", "--out", out});
+    ASSERT_EQ(flown.exit_code, 0) << flown.err;
+    nlohmann::json s = nlohmann::json::parse(slurp(out + "/summary.json"));
+    EXPECT_EQ(s["simulated_link"], "50mbit:5ms");
+    EXPECT_EQ(s["adaptive"], adaptive == "auto" ? "on" : "off");
+    // Every byte the loader read crossed the link (the header and directory pages too).
+    EXPECT_GT(s["bytes_read"].get<uint64_t>(), 0u);
+    EXPECT_GE(s["link"]["bytes_received"].get<uint64_t>(), s["bytes_read"].get<uint64_t>());
+    EXPECT_GT(s["link"]["requests"].get<uint64_t>(), 0u);
+    EXPECT_GT(s["link_bytes_per_s"].get<double>(), 0);
+    // A 50 Mbit/s link delivers no more than 6.25 MB/s, whatever the estimate's window.
+    EXPECT_LT(s["link_bytes_per_s"].get<double>(), 6.25e6 * 1.01);
+    const std::vector<double> flags = column(out, "adaptive");
+    ASSERT_EQ(flags.size(), s["frames"].get<size_t>());
+    for (double flag : flags) EXPECT_EQ(flag, adaptive == "auto" ? 1 : 0);
+    const std::vector<double> levels = column(out, "requested_level");
+    const std::vector<double> desired = column(out, "desired_level");
+    ASSERT_EQ(levels.size(), desired.size());
+    for (size_t i = 0; i < levels.size(); ++i) EXPECT_GE(levels[i], desired[i]);
+  }
+  RunResult bad = run({"fly", archive, "--link", "20mbit", "-q", "--out", work_ + "link-bad"});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("'20mbit'"), std::string::npos) << bad.err;
+}
+
 // The same commands on a URL: nginx serves the archive statically; every subcommand reads it
 // through the HTTP source and must see what it sees in the local file.
 TEST_F(Cli, InfoVerifyExtractAndFlyReadAnArchiveOverHttp) {
