@@ -136,6 +136,8 @@ int runFly(const FlyArgs& args) {
   // header too, as a remote client would.
   std::shared_ptr<ThrottledSource> link;
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
+  // Opening is part of a remote client's time to its first picture (one request for a URL).
+  const auto open_start = std::chrono::steady_clock::now();
   if (!args.link.empty()) {
     Result<LinkModel> model = parseLinkModel(args.link);
     if (!model) return reportError(model.error());
@@ -147,6 +149,9 @@ int runFly(const FlyArgs& args) {
     archive = Archive::openUri(args.archive);
   }
   if (!archive) return reportError(archive.error());
+  const double open_ms =
+      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - open_start)
+          .count();
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return reportError({ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off"});
   if (!(args.still_after_s >= 0))
@@ -388,6 +393,7 @@ int runFly(const FlyArgs& args) {
       {"frames", frames},
       {"frames_full_detail_pct", frames ? 100.0 * frames_full_detail / frames : 0},
       {"startup_frames", startup_frames},
+      {"open_ms", open_ms},
       {"startup_ms", startup_ms < 0 ? nlohmann::json() : nlohmann::json(startup_ms)},
       {"frames_fully_covered_pct",
        frames > startup_frames ? 100.0 * frames_covered / double(frames - startup_frames) : 0},

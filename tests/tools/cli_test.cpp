@@ -478,6 +478,8 @@ TEST_F(Cli, FlyOverASimulatedLinkReportsTheLinkAndTheScheduler) {
     EXPECT_GT(s["bytes_read"].get<uint64_t>(), 0u);
     EXPECT_GE(s["link"]["bytes_received"].get<uint64_t>(), s["bytes_read"].get<uint64_t>());
     EXPECT_GT(s["link"]["requests"].get<uint64_t>(), 0u);
+    // Opening read the header across the link: at least its round trip.
+    EXPECT_GE(s["open_ms"].get<double>(), 5.0);
     EXPECT_GT(s["link_bytes_per_s"].get<double>(), 0);
     // A 50 Mbit/s link delivers no more than 6.25 MB/s, whatever the estimate's window.
     EXPECT_LT(s["link_bytes_per_s"].get<double>(), 6.25e6 * 1.01);
