@@ -34,8 +34,10 @@ struct HttpOptions {
   /// A 429 or 503 with Retry-After waits what the server asks, but at most this.
   std::chrono::milliseconds retry_after_max{10'000};
   /// Connections to the server at most; more requests wait in libcurl's queue. Over HTTP/2
-  /// requests are streams of one connection and this limits connections only.
-  uint32_t max_connections = 8;
+  /// requests are streams of one connection and this limits connections only. As many as
+  /// the loader threads tuneForRemoteSource starts: over HTTP/1.1 one read per connection is
+  /// in flight at a time, and on a long link the reads in flight set the rate.
+  uint32_t max_connections = 16;
   /// Bytes fetched ahead on ByteSource::prefetch hints and held until a read takes them: the
   /// bound on that buffer. Hints beyond it are dropped, oldest unread data is evicted first.
   /// 0 ignores hints.

@@ -249,6 +249,22 @@ struct StreamerOptions {
   AdaptiveOptions adaptive;
 };
 
+/// Turns `options` into what a source whose every read is a network round trip wants (an
+/// HTTP URL, a simulated link); tools then apply what the user set explicitly. Measured over
+/// 20 Mbit/s with 40 ms RTT and 2 Mbit/s with 150 ms (docs/benchmarks.md, "Remote streaming
+/// over a slow link"):
+/// - `remote_loader_threads` loader threads at least: each waits a round trip per read, so the
+///   reads in flight, not the cores, set the rate (8 gave 1.1 MB/s on the 2.5 MB/s link);
+/// - one read per batch (batch gap = merge gap = 16 KiB): a batch's runs are read one after
+///   another, each a round trip, and a 64 KiB gap read 1.5x the payload bytes;
+/// - no read-ahead: the loaders' parallel reads keep the link busy, and fetched-ahead tiles
+///   that adaptive scheduling then drops cost link time the view needed;
+/// - adaptive scheduling (Marvie & Bouatouch, part III).
+void tuneForRemoteSource(StreamerOptions& options);
+/// Loader threads tuneForRemoteSource asks for (more if the machine has more cores); the HTTP
+/// source's default connection count matches it.
+inline constexpr uint32_t kRemoteLoaderThreads = 16;
+
 /// The runtime for one archive. `update`, `uploaded` and `release` are render-thread only and
 /// never wait on disk, network or decoding; loading happens on the loader threads.
 class TileStreamer {

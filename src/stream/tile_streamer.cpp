@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <optional>
+#include <thread>
 #include <unordered_map>
 #include <unordered_set>
 
@@ -299,6 +300,14 @@ TileCache& TileStreamer::cache() {
 }
 CacheStats TileStreamer::cacheStats() const {
   return impl_->cache->stats();
+}
+
+void tuneForRemoteSource(StreamerOptions& options) {
+  options.loader_threads = std::max(kRemoteLoaderThreads, std::thread::hardware_concurrency());
+  options.merge_gap_bytes = 16 * 1024;
+  options.batch_gap_bytes = options.merge_gap_bytes;
+  options.read_ahead_bytes = 0;
+  options.adaptive.enabled = true;
 }
 
 }  // namespace tessera

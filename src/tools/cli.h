@@ -46,12 +46,6 @@ inline constexpr const char* kArchiveArgumentHelp =
     "Archive: a .tess file, or an http:// or https:// URL of one on a server that honours "
     "byte ranges (docs/remote.md)";
 
-/// The loader's merge gap (StreamerOptions::merge_gap_bytes) for an archive at
-/// `path_or_url`: a local file keeps the library default (16 KiB, measured on disks), a URL
-/// takes the batch gap (64 KiB): there each read is a request, whose round trip costs more
-/// than the gap's bytes on any link worth streaming over (docs/remote.md).
-uint64_t defaultMergeGapBytes(const std::string& path_or_url);
-
 /// Formats a byte count as "12.3 MiB".
 std::string formatBytes(uint64_t bytes);
 

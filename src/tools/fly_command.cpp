@@ -33,7 +33,6 @@ using Clock = std::chrono::steady_clock;
 
 /// Loader threads over a simulated link when --threads is 0: reads there wait a round trip
 /// each, so more of them in flight than cores keep the link busy.
-constexpr uint32_t kLinkLoaderThreads = 8;
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -170,26 +169,23 @@ int runFly(const FlyArgs& args) {
   if (!path) return reportError(path.error());
 
   StreamerOptions options;
+  // Wherever reads cross a network, simulated or real, the remote tuning first; what the
+  // user set explicitly below overrides it.
+  const bool remote = link || isRemoteUri(args.archive);
+  if (remote) tuneForRemoteSource(options);
   options.cache_budget_bytes = args.cache_mib << 20;
   options.viewer_shift_eviction = args.eviction != "lru";
-  options.loader_threads = args.threads;
+  if (args.threads != 0 || !remote) options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
-  // Over a link every read is a round trip: gaps up to the batch gap are cheaper read than
-  // asked for again, as over HTTP (defaultMergeGapBytes).
-  options.merge_gap_bytes = args.merge_gap_kib ? *args.merge_gap_kib << 10
-                            : link             ? options.batch_gap_bytes
-                                               : defaultMergeGapBytes(args.archive);
-  options.read_ahead_bytes = args.read_ahead_kib << 10;
+  if (args.merge_gap_kib) options.merge_gap_bytes = *args.merge_gap_kib << 10;
+  if (!remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
+    options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
-  // Over a link the loaders mostly wait for bytes: more reads in flight than cores.
-  if (link && args.threads == 0)
-    options.loader_threads = std::max(kLinkLoaderThreads, std::thread::hardware_concurrency());
-  // The simulated link does not fetch ahead (its hints would only make the loaders look up
-  // directory pages across the link before their own reads), unless --read-ahead-kib says.
-  if (link && args.read_ahead_kib == FlyArgs{}.read_ahead_kib) options.read_ahead_bytes = 0;
   options.adaptive.enabled = adaptive;
   options.adaptive.still_after_s = args.still_after_s;
+  if (args.batch_gap_kib) options.batch_gap_bytes = *args.batch_gap_kib << 10;
+  if (args.max_read_kib) options.max_merged_read_bytes = *args.max_read_kib << 10;
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   std::unique_ptr<FlyRenderer> gpu;
@@ -235,8 +231,7 @@ int runFly(const FlyArgs& args) {
   size_t startup_frames = 0;
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
-  const bool remote = isRemoteUri(args.archive);
-  if (args.cold && !remote) dropFromPageCache(args.archive);
+  if (args.cold && !isRemoteUri(args.archive)) dropFromPageCache(args.archive);
   const auto start = Clock::now();
   const double duration = path->durationS();
   FrameReport last{};
@@ -388,6 +383,9 @@ int runFly(const FlyArgs& args) {
                      : args.cold ? "cold (posix_fadvise DONTNEED before each jump)"
                                  : "as found"},
       {"merge_gap_bytes", options.merge_gap_bytes},
+      {"batch_gap_bytes", options.batch_gap_bytes},
+      {"read_ahead_bytes", options.read_ahead_bytes},
+      {"loader_threads", options.loader_threads},
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
@@ -520,6 +518,12 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
                   "Reads of tiles closer than this in the file are merged into one (default: 16 "
                   "for a file, 64 for a URL)");
+  cmd->add_option("--batch-gap-kib", args->batch_gap_kib,
+                  "Queued tiles whose payloads are closer than this are loaded as one batch "
+                  "(StreamerOptions::batch_gap_bytes)");
+  cmd->add_option(
+      "--max-read-kib", args->max_read_kib,
+      "Most bytes one batch spans in the file (StreamerOptions::max_merged_read_bytes)");
   cmd->add_option("--read-ahead-kib", args->read_ahead_kib,
                   "Payload bytes at the head of the loader's queue fetched ahead (0 = off)")
       ->capture_default_str();

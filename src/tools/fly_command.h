@@ -23,9 +23,11 @@ struct FlyArgs {
   uint32_t threads = 0;
   uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
   uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
-  /// Unset: by where the archive is (defaultMergeGapBytes: 16 KiB for a file, 64 for a URL).
+  /// Unset: StreamerOptions' default, or tuneForRemoteSource's for a URL or --link.
   std::optional<uint64_t> merge_gap_kib;
   uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
+  std::optional<uint64_t> batch_gap_kib;  ///< unset: StreamerOptions' default, or the remote one
+  std::optional<uint64_t> max_read_kib;   ///< unset: likewise
   std::string loader_priority = "idle";
   uint32_t image = 0;
   std::string out_dir = "fly-out";

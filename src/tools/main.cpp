@@ -23,11 +23,6 @@ bool stderrIsTerminal() {
   return ::isatty(STDERR_FILENO) == 1;
 }
 
-uint64_t defaultMergeGapBytes(const std::string& path_or_url) {
-  const StreamerOptions defaults;
-  return isRemoteUri(path_or_url) ? defaults.batch_gap_bytes : defaults.merge_gap_bytes;
-}
-
 std::string formatBytes(uint64_t bytes) {
   const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
   double value = double(bytes);

@@ -433,16 +433,9 @@ int runView(const ViewArgs& args) {
 
   StreamerOptions options;
   options.cache_budget_bytes = args.cache_mib << 20;
-  options.merge_gap_bytes = defaultMergeGapBytes(args.archive);
-  options.adaptive.enabled = args.adaptive == "on" ||
-                             (args.adaptive == "auto" && (over_link || isRemoteUri(args.archive)));
-  if (over_link) {
-    // As fly over a link: more reads in flight than cores, and gaps up to the batch gap read
-    // rather than asked for again (docs/runtime.md).
-    options.loader_threads = std::max(8u, std::thread::hardware_concurrency());
-    options.merge_gap_bytes = options.batch_gap_bytes;
-    options.read_ahead_bytes = 0;  // the simulated link does not fetch ahead
-  }
+  // Wherever reads cross a network, simulated or real: the remote tuning (docs/runtime.md).
+  if (over_link || isRemoteUri(args.archive)) tuneForRemoteSource(options);
+  if (args.adaptive != "auto") options.adaptive.enabled = args.adaptive == "on";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);

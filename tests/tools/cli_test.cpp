@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/stream.h>
 
 #include "format/codec.h"
 #include "support/archive_fixture.h"
@@ -535,18 +536,29 @@ TEST_F(Cli, InfoVerifyExtractAndFlyReadAnArchiveOverHttp) {
   ASSERT_EQ(flown.exit_code, 0) << flown.err;
   nlohmann::json summary = nlohmann::json::parse(slurp(out + "/summary.json"));
   EXPECT_EQ(summary["archive"], url);
-  EXPECT_EQ(summary["merge_gap_bytes"], 64 * 1024);  // the remote default
+  // The remote tuning (tuneForRemoteSource): a batch is one read, many reads in flight, no
+  // fetch-ahead, adaptive scheduling.
+  EXPECT_EQ(summary["merge_gap_bytes"], 16 * 1024);
+  EXPECT_EQ(summary["batch_gap_bytes"], 16 * 1024);
+  EXPECT_GE(summary["loader_threads"].get<uint32_t>(), kRemoteLoaderThreads);
+  EXPECT_EQ(summary["read_ahead_bytes"], 0);
+  EXPECT_EQ(summary["adaptive"], "on");
   EXPECT_GT(summary["tiles_loaded"].get<uint64_t>(), 0u);
   EXPECT_EQ(summary["load_failures"].get<uint64_t>(), 0u);
   ASSERT_TRUE(summary.contains("link")) << summary.dump();
   EXPECT_GT(summary["link"]["requests"].get<uint64_t>(), 1u);
   EXPECT_EQ(summary["link"]["errors"].get<uint64_t>(), 0u);
   EXPECT_GT(summary["link"]["bytes_received"].get<uint64_t>(), 0u);
-  // A local flight keeps the disk default.
+  // A local flight keeps the disk defaults.
   RunResult local_fly = run({"fly", archive, "--duration", "0.2", "--fps", "10", "--viewport",
                              "320x240", "-q", "--out", out});
   ASSERT_EQ(local_fly.exit_code, 0) << local_fly.err;
-  EXPECT_EQ(nlohmann::json::parse(slurp(out + "/summary.json"))["merge_gap_bytes"], 16 * 1024);
+  nlohmann::json local_summary = nlohmann::json::parse(slurp(out + "/summary.json"));
+  const StreamerOptions defaults;
+  EXPECT_EQ(local_summary["merge_gap_bytes"], defaults.merge_gap_bytes);
+  EXPECT_EQ(local_summary["batch_gap_bytes"], defaults.batch_gap_bytes);
+  EXPECT_EQ(local_summary["read_ahead_bytes"], defaults.read_ahead_bytes);
+  EXPECT_EQ(local_summary["adaptive"], "off");
 
   RunResult missing = run({"info", (*nginx)->url("missing.tess")});
   EXPECT_EQ(missing.exit_code, 1);
