@@ -106,6 +106,11 @@ class TileCache {
   /// the whole batch, so a render thread pays one short critical section per frame.
   void findAndPin(std::span<const TileId> ids,
                   std::vector<std::shared_ptr<const DecodedTile>>& out);
+  /// The tile pinned (the caller unpins it), or null without pinning when it is not cached.
+  /// Counts neither a hit nor a miss; tells the policy of the use. The loader holds a parent
+  /// tile this way while it decodes a child coded against it (a dependent codec, ptm), so the
+  /// parent cannot be evicted half-way.
+  std::shared_ptr<const DecodedTile> pinIfCached(const TileId& id);
   /// Pinned tiles are never evicted (the coarsest level, tiles being uploaded). Pins count.
   void pin(const TileId& id);
   void unpin(const TileId& id);

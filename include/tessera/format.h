@@ -49,6 +49,10 @@ enum class Codec : uint8_t {
 const char* codecName(Codec codec);
 /// Parses a codec name; returns false for an unknown name.
 bool parseCodecName(std::string_view name, Codec* codec);
+/// True for a codec whose tiles below the coarsest level decode only against their decoded
+/// parent tile (ptm): a loader must decode the parent first (docs/runtime.md, "Dependent
+/// codecs").
+bool codecNeedsParent(Codec codec);
 /// Names a tile kind: "empty", "uniform", "encoded", "procedural".
 const char* tileKindName(TileKind kind);
 

@@ -103,6 +103,15 @@ void TileCache::findAndPin(std::span<const TileId> ids,
   }
 }
 
+std::shared_ptr<const DecodedTile> TileCache::pinIfCached(const TileId& id) {
+  std::lock_guard lock(mutex_);
+  auto it = slots_.find(id);
+  if (it == slots_.end()) return nullptr;
+  policy_->onAccess(id);
+  if (it->second.pins++ == 0) ++stats_.pinned;
+  return it->second.tile;
+}
+
 void TileCache::pin(const TileId& id) {
   std::lock_guard lock(mutex_);
   auto it = slots_.find(id);

@@ -111,6 +111,19 @@ const CodecFunctions* findCodec(Codec codec) {
   return index < std::size(kCodecTable) ? &kCodecTable[index] : nullptr;
 }
 
+}  // namespace tessera::detail
+
+namespace tessera {
+
+bool codecNeedsParent(Codec codec) {
+  const detail::CodecFunctions* functions = detail::findCodec(codec);
+  return functions != nullptr && functions->needs_parent;
+}
+
+}  // namespace tessera
+
+namespace tessera::detail {
+
 Result<std::vector<uint8_t>> encodeTile(Codec codec, const ImageView& tile,
                                         const EncodeOptions& options, const ParentTexels* parent,
                                         CodecScratch* scratch) {

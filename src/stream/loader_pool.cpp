@@ -63,6 +63,10 @@ LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
       thread_count_(options.threads ? options.threads
                                     : std::max(1u, std::thread::hardware_concurrency())),
       texel_pool_(std::make_shared<TexelPool>(options.recycled_bytes)) {
+  for (const ImageInfo& info : archive_->images()) {
+    dependent_images_.push_back(codecNeedsParent(info.default_codec) && info.level_count > 1);
+    any_dependent_ = any_dependent_ || dependent_images_.back();
+  }
   for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
 }
 
@@ -89,9 +93,11 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
     for (const Pending& pending : queue_)
       if (!wanted.count(pending.id)) ++stats_.cancelled;
     queue_.clear();
-    for (const TileRequest& request : requests)
-      if (!in_flight_.count(request.id))
-        queue_.push_back({request.id, request.priority, request.urgency});
+    for (const TileRequest& request : requests) {
+      if (in_flight_.count(request.id)) continue;
+      if (any_dependent_) queueMissingAncestorsLocked(request, wanted, now);
+      queue_.push_back({request.id, request.priority, request.urgency});
+    }
     wanted_ = std::move(wanted);
     // Reads in flight whose every tile left: abandoned, so a network read stops using the
     // link (Marvie & Bouatouch, part III). A read with one tile still wanted goes on.
@@ -115,6 +121,47 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
     noteIdleLocked();
   }
   work_ready_.notify_all();
+}
+
+bool LoaderPool::needsParent(const TileId& id) const {
+  return id.image < dependent_images_.size() && dependent_images_[id.image] &&
+         id.level + 1 < archive_->images()[id.image].level_count;
+}
+
+void LoaderPool::queueMissingAncestorsLocked(
+    const TileRequest& request, std::unordered_map<TileId, Clock::time_point, TileIdHash>& wanted,
+    Clock::time_point now) {
+  // A child decodes only against its decoded parent, so a wanted child whose parent nobody
+  // asked for (it is resident on the GPU but left the host cache, or the residency manager
+  // did not want that level) would wait for ever. Its missing ancestors go first, at its
+  // priority; the chain stops at the first one that is wanted, cached or loading.
+  TileId missing[32];
+  size_t count = 0;
+  for (TileId id = request.id; needsParent(id) && count < std::size(missing);) {
+    const TileId parent = Archive::parentTile(id);
+    if (wanted.count(parent) || in_flight_.count(parent) || cache_.contains(parent)) break;
+    missing[count++] = parent;
+    id = parent;
+  }
+  for (size_t i = count; i-- > 0;) {
+    auto previous = wanted_.find(missing[i]);
+    if (previous == wanted_.end()) ++stats_.parents_queued;
+    wanted.emplace(missing[i], previous == wanted_.end() ? now : previous->second);
+    queue_.push_back({missing[i], request.priority, request.urgency});
+  }
+}
+
+bool LoaderPool::waitsForParentLocked(const TileId& id,
+                                      const std::unordered_set<TileId, TileIdHash>& queued,
+                                      Clock::time_point now) const {
+  if (!needsParent(id)) return false;
+  const TileId parent = Archive::parentTile(id);
+  if (in_flight_.count(parent)) return true;
+  if (!queued.count(parent)) return false;
+  // A parent waiting out a backoff does not hold its children: they read it themselves and
+  // fail with it, naming both tiles, instead of waiting unseen.
+  auto retry = retries_.find(parent);
+  return retry == retries_.end() || retry->second.not_before <= now;
 }
 
 bool LoaderPool::anyWantedLocked(std::span<const TileId> tiles) const {
@@ -168,9 +215,15 @@ void LoaderPool::waitIdle() {
 }
 
 bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
+  // Dependent codecs: a tile whose parent is loading or queued waits for it, so it decodes
+  // against the cached parent instead of reading the parent a second time.
+  std::unordered_set<TileId, TileIdHash> queued;
+  if (any_dependent_)
+    for (const Pending& pending : queue_) queued.insert(pending.id);
   for (size_t i = 0; i < queue_.size(); ++i) {
     auto retry = retries_.find(queue_[i].id);
     if (retry != retries_.end() && retry->second.not_before > now) continue;
+    if (any_dependent_ && waitsForParentLocked(queue_[i].id, queued, now)) continue;
     batch.first = queue_[i].id;
     const uint32_t first_urgency = queue_[i].urgency;
     batch.candidates.clear();
@@ -186,7 +239,8 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
     for (size_t j = i; j < queue_.size() && batch.candidates.size() < share; ++j) {
       const TileId& other = queue_[j].id;
       if (other.image == batch.first.image && other.level == batch.first.level &&
-          queue_[j].urgency == first_urgency && !retries_.count(other))
+          queue_[j].urgency == first_urgency && !retries_.count(other) &&
+          !(any_dependent_ && waitsForParentLocked(other, queued, now)))
         batch.candidates.push_back(other);
     }
     stats_.queued = queue_.size();
@@ -344,7 +398,92 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
   noteIdleLocked();
   events_.push_back(std::move(event));
   idle_.notify_all();
-  if (failed) work_ready_.notify_one();
+  // A finished parent frees the children that waited for it, on any sleeping worker.
+  if (any_dependent_)
+    work_ready_.notify_all();
+  else if (failed)
+    work_ready_.notify_one();
+}
+
+Result<Image> LoaderPool::decodeParentChain(const TileId& child, CodecScratch& scratch,
+                                            uint64_t& bytes_read, size_t& reads) {
+  const Archive& archive = *archive_;
+  std::vector<TileId> chain;  // finest first
+  std::shared_ptr<const DecodedTile> base;
+  for (TileId id = Archive::parentTile(child);; id = Archive::parentTile(id)) {
+    if ((base = cache_.pinIfCached(id))) break;
+    chain.push_back(id);
+    if (!needsParent(id)) break;  // the coarsest level decodes on its own
+  }
+  const TileId base_id = base ? base->id : TileId{};
+  Image decoded;
+  const Image* parent = base ? &base->texels : nullptr;
+  Result<void> status;
+  for (auto it = chain.rbegin(); it != chain.rend() && status; ++it) {
+    Result<TileEntry> entry = archive.tileEntry(*it);
+    if (!entry) {
+      status = forwardError(entry);
+      break;
+    }
+    std::vector<uint8_t> payload;
+    if (entry->kind == TileKind::kEncoded) {
+      Result<std::vector<uint8_t>> read = archive.readPayload(*it, *entry);
+      ++reads;
+      if (!read) {
+        status = forwardError(read);
+        break;
+      }
+      bytes_read += read->size();
+      payload = std::move(*read);
+    }
+    Image next;
+    status = parent ? archive.decodeTileInto(*it, *entry, payload, next, *parent, &scratch)
+                    : archive.decodeTileInto(*it, *entry, payload, next, &scratch);
+    decoded = std::move(next);
+    parent = &decoded;
+  }
+  if (base) cache_.unpin(base_id);
+  if (!status)
+    return fail(
+        status.error().code,
+        fmt::format(
+            "{}: {}tile ({},{},{}): its parent cannot be decoded: {}", archive.name(),
+            archive.images().size() > 1 ? fmt::format("image {} ", child.image) : std::string(),
+            child.level, child.x, child.y, status.error().message));
+  return decoded;
+}
+
+Result<void> LoaderPool::decodeItem(const TileId& id, const TileEntry& entry,
+                                    std::span<const uint8_t> payload, Image& texels,
+                                    size_t tile_bytes, CodecScratch& scratch) {
+  const Archive& archive = *archive_;
+  if (entry.kind != TileKind::kEncoded || !codecNeedsParent(entry.codec) || !needsParent(id))
+    return archive.decodeTileInto(id, entry, payload, texels, &scratch);
+  const TileId parent_id = Archive::parentTile(id);
+  if (std::shared_ptr<const DecodedTile> parent = cache_.pinIfCached(parent_id)) {
+    Result<void> decoded =
+        archive.decodeTileInto(id, entry, payload, texels, parent->texels, &scratch);
+    cache_.unpin(parent_id);
+    return decoded;
+  }
+  // The parent left the cache after it loaded (or failed to load): its chain is read and
+  // decoded here, in the budget, never an unverified or stale parent.
+  if (!cache_.reserve(tile_bytes))
+    return fail(ErrorCode::kIo, fmt::format("{}: tile cache full of pinned tiles", archive.name()));
+  uint64_t bytes_read = 0;
+  size_t reads = 0;
+  Result<Image> parent = decodeParentChain(id, scratch, bytes_read, reads);
+  {
+    std::lock_guard lock(mutex_);
+    ++stats_.parent_fallbacks;
+    stats_.reads += reads;
+    stats_.bytes_read += bytes_read;
+  }
+  Result<void> decoded = parent
+                             ? archive.decodeTileInto(id, entry, payload, texels, *parent, &scratch)
+                             : Result<void>(forwardError(parent));
+  cache_.unreserve(tile_bytes);
+  return decoded;
 }
 
 void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
@@ -493,7 +632,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     auto started = Clock::now();
     Image texels;
     texels.texels = texel_pool_->take(tile_bytes);
-    Result<void> decoded = archive.decodeTileInto(item.id, item.entry, payload, texels, &scratch);
+    Result<void> decoded = decodeItem(item.id, item.entry, payload, texels, tile_bytes, scratch);
     uint64_t decode_ns = uint64_t(
         std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
     cache_.unreserve(tile_bytes);

@@ -62,6 +62,13 @@ struct LoaderStats {
   /// Reads abandoned in flight through readCancellable because every tile they carried left
   /// the wanted set (their tiles are neither failures nor retried).
   uint64_t reads_cancelled = 0;
+  /// Parents of a dependent codec's tiles (ptm) the loader queued itself because a wanted
+  /// child's parent was neither wanted, cached nor loading (docs/runtime.md, "Dependent
+  /// codecs").
+  uint64_t parents_queued = 0;
+  /// Children decoded after reading their parent chain in the same job, because the parent
+  /// left the cache (or could not be loaded) between its load and the child's decode.
+  uint64_t parent_fallbacks = 0;
   LinkEstimate link;  ///< throughput, latency and queue wait measured on every read
   /// When the queue and in-flight set last became empty together (the end of a load).
   std::chrono::steady_clock::time_point idle_since{};
@@ -122,6 +129,29 @@ class LoaderPool {
   void run(uint32_t worker_index);
   bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
   void loadBatch(Batch& batch, CodecScratch& scratch);
+  /// True when `id` is coded against a parent (its image's codec is dependent and it is below
+  /// the coarsest level). Lock-free: reads constant members only.
+  bool needsParent(const TileId& id) const;
+  /// Whether a dependent tile must wait: its parent is being loaded, or queued and ready to be
+  /// taken (not waiting out a retry backoff). `queued` holds the queue's ids. Under mutex_.
+  bool waitsForParentLocked(const TileId& id, const std::unordered_set<TileId, TileIdHash>& queued,
+                            std::chrono::steady_clock::time_point now) const;
+  /// Adds to `wanted` and the queue, coarsest first, the ancestors of `request` that a
+  /// dependent codec needs and that are neither wanted, cached nor loading. Under mutex_.
+  void queueMissingAncestorsLocked(
+      const TileRequest& request,
+      std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash>& wanted,
+      std::chrono::steady_clock::time_point now);
+  /// The decoded parent of `child` when it is not in the cache: reads and decodes the chain
+  /// from the nearest cached ancestor (or the coarsest level) down, counting the bytes and
+  /// reads in `bytes_read` and `reads`. The tiles decoded on the way are not cached.
+  /// Decodes a verified payload into `texels`: a dependent codec's tile against its parent,
+  /// pinned in the cache for the decode, or decodeParentChain's when the parent is not cached.
+  Result<void> decodeItem(const TileId& id, const TileEntry& entry,
+                          std::span<const uint8_t> payload, Image& texels, size_t tile_bytes,
+                          CodecScratch& scratch);
+  Result<Image> decodeParentChain(const TileId& child, CodecScratch& scratch, uint64_t& bytes_read,
+                                  size_t& reads);
   void finish(const TileId& id, LoadEvent event, bool failed);
   /// Queued tiles at the head of the queue not hinted yet, if the read-ahead window has room;
   /// marks them hinted (size unknown yet). Under mutex_.
@@ -140,6 +170,9 @@ class LoaderPool {
   TileCache& cache_;
   LoaderOptions options_;
   const uint32_t thread_count_;  ///< set before the workers start; they read it unlocked
+  /// Per image: whether its tiles are coded against their parents (ptm). Constant.
+  std::vector<bool> dependent_images_;
+  bool any_dependent_ = false;  ///< any of dependent_images_; constant
   std::shared_ptr<TexelPool> texel_pool_;
   std::atomic<size_t> last_tile_bytes_{0};  ///< the size of the last tile loaded, for prewarming
 

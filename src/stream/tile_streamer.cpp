@@ -256,6 +256,8 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   report.queue_wait_ms = loader_stats.link.queue_wait_s * 1e3;
   report.cancelled_total = loader_stats.cancelled;
   report.reads_cancelled_total = loader_stats.reads_cancelled;
+  report.parents_queued_total = loader_stats.parents_queued;
+  report.parent_fallbacks_total = loader_stats.parent_fallbacks;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }

@@ -376,6 +376,7 @@ int runFly(const FlyArgs& args) {
   nlohmann::json summary = {
       {"archive", args.archive},
       {"path", path->name},
+      {"codec", codecName(info.default_codec)},
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
@@ -422,7 +423,9 @@ int runFly(const FlyArgs& args) {
       {"link_bytes_per_s", last.link_bytes_per_s},
       {"link_latency_ms", last.link_latency_ms},
       {"requests_cancelled", last.cancelled_total},
-      {"reads_cancelled", last.reads_cancelled_total}};
+      {"reads_cancelled", last.reads_cancelled_total},
+      {"parents_queued", last.parents_queued_total},
+      {"parent_fallbacks", last.parent_fallbacks_total}};
   if (adaptive) summary["still_after_s"] = args.still_after_s;
   if (std::optional<LinkStats> link_stats = (*archive)->source().linkStats()) {
     // Over a network: what the link did, and what the requests saw of it (the last ones).
