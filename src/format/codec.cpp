@@ -69,11 +69,12 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // Nearest-parent prediction beat bilinear upsampling of the parent on every input of the codec
 // study, by 5-30 % in size and 40 % in decode speed (docs/codecs.md, "ptm (6)").
 constexpr Predictor kDefaultPtmPredictor = Predictor::kParentNearest;
+constexpr PtmCoder kDefaultPtmCoder = PtmCoder::kZstd;
 
 Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const EncodeOptions& options,
                                               const ParentTexels* parent, CodecScratch* scratch) {
   checkTile(tile);
-  return encodePtm(tile, options, parent, kDefaultPtmPredictor, scratch);
+  return encodePtm(tile, options, parent, kDefaultPtmPredictor, kDefaultPtmCoder, scratch);
 }
 
 Result<void> decodePtmChecked(std::span<const uint8_t> payload, Image& out,

@@ -143,10 +143,10 @@ TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
   const Image parent_tile = pyramid.tile(1, 0, 0);
   const Image child = pyramid.tile(0, 1, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 0, 128, 1);
-  auto root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, nullptr);
+  auto root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kZstd, nullptr);
   ASSERT_TRUE(root.has_value());
   for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear}) {
-    auto payload = encodePtm(child.view(), {}, &parent, predictor, nullptr);
+    auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kZstd, nullptr);
     ASSERT_TRUE(payload.has_value()) << payload.error().message;
     EXPECT_LT(payload->size(), root->size()) << int(predictor);
     EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
