@@ -94,9 +94,13 @@ struct Variant {
   std::string name;
   Codec codec;
   int effort;
-  Predictor predictor;  ///< ptm only
-  PtmCoder coder;       ///< ptm only
+  Predictor predictor;    ///< ptm only
+  PtmCoder coder;         ///< ptm only
+  bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
 };
+
+constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                          Predictor::kParentCorrected};
 
 struct Tiles {
   std::vector<std::vector<Image>> levels;  ///< [level][y * tiles_x + x]
@@ -143,15 +147,13 @@ void study(const std::string& input, double min_seconds, const std::string& only
       {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot, PtmCoder::kZstd},
       {"ptm nearest-parent + zstd", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kZstd},
       {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear, PtmCoder::kZstd},
-      {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-       PtmCoder::kZstd},
-      {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected,
-       PtmCoder::kZstd},
+      {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kZstd},
+      {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
       {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
-      {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-       PtmCoder::kRans},
-      {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected,
-       PtmCoder::kRans},
+      {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
+      {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
+      {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
+      {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
   };
   CodecScratch scratch;
   for (const Variant& variant : variants) {
@@ -172,9 +174,11 @@ void study(const std::string& input, double min_seconds, const std::string& only
                                 x & 1, y & 1, kTilePx, 0};
         }
         Result<std::vector<uint8_t>> payload =
-            ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
-                            variant.coder, &scratch)
-                : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+            variant.smallest ? encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr,
+                                                 kTriedPredictors, variant.coder, &scratch)
+            : ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
+                              variant.coder, &scratch)
+                  : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
         if (!payload) {
           fmt::print(stderr, "{}: {}\n", variant.name, payload.error().message);
           return;
@@ -213,12 +217,13 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (size_t i = 0; i < tiles.levels[l].size(); ++i)
         if (decoded[l][i].texels != tiles.levels[l][i].texels) exact = false;
     // Seed 003's overhead: the whole pyramid against the base level coded on its own by the
-    // same codec (for ptm: its parentless mode with the same entropy coder), not against ptm's parent-coded level 0.
+    // same codec (for ptm: its parentless mode with the same entropy coder), not against ptm's
+    // parent-coded level 0.
     double base_alone = 0;
     for (const Image& tile : tiles.levels[0]) {
-      auto alone = ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder,
-                                   &scratch)
-                       : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+      auto alone =
+          ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
+              : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
       base_alone += alone ? double(alone->size()) : 0;
     }
     (void)level0_bytes;

@@ -117,6 +117,13 @@ enum class PtmCoder : uint8_t {
 Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
                                        const ParentTexels* parent, Predictor predictor,
                                        PtmCoder coder, CodecScratch* scratch);
+/// Encodes the tile with each of `predictors` (with a parent; kRoot without) and `coder`, and
+/// returns the smallest payload: which predictor suits a tile depends on the image (docs/codecs.md,
+/// "ptm (6)").
+Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
+                                               const ParentTexels* parent,
+                                               std::span<const Predictor> predictors,
+                                               PtmCoder coder, CodecScratch* scratch);
 /// Decodes any ptm payload; `parent` is required unless the payload is kRoot.
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
                        CodecScratch* scratch);

@@ -5,6 +5,7 @@
 // (eq. 3). Byte layout and the measurements behind the choices: docs/codecs.md, "ptm (6)".
 #include <algorithm>
 #include <cstring>
+#include <optional>
 
 #include <fmt/format.h>
 
@@ -159,10 +160,10 @@ void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageVie
                 Coder& coder) {
   constexpr bool kColourTransform = kChannels >= 3;
   constexpr bool kHasParent = kPredictor != Predictor::kRoot;
-  constexpr bool kExpectedRemainder = kPredictor == Predictor::kNeighbourMedian ||
-                                      kPredictor == Predictor::kParentCorrected;
-  constexpr bool kNeighbours = kPredictor == Predictor::kRoot || kExpectedRemainder ||
-                               Coder::kContexts;
+  constexpr bool kExpectedRemainder =
+      kPredictor == Predictor::kNeighbourMedian || kPredictor == Predictor::kParentCorrected;
+  constexpr bool kNeighbours =
+      kPredictor == Predictor::kRoot || kExpectedRemainder || Coder::kContexts;
   const size_t stride = size_t(width) * kChannels;
   for (uint32_t y = 0; y < height; ++y) {
     uint8_t* row = texels + y * stride;
@@ -242,8 +243,7 @@ void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageVie
       }
       int predicted[4];
       for (uint32_t c = 0; c < kChannels; ++c) {
-        if constexpr (kPredictor == Predictor::kRoot ||
-                      kPredictor == Predictor::kNeighbourMedian) {
+        if constexpr (kPredictor == Predictor::kRoot || kPredictor == Predictor::kNeighbourMedian) {
           predicted[c] =
               origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
         } else if constexpr (kPredictor == Predictor::kParentNearest) {
@@ -341,14 +341,10 @@ void codeWith(Predictor predictor, const Walk& w, Coder& coder) {
 template <bool kEncode, class Coder>
 void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder) {
   switch (channels) {
-    case 1:
-      return codeWith<kEncode, 1>(predictor, walk, coder);
-    case 2:
-      return codeWith<kEncode, 2>(predictor, walk, coder);
-    case 3:
-      return codeWith<kEncode, 3>(predictor, walk, coder);
-    default:
-      return codeWith<kEncode, 4>(predictor, walk, coder);
+    case 1: return codeWith<kEncode, 1>(predictor, walk, coder);
+    case 2: return codeWith<kEncode, 2>(predictor, walk, coder);
+    case 3: return codeWith<kEncode, 3>(predictor, walk, coder);
+    default: return codeWith<kEncode, 4>(predictor, walk, coder);
   }
 }
 
@@ -356,14 +352,10 @@ void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns
               const AxisMap& rows, std::vector<int16_t>& out) {
   out.resize(columns.parent.size() * rows.parent.size() * channels);
   switch (channels) {
-    case 1:
-      return upsampleParent<1>(parent, columns, rows, out.data());
-    case 2:
-      return upsampleParent<2>(parent, columns, rows, out.data());
-    case 3:
-      return upsampleParent<3>(parent, columns, rows, out.data());
-    default:
-      return upsampleParent<4>(parent, columns, rows, out.data());
+    case 1: return upsampleParent<1>(parent, columns, rows, out.data());
+    case 2: return upsampleParent<2>(parent, columns, rows, out.data());
+    case 3: return upsampleParent<3>(parent, columns, rows, out.data());
+    default: return upsampleParent<4>(parent, columns, rows, out.data());
   }
 }
 
@@ -485,6 +477,21 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
     for (uint32_t c = 0; c < channels; ++c)
       TESSERA_TRY(addStream(starts.remainders[c], counts.derived));
   return payload;
+}
+
+Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
+                                               const ParentTexels* parent,
+                                               std::span<const Predictor> predictors,
+                                               PtmCoder coder, CodecScratch* scratch) {
+  if (parent == nullptr || predictors.empty())
+    return encodePtm(tile, options, nullptr, Predictor::kRoot, coder, scratch);
+  std::optional<std::vector<uint8_t>> smallest;
+  for (Predictor predictor : predictors) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
+                             encodePtm(tile, options, parent, predictor, coder, scratch));
+    if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
+  }
+  return std::move(*smallest);
 }
 
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
