@@ -68,7 +68,7 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 
 // Per tile, the smallest of nearest-parent, neighbour-median and parent-corrected prediction,
 // entropy-coded by rANS: on the codec study's three inputs 5-45 % smaller than nearest-parent
-// with zstd, at a fifth to an eighth of its decode speed (docs/codecs.md, "ptm (6)").
+// with zstd, at a fifth to a ninth of its decode speed (docs/codecs.md, "ptm (6)").
 constexpr Predictor kDefaultPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 constexpr PtmCoder kDefaultPtmCoder = PtmCoder::kRans;
