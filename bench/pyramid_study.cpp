@@ -94,8 +94,13 @@ struct Variant {
   std::string name;
   Codec codec;
   int effort;
-  Predictor predictor;  ///< ptm only
+  Predictor predictor;    ///< ptm only
+  PtmCoder coder;         ///< ptm only
+  bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
 };
+
+constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                          Predictor::kParentCorrected};
 
 struct Tiles {
   std::vector<std::vector<Image>> levels;  ///< [level][y * tiles_x + x]
@@ -115,7 +120,7 @@ Tiles cutAll(const std::vector<Image>& pyramid) {
   return tiles;
 }
 
-void study(const std::string& input, double min_seconds) {
+void study(const std::string& input, double min_seconds, const std::string& only) {
   Image level0 = readInput(input);
   if (level0.texels.empty()) {
     fmt::print(stderr, "{}: cannot read\n", input);
@@ -133,18 +138,26 @@ void study(const std::string& input, double min_seconds) {
       "| codec | pyramid / raw base | raw base : pyramid | pyramid over base coded alone | decode "
       "MP/s per core |\n|---|---:|---:|---:|---:|\n");
   const std::vector<Variant> variants = {
-      {"raw", Codec::kRaw, 0, Predictor::kRoot},
-      {"lz4", Codec::kLz4, 0, Predictor::kRoot},
-      {"zstd-1", Codec::kZstd, 1, Predictor::kRoot},
-      {"zstd-3", Codec::kZstd, 3, Predictor::kRoot},
-      {"zstd-9", Codec::kZstd, 9, Predictor::kRoot},
-      {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot},
-      {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot},
-      {"ptm nearest-parent + zstd (default)", Codec::kPtm, 0, Predictor::kParentNearest},
-      {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear},
+      {"raw", Codec::kRaw, 0, Predictor::kRoot, PtmCoder::kZstd},
+      {"lz4", Codec::kLz4, 0, Predictor::kRoot, PtmCoder::kZstd},
+      {"zstd-1", Codec::kZstd, 1, Predictor::kRoot, PtmCoder::kZstd},
+      {"zstd-3", Codec::kZstd, 3, Predictor::kRoot, PtmCoder::kZstd},
+      {"zstd-9", Codec::kZstd, 9, Predictor::kRoot, PtmCoder::kZstd},
+      {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot, PtmCoder::kZstd},
+      {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot, PtmCoder::kZstd},
+      {"ptm nearest-parent + zstd", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kZstd},
+      {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear, PtmCoder::kZstd},
+      {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kZstd},
+      {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
+      {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
+      {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
+      {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
+      {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
+      {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
   };
   CodecScratch scratch;
   for (const Variant& variant : variants) {
+    if (!only.empty() && variant.name.find(only) == std::string::npos) continue;
     const bool ptm = variant.codec == Codec::kPtm;
     const Tiles& tiles = ptm ? floored : rounded;
     std::vector<std::vector<std::vector<uint8_t>>> payloads(tiles.levels.size());
@@ -161,9 +174,11 @@ void study(const std::string& input, double min_seconds) {
                                 x & 1, y & 1, kTilePx, 0};
         }
         Result<std::vector<uint8_t>> payload =
-            ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
-                            &scratch)
-                : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+            variant.smallest ? encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr,
+                                                 kTriedPredictors, variant.coder, &scratch)
+            : ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
+                              variant.coder, &scratch)
+                  : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
         if (!payload) {
           fmt::print(stderr, "{}: {}\n", variant.name, payload.error().message);
           return;
@@ -202,11 +217,13 @@ void study(const std::string& input, double min_seconds) {
       for (size_t i = 0; i < tiles.levels[l].size(); ++i)
         if (decoded[l][i].texels != tiles.levels[l][i].texels) exact = false;
     // Seed 003's overhead: the whole pyramid against the base level coded on its own by the
-    // same codec (for ptm: its parentless mode), not against ptm's parent-coded level 0.
+    // same codec (for ptm: its parentless mode with the same entropy coder), not against ptm's
+    // parent-coded level 0.
     double base_alone = 0;
     for (const Image& tile : tiles.levels[0]) {
-      auto alone = ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, &scratch)
-                       : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+      auto alone =
+          ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
+              : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
       base_alone += alone ? double(alone->size()) : 0;
     }
     (void)level0_bytes;
@@ -220,16 +237,21 @@ void study(const std::string& input, double min_seconds) {
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr, "usage: {} [--seconds S] INPUT...\n", argv[0]);
+    fmt::print(stderr, "usage: {} [--seconds S] [--only NAME-PART] INPUT...\n", argv[0]);
     return 2;
   }
   double seconds = 0.5;
+  std::string only;
   for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--only" && i + 1 < argc) {
+      only = argv[++i];
+      continue;
+    }
     if (std::string(argv[i]) == "--seconds" && i + 1 < argc) {
       seconds = std::atof(argv[++i]);
       continue;
     }
-    study(argv[i], seconds);
+    study(argv[i], seconds, only);
   }
   return 0;
 }

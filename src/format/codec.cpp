@@ -66,14 +66,17 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
   return {codec, /*needs_parent=*/false, lossless, &encodeChecked<encode>, &decodeChecked<decode>};
 }
 
-// Nearest-parent prediction beat bilinear upsampling of the parent on every input of the codec
-// study, by 5-30 % in size and 40 % in decode speed (docs/codecs.md, "ptm (6)").
-constexpr Predictor kDefaultPtmPredictor = Predictor::kParentNearest;
+// Per tile, the smallest of nearest-parent, neighbour-median and parent-corrected prediction,
+// entropy-coded by rANS: on the codec study's three inputs 5-45 % smaller than nearest-parent
+// with zstd, at a fifth to a ninth of its decode speed (docs/codecs.md, "ptm (6)").
+constexpr Predictor kDefaultPtmPredictors[] = {
+    Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
+constexpr PtmCoder kDefaultPtmCoder = PtmCoder::kRans;
 
 Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const EncodeOptions& options,
                                               const ParentTexels* parent, CodecScratch* scratch) {
   checkTile(tile);
-  return encodePtm(tile, options, parent, kDefaultPtmPredictor, scratch);
+  return encodePtmSmallest(tile, options, parent, kDefaultPtmPredictors, kDefaultPtmCoder, scratch);
 }
 
 Result<void> decodePtmChecked(std::span<const uint8_t> payload, Image& out,

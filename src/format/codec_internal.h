@@ -43,6 +43,10 @@ struct CodecScratch::State {
   std::vector<uint8_t> plane;
   /// Compressed bytes before they are copied into the exact-size payload.
   std::vector<uint8_t> compressed;
+  /// ptm: the parent bilinearly upsampled to the tile, 16 times the texel scale.
+  std::vector<int16_t> upsampled;
+  /// ptm: the context of each residual symbol, for the rANS coder's encoder.
+  std::vector<uint8_t> contexts;
 };
 
 /// Resolves a possibly null CodecScratch to a usable State: the caller's, or one that lives
@@ -94,13 +98,32 @@ enum class Predictor : uint8_t {
   kRoot = 0,            ///< no parent: LOCO-I median of left, up and up-left texels
   kParentNearest = 1,   ///< the parent texel of the child's 2x2 block
   kParentBilinear = 2,  ///< the parent bilinearly upsampled (weights 9, 3, 3, 1 / 16)
+  /// LOCO-I median of the child's neighbours; the parent only for eq. 3's remainder, whose
+  /// expected value the median's guess at the derived texel gives
+  kNeighbourMedian = 3,
+  /// the bilinear parent plus the neighbours' median departure from it, pulled towards what
+  /// the 2x2 block's sum (eq. 3) leaves for the texels not yet decoded; remainder as in 3
+  kParentCorrected = 4,
 };
 
-/// Encodes a ptm payload with `predictor` (kRoot when `parent` is null). The codec table's
-/// entry uses the default predictor; the codec study compares the others.
+/// How a ptm payload entropy-codes its symbols; stored in the payload's second byte.
+enum class PtmCoder : uint8_t {
+  kZstd = 0,  ///< one zstd frame per channel for residuals, one for remainders
+  kRans = 1,  ///< rANS over the symbols, each modelled by its context (local activity)
+};
+
+/// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec
+/// table's entry uses the defaults; the codec study compares the others.
 Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
                                        const ParentTexels* parent, Predictor predictor,
-                                       CodecScratch* scratch);
+                                       PtmCoder coder, CodecScratch* scratch);
+/// Encodes the tile with each of `predictors` (with a parent; kRoot without) and `coder`, and
+/// returns the smallest payload: which predictor suits a tile depends on the image (docs/codecs.md,
+/// "ptm (6)").
+Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
+                                               const ParentTexels* parent,
+                                               std::span<const Predictor> predictors,
+                                               PtmCoder coder, CodecScratch* scratch);
 /// Decodes any ptm payload; `parent` is required unless the payload is kRoot.
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
                        CodecScratch* scratch);

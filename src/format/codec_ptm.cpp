@@ -5,10 +5,12 @@
 // (eq. 3). Byte layout and the measurements behind the choices: docs/codecs.md, "ptm (6)".
 #include <algorithm>
 #include <cstring>
+#include <optional>
 
 #include <fmt/format.h>
 
 #include "codec_internal.h"
+#include "ptm_rans.h"
 
 namespace tessera::detail {
 
@@ -25,6 +27,8 @@ constexpr int kDefaultZstdLevel = 1;
 struct AxisMap {
   std::vector<uint32_t> parent;     ///< parent texel index of the block holding this child
   std::vector<uint32_t> neighbour;  ///< the parent texel on this child's side of `parent`
+  std::vector<uint8_t> second;      ///< 1 for the second child of its block
+  std::vector<uint8_t> full;        ///< 1 when both children of the block lie in the tile
   std::vector<uint8_t> derived;     ///< 1 for the second child of a block wholly in the tile
 };
 
@@ -33,6 +37,8 @@ struct AxisMap {
 bool mapAxis(uint32_t child_px, uint32_t parent_px, uint64_t offset, AxisMap& map) {
   map.parent.resize(child_px);
   map.neighbour.resize(child_px);
+  map.second.resize(child_px);
+  map.full.resize(child_px);
   map.derived.resize(child_px);
   for (uint32_t i = 0; i < child_px; ++i) {
     const uint64_t u = offset + i;
@@ -43,14 +49,16 @@ bool mapAxis(uint32_t child_px, uint32_t parent_px, uint64_t offset, AxisMap& ma
     // Bilinear upsampling weights the parent texel on the child's side of its block.
     map.neighbour[i] =
         second ? uint32_t(std::min<uint64_t>(j + 1, parent_px - 1)) : uint32_t(j == 0 ? 0 : j - 1);
+    map.second[i] = second;
     // A block whose first child lies before the tile (odd border) is coded texel by texel.
+    map.full[i] = second ? i > 0 : i + 1 < child_px;
     map.derived[i] = second && i > 0;
   }
   return true;
 }
 
 // LOCO-I's median edge detector (Weinberger et al., "The LOCO-I lossless image compression
-// algorithm"), for tiles coded without a parent.
+// algorithm").
 inline int medPredict(int left, int up, int up_left) {
   const int low = std::min(left, up), high = std::max(left, up);
   if (up_left >= high) return low;
@@ -58,39 +66,154 @@ inline int medPredict(int left, int up, int up_left) {
   return left + up - up_left;
 }
 
-struct Planes {
+// Contexts of the rANS coder, per channel: for coded texels, the position in the 2x2 block
+// (4) times the activity class (8); then, with a parent, the activity class of remainders.
+constexpr uint32_t kActivityClasses = 8;
+constexpr uint32_t kCodedContexts = 4 * kActivityClasses;
+constexpr uint32_t kParentContexts = kCodedContexts + kActivityClasses;
+constexpr uint32_t kRootContexts = kActivityClasses;
+// Class boundaries of |left - up_left| + |up - up_left| + |up_right - up| per channel, about
+// geometric as LOCO-I's gradient quantiser; set on the codec study's inputs.
+constexpr int kActivityBounds[kActivityClasses - 1] = {1, 3, 6, 10, 16, 26, 42};
+
+template <uint32_t kChannels>
+inline uint32_t activityClass(int activity) {
+  uint32_t q = 0;
+  for (int bound : kActivityBounds) q += activity >= bound * int(kChannels);
+  return q;
+}
+
+// The zstd coder's side of the texel walk: symbols go to (or come from) one plane per channel.
+template <bool kEncode>
+struct PlaneCoder {
+  static constexpr bool kContexts = false;
   uint8_t* residuals[4];   ///< per channel: symbols of the coded texels, raster order
-  uint8_t* remainders[4];  ///< per channel: eq. 3's remainder of each derived texel
+  uint8_t* remainders[4];  ///< per channel: eq. 3's remainder symbol of each derived texel
+  void residual(uint32_t channel, uint32_t /*context*/, uint8_t& symbol) {
+    if constexpr (kEncode)
+      *residuals[channel]++ = symbol;
+    else
+      symbol = *residuals[channel]++;
+  }
+  void remainder(uint32_t channel, uint32_t /*context*/, uint8_t& symbol) {
+    if constexpr (kEncode)
+      *remainders[channel]++ = symbol;
+    else
+      symbol = *remainders[channel]++;
+  }
 };
 
-// One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
-// `texels` and writes `planes`; decoding reads `planes` and writes `texels`. Arithmetic is
-// modulo 256: bit-exact for any input, and for a floor-average pyramid every remainder is 0..3.
-template <bool kEncode, uint32_t kChannels, Predictor kPredictor>
-void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageView* parent,
-                const AxisMap* columns, const AxisMap* rows, Planes planes) {
-  constexpr bool kColourTransform = kChannels >= 3;
-  const size_t stride = size_t(width) * kChannels;
-  uint8_t* residual[4];
-  uint8_t* remainder[4];
-  for (uint32_t c = 0; c < kChannels; ++c) {
-    residual[c] = planes.residuals[c];
-    remainder[c] = planes.remainders[c];
+// The rANS encoder's side: symbols and their contexts in decoding order, coded afterwards
+// (rANS codes backwards).
+struct RansRecorder {
+  static constexpr bool kContexts = true;
+  uint8_t* symbols;
+  uint8_t* contexts;
+  void residual(uint32_t /*channel*/, uint32_t context, uint8_t& symbol) {
+    *symbols++ = symbol;
+    *contexts++ = uint8_t(context);
   }
+  void remainder(uint32_t /*channel*/, uint32_t context, uint8_t& symbol) {
+    *symbols++ = symbol;
+    *contexts++ = uint8_t(kCodedContexts + context);
+  }
+};
+
+struct RansReader {
+  static constexpr bool kContexts = true;
+  rans::Decoder decoder;
+  const rans::Model* models[4][kParentContexts];
+  void residual(uint32_t channel, uint32_t context, uint8_t& symbol) {
+    symbol = decoder.decode(channel, *models[channel][context]);
+  }
+  void remainder(uint32_t channel, uint32_t context, uint8_t& symbol) {
+    symbol = decoder.decode(channel, *models[channel][kCodedContexts + context]);
+  }
+};
+
+// The parent bilinearly upsampled to every child texel, times 16, plus 6: a floor-average
+// parent sits 0.375 below its block's mean.
+template <uint32_t kChannels>
+void upsampleParent(const ImageView& parent, const AxisMap& columns, const AxisMap& rows,
+                    int16_t* out) {
+  const uint32_t width = uint32_t(columns.parent.size()), height = uint32_t(rows.parent.size());
+  for (uint32_t y = 0; y < height; ++y) {
+    const uint8_t* parent_row = parent.row(rows.parent[y]);
+    const uint8_t* parent_near = parent.row(rows.neighbour[y]);
+    for (uint32_t x = 0; x < width; ++x) {
+      const size_t j = size_t(columns.parent[x]) * kChannels;
+      const size_t jn = size_t(columns.neighbour[x]) * kChannels;
+      for (uint32_t c = 0; c < kChannels; ++c)
+        *out++ = int16_t(9 * parent_row[j + c] + 3 * parent_row[jn + c] + 3 * parent_near[j + c] +
+                         parent_near[jn + c] + 6);
+    }
+  }
+}
+
+// One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
+// `texels` and hands symbols to `coder`; decoding takes them from `coder` and writes `texels`.
+// Arithmetic is modulo 256: bit-exact for any input, and for a floor-average pyramid every
+// remainder is 0..3.
+template <bool kEncode, uint32_t kChannels, Predictor kPredictor, class Coder>
+void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageView* parent,
+                const AxisMap* columns, const AxisMap* rows, const int16_t* upsampled,
+                Coder& coder) {
+  constexpr bool kColourTransform = kChannels >= 3;
+  constexpr bool kHasParent = kPredictor != Predictor::kRoot;
+  constexpr bool kExpectedRemainder =
+      kPredictor == Predictor::kNeighbourMedian || kPredictor == Predictor::kParentCorrected;
+  constexpr bool kNeighbours =
+      kPredictor == Predictor::kRoot || kExpectedRemainder || Coder::kContexts;
+  const size_t stride = size_t(width) * kChannels;
   for (uint32_t y = 0; y < height; ++y) {
     uint8_t* row = texels + y * stride;
     const uint8_t* up_row = y > 0 ? row - stride : nullptr;
     const uint8_t* parent_row = nullptr;
     const uint8_t* parent_near = nullptr;
     bool derived_row = false;
-    if constexpr (kPredictor != Predictor::kRoot) {
+    uint32_t row_position = 0;
+    bool full_row = false;
+    if constexpr (kHasParent) {
       parent_row = parent->row(rows->parent[y]);
       parent_near = parent->row(rows->neighbour[y]);
       derived_row = rows->derived[y] != 0;
+      row_position = 2u * rows->second[y];
+      full_row = rows->full[y] != 0;
     }
     for (uint32_t x = 0; x < width; ++x) {
       uint8_t* texel = row + size_t(x) * kChannels;
-      if constexpr (kPredictor != Predictor::kRoot) {
+      const size_t index = size_t(y) * stride + size_t(x) * kChannels;
+      // Causal neighbours, with LOCO-I's substitutes on the first row and column; offsets from
+      // `index` so that the detail plane of predictor 4 can use the same ones.
+      ptrdiff_t left = 0, up = 0, up_left = 0, up_right = 0;
+      const bool origin = x == 0 && y == 0;
+      if constexpr (kNeighbours) {
+        const ptrdiff_t c1 = ptrdiff_t(kChannels), s = ptrdiff_t(stride);
+        if (y == 0) {
+          left = up = up_left = up_right = -c1;
+        } else if (x == 0) {
+          left = up = up_left = -s;
+          up_right = x + 1 < width ? -s + c1 : -s;
+        } else {
+          left = -c1;
+          up = -s;
+          up_left = -s - c1;
+          up_right = x + 1 < width ? -s + c1 : -s;
+        }
+      }
+      uint32_t context = 0;
+      if constexpr (Coder::kContexts) {
+        int activity = 0;
+        if (!origin)
+          for (uint32_t c = 0; c < kChannels; ++c) {
+            const int n = texel[up + c], nw = texel[up_left + c];
+            activity += std::abs(texel[left + c] - nw) + std::abs(n - nw) +
+                        std::abs(texel[up_right + c] - n);
+          }
+        context = activityClass<kChannels>(activity);
+      }
+      uint32_t position = 0;
+      if constexpr (kHasParent) {
         const uint8_t* p = parent_row + size_t(columns->parent[x]) * kChannels;
         if (derived_row && columns->derived[x]) {
           // Marvie & Bouatouch eq. 3: d = 4 * parent + e - a - b - c.
@@ -99,43 +222,81 @@ void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageVie
           const uint8_t* c3 = texel - kChannels;
           for (uint32_t c = 0; c < kChannels; ++c) {
             const uint32_t known = 4u * p[c] - a[c] - b[c] - c3[c];
-            if constexpr (kEncode)
-              *remainder[c]++ = uint8_t(texel[c] - known);
-            else
-              texel[c] = uint8_t(known + *remainder[c]++);
+            // The remainder the neighbours expect: the median's guess at d, through eq. 3.
+            uint32_t expected = 0;
+            if constexpr (kExpectedRemainder) {
+              const int guess = medPredict(c3[c], b[c], a[c]) + a[c] + b[c] + c3[c] - 4 * p[c];
+              expected = uint32_t(std::clamp(guess, 0, 3));
+            }
+            uint8_t symbol;
+            if constexpr (kEncode) {
+              symbol = uint8_t(texel[c] - known - expected);
+              coder.remainder(c, context, symbol);
+            } else {
+              coder.remainder(c, context, symbol);
+              texel[c] = uint8_t(known + expected + symbol);
+            }
           }
           continue;
         }
+        position = row_position + columns->second[x];
       }
       int predicted[4];
       for (uint32_t c = 0; c < kChannels; ++c) {
-        if constexpr (kPredictor == Predictor::kRoot) {
-          const int left = x > 0 ? (texel - kChannels)[c] : (y > 0 ? up_row[c] : 0);
-          const int up = y > 0 ? up_row[size_t(x) * kChannels + c] : left;
-          const int up_left = x > 0 && y > 0 ? up_row[size_t(x - 1) * kChannels + c] : left;
-          predicted[c] = medPredict(left, up, up_left);
+        if constexpr (kPredictor == Predictor::kRoot || kPredictor == Predictor::kNeighbourMedian) {
+          predicted[c] =
+              origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
         } else if constexpr (kPredictor == Predictor::kParentNearest) {
           predicted[c] = parent_row[size_t(columns->parent[x]) * kChannels + c];
-        } else {
+        } else if constexpr (kPredictor == Predictor::kParentBilinear) {
           const size_t j = size_t(columns->parent[x]) * kChannels + c;
           const size_t jn = size_t(columns->neighbour[x]) * kChannels + c;
           predicted[c] =
               (9 * parent_row[j] + 3 * parent_row[jn] + 3 * parent_near[j] + parent_near[jn] + 8) >>
               4;
+        } else {
+          const int16_t* u = upsampled + index + c;
+          const uint8_t* t = texel + c;
+          int estimate = *u;
+          if (!origin) {
+            // The neighbours' departure from the upsampled parent carries the detail the
+            // parent lost.
+            estimate += medPredict(16 * t[left] - u[left], 16 * t[up] - u[up],
+                                   16 * t[up_left] - u[up_left]);
+          }
+          if (full_row && columns->full[x]) {
+            // Eq. 3 fixes the block's sum; what the texels still to come would need, by the
+            // same estimate, pulls this one. Weights 1/2, 1/4, 1/2 of the shortfall per texel
+            // still unknown: measured on the codec study's inputs.
+            const int sum16 = 64 * parent_row[size_t(columns->parent[x]) * kChannels + c] + 24;
+            const int detail = estimate - *u;
+            const ptrdiff_t cx = ptrdiff_t(kChannels), sy = ptrdiff_t(stride);
+            if (position == 0) {
+              const int block = u[0] + u[cx] + u[sy] + u[sy + cx] + 4 * detail;
+              estimate += (sum16 - block) >> 3;
+            } else if (position == 1) {
+              const int block = u[0] + u[sy - cx] + u[sy] + 3 * detail;
+              estimate += (sum16 - 16 * t[-cx] - block) / 12;
+            } else {
+              const int block = u[0] + u[cx] + 2 * detail;
+              estimate += (sum16 - 16 * (t[-sy] + t[-sy + cx]) - block) >> 2;
+            }
+          }
+          predicted[c] = std::clamp((estimate + 8) >> 4, 0, 255);
         }
       }
+      const uint32_t symbol_context = position * kActivityClasses + context;
       // Subtract-green on residuals: colour channels share most of their error.
+      uint8_t symbols[4];
       if constexpr (kEncode) {
-        uint8_t symbols[4];
         for (uint32_t c = 0; c < kChannels; ++c) symbols[c] = uint8_t(texel[c] - predicted[c]);
         if constexpr (kColourTransform) {
           symbols[0] = uint8_t(symbols[0] - symbols[1]);
           symbols[2] = uint8_t(symbols[2] - symbols[1]);
         }
-        for (uint32_t c = 0; c < kChannels; ++c) *residual[c]++ = symbols[c];
+        for (uint32_t c = 0; c < kChannels; ++c) coder.residual(c, symbol_context, symbols[c]);
       } else {
-        uint8_t symbols[4];
-        for (uint32_t c = 0; c < kChannels; ++c) symbols[c] = *residual[c]++;
+        for (uint32_t c = 0; c < kChannels; ++c) coder.residual(c, symbol_context, symbols[c]);
         if constexpr (kColourTransform) {
           symbols[0] = uint8_t(symbols[0] + symbols[1]);
           symbols[2] = uint8_t(symbols[2] + symbols[1]);
@@ -146,34 +307,55 @@ void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageVie
   }
 }
 
-template <bool kEncode, uint32_t kChannels>
-void codeWith(Predictor predictor, uint8_t* texels, uint32_t width, uint32_t height,
-              const ImageView* parent, const AxisMap* columns, const AxisMap* rows, Planes planes) {
+// Everything a texel walk needs besides the coder.
+struct Walk {
+  uint8_t* texels;
+  uint32_t width, height;
+  const ImageView* parent;
+  const AxisMap* columns;
+  const AxisMap* rows;
+  const int16_t* upsampled;
+};
+
+template <bool kEncode, uint32_t kChannels, class Coder>
+void codeWith(Predictor predictor, const Walk& w, Coder& coder) {
   switch (predictor) {
     case Predictor::kRoot:
-      return codeTexels<kEncode, kChannels, Predictor::kRoot>(texels, width, height, parent,
-                                                              columns, rows, planes);
+      return codeTexels<kEncode, kChannels, Predictor::kRoot>(
+          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
     case Predictor::kParentNearest:
       return codeTexels<kEncode, kChannels, Predictor::kParentNearest>(
-          texels, width, height, parent, columns, rows, planes);
+          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
     case Predictor::kParentBilinear:
       return codeTexels<kEncode, kChannels, Predictor::kParentBilinear>(
-          texels, width, height, parent, columns, rows, planes);
+          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+    case Predictor::kNeighbourMedian:
+      return codeTexels<kEncode, kChannels, Predictor::kNeighbourMedian>(
+          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+    case Predictor::kParentCorrected:
+      return codeTexels<kEncode, kChannels, Predictor::kParentCorrected>(
+          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
   }
 }
 
-template <bool kEncode>
-void code(Predictor predictor, uint32_t channels, uint8_t* texels, uint32_t width, uint32_t height,
-          const ImageView* parent, const AxisMap* columns, const AxisMap* rows, Planes planes) {
+template <bool kEncode, class Coder>
+void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder) {
   switch (channels) {
-    case 1:
-      return codeWith<kEncode, 1>(predictor, texels, width, height, parent, columns, rows, planes);
-    case 2:
-      return codeWith<kEncode, 2>(predictor, texels, width, height, parent, columns, rows, planes);
-    case 3:
-      return codeWith<kEncode, 3>(predictor, texels, width, height, parent, columns, rows, planes);
-    default:
-      return codeWith<kEncode, 4>(predictor, texels, width, height, parent, columns, rows, planes);
+    case 1: return codeWith<kEncode, 1>(predictor, walk, coder);
+    case 2: return codeWith<kEncode, 2>(predictor, walk, coder);
+    case 3: return codeWith<kEncode, 3>(predictor, walk, coder);
+    default: return codeWith<kEncode, 4>(predictor, walk, coder);
+  }
+}
+
+void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
+              const AxisMap& rows, std::vector<int16_t>& out) {
+  out.resize(columns.parent.size() * rows.parent.size() * channels);
+  switch (channels) {
+    case 1: return upsampleParent<1>(parent, columns, rows, out.data());
+    case 2: return upsampleParent<2>(parent, columns, rows, out.data());
+    case 3: return upsampleParent<3>(parent, columns, rows, out.data());
+    default: return upsampleParent<4>(parent, columns, rows, out.data());
   }
 }
 
@@ -218,11 +400,25 @@ void appendU32(std::vector<uint8_t>& out, uint32_t value) {
   for (int i = 0; i < 4; ++i) out.push_back(uint8_t(value >> (8 * i)));
 }
 
+// The symbol planes of the zstd coder, laid out in `plane`: residuals of each channel, then
+// remainders of each channel.
+template <bool kEncode>
+PlaneCoder<kEncode> planesIn(std::vector<uint8_t>& plane, uint32_t channels,
+                             const SymbolCounts& counts) {
+  plane.resize((counts.coded + counts.derived) * channels);
+  PlaneCoder<kEncode> planes{};
+  for (uint32_t c = 0; c < channels; ++c) {
+    planes.residuals[c] = plane.data() + c * counts.coded;
+    planes.remainders[c] = plane.data() + channels * counts.coded + c * counts.derived;
+  }
+  return planes;
+}
+
 }  // namespace
 
 Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
                                        const ParentTexels* parent, Predictor predictor,
-                                       CodecScratch* scratch) {
+                                       PtmCoder coder, CodecScratch* scratch) {
   ScratchRef state(scratch);
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
@@ -230,22 +426,40 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
   const bool has_parent = predictor != Predictor::kRoot;
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
+  if (predictor == Predictor::kParentCorrected)
+    upsample(channels, parent->texels, columns, rows, state->upsampled);
+  std::span<const uint8_t> packed = packedTexels(tile, *state);
+  // Encoding only reads the texels; the shared routine takes a mutable pointer for decoding.
+  const Walk walk{const_cast<uint8_t*>(packed.data()),
+                  width,
+                  height,
+                  has_parent ? &parent->texels : nullptr,
+                  &columns,
+                  &rows,
+                  state->upsampled.data()};
+  std::vector<uint8_t> payload = {uint8_t(predictor), uint8_t(coder)};
+
+  if (coder == PtmCoder::kRans) {
+    const size_t symbols = size_t(width) * height * channels;
+    state->plane.resize(symbols);
+    state->contexts.resize(symbols);
+    RansRecorder recorder{state->plane.data(), state->contexts.data()};
+    code<true>(predictor, channels, walk, recorder);
+    const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
+    std::vector<uint8_t> params;
+    rans::chooseModels(state->plane, state->contexts, channels, contexts, params);
+    payload.insert(payload.end(), params.begin(), params.end());
+    rans::encode(state->plane, state->contexts, channels, contexts, params, state->compressed,
+                 payload);
+    return payload;
+  }
+
   const SymbolCounts counts =
       countSymbols(width, height, has_parent ? &columns : nullptr, has_parent ? &rows : nullptr);
-
-  std::span<const uint8_t> packed = packedTexels(tile, *state);
-  state->plane.resize((counts.coded + counts.derived) * channels);
-  Planes planes{};
-  for (uint32_t c = 0; c < channels; ++c) {
-    planes.residuals[c] = state->plane.data() + c * counts.coded;
-    planes.remainders[c] = state->plane.data() + channels * counts.coded + c * counts.derived;
-  }
-  // Encoding only reads the texels; the shared routine takes a mutable pointer for decoding.
-  code<true>(predictor, channels, const_cast<uint8_t*>(packed.data()), width, height,
-             has_parent ? &parent->texels : nullptr, &columns, &rows, planes);
-
+  PlaneCoder<true> planes = planesIn<true>(state->plane, channels, counts);
+  const PlaneCoder<true> starts = planes;
+  code<true>(predictor, channels, walk, planes);
   const int level = options.effort != 0 ? options.effort : kDefaultZstdLevel;
-  std::vector<uint8_t> payload = {uint8_t(predictor), 0};
   auto addStream = [&](const uint8_t* symbols, size_t count) -> Result<void> {
     if (count == 0) {
       appendU32(payload, 0);
@@ -258,11 +472,26 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
     return {};
   };
   // The compressed frames reuse state->compressed, so the planes stay valid throughout.
-  for (uint32_t c = 0; c < channels; ++c) TESSERA_TRY(addStream(planes.residuals[c], counts.coded));
+  for (uint32_t c = 0; c < channels; ++c) TESSERA_TRY(addStream(starts.residuals[c], counts.coded));
   if (has_parent)
     for (uint32_t c = 0; c < channels; ++c)
-      TESSERA_TRY(addStream(planes.remainders[c], counts.derived));
+      TESSERA_TRY(addStream(starts.remainders[c], counts.derived));
   return payload;
+}
+
+Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
+                                               const ParentTexels* parent,
+                                               std::span<const Predictor> predictors,
+                                               PtmCoder coder, CodecScratch* scratch) {
+  if (parent == nullptr || predictors.empty())
+    return encodePtm(tile, options, nullptr, Predictor::kRoot, coder, scratch);
+  std::optional<std::vector<uint8_t>> smallest;
+  for (Predictor predictor : predictors) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
+                             encodePtm(tile, options, parent, predictor, coder, scratch));
+    if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
+  }
+  return std::move(*smallest);
 }
 
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
@@ -272,12 +501,13 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   if (payload.size() < kHeaderBytes)
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: {} bytes, shorter than its header", payload.size()));
-  if (payload[0] > uint8_t(Predictor::kParentBilinear))
+  if (payload[0] > uint8_t(Predictor::kParentCorrected))
     return fail(ErrorCode::kCorrupt, fmt::format("ptm payload: unknown predictor {}", payload[0]));
-  if (payload[1] != 0)
+  if (payload[1] > uint8_t(PtmCoder::kRans))
     return fail(ErrorCode::kCorrupt,
-                fmt::format("ptm payload: reserved byte is {}, must be 0", payload[1]));
+                fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);
+  const PtmCoder coder = PtmCoder(payload[1]);
   const bool has_parent = predictor != Predictor::kRoot;
   if (has_parent && parent == nullptr)
     return fail(ErrorCode::kCorrupt,
@@ -286,15 +516,49 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   AxisMap columns, rows;
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
+  if (predictor == Predictor::kParentCorrected)
+    upsample(channels, parent->texels, columns, rows, state->upsampled);
+  const Walk walk{out.texels.data(),
+                  width,
+                  height,
+                  has_parent ? &parent->texels : nullptr,
+                  &columns,
+                  &rows,
+                  state->upsampled.data()};
+
+  if (coder == PtmCoder::kRans) {
+    const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
+    const size_t params_bytes = size_t(contexts) * channels;
+    if (payload.size() - kHeaderBytes < params_bytes)
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
+                              payload.size(), params_bytes));
+    RansReader reader;
+    const rans::Model* family = rans::models();
+    for (uint32_t c = 0; c < channels; ++c)
+      for (uint32_t k = 0; k < contexts; ++k) {
+        const uint8_t param = payload[kHeaderBytes + c * contexts + k];
+        if (param >= rans::kModelCount)
+          return fail(ErrorCode::kCorrupt,
+                      fmt::format("ptm payload: model {} of context {} in channel {} is not one "
+                                  "of the {}",
+                                  param, k, c, rans::kModelCount));
+        reader.models[c][k] = &family[param];
+      }
+    if (!reader.decoder.start(payload.subspan(kHeaderBytes + params_bytes), channels))
+      return fail(ErrorCode::kCorrupt,
+                  "ptm payload: rANS stream too short for its initial states, or one is out of "
+                  "range");
+    code<false>(predictor, channels, walk, reader);
+    if (!reader.decoder.finishedCleanly(channels))
+      return fail(ErrorCode::kCorrupt,
+                  "ptm payload: rANS stream truncated, corrupt or followed by trailing bytes");
+    return {};
+  }
+
   const SymbolCounts counts =
       countSymbols(width, height, has_parent ? &columns : nullptr, has_parent ? &rows : nullptr);
-
-  state->plane.resize((counts.coded + counts.derived) * channels);
-  Planes planes{};
-  for (uint32_t c = 0; c < channels; ++c) {
-    planes.residuals[c] = state->plane.data() + c * counts.coded;
-    planes.remainders[c] = state->plane.data() + channels * counts.coded + c * counts.derived;
-  }
+  PlaneCoder<false> planes = planesIn<false>(state->plane, channels, counts);
   size_t position = kHeaderBytes;
   auto readStream = [&](uint8_t* symbols, size_t count, const char* what,
                         uint32_t channel) -> Result<void> {
@@ -329,8 +593,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   if (position != payload.size())
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: {} trailing bytes", payload.size() - position));
-  code<false>(predictor, channels, out.texels.data(), width, height,
-              has_parent ? &parent->texels : nullptr, &columns, &rows, planes);
+  code<false>(predictor, channels, walk, planes);
   return {};
 }
 

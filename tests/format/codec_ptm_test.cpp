@@ -12,6 +12,7 @@
 
 #include "format/codec.h"
 #include "format/codec_internal.h"
+#include "format/ptm_rans.h"
 
 namespace tessera::detail {
 namespace {
@@ -124,8 +125,11 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
                                 tile_px, c.border);
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent ? &*parent : nullptr);
             ASSERT_TRUE(payload.has_value()) << payload.error().message;
-            EXPECT_EQ((*payload)[0],
-                      uint8_t(parent ? Predictor::kParentNearest : Predictor::kRoot));
+            if (parent)
+              EXPECT_NE((*payload)[0], uint8_t(Predictor::kRoot));
+            else
+              EXPECT_EQ((*payload)[0], uint8_t(Predictor::kRoot));
+            EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRans));
             Image out = decodeOrDie(*payload, side, channels, parent ? &*parent : nullptr);
             ASSERT_EQ(out.texels, tile.texels)
                 << c.width << "x" << c.height << " border " << c.border << " channels " << channels
@@ -138,17 +142,119 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
   }
 }
 
+constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
+                                           Predictor::kNeighbourMedian,
+                                           Predictor::kParentCorrected};
+constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans};
+
+TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
+  struct Case {
+    uint32_t width, height, border;
+  };
+  for (const Case& c : {Case{133, 77, 0}, Case{97, 130, 1}, Case{71, 69, 2}, Case{101, 99, 3}}) {
+    for (uint32_t channels = 1; channels <= 4; ++channels) {
+      const uint32_t tile_px = 32, side = tile_px + 2 * c.border;
+      PyramidTiles pyramid =
+          makePyramid(c.width, c.height, channels, tile_px, c.border, channels + 7);
+      for (PtmCoder coder : kCoders) {
+        for (Predictor predictor : kParentPredictors) {
+          std::vector<std::vector<Image>> decoded(pyramid.levels.size());
+          for (uint32_t l = uint32_t(pyramid.levels.size()); l-- > 0;) {
+            for (uint32_t y = 0; y < pyramid.tilesY(l); ++y) {
+              for (uint32_t x = 0; x < pyramid.tilesX(l); ++x) {
+                Image tile = pyramid.tile(l, x, y);
+                std::optional<ParentTexels> parent;
+                if (l + 1 < pyramid.levels.size())
+                  parent = parentOf(decoded[l + 1][(y / 2) * pyramid.tilesX(l + 1) + x / 2], x, y,
+                                    tile_px, c.border);
+                auto payload = encodePtm(tile.view(), {}, parent ? &*parent : nullptr, predictor,
+                                         coder, nullptr);
+                ASSERT_TRUE(payload.has_value()) << payload.error().message;
+                EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
+                EXPECT_EQ((*payload)[1], uint8_t(coder));
+                Image out = decodeOrDie(*payload, side, channels, parent ? &*parent : nullptr);
+                ASSERT_EQ(out.texels, tile.texels)
+                    << c.width << "x" << c.height << " border " << c.border << " channels "
+                    << channels << " predictor " << int(predictor) << " coder " << int(coder)
+                    << " tile (" << l << "," << x << "," << y << ")";
+                decoded[l].push_back(std::move(out));
+              }
+            }
+          }
+        }
+      }
+    }
+  }
+}
+
+TEST(PtmCodec, SmallestEncodingIsNoLargerThanAnyOfItsCandidates) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 9);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  const Image child = pyramid.tile(0, 0, 1);
+  ParentTexels parent = parentOf(parent_tile, 0, 1, 128, 0);
+  const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                  Predictor::kParentCorrected};
+  auto smallest =
+      encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kRans, nullptr);
+  ASSERT_TRUE(smallest.has_value());
+  for (Predictor predictor : candidates) {
+    auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRans, nullptr);
+    ASSERT_TRUE(payload.has_value());
+    EXPECT_LE(smallest->size(), payload->size()) << int(predictor);
+  }
+  EXPECT_EQ(decodeOrDie(*smallest, 128, 3, &parent).texels, child.texels);
+  // Without a parent there is nothing to choose: the tile is coded on its own.
+  auto orphan = encodePtmSmallest(child.view(), {}, nullptr, candidates, PtmCoder::kRans, nullptr);
+  ASSERT_TRUE(orphan.has_value());
+  EXPECT_EQ((*orphan)[0], uint8_t(Predictor::kRoot));
+  EXPECT_EQ(decodeOrDie(*orphan, 128, 3, nullptr).texels, child.texels);
+}
+
+TEST(PtmRans, EveryModelIsAProperDistributionAndZigzagIsABijection) {
+  const rans::Model* models = rans::models();
+  for (uint32_t k = 0; k < rans::kModelCount; ++k) {
+    uint32_t sum = 0;
+    for (uint32_t s = 0; s < rans::kAlphabet; ++s) {
+      ASSERT_GE(models[k].freq[s], 1u) << "model " << k << " symbol " << s;
+      EXPECT_EQ(models[k].start[s], sum);
+      for (uint32_t i = 0; i < models[k].freq[s]; ++i)
+        ASSERT_EQ(models[k].symbol_of_slot[sum + i], s);
+      sum += models[k].freq[s];
+    }
+    EXPECT_EQ(sum, rans::kScale) << "model " << k;
+  }
+  // The family runs from near-certain zero to spread-out residuals.
+  EXPECT_GT(models[0].freq[0], rans::kScale * 9 / 10);
+  EXPECT_LT(models[rans::kModelCount - 1].freq[0], rans::kScale / 20);
+  for (uint32_t v = 0; v < 256; ++v) {
+    EXPECT_LT(rans::zigzag(uint8_t(v)), 256u);
+    EXPECT_EQ(rans::unzigzag(rans::zigzag(uint8_t(v))), uint8_t(v));
+  }
+  EXPECT_EQ(rans::zigzag(0), 0u);
+  EXPECT_EQ(rans::zigzag(uint8_t(-1)), 1u);
+  EXPECT_EQ(rans::zigzag(1), 2u);
+}
+
 TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
   PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 1, 5);
   const Image parent_tile = pyramid.tile(1, 0, 0);
   const Image child = pyramid.tile(0, 1, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 0, 128, 1);
-  auto root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, nullptr);
+  auto root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kZstd, nullptr);
   ASSERT_TRUE(root.has_value());
-  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear}) {
-    auto payload = encodePtm(child.view(), {}, &parent, predictor, nullptr);
+  for (Predictor predictor : kParentPredictors) {
+    auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kZstd, nullptr);
     ASSERT_TRUE(payload.has_value()) << payload.error().message;
     EXPECT_LT(payload->size(), root->size()) << int(predictor);
+    EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
+  }
+  auto rans_root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRans, nullptr);
+  ASSERT_TRUE(rans_root.has_value());
+  for (Predictor predictor :
+       {Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+    auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRans, nullptr);
+    ASSERT_TRUE(payload.has_value()) << payload.error().message;
+    EXPECT_LT(payload->size(), rans_root->size()) << int(predictor);
     EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
   }
 }
@@ -171,33 +277,54 @@ struct ChildPayload {
   std::vector<uint8_t> payload;
 };
 
-ChildPayload makeChildPayload(uint32_t channels) {
+// The default encoder's payload, or one with `predictor` and `coder`.
+ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predictor = {},
+                              PtmCoder coder = PtmCoder::kRans) {
   PyramidTiles pyramid = makePyramid(120, 100, channels, 64, 1, 11);
   ChildPayload result{pyramid.tile(1, 0, 0), pyramid.tile(0, 1, 1), {}};
   ParentTexels parent = parentOf(result.parent, 1, 1, 64, 1);
-  result.payload = *encodeTile(Codec::kPtm, result.child.view(), {}, &parent);
+  result.payload = predictor
+                       ? *encodePtm(result.child.view(), {}, &parent, *predictor, coder, nullptr)
+                       : *encodeTile(Codec::kPtm, result.child.view(), {}, &parent);
   return result;
 }
 
+// Every predictor that reads the parent, with each coder: what the truncation and corruption
+// tests sweep.
+std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
+  std::vector<ChildPayload> payloads;
+  for (PtmCoder coder : kCoders)
+    for (Predictor predictor : kParentPredictors)
+      payloads.push_back(makeChildPayload(channels, predictor, coder));
+  return payloads;
+}
+
 TEST(PtmCodec, DecodeRejectsEveryTruncationAndTrailingBytes) {
-  for (uint32_t channels = 1; channels <= 4; ++channels) {
-    ChildPayload tile = makeChildPayload(channels);
-    ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
-    for (size_t length = 0; length < tile.payload.size(); ++length) {
-      // A fresh allocation of exactly `length` bytes, so ASan catches any read past it.
-      std::vector<uint8_t> prefix(tile.payload.begin(), tile.payload.begin() + length);
+  for (uint32_t channels = 1; channels <= 4; ++channels)
+    for (const ChildPayload& tile : everyKindOfChildPayload(channels)) {
+      ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
+      for (size_t length = 0; length < tile.payload.size(); ++length) {
+        // A fresh allocation of exactly `length` bytes, so ASan catches any read past it.
+        std::vector<uint8_t> prefix(tile.payload.begin(), tile.payload.begin() + length);
+        Image out(66, 66, channels);
+        auto decoded = decodeTile(Codec::kPtm, prefix, out, &parent);
+        ASSERT_FALSE(decoded.has_value())
+            << "prefix " << length << " predictor " << int(tile.payload[0]) << " coder "
+            << int(tile.payload[1]);
+        EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
+      }
+      std::vector<uint8_t> longer = tile.payload;
+      longer.push_back(0);
       Image out(66, 66, channels);
-      auto decoded = decodeTile(Codec::kPtm, prefix, out, &parent);
-      ASSERT_FALSE(decoded.has_value()) << "prefix " << length;
-      EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
+      auto decoded = decodeTile(Codec::kPtm, longer, out, &parent);
+      ASSERT_FALSE(decoded.has_value());
+      EXPECT_NE(decoded.error().message.find("trailing"), std::string::npos);
+      // A byte missing from the middle of the stream (the total one short, the tail intact) is
+      // caught too.
+      std::vector<uint8_t> gap = tile.payload;
+      gap.erase(gap.begin() + std::ptrdiff_t(gap.size() / 2));
+      EXPECT_FALSE(decodeTile(Codec::kPtm, gap, out, &parent).has_value());
     }
-    std::vector<uint8_t> longer = tile.payload;
-    longer.push_back(0);
-    Image out(66, 66, channels);
-    auto decoded = decodeTile(Codec::kPtm, longer, out, &parent);
-    ASSERT_FALSE(decoded.has_value());
-    EXPECT_NE(decoded.error().message.find("trailing"), std::string::npos);
-  }
 }
 
 TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
@@ -205,11 +332,18 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
   Image out(66, 66, 3);
   std::vector<uint8_t> bad = tile.payload;
-  bad[0] = 3;
+  bad[0] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = 1;
+  bad[1] = 2;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
+  // A rANS payload's model parameters index a family of rans::kModelCount.
+  bad = tile.payload;
+  ASSERT_EQ(bad[1], uint8_t(PtmCoder::kRans));
+  bad[2] = uint8_t(rans::kModelCount);
+  auto model = decodeTile(Codec::kPtm, bad, out, &parent);
+  ASSERT_FALSE(model.has_value());
+  EXPECT_NE(model.error().message.find("model"), std::string::npos);
   auto orphan = decodeTile(Codec::kPtm, tile.payload, out, nullptr);
   ASSERT_FALSE(orphan.has_value());
   EXPECT_NE(orphan.error().message.find("parent"), std::string::npos);
@@ -228,6 +362,29 @@ TEST(PtmCodec, AParentThatDoesNotFitIsRefusedNotRead) {
   EXPECT_FALSE(decodeTile(Codec::kPtm, tile.payload, out, &wrong_channels).has_value());
 }
 
+TEST(PtmCodec, SingleByteCorruptionOfEveryKindOfPayloadNeverCrashes) {
+  for (uint32_t channels : {1u, 3u, 4u})
+    for (const ChildPayload& tile : everyKindOfChildPayload(channels)) {
+      ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
+      CodecScratch scratch;
+      size_t rejected = 0;
+      for (size_t i = 0; i < tile.payload.size(); ++i) {
+        std::vector<uint8_t> corrupt = tile.payload;
+        corrupt[i] ^= uint8_t(1 + i % 255);
+        Image out(66, 66, channels);
+        rejected += !decodeTile(Codec::kPtm, corrupt, out, &parent, &scratch).has_value();
+      }
+      // rANS checks that every state ends where the encoder started it, so most corruption is
+      // caught; a zstd frame without a checksum decodes changed residuals to other texels.
+      if (tile.payload[1] == uint8_t(PtmCoder::kRans)) {
+        EXPECT_GT(rejected, tile.payload.size() / 2) << "predictor " << int(tile.payload[0]);
+      }
+      Image out(66, 66, channels);
+      ASSERT_TRUE(decodeTile(Codec::kPtm, tile.payload, out, &parent, &scratch).has_value());
+      EXPECT_EQ(out.texels, tile.child.texels);
+    }
+}
+
 TEST(PtmCodec, SingleByteCorruptionNeverCrashesNorPoisonsTheScratch) {
   ChildPayload tile = makeChildPayload(4);
   ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
@@ -242,13 +399,20 @@ TEST(PtmCodec, SingleByteCorruptionNeverCrashesNorPoisonsTheScratch) {
   Image out(66, 66, 4);
   ASSERT_TRUE(decodeTile(Codec::kPtm, tile.payload, out, &parent, &scratch).has_value());
   EXPECT_EQ(out.texels, tile.child.texels);
-  // The codec cannot tell a wrong parent (that is the archive checksum's job); it decodes to
-  // other texels without failing or reading out of range.
+  // The codec cannot be relied on to tell a wrong parent (that is the archive checksum's job):
+  // with zstd it decodes to other texels without failing or reading out of range; with rANS
+  // the changed texels change the contexts, which the final states usually catch.
   Image other_parent = tile.parent;
   other_parent.texels[(size_t(40) * 66 + 40) * 4] ^= 0x55;  // inside the quadrant used
   ParentTexels wrong = parentOf(other_parent, 1, 1, 64, 1);
-  ASSERT_TRUE(decodeTile(Codec::kPtm, tile.payload, out, &wrong).has_value());
-  EXPECT_NE(out.texels, tile.child.texels);
+  ChildPayload zstd_tile = makeChildPayload(4, Predictor::kParentNearest, PtmCoder::kZstd);
+  ASSERT_TRUE(decodeTile(Codec::kPtm, zstd_tile.payload, out, &wrong).has_value());
+  EXPECT_NE(out.texels, zstd_tile.child.texels);
+  auto rans_decoded = decodeTile(Codec::kPtm, tile.payload, out, &wrong);
+  if (rans_decoded.has_value())
+    EXPECT_NE(out.texels, tile.child.texels);
+  else
+    EXPECT_EQ(rans_decoded.error().code, ErrorCode::kCorrupt);
 }
 
 }  // namespace
