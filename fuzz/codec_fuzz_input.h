@@ -4,9 +4,12 @@
 //           bit 5 mode (0: decode the payload, 1: encode the texels, decode, compare)
 //   byte 1: width - 1 (low 6 bits), byte 2: height - 1 (low 6 bits): tiles up to 64x64 keep
 //           each run fast, and the codecs' size-dependent paths are all reached below that
-//   decode mode: bytes 3.. are the payload
+//   decode mode: bytes 3.. are the payload (ptm: the parent's quarter is the payload length's
+//           parity, the same in x and y)
 //   round-trip mode: byte 3 JPEG quality (1 + b % 100), byte 4 bits 0-3 effort (0..9),
-//           bit 4 chroma subsampling; bytes 5.. are texels, repeated to fill the tile
+//           bit 4 chroma subsampling, bits 5 and 6 ptm's parent quarter in x and y; bytes 5..
+//           are texels, repeated to fill the tile
+// ptm gets a fixed parent for square tiles of even side (codec_fuzzer.cpp, fuzzParent).
 
 #include <algorithm>
 #include <cstddef>

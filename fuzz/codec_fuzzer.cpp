@@ -16,10 +16,34 @@ namespace {
   std::abort();
 }
 
+// A ptm tile is decoded against its parent: for a square tile of even side (a stored tile with
+// no border) a parent of the same geometry with a fixed texel pattern, refining the quarter
+// (quadrant_x, quadrant_y); other shapes get none, so only parentless payloads decode. The codec is
+// lossless for any child against any parent, so round trips need no floor-average pyramid.
+struct FuzzParent {
+  Image texels;
+  detail::ParentTexels view;
+  const detail::ParentTexels* get() const { return texels.texels.empty() ? nullptr : &view; }
+};
+
+FuzzParent fuzzParent(const CodecFuzzInput& input, uint32_t quadrant_x, uint32_t quadrant_y) {
+  FuzzParent parent;
+  if (input.codec != Codec::kPtm || input.width_px != input.height_px || input.width_px % 2)
+    return parent;
+  parent.texels = Image(input.width_px, input.height_px, input.channels);
+  for (size_t i = 0; i < parent.texels.texels.size(); ++i)
+    parent.texels.texels[i] = uint8_t(i * 37 + (i >> 7) * 11);
+  parent.view = {parent.texels.view(), quadrant_x & 1, quadrant_y & 1, input.width_px, 0};
+  return parent;
+}
+
 void fuzzDecode(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   Image out(input.width_px, input.height_px, input.channels);
   const size_t expected_bytes = out.texels.size();
-  auto result = detail::decodeTile(input.codec, input.rest, out, nullptr, &scratch);
+  // The payload's length picks the quarter, so a corpus file chooses it without a header byte.
+  const uint32_t quadrant = uint32_t(input.rest.size() & 1);
+  const FuzzParent parent = fuzzParent(input, quadrant, quadrant);
+  auto result = detail::decodeTile(input.codec, input.rest, out, parent.get(), &scratch);
   if (result && out.texels.size() != expected_bytes) die("decode changed the tile size", input);
   if (!result && result.error().message.empty()) die("error without a message", input);
 }
@@ -37,7 +61,8 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   for (size_t i = 0; i < tile.texels.size(); ++i)
     tile.texels[i] = seed.empty() ? 0 : seed[i % seed.size()];
   const detail::CodecFunctions* functions = detail::findCodec(input.codec);
-  auto payload = detail::encodeTile(input.codec, tile.view(), options, nullptr, &scratch);
+  const FuzzParent parent = fuzzParent(input, input.rest[1] >> 5, input.rest[1] >> 6);
+  auto payload = detail::encodeTile(input.codec, tile.view(), options, parent.get(), &scratch);
   if (functions == nullptr) {
     if (payload) die("unimplemented codec encoded", input);
     return;
@@ -45,7 +70,7 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   if (!payload) die("encode failed", input, payload.error().message.c_str());
 
   Image decoded(input.width_px, input.height_px, input.channels);
-  auto result = detail::decodeTile(input.codec, *payload, decoded, nullptr, &scratch);
+  auto result = detail::decodeTile(input.codec, *payload, decoded, parent.get(), &scratch);
   if (!result) die("decode of a fresh payload failed", input, result.error().message.c_str());
   if (functions->lossless) {
     if (decoded.texels != tile.texels) die("lossless round trip changed texels", input);

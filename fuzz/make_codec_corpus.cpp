@@ -49,8 +49,8 @@ int main(int argc, char** argv) {
   }
   const std::filesystem::path dir = argv[1];
   std::filesystem::create_directories(dir);
-  const Codec codecs[] = {Codec::kRaw,  Codec::kZstd, Codec::kLz4,
-                          Codec::kJpeg, Codec::kPng,  Codec::kWebp};
+  const Codec codecs[] = {Codec::kRaw, Codec::kZstd, Codec::kLz4, Codec::kJpeg,
+                          Codec::kPng, Codec::kWebp, Codec::kPtm};
   struct Size {
     uint32_t width, height;
   };
@@ -87,11 +87,46 @@ int main(int argc, char** argv) {
       bytes += input.size();
     }
   }
-  // The unimplemented codec, and an input too short to carry a header.
-  if (!writeFile(dir / "ptm_4x4x3", tessera::fuzz::codecFuzzHeader(Codec::kPtm, 3, 4, 4, false)) ||
-      !writeFile(dir / "short", {0x01}))
-    return 1;
-  files += 2;
+  // ptm coded against a parent (the fuzzer's fixed parent of a square even tile, quarter 0
+  // for an even payload length, 1 for odd), in each mode: nearest parent with zstd, the
+  // smallest with zstd, and with rANS.
+  for (int effort = 1; effort <= 3; ++effort) {
+    for (uint32_t channels = 1; channels <= 4; ++channels) {
+      Image tile = makeTile(16, 16, channels);
+      // The fuzzer's own parent pattern (codec_fuzzer.cpp, fuzzParent).
+      Image parent_texels(16, 16, channels);
+      for (size_t i = 0; i < parent_texels.texels.size(); ++i)
+        parent_texels.texels[i] = uint8_t(i * 37 + (i >> 7) * 11);
+      std::vector<uint8_t> payload;
+      for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
+        const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, 16, 0};
+        tessera::detail::EncodeOptions options;
+        options.effort = effort;
+        auto encoded = tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
+        if (!encoded) {
+          std::fprintf(stderr, "%s\n", encoded.error().message.c_str());
+          return 1;
+        }
+        if ((encoded->size() & 1) == quadrant) {
+          payload = std::move(*encoded);
+          break;
+        }
+      }
+      if (payload.empty()) continue;  // neither quarter gave a payload of the matching parity
+      std::vector<uint8_t> input =
+          tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, 16, 16, false);
+      input.insert(input.end(), payload.begin(), payload.end());
+      if (!writeFile(dir / ("ptm_parent_e" + std::to_string(effort) + "_16x16x" +
+                            std::to_string(channels)),
+                     input))
+        return 1;
+      ++files;
+      bytes += input.size();
+    }
+  }
+  // An input too short to carry a header.
+  if (!writeFile(dir / "short", {0x01})) return 1;
+  ++files;
   std::printf("wrote %zu files, %zu bytes, to %s\n", files, bytes, dir.c_str());
   return 0;
 }

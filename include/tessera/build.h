@@ -24,8 +24,9 @@ struct BuildOptions {
   uint32_t tile_size_px = 256;  ///< power of two, 64..2048
   uint32_t border_px = 0;       ///< 0..16
   Codec codec = Codec::kJpeg;
-  int quality = 85;                ///< JPEG quality 1..100
-  int effort = 0;                  ///< codec effort (zstd level, PNG/WebP effort); 0 = default
+  int quality = 85;  ///< JPEG quality 1..100
+  int effort =
+      0;  ///< codec effort (zstd level, PNG/WebP effort, ptm mode 1-3: docs/codecs.md); 0 = default
   bool chroma_subsampling = true;  ///< JPEG 4:2:0 (true) or 4:4:4
   bool srgb_downsample = false;    ///< average levels in linear light
   TileOrder order = TileOrder::kHilbert;

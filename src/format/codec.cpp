@@ -66,17 +66,34 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
   return {codec, /*needs_parent=*/false, lossless, &encodeChecked<encode>, &decodeChecked<decode>};
 }
 
-// Per tile, the smallest of nearest-parent, neighbour-median and parent-corrected prediction,
-// entropy-coded by rANS: on the codec study's three inputs 5-45 % smaller than nearest-parent
-// with zstd, at a fifth to a ninth of its decode speed (docs/codecs.md, "ptm (6)").
-constexpr Predictor kDefaultPtmPredictors[] = {
+// `effort` picks ptm's point on its size/decode-speed trade-off, measured on the codec study's
+// three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
+// - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
+// - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
+//   prediction, with zstd;
+// - 3 and the default: the same predictors entropy-coded by rANS, 5-45 % smaller than effort 1
+//   but a fifth to a ninth of its decode speed. Bytes are what ptm is for (storage, and remote
+//   refinement over a link), so the smallest is the default.
+constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
-constexpr PtmCoder kDefaultPtmCoder = PtmCoder::kRans;
 
 Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const EncodeOptions& options,
                                               const ParentTexels* parent, CodecScratch* scratch) {
   checkTile(tile);
-  return encodePtmSmallest(tile, options, parent, kDefaultPtmPredictors, kDefaultPtmCoder, scratch);
+  // The effort selects the mode, so zstd's streams keep their measured level.
+  EncodeOptions stream_options = options;
+  stream_options.effort = 0;
+  switch (options.effort) {
+    case 1:
+      return encodePtm(tile, stream_options, parent, Predictor::kParentNearest, PtmCoder::kZstd,
+                       scratch);
+    case 2:
+      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
+                               PtmCoder::kZstd, scratch);
+    default:
+      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
+                               PtmCoder::kRans, scratch);
+  }
 }
 
 Result<void> decodePtmChecked(std::span<const uint8_t> payload, Image& out,
