@@ -210,6 +210,38 @@ TEST(PtmCodec, SmallestEncodingIsNoLargerThanAnyOfItsCandidates) {
   EXPECT_EQ(decodeOrDie(*orphan, 128, 3, nullptr).texels, child.texels);
 }
 
+TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 5);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  const Image child = pyramid.tile(0, 1, 0);
+  ParentTexels parent = parentOf(parent_tile, 1, 0, 128, 0);
+  const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                  Predictor::kParentCorrected};
+  auto payloadAt = [&](int effort) {
+    EncodeOptions options;
+    options.effort = effort;
+    auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
+    EXPECT_TRUE(payload.has_value()) << payload.error().message;
+    EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels) << "effort " << effort;
+    return *payload;
+  };
+  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 1 rANS).
+  const std::vector<uint8_t> fast = payloadAt(1);
+  EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
+  EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
+  const std::vector<uint8_t> zstd_smallest = payloadAt(2);
+  EXPECT_EQ(zstd_smallest[1], uint8_t(PtmCoder::kZstd));
+  EXPECT_EQ(zstd_smallest,
+            *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
+  const std::vector<uint8_t> smallest = payloadAt(0);
+  EXPECT_EQ(smallest[1], uint8_t(PtmCoder::kRans));
+  EXPECT_EQ(smallest,
+            *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kRans, nullptr));
+  EXPECT_EQ(payloadAt(3), smallest);
+  EXPECT_EQ(payloadAt(9), smallest);
+  EXPECT_LE(zstd_smallest.size(), fast.size());
+}
+
 TEST(PtmRans, EveryModelIsAProperDistributionAndZigzagIsABijection) {
   const rans::Model* models = rans::models();
   for (uint32_t k = 0; k < rans::kModelCount; ++k) {
