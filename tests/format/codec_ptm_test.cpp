@@ -8,6 +8,7 @@
 #include <optional>
 #include <vector>
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "format/codec.h"
@@ -104,40 +105,51 @@ Image decodeOrDie(std::span<const uint8_t> payload, uint32_t side, uint32_t chan
   return out;
 }
 
+// Codes every tile of `pyramid` with `encode(tile, parent)` and decodes coarse to fine, each
+// level against the previous level's *decoded* tiles, as a reader does; every texel must come
+// back. `what` names the case in failures.
+template <class Encode>
+void expectCoarseToFineRoundTrip(const PyramidTiles& pyramid, uint32_t channels, Encode&& encode,
+                                 const std::string& what) {
+  const uint32_t side = pyramid.tile_px + 2 * pyramid.border_px;
+  std::vector<std::vector<Image>> decoded(pyramid.levels.size());
+  for (uint32_t l = uint32_t(pyramid.levels.size()); l-- > 0;) {
+    for (uint32_t y = 0; y < pyramid.tilesY(l); ++y) {
+      for (uint32_t x = 0; x < pyramid.tilesX(l); ++x) {
+        Image tile = pyramid.tile(l, x, y);
+        std::optional<ParentTexels> parent;
+        if (l + 1 < pyramid.levels.size())
+          parent = parentOf(decoded[l + 1][(y / 2) * pyramid.tilesX(l + 1) + x / 2], x, y,
+                            pyramid.tile_px, pyramid.border_px);
+        const ParentTexels* parent_texels = parent ? &*parent : nullptr;
+        Result<std::vector<uint8_t>> payload = encode(tile, parent_texels);
+        ASSERT_TRUE(payload.has_value()) << payload.error().message;
+        Image out = decodeOrDie(*payload, side, channels, parent_texels);
+        ASSERT_EQ(out.texels, tile.texels) << what << " tile (" << l << "," << x << "," << y << ")";
+        decoded[l].push_back(std::move(out));
+      }
+    }
+  }
+}
+
 TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedParent) {
   struct Case {
     uint32_t width, height, border;
   };
   for (const Case& c : {Case{200, 131, 0}, Case{129, 67, 1}, Case{157, 99, 3}, Case{64, 64, 2}}) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
-      const uint32_t tile_px = 64, side = tile_px + 2 * c.border;
-      PyramidTiles pyramid = makePyramid(c.width, c.height, channels, tile_px, c.border, channels);
-      // Decode coarse to fine, each level against the previous level's *decoded* tiles, as a
-      // reader does.
-      std::vector<std::vector<Image>> decoded(pyramid.levels.size());
-      for (uint32_t l = uint32_t(pyramid.levels.size()); l-- > 0;) {
-        for (uint32_t y = 0; y < pyramid.tilesY(l); ++y) {
-          for (uint32_t x = 0; x < pyramid.tilesX(l); ++x) {
-            Image tile = pyramid.tile(l, x, y);
-            std::optional<ParentTexels> parent;
-            if (l + 1 < pyramid.levels.size())
-              parent = parentOf(decoded[l + 1][(y / 2) * pyramid.tilesX(l + 1) + x / 2], x, y,
-                                tile_px, c.border);
-            auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent ? &*parent : nullptr);
-            ASSERT_TRUE(payload.has_value()) << payload.error().message;
-            if (parent)
-              EXPECT_NE((*payload)[0], uint8_t(Predictor::kRoot));
-            else
-              EXPECT_EQ((*payload)[0], uint8_t(Predictor::kRoot));
-            EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRans));
-            Image out = decodeOrDie(*payload, side, channels, parent ? &*parent : nullptr);
-            ASSERT_EQ(out.texels, tile.texels)
-                << c.width << "x" << c.height << " border " << c.border << " channels " << channels
-                << " tile (" << l << "," << x << "," << y << ")";
-            decoded[l].push_back(std::move(out));
-          }
-        }
-      }
+      PyramidTiles pyramid = makePyramid(c.width, c.height, channels, 64, c.border, channels);
+      expectCoarseToFineRoundTrip(
+          pyramid, channels,
+          [](const Image& tile, const ParentTexels* parent) {
+            auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
+            if (payload) {
+              EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
+              EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRans));
+            }
+            return payload;
+          },
+          fmt::format("{}x{} border {} channels {}", c.width, c.height, c.border, channels));
     }
   }
 }
@@ -153,34 +165,21 @@ TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   };
   for (const Case& c : {Case{133, 77, 0}, Case{97, 130, 1}, Case{71, 69, 2}, Case{101, 99, 3}}) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
-      const uint32_t tile_px = 32, side = tile_px + 2 * c.border;
-      PyramidTiles pyramid =
-          makePyramid(c.width, c.height, channels, tile_px, c.border, channels + 7);
+      PyramidTiles pyramid = makePyramid(c.width, c.height, channels, 32, c.border, channels + 7);
       for (PtmCoder coder : kCoders) {
         for (Predictor predictor : kParentPredictors) {
-          std::vector<std::vector<Image>> decoded(pyramid.levels.size());
-          for (uint32_t l = uint32_t(pyramid.levels.size()); l-- > 0;) {
-            for (uint32_t y = 0; y < pyramid.tilesY(l); ++y) {
-              for (uint32_t x = 0; x < pyramid.tilesX(l); ++x) {
-                Image tile = pyramid.tile(l, x, y);
-                std::optional<ParentTexels> parent;
-                if (l + 1 < pyramid.levels.size())
-                  parent = parentOf(decoded[l + 1][(y / 2) * pyramid.tilesX(l + 1) + x / 2], x, y,
-                                    tile_px, c.border);
-                auto payload = encodePtm(tile.view(), {}, parent ? &*parent : nullptr, predictor,
-                                         coder, nullptr);
-                ASSERT_TRUE(payload.has_value()) << payload.error().message;
-                EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
-                EXPECT_EQ((*payload)[1], uint8_t(coder));
-                Image out = decodeOrDie(*payload, side, channels, parent ? &*parent : nullptr);
-                ASSERT_EQ(out.texels, tile.texels)
-                    << c.width << "x" << c.height << " border " << c.border << " channels "
-                    << channels << " predictor " << int(predictor) << " coder " << int(coder)
-                    << " tile (" << l << "," << x << "," << y << ")";
-                decoded[l].push_back(std::move(out));
-              }
-            }
-          }
+          expectCoarseToFineRoundTrip(
+              pyramid, channels,
+              [&](const Image& tile, const ParentTexels* parent) {
+                auto payload = encodePtm(tile.view(), {}, parent, predictor, coder, nullptr);
+                if (payload) {
+                  EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
+                  EXPECT_EQ((*payload)[1], uint8_t(coder));
+                }
+                return payload;
+              },
+              fmt::format("{}x{} border {} channels {} predictor {} coder {}", c.width, c.height,
+                          c.border, channels, int(predictor), int(coder)));
         }
       }
     }
