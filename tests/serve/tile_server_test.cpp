@@ -167,6 +167,46 @@ TEST_F(TileServerTest, TranscodedStoredTileHasTheDecodedTexels) {
   EXPECT_EQ(lossy.width_px, info.storedTileSidePx());
 }
 
+// ptm tiles are coded against their parents and no browser decodes them: the tile endpoint
+// serves the stored residual as octet-stream, and `?format=png` and the DZI endpoint transcode
+// the fully decoded texels (the archive decodes each tile's parent chain first).
+TEST(TileServerPtm, TranscodesEveryTileOfAPtmArchiveToItsDecodedTexels) {
+  const std::string path = servedArchive("ptm4", 300, 200, 4, Codec::kPtm, 64, 1);
+  ASSERT_FALSE(path.empty());
+  std::unique_ptr<TileServer> server = startServer({path});
+  ASSERT_NE(server, nullptr);
+  std::shared_ptr<Archive> archive = Archive::openFile(path).value();
+  const ImageInfo& info = archive->images()[0];
+  ASSERT_GE(info.level_count, 3u);
+  // Finest level first, so the server meets children before their parents.
+  for (uint32_t level = 0; level < info.level_count; ++level) {
+    for (uint32_t y = 0; y < info.tilesY(level); ++y) {
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+        const TileId id{0, level, x, y};
+        HttpReply reply =
+            httpRequest(server->port(), fmt::format("/ptm4/0/{}/{}/{}?format=png", level, x, y));
+        ASSERT_EQ(reply.status, 200u) << reply.body;
+        Image got = decodePicture(Codec::kPng, reply.body, info.storedTileSidePx(),
+                                  info.storedTileSidePx(), info.channels);
+        EXPECT_EQ(got.texels, archive->readTile(id).value().texels)
+            << "tile " << level << "," << x << "," << y;
+      }
+    }
+  }
+  const TileId fine{0, 0, 1, 1};
+  const TileEntry entry = archive->tileEntry(fine).value();
+  ASSERT_EQ(entry.kind, TileKind::kEncoded);
+  HttpReply stored = httpRequest(server->port(), "/ptm4/0/0/1/1");
+  ASSERT_EQ(stored.status, 200u);
+  EXPECT_EQ(stored.header("content-type"), "application/octet-stream");
+  EXPECT_EQ(stored.body.size(), entry.length_bytes);
+  // DZI: 300 px -> max level 9 = tessera level 0; tile (0, 0) of 64 px with 1 px overlap.
+  HttpReply dzi = httpRequest(server->port(), "/ptm4/0_files/9/0_0.png");
+  ASSERT_EQ(dzi.status, 200u) << dzi.body;
+  Image expected = archive->readRegion(0, 0, {0, 0, 65, 65}).value();
+  EXPECT_EQ(decodePicture(Codec::kPng, dzi.body, 65, 65, info.channels).texels, expected.texels);
+}
+
 TEST_F(TileServerTest, ArchiveFileWholeAndHead) {
   const std::string bytes = fileBytes(paths_[0]);
   HttpReply whole = httpRequest(port_, "/pngb1.tess");
