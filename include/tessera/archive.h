@@ -75,6 +75,9 @@ class Archive {
   Archive& operator=(const Archive&) = delete;
 
   const std::string& name() const;
+  /// How errors name a tile: "<archive>: tile (level,x,y)", with the image when there are
+  /// several.
+  std::string tileName(const TileId& tile) const;
   const std::vector<ImageInfo>& images() const;
   /// The archive's JSON metadata (docs/format.md, "Metadata").
   const nlohmann::json& metadata() const;

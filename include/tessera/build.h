@@ -25,8 +25,8 @@ struct BuildOptions {
   uint32_t border_px = 0;       ///< 0..16
   Codec codec = Codec::kJpeg;
   int quality = 85;  ///< JPEG quality 1..100
-  int effort =
-      0;  ///< codec effort (zstd level, PNG/WebP effort, ptm mode 1-3: docs/codecs.md); 0 = default
+  /// Codec effort: zstd level, PNG/WebP effort, ptm mode 1-3 (docs/codecs.md); 0 = default.
+  int effort = 0;
   bool chroma_subsampling = true;  ///< JPEG 4:2:0 (true) or 4:4:4
   bool srgb_downsample = false;    ///< average levels in linear light
   TileOrder order = TileOrder::kHilbert;

@@ -34,6 +34,10 @@ uint64_t tileKey(const TileId& tile) {
 
 }  // namespace
 
+std::string Archive::tileName(const TileId& tile) const {
+  return impl_->tileName(tile);
+}
+
 std::string Archive::Impl::tileName(const TileId& tile) const {
   if (records.size() == 1)
     return fmt::format("{}: tile ({},{},{})", name, tile.level, tile.x, tile.y);

@@ -151,13 +151,18 @@ void LoaderPool::queueMissingAncestorsLocked(
   }
 }
 
-bool LoaderPool::waitsForParentLocked(const TileId& id,
-                                      const std::unordered_set<TileId, TileIdHash>& queued,
-                                      Clock::time_point now) const {
+bool LoaderPool::waitsForParentLocked(const TileId& id, Clock::time_point now) {
   if (!needsParent(id)) return false;
   const TileId parent = Archive::parentTile(id);
   if (in_flight_.count(parent)) return true;
-  if (!queued.count(parent)) return false;
+  // The queue's ids, gathered once per take and only when a tile needs them; the set keeps its
+  // buckets from one take to the next.
+  if (!queued_ids_valid_) {
+    queued_ids_.clear();
+    for (const Pending& pending : queue_) queued_ids_.insert(pending.id);
+    queued_ids_valid_ = true;
+  }
+  if (!queued_ids_.count(parent)) return false;
   // A parent waiting out a backoff does not hold its children: they read it themselves and
   // fail with it, naming both tiles, instead of waiting unseen.
   auto retry = retries_.find(parent);
@@ -217,13 +222,11 @@ void LoaderPool::waitIdle() {
 bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
   // Dependent codecs: a tile whose parent is loading or queued waits for it, so it decodes
   // against the cached parent instead of reading the parent a second time.
-  std::unordered_set<TileId, TileIdHash> queued;
-  if (any_dependent_)
-    for (const Pending& pending : queue_) queued.insert(pending.id);
+  queued_ids_valid_ = false;
   for (size_t i = 0; i < queue_.size(); ++i) {
     auto retry = retries_.find(queue_[i].id);
     if (retry != retries_.end() && retry->second.not_before > now) continue;
-    if (any_dependent_ && waitsForParentLocked(queue_[i].id, queued, now)) continue;
+    if (any_dependent_ && waitsForParentLocked(queue_[i].id, now)) continue;
     batch.first = queue_[i].id;
     const uint32_t first_urgency = queue_[i].urgency;
     batch.candidates.clear();
@@ -240,7 +243,7 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
       const TileId& other = queue_[j].id;
       if (other.image == batch.first.image && other.level == batch.first.level &&
           queue_[j].urgency == first_urgency && !retries_.count(other) &&
-          !(any_dependent_ && waitsForParentLocked(other, queued, now)))
+          !(any_dependent_ && waitsForParentLocked(other, now)))
         batch.candidates.push_back(other);
     }
     stats_.queued = queue_.size();
@@ -398,8 +401,9 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
   noteIdleLocked();
   events_.push_back(std::move(event));
   idle_.notify_all();
-  // A finished parent frees the children that waited for it, on any sleeping worker.
-  if (any_dependent_)
+  // A finished parent frees the children that waited for it, on any sleeping worker (level 0
+  // is nobody's parent).
+  if (any_dependent_ && id.level > 0)
     work_ready_.notify_all();
   else if (failed)
     work_ready_.notify_one();
@@ -444,12 +448,8 @@ Result<Image> LoaderPool::decodeParentChain(const TileId& child, CodecScratch& s
   }
   if (base) cache_.unpin(base_id);
   if (!status)
-    return fail(
-        status.error().code,
-        fmt::format(
-            "{}: {}tile ({},{},{}): its parent cannot be decoded: {}", archive.name(),
-            archive.images().size() > 1 ? fmt::format("image {} ", child.image) : std::string(),
-            child.level, child.x, child.y, status.error().message));
+    return fail(status.error().code, fmt::format("{}: its parent cannot be decoded: {}",
+                                                 archive.tileName(child), status.error().message));
   return decoded;
 }
 

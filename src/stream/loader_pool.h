@@ -133,23 +133,22 @@ class LoaderPool {
   /// the coarsest level). Lock-free: reads constant members only.
   bool needsParent(const TileId& id) const;
   /// Whether a dependent tile must wait: its parent is being loaded, or queued and ready to be
-  /// taken (not waiting out a retry backoff). `queued` holds the queue's ids. Under mutex_.
-  bool waitsForParentLocked(const TileId& id, const std::unordered_set<TileId, TileIdHash>& queued,
-                            std::chrono::steady_clock::time_point now) const;
+  /// taken (not waiting out a retry backoff). Under mutex_, within one takeBatchLocked.
+  bool waitsForParentLocked(const TileId& id, std::chrono::steady_clock::time_point now);
   /// Adds to `wanted` and the queue, coarsest first, the ancestors of `request` that a
   /// dependent codec needs and that are neither wanted, cached nor loading. Under mutex_.
   void queueMissingAncestorsLocked(
       const TileRequest& request,
       std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash>& wanted,
       std::chrono::steady_clock::time_point now);
-  /// The decoded parent of `child` when it is not in the cache: reads and decodes the chain
-  /// from the nearest cached ancestor (or the coarsest level) down, counting the bytes and
-  /// reads in `bytes_read` and `reads`. The tiles decoded on the way are not cached.
   /// Decodes a verified payload into `texels`: a dependent codec's tile against its parent,
   /// pinned in the cache for the decode, or decodeParentChain's when the parent is not cached.
   Result<void> decodeItem(const TileId& id, const TileEntry& entry,
                           std::span<const uint8_t> payload, Image& texels, size_t tile_bytes,
                           CodecScratch& scratch);
+  /// The decoded parent of `child` when it is not in the cache: reads and decodes the chain
+  /// from the nearest cached ancestor (or the coarsest level) down, counting the bytes and
+  /// reads in `bytes_read` and `reads`. The tiles decoded on the way are not cached.
   Result<Image> decodeParentChain(const TileId& child, CodecScratch& scratch, uint64_t& bytes_read,
                                   size_t& reads);
   void finish(const TileId& id, LoadEvent event, bool failed);
@@ -185,6 +184,9 @@ class LoaderPool {
   std::vector<ActiveRead*> active_reads_;
   LinkEstimator link_;
   std::unordered_set<TileId, TileIdHash> in_flight_;
+  /// Dependent codecs: the queue's ids, for waitsForParentLocked; valid within one take.
+  std::unordered_set<TileId, TileIdHash> queued_ids_;
+  bool queued_ids_valid_ = false;
   std::unordered_map<TileId, RetryState, TileIdHash> retries_;
   /// Queued tiles whose payloads the byte source was told to fetch ahead, with their payload
   /// bytes; forgotten when the tile finishes or stops being wanted, so a later request hints
