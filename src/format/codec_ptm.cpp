@@ -150,14 +150,28 @@ void upsampleParent(const ImageView& parent, const AxisMap& columns, const AxisM
   }
 }
 
+// Everything a texel walk needs besides the coder.
+struct Walk {
+  uint8_t* texels;
+  uint32_t width, height;
+  const ImageView* parent;
+  const AxisMap* columns;
+  const AxisMap* rows;
+  const int16_t* upsampled;
+};
+
 // One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
 // `texels` and hands symbols to `coder`; decoding takes them from `coder` and writes `texels`.
 // Arithmetic is modulo 256: bit-exact for any input, and for a floor-average pyramid every
 // remainder is 0..3.
 template <bool kEncode, uint32_t kChannels, Predictor kPredictor, class Coder>
-void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageView* parent,
-                const AxisMap* columns, const AxisMap* rows, const int16_t* upsampled,
-                Coder& coder) {
+void codeTexels(const Walk& walk, Coder& coder) {
+  uint8_t* const texels = walk.texels;
+  const uint32_t width = walk.width, height = walk.height;
+  const ImageView* const parent = walk.parent;
+  const AxisMap* const columns = walk.columns;
+  const AxisMap* const rows = walk.rows;
+  const int16_t* const upsampled = walk.upsampled;
   constexpr bool kColourTransform = kChannels >= 3;
   constexpr bool kHasParent = kPredictor != Predictor::kRoot;
   constexpr bool kExpectedRemainder =
@@ -307,34 +321,18 @@ void codeTexels(uint8_t* texels, uint32_t width, uint32_t height, const ImageVie
   }
 }
 
-// Everything a texel walk needs besides the coder.
-struct Walk {
-  uint8_t* texels;
-  uint32_t width, height;
-  const ImageView* parent;
-  const AxisMap* columns;
-  const AxisMap* rows;
-  const int16_t* upsampled;
-};
-
 template <bool kEncode, uint32_t kChannels, class Coder>
 void codeWith(Predictor predictor, const Walk& w, Coder& coder) {
   switch (predictor) {
-    case Predictor::kRoot:
-      return codeTexels<kEncode, kChannels, Predictor::kRoot>(
-          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+    case Predictor::kRoot: return codeTexels<kEncode, kChannels, Predictor::kRoot>(w, coder);
     case Predictor::kParentNearest:
-      return codeTexels<kEncode, kChannels, Predictor::kParentNearest>(
-          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+      return codeTexels<kEncode, kChannels, Predictor::kParentNearest>(w, coder);
     case Predictor::kParentBilinear:
-      return codeTexels<kEncode, kChannels, Predictor::kParentBilinear>(
-          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+      return codeTexels<kEncode, kChannels, Predictor::kParentBilinear>(w, coder);
     case Predictor::kNeighbourMedian:
-      return codeTexels<kEncode, kChannels, Predictor::kNeighbourMedian>(
-          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+      return codeTexels<kEncode, kChannels, Predictor::kNeighbourMedian>(w, coder);
     case Predictor::kParentCorrected:
-      return codeTexels<kEncode, kChannels, Predictor::kParentCorrected>(
-          w.texels, w.width, w.height, w.parent, w.columns, w.rows, w.upsampled, coder);
+      return codeTexels<kEncode, kChannels, Predictor::kParentCorrected>(w, coder);
   }
 }
 
