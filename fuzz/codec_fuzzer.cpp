@@ -17,32 +17,28 @@ namespace {
 }
 
 // A ptm tile is decoded against its parent: for a square tile of even side (a stored tile with
-// no border) a parent of the same geometry with a fixed texel pattern, refining the quarter
-// (quadrant_x, quadrant_y); other shapes get none, so only parentless payloads decode. The codec is
-// lossless for any child against any parent, so round trips need no floor-average pyramid.
+// no border) fuzzParentTexels, refining the header's quarter; other shapes get none, so only
+// parentless payloads decode. The codec is lossless for any child against any parent, so round
+// trips need no floor-average pyramid.
 struct FuzzParent {
   Image texels;
   detail::ParentTexels view;
   const detail::ParentTexels* get() const { return texels.texels.empty() ? nullptr : &view; }
 };
 
-FuzzParent fuzzParent(const CodecFuzzInput& input, uint32_t quadrant_x, uint32_t quadrant_y) {
+FuzzParent fuzzParent(const CodecFuzzInput& input) {
   FuzzParent parent;
   if (input.codec != Codec::kPtm || input.width_px != input.height_px || input.width_px % 2)
     return parent;
-  parent.texels = Image(input.width_px, input.height_px, input.channels);
-  for (size_t i = 0; i < parent.texels.texels.size(); ++i)
-    parent.texels.texels[i] = uint8_t(i * 37 + (i >> 7) * 11);
-  parent.view = {parent.texels.view(), quadrant_x & 1, quadrant_y & 1, input.width_px, 0};
+  parent.texels = fuzzParentTexels(input.width_px, input.channels);
+  parent.view = {parent.texels.view(), input.quadrant_x, input.quadrant_y, input.width_px, 0};
   return parent;
 }
 
 void fuzzDecode(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   Image out(input.width_px, input.height_px, input.channels);
   const size_t expected_bytes = out.texels.size();
-  // The payload's length picks the quarter, so a corpus file chooses it without a header byte.
-  const uint32_t quadrant = uint32_t(input.rest.size() & 1);
-  const FuzzParent parent = fuzzParent(input, quadrant, quadrant);
+  const FuzzParent parent = fuzzParent(input);
   auto result = detail::decodeTile(input.codec, input.rest, out, parent.get(), &scratch);
   if (result && out.texels.size() != expected_bytes) die("decode changed the tile size", input);
   if (!result && result.error().message.empty()) die("error without a message", input);
@@ -61,7 +57,7 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   for (size_t i = 0; i < tile.texels.size(); ++i)
     tile.texels[i] = seed.empty() ? 0 : seed[i % seed.size()];
   const detail::CodecFunctions* functions = detail::findCodec(input.codec);
-  const FuzzParent parent = fuzzParent(input, input.rest[1] >> 5, input.rest[1] >> 6);
+  const FuzzParent parent = fuzzParent(input);
   auto payload = detail::encodeTile(input.codec, tile.view(), options, parent.get(), &scratch);
   if (functions == nullptr) {
     if (payload) die("unimplemented codec encoded", input);

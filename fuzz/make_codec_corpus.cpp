@@ -87,41 +87,31 @@ int main(int argc, char** argv) {
       bytes += input.size();
     }
   }
-  // ptm coded against a parent (the fuzzer's fixed parent of a square even tile, quarter 0
-  // for an even payload length, 1 for odd), in each mode: nearest parent with zstd, the
-  // smallest with zstd, and with rANS.
+  // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
+  // nearest parent with zstd, the smallest with zstd, and with rANS.
   for (int effort = 1; effort <= 3; ++effort) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
-      Image tile = makeTile(16, 16, channels);
-      // The fuzzer's own parent pattern (codec_fuzzer.cpp, fuzzParent).
-      Image parent_texels(16, 16, channels);
-      for (size_t i = 0; i < parent_texels.texels.size(); ++i)
-        parent_texels.texels[i] = uint8_t(i * 37 + (i >> 7) * 11);
-      std::vector<uint8_t> payload;
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
+        const Image tile = makeTile(16, 16, channels);
+        const Image parent_texels = tessera::fuzz::fuzzParentTexels(16, channels);
         const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, 16, 0};
         tessera::detail::EncodeOptions options;
         options.effort = effort;
-        auto encoded = tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
-        if (!encoded) {
-          std::fprintf(stderr, "%s\n", encoded.error().message.c_str());
+        auto payload = tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
+        if (!payload) {
+          std::fprintf(stderr, "%s\n", payload.error().message.c_str());
           return 1;
         }
-        if ((encoded->size() & 1) == quadrant) {
-          payload = std::move(*encoded);
-          break;
-        }
+        std::vector<uint8_t> input =
+            tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, 16, 16, false, quadrant);
+        input.insert(input.end(), payload->begin(), payload->end());
+        if (!writeFile(dir / ("ptm_parent_e" + std::to_string(effort) + "_q" +
+                              std::to_string(quadrant) + "_16x16x" + std::to_string(channels)),
+                       input))
+          return 1;
+        ++files;
+        bytes += input.size();
       }
-      if (payload.empty()) continue;  // neither quarter gave a payload of the matching parity
-      std::vector<uint8_t> input =
-          tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, 16, 16, false);
-      input.insert(input.end(), payload.begin(), payload.end());
-      if (!writeFile(dir / ("ptm_parent_e" + std::to_string(effort) + "_16x16x" +
-                            std::to_string(channels)),
-                     input))
-        return 1;
-      ++files;
-      bytes += input.size();
     }
   }
   // An input too short to carry a header.
