@@ -11,6 +11,7 @@ packages=(
   time           # /usr/bin/time -v: wall time and peak RSS
   nginx-light    # static serving baseline (serve_bench.sh, link_bench.sh)
   wrk            # HTTP load generator (serve_bench.sh)
+  libjxl-dev     # JPEG XL lossless column of the ptm codec study (pyramid_study.sh)
 )
 
 missing=()

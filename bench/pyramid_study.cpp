@@ -7,7 +7,8 @@
 // codec and reports, against the raw base level (level 0 tiles as stored, padding included):
 // the whole pyramid's bytes, ptm's overhead over its own base level, and single-thread decode
 // throughput in megapixels of pyramid per second (ptm decoded coarse to fine against the
-// decoded parents, as a reader does).
+// decoded parents, as a reader does). JPEG XL lossless (libjxl, single-threaded) is a column when
+// the build found libjxl-dev; it is not an archive codec.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -18,6 +19,10 @@
 
 #include <fmt/format.h>
 #include <webp/decode.h>
+#if TESSERA_STUDY_JXL
+#include <jxl/decode.h>
+#include <jxl/encode.h>
+#endif
 
 #include "build/band_reader.h"
 #include "build/downsample.h"
@@ -90,6 +95,94 @@ Image cutTile(const Image& level, uint32_t x, uint32_t y) {
   return tile;
 }
 
+#if TESSERA_STUDY_JXL
+// libjxl's lossless mode on one tile: 8 bits per sample, grey or RGB plus alpha for 2 and 4
+// channels, no parallel runner (the study measures one core).
+class JxlTileCodec {
+ public:
+  JxlTileCodec() : encoder_(JxlEncoderCreate(nullptr)), decoder_(JxlDecoderCreate(nullptr)) {}
+  ~JxlTileCodec() {
+    JxlEncoderDestroy(encoder_);
+    JxlDecoderDestroy(decoder_);
+  }
+  JxlTileCodec(const JxlTileCodec&) = delete;
+  JxlTileCodec& operator=(const JxlTileCodec&) = delete;
+
+  std::optional<std::vector<uint8_t>> encode(const Image& tile, int effort) {
+    JxlEncoderReset(encoder_);
+    const bool alpha = tile.channels == 2 || tile.channels == 4;
+    JxlBasicInfo info;
+    JxlEncoderInitBasicInfo(&info);
+    info.xsize = tile.width_px;
+    info.ysize = tile.height_px;
+    info.bits_per_sample = 8;
+    info.num_color_channels = tile.channels >= 3 ? 3 : 1;
+    info.num_extra_channels = alpha ? 1 : 0;
+    info.alpha_bits = alpha ? 8 : 0;
+    info.uses_original_profile = JXL_TRUE;  // lossless needs the samples as they are
+    if (JxlEncoderSetBasicInfo(encoder_, &info) != JXL_ENC_SUCCESS) return std::nullopt;
+    if (alpha) {
+      JxlExtraChannelInfo extra;
+      JxlEncoderInitExtraChannelInfo(JXL_CHANNEL_ALPHA, &extra);
+      extra.bits_per_sample = 8;
+      if (JxlEncoderSetExtraChannelInfo(encoder_, 0, &extra) != JXL_ENC_SUCCESS)
+        return std::nullopt;
+    }
+    JxlColorEncoding colour;
+    JxlColorEncodingSetToSRGB(&colour, info.num_color_channels == 1);
+    if (JxlEncoderSetColorEncoding(encoder_, &colour) != JXL_ENC_SUCCESS) return std::nullopt;
+    JxlEncoderFrameSettings* settings = JxlEncoderFrameSettingsCreate(encoder_, nullptr);
+    if (JxlEncoderSetFrameLossless(settings, JXL_TRUE) != JXL_ENC_SUCCESS ||
+        JxlEncoderFrameSettingsSetOption(settings, JXL_ENC_FRAME_SETTING_EFFORT, effort) !=
+            JXL_ENC_SUCCESS)
+      return std::nullopt;
+    const JxlPixelFormat format{tile.channels, JXL_TYPE_UINT8, JXL_NATIVE_ENDIAN, 0};
+    if (JxlEncoderAddImageFrame(settings, &format, tile.texels.data(), tile.texels.size()) !=
+        JXL_ENC_SUCCESS)
+      return std::nullopt;
+    JxlEncoderCloseInput(encoder_);
+    std::vector<uint8_t> out(4096);
+    size_t used = 0;
+    for (;;) {
+      uint8_t* next = out.data() + used;
+      size_t available = out.size() - used;
+      const JxlEncoderStatus status = JxlEncoderProcessOutput(encoder_, &next, &available);
+      used = size_t(next - out.data());
+      if (status == JXL_ENC_SUCCESS) break;
+      if (status != JXL_ENC_NEED_MORE_OUTPUT) return std::nullopt;
+      out.resize(out.size() * 2);
+    }
+    out.resize(used);
+    return out;
+  }
+
+  bool decode(const std::vector<uint8_t>& payload, Image& out) {
+    JxlDecoderReset(decoder_);
+    if (JxlDecoderSubscribeEvents(decoder_, JXL_DEC_FULL_IMAGE) != JXL_DEC_SUCCESS ||
+        JxlDecoderSetInput(decoder_, payload.data(), payload.size()) != JXL_DEC_SUCCESS)
+      return false;
+    JxlDecoderCloseInput(decoder_);
+    const JxlPixelFormat format{out.channels, JXL_TYPE_UINT8, JXL_NATIVE_ENDIAN, 0};
+    for (;;) {
+      switch (JxlDecoderProcessInput(decoder_)) {
+        case JXL_DEC_NEED_IMAGE_OUT_BUFFER:
+          if (JxlDecoderSetImageOutBuffer(decoder_, &format, out.texels.data(),
+                                          out.texels.size()) != JXL_DEC_SUCCESS)
+            return false;
+          break;
+        case JXL_DEC_FULL_IMAGE: break;
+        case JXL_DEC_SUCCESS: return true;
+        default: return false;
+      }
+    }
+  }
+
+ private:
+  JxlEncoder* encoder_;
+  JxlDecoder* decoder_;
+};
+#endif
+
 struct Variant {
   std::string name;
   Codec codec;
@@ -97,6 +190,7 @@ struct Variant {
   Predictor predictor;    ///< ptm only
   PtmCoder coder;         ///< ptm only
   bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
+  bool jxl = false;       ///< libjxl lossless at `effort` instead of `codec`
 };
 
 constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
@@ -120,7 +214,7 @@ Tiles cutAll(const std::vector<Image>& pyramid) {
   return tiles;
 }
 
-void study(const std::string& input, double min_seconds, const std::string& only) {
+void study(const std::string& input, double min_seconds, const std::string& only, bool per_level) {
   Image level0 = readInput(input);
   if (level0.texels.empty()) {
     fmt::print(stderr, "{}: cannot read\n", input);
@@ -138,30 +232,66 @@ void study(const std::string& input, double min_seconds, const std::string& only
       "| codec | pyramid / raw base | raw base : pyramid | pyramid over base coded alone | decode "
       "MP/s per core |\n|---|---:|---:|---:|---:|\n");
   const std::vector<Variant> variants = {
-      {"raw", Codec::kRaw, 0, Predictor::kRoot, PtmCoder::kZstd},
-      {"lz4", Codec::kLz4, 0, Predictor::kRoot, PtmCoder::kZstd},
-      {"zstd-1", Codec::kZstd, 1, Predictor::kRoot, PtmCoder::kZstd},
-      {"zstd-3", Codec::kZstd, 3, Predictor::kRoot, PtmCoder::kZstd},
-      {"zstd-9", Codec::kZstd, 9, Predictor::kRoot, PtmCoder::kZstd},
-      {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot, PtmCoder::kZstd},
-      {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot, PtmCoder::kZstd},
-      {"ptm nearest-parent + zstd", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kZstd},
-      {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear, PtmCoder::kZstd},
-      {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kZstd},
-      {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
-      {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
-      {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
-      {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
-      {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
-      {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
+    {"raw", Codec::kRaw, 0, Predictor::kRoot, PtmCoder::kZstd},
+    {"lz4", Codec::kLz4, 0, Predictor::kRoot, PtmCoder::kZstd},
+    {"zstd-1", Codec::kZstd, 1, Predictor::kRoot, PtmCoder::kZstd},
+    {"zstd-3", Codec::kZstd, 3, Predictor::kRoot, PtmCoder::kZstd},
+    {"zstd-9", Codec::kZstd, 9, Predictor::kRoot, PtmCoder::kZstd},
+    {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot, PtmCoder::kZstd},
+    {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot, PtmCoder::kZstd},
+    {"ptm nearest-parent + zstd", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kZstd},
+    {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear, PtmCoder::kZstd},
+    {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kZstd},
+    {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
+    {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
+    {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
+    {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
+    {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
+    {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
+#if TESSERA_STUDY_JXL
+    // libjxl's default effort is 7; 3 is its fast lossless setting.
+    {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, Predictor::kRoot, PtmCoder::kZstd, false, true},
+    {"jpeg-xl lossless (effort 7)", Codec::kRaw, 7, Predictor::kRoot, PtmCoder::kZstd, false, true},
+#endif
   };
+#if TESSERA_STUDY_JXL
+  JxlTileCodec jxl;
+#else
+  fmt::print("(JPEG XL lossless: not built; install libjxl-dev and reconfigure)\n");
+#endif
   CodecScratch scratch;
+  auto encodeVariant =
+      [&](const Variant& variant, const Image& tile, const EncodeOptions& options,
+          const std::optional<ParentTexels>& parent) -> Result<std::vector<uint8_t>> {
+#if TESSERA_STUDY_JXL
+    if (variant.jxl) {
+      std::optional<std::vector<uint8_t>> payload = jxl.encode(tile, variant.effort);
+      if (!payload) return fail(ErrorCode::kInvalidArgument, "libjxl refused the tile");
+      return std::move(*payload);
+    }
+#endif
+    if (variant.smallest)
+      return encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr, kTriedPredictors,
+                               variant.coder, &scratch);
+    if (variant.codec == Codec::kPtm)
+      return encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
+                       variant.coder, &scratch);
+    return encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+  };
+  auto decodeVariant = [&](const Variant& variant, const std::vector<uint8_t>& payload, Image& out,
+                           const std::optional<ParentTexels>& parent) -> bool {
+#if TESSERA_STUDY_JXL
+    if (variant.jxl) return jxl.decode(payload, out);
+#endif
+    return bool(decodeTile(variant.codec, payload, out, parent ? &*parent : nullptr, &scratch));
+  };
   for (const Variant& variant : variants) {
     if (!only.empty() && variant.name.find(only) == std::string::npos) continue;
     const bool ptm = variant.codec == Codec::kPtm;
     const Tiles& tiles = ptm ? floored : rounded;
     std::vector<std::vector<std::vector<uint8_t>>> payloads(tiles.levels.size());
-    double total = 0, level0_bytes = 0;
+    double total = 0;
+    std::vector<double> level_bytes(tiles.levels.size(), 0);
     EncodeOptions options;
     options.effort = variant.effort;
     for (size_t l = tiles.levels.size(); l-- > 0;) {
@@ -173,18 +303,13 @@ void study(const std::string& input, double min_seconds, const std::string& only
           parent = ParentTexels{tiles.levels[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
                                 x & 1, y & 1, kTilePx, 0};
         }
-        Result<std::vector<uint8_t>> payload =
-            variant.smallest ? encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr,
-                                                 kTriedPredictors, variant.coder, &scratch)
-            : ptm ? encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
-                              variant.coder, &scratch)
-                  : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+        Result<std::vector<uint8_t>> payload = encodeVariant(variant, tile, options, parent);
         if (!payload) {
           fmt::print(stderr, "{}: {}\n", variant.name, payload.error().message);
           return;
         }
         total += payload->size();
-        if (l == 0) level0_bytes += payload->size();
+        level_bytes[l] += payload->size();
         payloads[l].push_back(std::move(*payload));
       }
     }
@@ -205,9 +330,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
             parent = ParentTexels{decoded[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
                                   x & 1, y & 1, kTilePx, 0};
           }
-          if (!decodeTile(variant.codec, payloads[l][i], decoded[l][i], parent ? &*parent : nullptr,
-                          &scratch))
-            exact = false;
+          if (!decodeVariant(variant, payloads[l][i], decoded[l][i], parent)) exact = false;
         }
       }
       ++rounds;
@@ -223,13 +346,28 @@ void study(const std::string& input, double min_seconds, const std::string& only
     for (const Image& tile : tiles.levels[0]) {
       auto alone =
           ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
-              : encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+              : encodeVariant(variant, tile, options, std::nullopt);
       base_alone += alone ? double(alone->size()) : 0;
     }
-    (void)level0_bytes;
     fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} |\n", variant.name, total / raw_base,
                raw_base / total, 100.0 * (total - base_alone) / base_alone,
                pyramid_px * rounds / elapsed / 1e6, exact ? "" : " (NOT EXACT)");
+    if (per_level) {
+      // Where the overhead lies: each level's bytes as coded in the pyramid, and the same level
+      // coded on its own, both in bits per texel.
+      for (size_t l = 0; l < tiles.levels.size(); ++l) {
+        double alone = 0;
+        for (const Image& tile : tiles.levels[l]) {
+          auto coded = ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot,
+                                       variant.coder, &scratch)
+                           : encodeVariant(variant, tile, options, std::nullopt);
+          alone += coded ? double(coded->size()) : 0;
+        }
+        const double texels = double(tiles.levels[l].size()) * kTilePx * kTilePx;
+        fmt::print("|   level {} | {:.3f} bits/texel in the pyramid | {:.3f} alone | | |\n", l,
+                   8 * level_bytes[l] / texels, 8 * alone / texels);
+      }
+    }
   }
 }
 
@@ -237,12 +375,17 @@ void study(const std::string& input, double min_seconds, const std::string& only
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr, "usage: {} [--seconds S] [--only NAME-PART] INPUT...\n", argv[0]);
+    fmt::print(stderr, "usage: {} [--seconds S] [--only NAME-PART] [--levels] INPUT...\n", argv[0]);
     return 2;
   }
   double seconds = 0.5;
   std::string only;
+  bool per_level = false;
   for (int i = 1; i < argc; ++i) {
+    if (std::string(argv[i]) == "--levels") {
+      per_level = true;
+      continue;
+    }
     if (std::string(argv[i]) == "--only" && i + 1 < argc) {
       only = argv[++i];
       continue;
@@ -251,7 +394,7 @@ int main(int argc, char** argv) {
       seconds = std::atof(argv[++i]);
       continue;
     }
-    study(argv[i], seconds, only);
+    study(argv[i], seconds, only, per_level);
   }
   return 0;
 }
