@@ -18,8 +18,9 @@ inline constexpr uint32_t kScale = 1u << kScaleBits;
 /// Symbols 0..62 are zigzag residuals; 63 escapes a residual of 63..255, sent as 8 uniform bits.
 inline constexpr uint32_t kAlphabet = 64;
 inline constexpr uint32_t kEscape = kAlphabet - 1;
-/// Distributions in the family; a context's parameter byte is below this.
-inline constexpr uint32_t kModelCount = 64;
+/// Distributions in the family: every value of a context's parameter byte names one (models
+/// 0-63 are the first family's, so payloads written with it decode unchanged).
+inline constexpr uint32_t kModelCount = 256;
 /// The lower bound of the state between symbols, and the value every state starts at.
 inline constexpr uint32_t kLower = 1u << 23;
 
