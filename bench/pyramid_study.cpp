@@ -248,6 +248,14 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
     {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
     {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
+    {"ptm nearest-parent + rANS chained", Codec::kPtm, 0, Predictor::kParentNearest,
+     PtmCoder::kRansChained},
+    {"ptm neighbour-median + rANS chained", Codec::kPtm, 0, Predictor::kNeighbourMedian,
+     PtmCoder::kRansChained},
+    {"ptm parent-corrected + rANS chained", Codec::kPtm, 0, Predictor::kParentCorrected,
+     PtmCoder::kRansChained},
+    {"ptm smallest of 1/3/4 + rANS chained", Codec::kPtm, 0, Predictor::kRoot,
+     PtmCoder::kRansChained, true},
 #if TESSERA_STUDY_JXL
     // libjxl's default effort is 7; 3 is its fast lossless setting.
     {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, Predictor::kRoot, PtmCoder::kZstd, false, true},

@@ -12,6 +12,7 @@
 
 #include "codec_fuzz_input.h"
 #include "format/codec.h"
+#include "format/codec_internal.h"
 
 namespace {
 
@@ -88,8 +89,9 @@ int main(int argc, char** argv) {
     }
   }
   // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
-  // nearest parent with zstd, the smallest with zstd, and with rANS.
-  for (int effort = 1; effort <= 3; ++effort) {
+  // nearest parent with zstd, the smallest with zstd, with rANS (coder 1, "e0", which no effort
+  // selects any more but every reader decodes) and with chained rANS (coder 2).
+  for (int effort = 0; effort <= 3; ++effort) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
         const Image tile = makeTile(16, 16, channels);
@@ -97,7 +99,15 @@ int main(int argc, char** argv) {
         const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, 16, 0};
         tessera::detail::EncodeOptions options;
         options.effort = effort;
-        auto payload = tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
+        constexpr tessera::detail::Predictor kCandidates[] = {
+            tessera::detail::Predictor::kParentNearest,
+            tessera::detail::Predictor::kNeighbourMedian,
+            tessera::detail::Predictor::kParentCorrected};
+        auto payload =
+            effort == 0
+                ? tessera::detail::encodePtmSmallest(tile.view(), options, &parent, kCandidates,
+                                                     tessera::detail::PtmCoder::kRans, nullptr)
+                : tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
         if (!payload) {
           std::fprintf(stderr, "%s\n", payload.error().message.c_str());
           return 1;

@@ -110,6 +110,9 @@ enum class Predictor : uint8_t {
 enum class PtmCoder : uint8_t {
   kZstd = 0,  ///< one zstd frame per channel for residuals, one for remainders
   kRans = 1,  ///< rANS over the symbols, each modelled by its context (local activity)
+  /// rANS with green coded first and each later channel's context raised or lowered by the
+  /// residual coded before it in the same texel
+  kRansChained = 2,
 };
 
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec

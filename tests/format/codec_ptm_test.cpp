@@ -145,7 +145,7 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
-              EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRans));
+              EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRansChained));
             }
             return payload;
           },
@@ -157,7 +157,7 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
 constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
                                            Predictor::kNeighbourMedian,
                                            Predictor::kParentCorrected};
-constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans};
+constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans, PtmCoder::kRansChained};
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   struct Case {
@@ -224,7 +224,7 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
     EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels) << "effort " << effort;
     return *payload;
   };
-  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 1 rANS).
+  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 2 rANS with chained contexts).
   const std::vector<uint8_t> fast = payloadAt(1);
   EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
   EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
@@ -233,9 +233,9 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
   const std::vector<uint8_t> smallest = payloadAt(0);
-  EXPECT_EQ(smallest[1], uint8_t(PtmCoder::kRans));
-  EXPECT_EQ(smallest,
-            *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kRans, nullptr));
+  EXPECT_EQ(smallest[1], uint8_t(PtmCoder::kRansChained));
+  EXPECT_EQ(smallest, *encodePtmSmallest(child.view(), {}, &parent, candidates,
+                                         PtmCoder::kRansChained, nullptr));
   EXPECT_EQ(payloadAt(3), smallest);
   EXPECT_EQ(payloadAt(9), smallest);
   EXPECT_LE(zstd_smallest.size(), fast.size());
@@ -279,15 +279,39 @@ TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
     EXPECT_LT(payload->size(), root->size()) << int(predictor);
     EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
   }
-  auto rans_root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRans, nullptr);
-  ASSERT_TRUE(rans_root.has_value());
-  for (Predictor predictor :
-       {Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
-    auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRans, nullptr);
-    ASSERT_TRUE(payload.has_value()) << payload.error().message;
-    EXPECT_LT(payload->size(), rans_root->size()) << int(predictor);
-    EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
+  for (PtmCoder coder : {PtmCoder::kRans, PtmCoder::kRansChained}) {
+    auto rans_root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, coder, nullptr);
+    ASSERT_TRUE(rans_root.has_value());
+    for (Predictor predictor :
+         {Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+      auto payload = encodePtm(child.view(), {}, &parent, predictor, coder, nullptr);
+      ASSERT_TRUE(payload.has_value()) << payload.error().message;
+      EXPECT_LT(payload->size(), rans_root->size()) << int(predictor) << " coder " << int(coder);
+      EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
+    }
   }
+}
+
+TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
+  // Texels are either flat grey or carry independent noise in every channel, scattered so
+  // that the neighbourhood's activity cannot tell which: only the residual already coded in
+  // the same texel can. Coder 2 codes green first and lets it choose the others' contexts.
+  Image tile(64, 64, 3);
+  uint32_t random = 17;
+  for (size_t i = 0; i < tile.texels.size(); i += 3) {
+    const bool noisy = nextRandom(random) % 4 == 0;
+    for (size_t c = 0; c < 3; ++c)
+      tile.texels[i + c] = uint8_t(noisy ? 128 + int(nextRandom(random) % 41) - 20 : 128);
+  }
+  auto per_channel =
+      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRans, nullptr);
+  auto chained =
+      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRansChained, nullptr);
+  ASSERT_TRUE(per_channel.has_value());
+  ASSERT_TRUE(chained.has_value());
+  EXPECT_LT(chained->size() * 10, per_channel->size() * 9)
+      << chained->size() << " against " << per_channel->size();
+  EXPECT_EQ(decodeOrDie(*chained, 64, 3, nullptr).texels, tile.texels);
 }
 
 TEST(PtmCodec, ARemainderOutsideZeroToThreeStillDecodesExactly) {
@@ -366,13 +390,13 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad[0] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = 2;
+  bad[1] = 3;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   // Every model byte names a model of the family; one changed under a used context (the first
-  // position's flattest class in channel 0, which this smooth tile uses) leaves the rANS stream
+  // position's flattest class in slot 0, which this smooth tile uses) leaves the rANS stream
   // unfinished.
   bad = tile.payload;
-  ASSERT_EQ(bad[1], uint8_t(PtmCoder::kRans));
+  ASSERT_EQ(bad[1], uint8_t(PtmCoder::kRansChained));
   bad[2] = uint8_t(bad[2] ^ 0x40);
   auto model = decodeTile(Codec::kPtm, bad, out, &parent);
   ASSERT_FALSE(model.has_value());
@@ -409,7 +433,7 @@ TEST(PtmCodec, SingleByteCorruptionOfEveryKindOfPayloadNeverCrashes) {
       }
       // rANS checks that every state ends where the encoder started it, so most corruption is
       // caught; a zstd frame without a checksum decodes changed residuals to other texels.
-      if (tile.payload[1] == uint8_t(PtmCoder::kRans)) {
+      if (tile.payload[1] != uint8_t(PtmCoder::kZstd)) {
         EXPECT_GT(rejected, tile.payload.size() / 2) << "predictor " << int(tile.payload[0]);
       }
       Image out(66, 66, channels);
