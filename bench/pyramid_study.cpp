@@ -191,6 +191,7 @@ struct Variant {
   PtmCoder coder;         ///< ptm only
   bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
   bool jxl = false;       ///< libjxl lossless at `effort` instead of `codec`
+  bool as_built = false;  ///< ptm only: the codec's own encoder at `effort`, as `tessera build`
 };
 
 constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
@@ -230,7 +231,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
              raw_base / 1e6, pyramid_px / 1e6);
   fmt::print(
       "| codec | pyramid / raw base | raw base : pyramid | pyramid over base coded alone | decode "
-      "MP/s per core |\n|---|---:|---:|---:|---:|\n");
+      "MP/s per core | encode MP/s per core |\n|---|---:|---:|---:|---:|---:|\n");
   const std::vector<Variant> variants = {
     {"raw", Codec::kRaw, 0, Predictor::kRoot, PtmCoder::kZstd},
     {"lz4", Codec::kLz4, 0, Predictor::kRoot, PtmCoder::kZstd},
@@ -256,6 +257,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
      PtmCoder::kRansChained},
     {"ptm smallest of 1/3/4 + rANS chained", Codec::kPtm, 0, Predictor::kRoot,
      PtmCoder::kRansChained, true},
+    {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0, Predictor::kRoot,
+     PtmCoder::kRansChained, false, false, true},
 #if TESSERA_STUDY_JXL
     // libjxl's default effort is 7; 3 is its fast lossless setting.
     {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, Predictor::kRoot, PtmCoder::kZstd, false, true},
@@ -278,6 +281,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
       return std::move(*payload);
     }
 #endif
+    if (variant.as_built)
+      return encodeTile(Codec::kPtm, tile.view(), options, parent ? &*parent : nullptr, &scratch);
     if (variant.smallest)
       return encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr, kTriedPredictors,
                                variant.coder, &scratch);
@@ -302,6 +307,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
     std::vector<double> level_bytes(tiles.levels.size(), 0);
     EncodeOptions options;
     options.effort = variant.effort;
+    const auto encode_start = std::chrono::steady_clock::now();
     for (size_t l = tiles.levels.size(); l-- > 0;) {
       for (size_t i = 0; i < tiles.levels[l].size(); ++i) {
         const Image& tile = tiles.levels[l][i];
@@ -321,6 +327,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
         payloads[l].push_back(std::move(*payload));
       }
     }
+    const double encode_seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - encode_start).count();
     // Decode the whole pyramid, coarse to fine, until min_seconds have passed.
     std::vector<std::vector<Image>> decoded(tiles.levels.size());
     for (size_t l = 0; l < tiles.levels.size(); ++l)
@@ -352,27 +360,29 @@ void study(const std::string& input, double min_seconds, const std::string& only
     // parent-coded level 0.
     double base_alone = 0;
     for (const Image& tile : tiles.levels[0]) {
-      auto alone =
-          ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
-              : encodeVariant(variant, tile, options, std::nullopt);
+      auto alone = ptm && !variant.as_built ? encodePtm(tile.view(), options, nullptr,
+                                                        Predictor::kRoot, variant.coder, &scratch)
+                                            : encodeVariant(variant, tile, options, std::nullopt);
       base_alone += alone ? double(alone->size()) : 0;
     }
-    fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} |\n", variant.name, total / raw_base,
-               raw_base / total, 100.0 * (total - base_alone) / base_alone,
-               pyramid_px * rounds / elapsed / 1e6, exact ? "" : " (NOT EXACT)");
+    fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} | {:.1f} |\n", variant.name,
+               total / raw_base, raw_base / total, 100.0 * (total - base_alone) / base_alone,
+               pyramid_px * rounds / elapsed / 1e6, exact ? "" : " (NOT EXACT)",
+               pyramid_px / encode_seconds / 1e6);
     if (per_level) {
       // Where the overhead lies: each level's bytes as coded in the pyramid, and the same level
       // coded on its own, both in bits per texel.
       for (size_t l = 0; l < tiles.levels.size(); ++l) {
         double alone = 0;
         for (const Image& tile : tiles.levels[l]) {
-          auto coded = ptm ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot,
+          auto coded = ptm && !variant.as_built
+                           ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot,
                                        variant.coder, &scratch)
                            : encodeVariant(variant, tile, options, std::nullopt);
           alone += coded ? double(coded->size()) : 0;
         }
         const double texels = double(tiles.levels[l].size()) * kTilePx * kTilePx;
-        fmt::print("|   level {} | {:.3f} bits/texel in the pyramid | {:.3f} alone | | |\n", l,
+        fmt::print("|   level {} | {:.3f} bits/texel in the pyramid | {:.3f} alone | | | |\n", l,
                    8 * level_bytes[l] / texels, 8 * alone / texels);
       }
     }

@@ -89,25 +89,33 @@ int main(int argc, char** argv) {
     }
   }
   // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
-  // nearest parent with zstd, the smallest with zstd, with rANS (coder 1, "e0", which no effort
-  // selects any more but every reader decodes) and with chained rANS (coder 2).
-  for (int effort = 0; effort <= 3; ++effort) {
+  // the encoder at efforts 1 (nearest parent, zstd), 2 (smallest, zstd) and 3 (smallest, rANS,
+  // whichever coder the default picks), and each rANS coder forced ("c1", "c2"), so both are
+  // seeded whatever the default picks for these small tiles.
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2"};
+  for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
         const Image tile = makeTile(16, 16, channels);
         const Image parent_texels = tessera::fuzz::fuzzParentTexels(16, channels);
         const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, 16, 0};
-        tessera::detail::EncodeOptions options;
-        options.effort = effort;
         constexpr tessera::detail::Predictor kCandidates[] = {
             tessera::detail::Predictor::kParentNearest,
             tessera::detail::Predictor::kNeighbourMedian,
             tessera::detail::Predictor::kParentCorrected};
-        auto payload =
-            effort == 0
-                ? tessera::detail::encodePtmSmallest(tile.view(), options, &parent, kCandidates,
-                                                     tessera::detail::PtmCoder::kRans, nullptr)
-                : tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
+        auto encode = [&]() {
+          tessera::detail::EncodeOptions options;
+          if (mode[0] == 'e') {
+            options.effort = mode[1] - '0';
+            return tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
+          }
+          return tessera::detail::encodePtmSmallest(tile.view(), options, &parent, kCandidates,
+                                                    mode == "c1"
+                                                        ? tessera::detail::PtmCoder::kRans
+                                                        : tessera::detail::PtmCoder::kRansChained,
+                                                    nullptr);
+        };
+        auto payload = encode();
         if (!payload) {
           std::fprintf(stderr, "%s\n", payload.error().message.c_str());
           return 1;
@@ -115,8 +123,8 @@ int main(int argc, char** argv) {
         std::vector<uint8_t> input =
             tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, 16, 16, false, quadrant);
         input.insert(input.end(), payload->begin(), payload->end());
-        if (!writeFile(dir / ("ptm_parent_e" + std::to_string(effort) + "_q" +
-                              std::to_string(quadrant) + "_16x16x" + std::to_string(channels)),
+        if (!writeFile(dir / ("ptm_parent_" + mode + "_q" + std::to_string(quadrant) + "_16x16x" +
+                              std::to_string(channels)),
                        input))
           return 1;
         ++files;

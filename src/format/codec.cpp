@@ -71,10 +71,12 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
 //   prediction, with zstd;
-// - 3 and the default: the same predictors entropy-coded by rANS with chained channel contexts
-//   (coder 2), 8-55 % smaller than effort 1 but a fifth to a ninth of its decode speed. Bytes are
-//   what ptm is for (storage, and remote refinement over a link), so the smallest is the
+// - 3 and the default: the same predictors entropy-coded by rANS, with chained channel
+//   contexts (coder 2) where they save at least 3 % of the tile and per-channel contexts
+//   (coder 1) elsewhere; smaller than effort 1 but a fifth to a ninth of its decode speed. Bytes
+//   are what ptm is for (storage, and remote refinement over a link), so the smallest is the
 //   default.
+constexpr size_t kChainedMaxPercent = 97;
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 
@@ -91,9 +93,21 @@ Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const Encod
     case 2:
       return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
                                PtmCoder::kZstd, scratch);
-    default:
-      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
-                               PtmCoder::kRansChained, scratch);
+    default: {
+      size_t chained_bytes = 0, plain_bytes = 0;
+      TESSERA_ASSIGN_OR_RETURN(
+          Predictor predictor,
+          smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
+                               PtmCoder::kRansChained, scratch, &chained_bytes));
+      TESSERA_ASSIGN_OR_RETURN(plain_bytes, estimatePtmBytes(tile, stream_options, parent,
+                                                             predictor, PtmCoder::kRans, scratch));
+      // Chained contexts serialise a texel's channels, so coder 2 decodes 7-27 % slower than
+      // coder 1: it has to save at least 3 % of the tile to be worth it.
+      const PtmCoder coder = chained_bytes * 100 <= plain_bytes * kChainedMaxPercent
+                                 ? PtmCoder::kRansChained
+                                 : PtmCoder::kRans;
+      return encodePtm(tile, stream_options, parent, predictor, coder, scratch);
+    }
   }
 }
 

@@ -127,6 +127,17 @@ Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const Enco
                                                const ParentTexels* parent,
                                                std::span<const Predictor> predictors,
                                                PtmCoder coder, CodecScratch* scratch);
+/// The size encodePtm's payload would have, without coding it where that can be saved: to
+/// within a few bytes for the rANS coders (walk and model choice only), exactly for zstd.
+Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& options,
+                                const ParentTexels* parent, Predictor predictor, PtmCoder coder,
+                                CodecScratch* scratch);
+/// Which of `predictors` gives the smallest payload with `coder` by estimatePtmBytes (kRoot
+/// without a parent); its estimate goes to `estimated_bytes` when given.
+Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent,
+                                       std::span<const Predictor> predictors, PtmCoder coder,
+                                       CodecScratch* scratch, size_t* estimated_bytes);
 /// Decodes any ptm payload; `parent` is required unless the payload is kRoot.
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
                        CodecScratch* scratch);

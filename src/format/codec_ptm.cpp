@@ -479,9 +479,16 @@ Result<void> decodeRans(std::span<const uint8_t> payload, Predictor predictor, u
 
 }  // namespace
 
-Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
-                                       const ParentTexels* parent, Predictor predictor,
-                                       PtmCoder coder, CodecScratch* scratch) {
+namespace {
+
+// encodePtm, or with `estimated_bytes` and a rANS coder only the payload's size to within a
+// few bytes: the texel walk and the model choice, without the rANS pass (a quarter of a
+// tile's encoding time), for choosing between predictors and coders.
+Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
+                                                 const EncodeOptions& options,
+                                                 const ParentTexels* parent, Predictor predictor,
+                                                 PtmCoder coder, CodecScratch* scratch,
+                                                 size_t* estimated_bytes) {
   ScratchRef state(scratch);
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
@@ -515,7 +522,12 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
     }
     const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
     std::vector<uint8_t> params;
-    rans::chooseModels(state->plane, state->contexts, channels, contexts, params);
+    const double bits =
+        rans::chooseModels(state->plane, state->contexts, channels, contexts, params);
+    if (estimated_bytes != nullptr) {
+      *estimated_bytes = payload.size() + params.size() + size_t(bits / 8) + 4 * channels;
+      return std::vector<uint8_t>{};
+    }
     payload.insert(payload.end(), params.begin(), params.end());
     rans::encode(state->plane, state->contexts, channels, contexts, params, state->compressed,
                  payload);
@@ -544,7 +556,50 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
   if (has_parent)
     for (uint32_t c = 0; c < channels; ++c)
       TESSERA_TRY(addStream(starts.remainders[c], counts.derived));
+  if (estimated_bytes != nullptr) *estimated_bytes = payload.size();
   return payload;
+}
+
+}  // namespace
+
+Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent, Predictor predictor,
+                                       PtmCoder coder, CodecScratch* scratch) {
+  return encodePtmOrEstimate(tile, options, parent, predictor, coder, scratch, nullptr);
+}
+
+Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& options,
+                                const ParentTexels* parent, Predictor predictor, PtmCoder coder,
+                                CodecScratch* scratch) {
+  size_t bytes = 0;
+  TESSERA_TRY(encodePtmOrEstimate(tile, options, parent, predictor, coder, scratch, &bytes));
+  return bytes;
+}
+
+Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent,
+                                       std::span<const Predictor> predictors, PtmCoder coder,
+                                       CodecScratch* scratch, size_t* estimated_bytes) {
+  if (parent == nullptr || predictors.empty()) {
+    if (estimated_bytes != nullptr) {
+      TESSERA_ASSIGN_OR_RETURN(
+          *estimated_bytes,
+          estimatePtmBytes(tile, options, nullptr, Predictor::kRoot, coder, scratch));
+    }
+    return Predictor::kRoot;
+  }
+  Predictor best = predictors[0];
+  size_t best_bytes = SIZE_MAX;
+  for (Predictor predictor : predictors) {
+    TESSERA_ASSIGN_OR_RETURN(size_t bytes,
+                             estimatePtmBytes(tile, options, parent, predictor, coder, scratch));
+    if (bytes < best_bytes) {
+      best = predictor;
+      best_bytes = bytes;
+    }
+  }
+  if (estimated_bytes != nullptr) *estimated_bytes = best_bytes;
+  return best;
 }
 
 Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
@@ -553,13 +608,19 @@ Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const Enco
                                                PtmCoder coder, CodecScratch* scratch) {
   if (parent == nullptr || predictors.empty())
     return encodePtm(tile, options, nullptr, Predictor::kRoot, coder, scratch);
-  std::optional<std::vector<uint8_t>> smallest;
-  for (Predictor predictor : predictors) {
-    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
-                             encodePtm(tile, options, parent, predictor, coder, scratch));
-    if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
+  if (coder == PtmCoder::kZstd) {
+    std::optional<std::vector<uint8_t>> smallest;
+    for (Predictor predictor : predictors) {
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
+                               encodePtm(tile, options, parent, predictor, coder, scratch));
+      if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
+    }
+    return std::move(*smallest);
   }
-  return std::move(*smallest);
+  // rANS: chosen by estimate, then coded once.
+  TESSERA_ASSIGN_OR_RETURN(Predictor best, smallestPtmPredictor(tile, options, parent, predictors,
+                                                                coder, scratch, nullptr));
+  return encodePtm(tile, options, parent, best, coder, scratch);
 }
 
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,

@@ -1,5 +1,6 @@
 #include "ptm_rans.h"
 
+#include <algorithm>
 #include <cmath>
 #include <iterator>
 #include <memory>
@@ -17,6 +18,7 @@ namespace {
 constexpr uint64_t kFirstMeanQ16 = 655;
 constexpr uint64_t kMeanStepQ16 = 75235;
 constexpr uint32_t kMeansPerKind = 64;
+constexpr uint32_t kCoarseStep = 8;
 
 struct Kind {
   bool symmetric;
@@ -24,6 +26,26 @@ struct Kind {
 };
 constexpr Kind kKinds[] = {{false, 0}, {true, 0}, {true, 1}, {true, -1}};
 static_assert(std::size(kKinds) * kMeansPerKind == kModelCount);
+
+// With shift = ceil(log2(freq)), rcp_freq = ceil(2^(shift + 31) / freq) makes the quotient
+// exact for every state below 2^31 (Giesen, ryg_rans). A frequency of 1 cannot be reached that
+// way: rcp_freq = 2^32 - 1 gives q = x - 1, and the bias adds back kScale - 1.
+EncodeStep encodeStep(uint32_t start, uint32_t freq) {
+  EncodeStep step;
+  step.cmpl_freq = uint16_t(kScale - freq);
+  if (freq < 2) {
+    step.rcp_freq = ~0u;
+    step.rcp_shift = 0;
+    step.bias = uint16_t(start + kScale - 1);
+  } else {
+    uint32_t shift = 0;
+    while (freq > (1u << shift)) ++shift;
+    step.rcp_freq = uint32_t(((uint64_t(1) << (shift + 31)) + freq - 1) / freq);
+    step.rcp_shift = shift - 1;
+    step.bias = uint16_t(start);
+  }
+  return step;
+}
 
 void buildModel(uint64_t mean_q16, Kind kind, Model& model) {
   const uint64_t theta_q16 = (mean_q16 << 16) / (65536 + mean_q16);
@@ -59,6 +81,7 @@ void buildModel(uint64_t mean_q16, Kind kind, Model& model) {
     for (uint32_t i = 0; i < model.freq[s]; ++i) model.symbol_of_slot[start + i] = uint8_t(s);
     start += model.freq[s];
     model.cost_bits[s] = float(kScaleBits - std::log2(double(model.freq[s])));
+    model.encode[s] = encodeStep(model.start[s], model.freq[s]);
   }
   model.cost_bits[kEscape] += 8;
 }
@@ -75,13 +98,25 @@ std::unique_ptr<Model[]> buildModels() {
 }
 
 // Byte-wise rANS step (as in Giesen's ryg_rans): bytes go out backwards.
-inline void put(uint32_t& x, uint32_t start, uint32_t freq, uint8_t*& out) {
+inline void renormaliseForPut(uint32_t& x, uint32_t freq, uint8_t*& out) {
   const uint32_t x_max = ((kLower >> kScaleBits) << 8) * freq;
   while (x >= x_max) {
     *--out = uint8_t(x);
     x >>= 8;
   }
-  x = ((x / freq) << kScaleBits) + (x % freq) + start;
+}
+
+inline void put(uint32_t& x, uint32_t freq, const EncodeStep& step, uint8_t*& out) {
+  renormaliseForPut(x, freq, out);
+  const uint32_t q = uint32_t((uint64_t(x) * step.rcp_freq) >> 32) >> step.rcp_shift;
+  x += step.bias + q * step.cmpl_freq;
+}
+
+// The escape's 8 uniform bits: frequency kScale / 256, a power of two.
+inline void putUniform(uint32_t& x, uint32_t z, uint8_t*& out) {
+  constexpr uint32_t kUniformBits = kScaleBits - 8;
+  renormaliseForPut(x, 1u << kUniformBits, out);
+  x = ((x >> kUniformBits) << kScaleBits) + (x & ((1u << kUniformBits) - 1)) + (z << kUniformBits);
 }
 
 }  // namespace
@@ -91,29 +126,67 @@ const Model* models() {
   return family.get();
 }
 
-void chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
-                  uint32_t channels, uint32_t contexts_per_channel, std::vector<uint8_t>& params) {
+double chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+                    uint32_t channels, uint32_t contexts_per_channel,
+                    std::vector<uint8_t>& params) {
   const uint32_t context_count = channels * contexts_per_channel;
   std::vector<uint32_t> counts(size_t(context_count) * kAlphabet, 0);
+  // A channel counter, not i % channels: a division per symbol cost a third of the encoder.
+  uint32_t channel = 0;
   for (size_t i = 0; i < residuals.size(); ++i) {
     const uint32_t z = zigzag(residuals[i]);
-    const uint32_t context = uint32_t(i % channels) * contexts_per_channel + contexts[i];
+    const uint32_t context = channel * contexts_per_channel + contexts[i];
     ++counts[size_t(context) * kAlphabet + (z < kEscape ? z : kEscape)];
+    if (++channel == channels) channel = 0;
   }
   const Model* family = models();
   params.assign(context_count, 0);
+  uint8_t used[kAlphabet];
+  double total_bits = 0;
   for (uint32_t context = 0; context < context_count; ++context) {
     const uint32_t* count = &counts[size_t(context) * kAlphabet];
-    double best = -1;
-    for (uint32_t k = 0; k < kModelCount; ++k) {
+    // A context sees few distinct symbols, so each model is priced over those alone.
+    uint32_t used_count = 0;
+    double used_weight[kAlphabet];
+    for (uint32_t s = 0; s < kAlphabet; ++s)
+      if (count[s] != 0) {
+        used_weight[used_count] = count[s];
+        used[used_count++] = uint8_t(s);
+      }
+    if (used_count == 0) continue;
+    auto bitsOf = [&](uint32_t k) {
       double bits = 0;
-      for (uint32_t s = 0; s < kAlphabet; ++s) bits += count[s] * double(family[k].cost_bits[s]);
-      if (best < 0 || bits < best) {
-        best = bits;
-        params[context] = uint8_t(k);
+      for (uint32_t i = 0; i < used_count; ++i)
+        bits += used_weight[i] * double(family[k].cost_bits[used[i]]);
+      return bits;
+    };
+    // Within a kind the cost falls and then rises with the mean, so every eighth mean and then
+    // the neighbours of the best of those find the kind's best (a third of the evaluations).
+    double best = -1;
+    for (uint32_t kind = 0; kind < kModelCount / kMeansPerKind; ++kind) {
+      const uint32_t first = kind * kMeansPerKind;
+      uint32_t coarse = first;
+      double coarse_bits = -1;
+      for (uint32_t k = first + kCoarseStep / 2; k < first + kMeansPerKind; k += kCoarseStep) {
+        const double bits = bitsOf(k);
+        if (coarse_bits < 0 || bits < coarse_bits) {
+          coarse_bits = bits;
+          coarse = k;
+        }
+      }
+      const uint32_t low = std::max(first, coarse - std::min(coarse, kCoarseStep - 1));
+      const uint32_t high = std::min(first + kMeansPerKind - 1, coarse + kCoarseStep - 1);
+      for (uint32_t k = low; k <= high; ++k) {
+        const double bits = k == coarse ? coarse_bits : bitsOf(k);
+        if (best < 0 || bits < best) {
+          best = bits;
+          params[context] = uint8_t(k);
+        }
       }
     }
+    total_bits += best;
   }
+  return total_bits;
 }
 
 void encode(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
@@ -125,21 +198,21 @@ void encode(std::span<const uint8_t> residuals, std::span<const uint8_t> context
   uint8_t* cursor = end;
   uint32_t state[4] = {kLower, kLower, kLower, kLower};
   const Model* family = models();
+  uint32_t channel = uint32_t(residuals.size() % channels);
   for (size_t i = residuals.size(); i-- > 0;) {
-    const uint32_t channel = uint32_t(i % channels);
+    channel = channel == 0 ? channels - 1 : channel - 1;
     const Model& model = family[params[channel * contexts_per_channel + contexts[i]]];
     const uint32_t z = zigzag(residuals[i]);
     uint32_t& x = state[channel];
     if (z >= kEscape) {
-      constexpr uint32_t kUniform = kScale >> 8;
-      put(x, z * kUniform, kUniform, cursor);
-      put(x, model.start[kEscape], model.freq[kEscape], cursor);
+      putUniform(x, z, cursor);
+      put(x, model.freq[kEscape], model.encode[kEscape], cursor);
     } else {
-      put(x, model.start[z], model.freq[z], cursor);
+      put(x, model.freq[z], model.encode[z], cursor);
     }
   }
-  for (uint32_t channel = channels; channel-- > 0;)
-    for (int shift = 24; shift >= 0; shift -= 8) *--cursor = uint8_t(state[channel] >> shift);
+  for (uint32_t c = channels; c-- > 0;)
+    for (int shift = 24; shift >= 0; shift -= 8) *--cursor = uint8_t(state[c] >> shift);
   out.insert(out.end(), cursor, end);
 }
 

@@ -24,12 +24,23 @@ inline constexpr uint32_t kModelCount = 256;
 /// The lower bound of the state between symbols, and the value every state starts at.
 inline constexpr uint32_t kLower = 1u << 23;
 
+/// The encoder's step for one symbol without a division (Giesen's reciprocal form):
+/// x' = x + bias + ((x * rcp_freq) >> (32 + rcp_shift)) * cmpl_freq equals
+/// (x / freq) * kScale + x % freq + start for every state the encoder holds.
+struct EncodeStep {
+  uint32_t rcp_freq;
+  uint16_t bias;
+  uint16_t cmpl_freq;
+  uint32_t rcp_shift;
+};
+
 /// One member of the family: frequencies summing to kScale, each at least 1.
 struct Model {
   uint16_t freq[kAlphabet];
   uint16_t start[kAlphabet];
   uint8_t symbol_of_slot[kScale];
-  float cost_bits[kAlphabet];  ///< encoder only: -log2 of the symbol's probability
+  float cost_bits[kAlphabet];    ///< encoder only: -log2 of the symbol's probability
+  EncodeStep encode[kAlphabet];  ///< encoder only
 };
 
 /// The family, built once (thread-safe) with integer arithmetic only, so every platform
@@ -128,7 +139,9 @@ void encode(std::span<const uint8_t> residuals, std::span<const uint8_t> context
 
 /// For each (channel, context), the model that codes its residuals in the fewest bits, by
 /// counting: `params` gets channels * contexts_per_channel bytes (0 for unused contexts).
-void chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
-                  uint32_t channels, uint32_t contexts_per_channel, std::vector<uint8_t>& params);
+/// Returns the bits the symbols cost under those models, which encode() meets to within a few
+/// bytes (its final states).
+double chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+                    uint32_t channels, uint32_t contexts_per_channel, std::vector<uint8_t>& params);
 
 }  // namespace tessera::detail::rans

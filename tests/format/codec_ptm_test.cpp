@@ -145,7 +145,8 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
-              EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRansChained));
+              EXPECT_TRUE((*payload)[1] == uint8_t(PtmCoder::kRans) ||
+                          (*payload)[1] == uint8_t(PtmCoder::kRansChained));
             }
             return payload;
           },
@@ -224,7 +225,7 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
     EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels) << "effort " << effort;
     return *payload;
   };
-  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 2 rANS with chained contexts).
+  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 1 rANS, 2 rANS with chained contexts).
   const std::vector<uint8_t> fast = payloadAt(1);
   EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
   EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
@@ -232,10 +233,16 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest[1], uint8_t(PtmCoder::kZstd));
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
+  // The default: the predictor that suits chained contexts best, and then the coder that
+  // decodes faster unless chaining saves at least 3 %.
   const std::vector<uint8_t> smallest = payloadAt(0);
-  EXPECT_EQ(smallest[1], uint8_t(PtmCoder::kRansChained));
-  EXPECT_EQ(smallest, *encodePtmSmallest(child.view(), {}, &parent, candidates,
-                                         PtmCoder::kRansChained, nullptr));
+  const Predictor predictor = Predictor(smallest[0]);
+  EXPECT_EQ(predictor, *smallestPtmPredictor(child.view(), {}, &parent, candidates,
+                                             PtmCoder::kRansChained, nullptr, nullptr));
+  const auto chained =
+      *encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansChained, nullptr);
+  const auto plain = *encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRans, nullptr);
+  EXPECT_EQ(smallest, chained.size() * 100 <= plain.size() * 97 ? chained : plain);
   EXPECT_EQ(payloadAt(3), smallest);
   EXPECT_EQ(payloadAt(9), smallest);
   EXPECT_LE(zstd_smallest.size(), fast.size());
@@ -312,6 +319,48 @@ TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
   EXPECT_LT(chained->size() * 10, per_channel->size() * 9)
       << chained->size() << " against " << per_channel->size();
   EXPECT_EQ(decodeOrDie(*chained, 64, 3, nullptr).texels, tile.texels);
+}
+
+TEST(PtmCodec, TheDefaultChainsContextsOnlyWhereThatSavesBytes) {
+  // One channel has nothing to chain: coder 2 would be coder 1 in another order, no smaller, so
+  // the default keeps the faster coder 1.
+  Image grey = makeLevel0(64, 64, 1, 4);
+  auto grey_payload = encodeTile(Codec::kPtm, grey.view(), {}, nullptr);
+  ASSERT_TRUE(grey_payload.has_value());
+  EXPECT_EQ((*grey_payload)[1], uint8_t(PtmCoder::kRans));
+  // Colour channels that err together: chaining saves far more than 3 %.
+  Image colour(64, 64, 3);
+  uint32_t random = 23;
+  for (size_t i = 0; i < colour.texels.size(); i += 3) {
+    const bool noisy = nextRandom(random) % 4 == 0;
+    for (size_t c = 0; c < 3; ++c)
+      colour.texels[i + c] = uint8_t(noisy ? 128 + int(nextRandom(random) % 41) - 20 : 128);
+  }
+  auto colour_payload = encodeTile(Codec::kPtm, colour.view(), {}, nullptr);
+  ASSERT_TRUE(colour_payload.has_value());
+  EXPECT_EQ((*colour_payload)[1], uint8_t(PtmCoder::kRansChained));
+  EXPECT_EQ(decodeOrDie(*colour_payload, 64, 3, nullptr).texels, colour.texels);
+}
+
+TEST(PtmCodec, EstimatesMatchTheRansPayloadsToWithinTheirStates) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 13);
+  const Image child = pyramid.tile(0, 1, 1);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  for (PtmCoder coder : kCoders)
+    for (Predictor predictor : kParentPredictors) {
+      const auto payload = encodePtm(child.view(), {}, &parent, predictor, coder, nullptr);
+      const auto estimate = estimatePtmBytes(child.view(), {}, &parent, predictor, coder, nullptr);
+      ASSERT_TRUE(payload.has_value());
+      ASSERT_TRUE(estimate.has_value());
+      // zstd's estimate is its payload; rANS's is the models' bit count, which the coder meets
+      // to within its final states (4 bytes per channel) and a byte of rounding.
+      if (coder == PtmCoder::kZstd)
+        EXPECT_EQ(*estimate, payload->size()) << int(predictor);
+      else
+        EXPECT_LE(std::abs(double(*estimate) - double(payload->size())), 4.0 * 3 + 1)
+            << int(predictor) << " coder " << int(coder);
+    }
 }
 
 TEST(PtmCodec, ARemainderOutsideZeroToThreeStillDecodesExactly) {
