@@ -299,17 +299,23 @@ TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
   }
 }
 
-TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
-  // Texels are either flat grey or carry independent noise in every channel, scattered so
-  // that the neighbourhood's activity cannot tell which: only the residual already coded in
-  // the same texel can. Coder 2 codes green first and lets it choose the others' contexts.
+// A 64x64 RGB tile whose texels are either flat grey or carry independent noise in every
+// channel, scattered so that the neighbourhood's activity cannot tell which: only the residual
+// already coded in the same texel can.
+Image makeTileWhoseChannelsErrTogether(uint32_t seed) {
   Image tile(64, 64, 3);
-  uint32_t random = 17;
+  uint32_t random = seed;
   for (size_t i = 0; i < tile.texels.size(); i += 3) {
     const bool noisy = nextRandom(random) % 4 == 0;
     for (size_t c = 0; c < 3; ++c)
       tile.texels[i + c] = uint8_t(noisy ? 128 + int(nextRandom(random) % 41) - 20 : 128);
   }
+  return tile;
+}
+
+TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
+  // Coder 2 codes green first and lets its residual choose the others' contexts.
+  const Image tile = makeTileWhoseChannelsErrTogether(17);
   auto per_channel =
       encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRans, nullptr);
   auto chained =
@@ -329,13 +335,7 @@ TEST(PtmCodec, TheDefaultChainsContextsOnlyWhereThatSavesBytes) {
   ASSERT_TRUE(grey_payload.has_value());
   EXPECT_EQ((*grey_payload)[1], uint8_t(PtmCoder::kRans));
   // Colour channels that err together: chaining saves far more than 3 %.
-  Image colour(64, 64, 3);
-  uint32_t random = 23;
-  for (size_t i = 0; i < colour.texels.size(); i += 3) {
-    const bool noisy = nextRandom(random) % 4 == 0;
-    for (size_t c = 0; c < 3; ++c)
-      colour.texels[i + c] = uint8_t(noisy ? 128 + int(nextRandom(random) % 41) - 20 : 128);
-  }
+  const Image colour = makeTileWhoseChannelsErrTogether(23);
   auto colour_payload = encodeTile(Codec::kPtm, colour.view(), {}, nullptr);
   ASSERT_TRUE(colour_payload.has_value());
   EXPECT_EQ((*colour_payload)[1], uint8_t(PtmCoder::kRansChained));
