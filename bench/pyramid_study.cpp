@@ -1,4 +1,4 @@
-// tessera-pyramid-study: bytes and decode speed of whole tile pyramids per codec, for the ptm
+// tessera-pyramid-study: bytes and coding speed of whole tile pyramids per codec, for the ptm
 // codec study (docs/benchmarks.md, "Progressive lossless pyramids (ptm): codec study").
 //
 // For each input (a synthetic:WxH:seed:channels spec, a PNG/JPEG/TIFF path, or a .webp photo)
@@ -6,9 +6,10 @@
 // other codecs, the floor average for ptm; 256-px tiles, no border), encodes every tile with each
 // codec and reports, against the raw base level (level 0 tiles as stored, padding included):
 // the whole pyramid's bytes, ptm's overhead over its own base level, and single-thread decode
-// throughput in megapixels of pyramid per second (ptm decoded coarse to fine against the
-// decoded parents, as a reader does). JPEG XL lossless (libjxl, single-threaded) is a column when
-// the build found libjxl-dev; it is not an archive codec.
+// and encode throughput in megapixels of pyramid per second (ptm decoded coarse to fine against
+// the decoded parents, as a reader does). `--levels` adds each level's bits per texel. JPEG XL
+// lossless (libjxl, single-threaded) is a row when the build found libjxl-dev; it is not an
+// archive codec.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
