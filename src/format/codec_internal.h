@@ -120,9 +120,10 @@ enum class PtmCoder : uint8_t {
 Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
                                        const ParentTexels* parent, Predictor predictor,
                                        PtmCoder coder, CodecScratch* scratch);
-/// Encodes the tile with each of `predictors` (with a parent; kRoot without) and `coder`, and
-/// returns the smallest payload: which predictor suits a tile depends on the image (docs/codecs.md,
-/// "ptm (6)").
+/// Encodes the tile with the one of `predictors` (with a parent; kRoot without) that gives the
+/// smallest payload with `coder`: which predictor suits a tile depends on the image
+/// (docs/codecs.md, "ptm (6)"). zstd payloads are compared as coded; rANS ones by
+/// estimatePtmBytes, so only the chosen one is coded.
 Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
                                                const ParentTexels* parent,
                                                std::span<const Predictor> predictors,

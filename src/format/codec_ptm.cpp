@@ -477,10 +477,6 @@ Result<void> decodeRans(std::span<const uint8_t> payload, Predictor predictor, u
   return {};
 }
 
-}  // namespace
-
-namespace {
-
 // encodePtm, or with `estimated_bytes` and a rANS coder only the payload's size to within a
 // few bytes: the texel walk and the model choice, without the rANS pass (a quarter of a
 // tile's encoding time), for choosing between predictors and coders.
