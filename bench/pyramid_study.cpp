@@ -292,6 +292,13 @@ void study(const std::string& input, double min_seconds, const std::string& only
                        variant.coder, &scratch);
     return encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
   };
+  // A level coded on its own: for ptm its parentless mode with the variant's entropy coder
+  // (seed 003's reference for the overhead), for the rest the variant itself.
+  auto encodeAlone = [&](const Variant& variant, const Image& tile, const EncodeOptions& options) {
+    return variant.codec == Codec::kPtm && !variant.as_built
+               ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
+               : encodeVariant(variant, tile, options, std::nullopt);
+  };
   auto decodeVariant = [&](const Variant& variant, const std::vector<uint8_t>& payload, Image& out,
                            const std::optional<ParentTexels>& parent) -> bool {
 #if TESSERA_STUDY_JXL
@@ -361,9 +368,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
     // parent-coded level 0.
     double base_alone = 0;
     for (const Image& tile : tiles.levels[0]) {
-      auto alone = ptm && !variant.as_built ? encodePtm(tile.view(), options, nullptr,
-                                                        Predictor::kRoot, variant.coder, &scratch)
-                                            : encodeVariant(variant, tile, options, std::nullopt);
+      auto alone = encodeAlone(variant, tile, options);
       base_alone += alone ? double(alone->size()) : 0;
     }
     fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} | {:.1f} |\n", variant.name,
@@ -376,10 +381,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (size_t l = 0; l < tiles.levels.size(); ++l) {
         double alone = 0;
         for (const Image& tile : tiles.levels[l]) {
-          auto coded = ptm && !variant.as_built
-                           ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot,
-                                       variant.coder, &scratch)
-                           : encodeVariant(variant, tile, options, std::nullopt);
+          auto coded = encodeAlone(variant, tile, options);
           alone += coded ? double(coded->size()) : 0;
         }
         const double texels = double(tiles.levels[l].size()) * kTilePx * kTilePx;

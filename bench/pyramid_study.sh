@@ -3,14 +3,15 @@
 # fetches real imagery from Debian packages into a temporary directory and runs
 # tessera-pyramid-study on it and on the synthetic source. JPEG XL lossless is a peer: the
 # script installs libjxl-dev (bench/install_peers.sh) and rebuilds the study against it.
-# About five minutes on 2 cores, most of it libjxl's effort-7 encoder.
+# About two minutes on 2 cores once the peers are installed, most of it libjxl's effort-7
+# encoder. Standard output carries only the study's tables.
 #   bench/pyramid_study.sh [BUILD_DIR]   (default: build)
 set -euo pipefail
 build=${1:-build}
-"$(dirname "$0")/install_peers.sh"
+"$(dirname "$0")/install_peers.sh" >&2
 # Reconfiguring finds libjxl now that it is installed; the study is rebuilt only if that changed.
 cmake "$build" >/dev/null
-cmake --build "$build" --target tessera_pyramid_study
+cmake --build "$build" --target tessera_pyramid_study >&2
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 # xplanet-images: earth.jpg, a 2048x1024 map of the Earth (satellite colour);

@@ -27,26 +27,6 @@ struct Kind {
 constexpr Kind kKinds[] = {{false, 0}, {true, 0}, {true, 1}, {true, -1}};
 static_assert(std::size(kKinds) * kMeansPerKind == kModelCount);
 
-// With shift = ceil(log2(freq)), rcp_freq = ceil(2^(shift + 31) / freq) makes the quotient
-// exact for every state below 2^31 (Giesen, ryg_rans). A frequency of 1 cannot be reached that
-// way: rcp_freq = 2^32 - 1 gives q = x - 1, and the bias adds back kScale - 1.
-EncodeStep encodeStep(uint32_t start, uint32_t freq) {
-  EncodeStep step;
-  step.cmpl_freq = uint16_t(kScale - freq);
-  if (freq < 2) {
-    step.rcp_freq = ~0u;
-    step.rcp_shift = 0;
-    step.bias = uint16_t(start + kScale - 1);
-  } else {
-    uint32_t shift = 0;
-    while (freq > (1u << shift)) ++shift;
-    step.rcp_freq = uint32_t(((uint64_t(1) << (shift + 31)) + freq - 1) / freq);
-    step.rcp_shift = shift - 1;
-    step.bias = uint16_t(start);
-  }
-  return step;
-}
-
 void buildModel(uint64_t mean_q16, Kind kind, Model& model) {
   const uint64_t theta_q16 = (mean_q16 << 16) / (65536 + mean_q16);
   uint64_t weight[kAlphabet];
@@ -81,7 +61,6 @@ void buildModel(uint64_t mean_q16, Kind kind, Model& model) {
     for (uint32_t i = 0; i < model.freq[s]; ++i) model.symbol_of_slot[start + i] = uint8_t(s);
     start += model.freq[s];
     model.cost_bits[s] = float(kScaleBits - std::log2(double(model.freq[s])));
-    model.encode[s] = encodeStep(model.start[s], model.freq[s]);
   }
   model.cost_bits[kEscape] += 8;
 }
@@ -98,25 +77,13 @@ std::unique_ptr<Model[]> buildModels() {
 }
 
 // Byte-wise rANS step (as in Giesen's ryg_rans): bytes go out backwards.
-inline void renormaliseForPut(uint32_t& x, uint32_t freq, uint8_t*& out) {
+inline void put(uint32_t& x, uint32_t start, uint32_t freq, uint8_t*& out) {
   const uint32_t x_max = ((kLower >> kScaleBits) << 8) * freq;
   while (x >= x_max) {
     *--out = uint8_t(x);
     x >>= 8;
   }
-}
-
-inline void put(uint32_t& x, uint32_t freq, const EncodeStep& step, uint8_t*& out) {
-  renormaliseForPut(x, freq, out);
-  const uint32_t q = uint32_t((uint64_t(x) * step.rcp_freq) >> 32) >> step.rcp_shift;
-  x += step.bias + q * step.cmpl_freq;
-}
-
-// The escape's 8 uniform bits: frequency kScale / 256, a power of two.
-inline void putUniform(uint32_t& x, uint32_t z, uint8_t*& out) {
-  constexpr uint32_t kUniformBits = kScaleBits - 8;
-  renormaliseForPut(x, 1u << kUniformBits, out);
-  x = ((x >> kUniformBits) << kScaleBits) + (x & ((1u << kUniformBits) - 1)) + (z << kUniformBits);
+  x = ((x / freq) << kScaleBits) + (x % freq) + start;
 }
 
 }  // namespace
@@ -174,7 +141,7 @@ double chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t>
           coarse = k;
         }
       }
-      const uint32_t low = std::max(first, coarse - std::min(coarse, kCoarseStep - 1));
+      const uint32_t low = coarse >= first + kCoarseStep - 1 ? coarse - (kCoarseStep - 1) : first;
       const uint32_t high = std::min(first + kMeansPerKind - 1, coarse + kCoarseStep - 1);
       for (uint32_t k = low; k <= high; ++k) {
         const double bits = k == coarse ? coarse_bits : bitsOf(k);
@@ -205,10 +172,11 @@ void encode(std::span<const uint8_t> residuals, std::span<const uint8_t> context
     const uint32_t z = zigzag(residuals[i]);
     uint32_t& x = state[channel];
     if (z >= kEscape) {
-      putUniform(x, z, cursor);
-      put(x, model.freq[kEscape], model.encode[kEscape], cursor);
+      constexpr uint32_t kUniform = kScale >> 8;
+      put(x, z * kUniform, kUniform, cursor);
+      put(x, model.start[kEscape], model.freq[kEscape], cursor);
     } else {
-      put(x, model.freq[z], model.encode[z], cursor);
+      put(x, model.start[z], model.freq[z], cursor);
     }
   }
   for (uint32_t c = channels; c-- > 0;)

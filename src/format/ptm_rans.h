@@ -24,23 +24,12 @@ inline constexpr uint32_t kModelCount = 256;
 /// The lower bound of the state between symbols, and the value every state starts at.
 inline constexpr uint32_t kLower = 1u << 23;
 
-/// The encoder's step for one symbol without a division (Giesen's reciprocal form):
-/// x' = x + bias + ((x * rcp_freq) >> (32 + rcp_shift)) * cmpl_freq equals
-/// (x / freq) * kScale + x % freq + start for every state the encoder holds.
-struct EncodeStep {
-  uint32_t rcp_freq;
-  uint16_t bias;
-  uint16_t cmpl_freq;
-  uint32_t rcp_shift;
-};
-
 /// One member of the family: frequencies summing to kScale, each at least 1.
 struct Model {
   uint16_t freq[kAlphabet];
   uint16_t start[kAlphabet];
   uint8_t symbol_of_slot[kScale];
-  float cost_bits[kAlphabet];    ///< encoder only: -log2 of the symbol's probability
-  EncodeStep encode[kAlphabet];  ///< encoder only
+  float cost_bits[kAlphabet];  ///< encoder only: -log2 of the symbol's probability
 };
 
 /// The family, built once (thread-safe) with integer arithmetic only, so every platform
