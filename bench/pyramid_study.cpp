@@ -258,8 +258,24 @@ void study(const std::string& input, double min_seconds, const std::string& only
      PtmCoder::kRansChained},
     {"ptm smallest of 1/3/4 + rANS chained", Codec::kPtm, 0, Predictor::kRoot,
      PtmCoder::kRansChained, true},
+    {"ptm nearest-parent + rANS mixture", Codec::kPtm, 0, Predictor::kParentNearest,
+     PtmCoder::kRansMixture},
+    {"ptm neighbour-median + rANS mixture", Codec::kPtm, 0, Predictor::kNeighbourMedian,
+     PtmCoder::kRansMixture},
+    {"ptm parent-corrected + rANS mixture", Codec::kPtm, 0, Predictor::kParentCorrected,
+     PtmCoder::kRansMixture},
+    {"ptm smallest of 1/3/4 + rANS mixture", Codec::kPtm, 0, Predictor::kRoot,
+     PtmCoder::kRansMixture, true},
+    {"ptm nearest-parent + rANS mixture chained", Codec::kPtm, 0, Predictor::kParentNearest,
+     PtmCoder::kRansMixtureChained},
+    {"ptm neighbour-median + rANS mixture chained", Codec::kPtm, 0, Predictor::kNeighbourMedian,
+     PtmCoder::kRansMixtureChained},
+    {"ptm parent-corrected + rANS mixture chained", Codec::kPtm, 0, Predictor::kParentCorrected,
+     PtmCoder::kRansMixtureChained},
+    {"ptm smallest of 1/3/4 + rANS mixture chained", Codec::kPtm, 0, Predictor::kRoot,
+     PtmCoder::kRansMixtureChained, true},
     {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansChained, false, false, true},
+     PtmCoder::kRansMixtureChained, false, false, true},
 #if TESSERA_STUDY_JXL
     // libjxl's default effort is 7; 3 is its fast lossless setting.
     {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, Predictor::kRoot, PtmCoder::kZstd, false, true},
@@ -337,15 +353,17 @@ void study(const std::string& input, double min_seconds, const std::string& only
     }
     const double encode_seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - encode_start).count();
-    // Decode the whole pyramid, coarse to fine, until min_seconds have passed.
+    // Decode the whole pyramid, coarse to fine, until min_seconds have passed; the fastest
+    // round counts, so that other work on a shared machine lowers the figure less.
     std::vector<std::vector<Image>> decoded(tiles.levels.size());
     for (size_t l = 0; l < tiles.levels.size(); ++l)
       decoded[l].assign(tiles.levels[l].size(), Image(kTilePx, kTilePx, level0.channels));
-    int rounds = 0;
     bool exact = true;
     const auto start = std::chrono::steady_clock::now();
     double elapsed = 0;
+    double fastest_round = 0;
     do {
+      const auto round_start = std::chrono::steady_clock::now();
       for (size_t l = tiles.levels.size(); l-- > 0;) {
         for (size_t i = 0; i < payloads[l].size(); ++i) {
           std::optional<ParentTexels> parent;
@@ -357,8 +375,10 @@ void study(const std::string& input, double min_seconds, const std::string& only
           if (!decodeVariant(variant, payloads[l][i], decoded[l][i], parent)) exact = false;
         }
       }
-      ++rounds;
-      elapsed = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+      const auto now = std::chrono::steady_clock::now();
+      const double round = std::chrono::duration<double>(now - round_start).count();
+      if (fastest_round == 0 || round < fastest_round) fastest_round = round;
+      elapsed = std::chrono::duration<double>(now - start).count();
     } while (elapsed < min_seconds);
     for (size_t l = 0; l < tiles.levels.size() && exact; ++l)
       for (size_t i = 0; i < tiles.levels[l].size(); ++i)
@@ -373,7 +393,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
     }
     fmt::print("| {} | {:.3f} | {:.2f}:1 | {:.1f} % | {:.0f}{} | {:.1f} |\n", variant.name,
                total / raw_base, raw_base / total, 100.0 * (total - base_alone) / base_alone,
-               pyramid_px * rounds / elapsed / 1e6, exact ? "" : " (NOT EXACT)",
+               pyramid_px / fastest_round / 1e6, exact ? "" : " (NOT EXACT)",
                pyramid_px / encode_seconds / 1e6);
     if (per_level) {
       // Where the overhead lies: each level's bytes as coded in the pyramid, and the same level

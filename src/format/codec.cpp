@@ -1,6 +1,8 @@
 #include "codec.h"
 
+#include <algorithm>
 #include <cstring>
+#include <iterator>
 
 #include <fmt/format.h>
 #include <turbojpeg.h>
@@ -71,12 +73,16 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
 //   prediction, with zstd;
-// - 3 and the default: the same predictors entropy-coded by rANS, with chained channel
-//   contexts (coder 2) where they save at least 3 % of the tile and per-channel contexts
-//   (coder 1) elsewhere; smaller than effort 1 but a fifth to a ninth of its decode speed. Bytes
-//   are what ptm is for (storage, and remote refinement over a link), so the smallest is the
-//   default.
-constexpr size_t kChainedMaxPercent = 97;
+// - 3 and the default: the same predictors entropy-coded by rANS. Of its four coders, fastest to
+//   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
+//   family 2), 4 (both), each tile takes the fastest whose estimated size is within 3 % of the
+//   smallest. Smaller than effort 1 but a fifth to a ninth of its decode
+//   speed. Bytes are what ptm is for (storage, and remote refinement over a link), so the
+//   smallest is the default.
+constexpr size_t kSlowerCoderMinSavingPercent = 3;
+// Fastest to decode first (docs/codecs.md, "ptm (6)").
+constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
+    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained};
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 
@@ -94,19 +100,22 @@ Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const Encod
       return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
                                PtmCoder::kZstd, scratch);
     default: {
-      size_t chained_bytes = 0, plain_bytes = 0;
+      // The predictor that suits the most elaborate coder, then the coder by size and speed.
+      size_t bytes[std::size(kRansCodersByDecodeSpeed)];
       TESSERA_ASSIGN_OR_RETURN(
           Predictor predictor,
           smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
-                               PtmCoder::kRansChained, scratch, &chained_bytes));
-      TESSERA_ASSIGN_OR_RETURN(plain_bytes, estimatePtmBytes(tile, stream_options, parent,
-                                                             predictor, PtmCoder::kRans, scratch));
-      // Chained contexts serialise a texel's channels, so coder 2 decodes 7-27 % slower than
-      // coder 1: it has to save at least 3 % of the tile to be worth it.
-      const PtmCoder coder = chained_bytes * 100 <= plain_bytes * kChainedMaxPercent
-                                 ? PtmCoder::kRansChained
-                                 : PtmCoder::kRans;
-      return encodePtm(tile, stream_options, parent, predictor, coder, scratch);
+                               kRansCodersByDecodeSpeed[3], scratch, &bytes[3]));
+      size_t smallest = bytes[3];
+      for (size_t i = 0; i < 3; ++i) {
+        TESSERA_ASSIGN_OR_RETURN(bytes[i], estimatePtmBytes(tile, stream_options, parent, predictor,
+                                                            kRansCodersByDecodeSpeed[i], scratch));
+        smallest = std::min(smallest, bytes[i]);
+      }
+      size_t chosen = 0;
+      while (bytes[chosen] * 100 > smallest * (100 + kSlowerCoderMinSavingPercent)) ++chosen;
+      return encodePtm(tile, stream_options, parent, predictor, kRansCodersByDecodeSpeed[chosen],
+                       scratch);
     }
   }
 }

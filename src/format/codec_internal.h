@@ -113,7 +113,20 @@ enum class PtmCoder : uint8_t {
   /// rANS with green coded first and each later channel's context raised or lowered by the
   /// residual coded before it in the same texel
   kRansChained = 2,
+  /// kRans with the second model family: 15-bit probabilities, heavier tails
+  kRansMixture = 3,
+  /// kRansChained with the second model family
+  kRansMixtureChained = 4,
 };
+
+/// True for the rANS coders, whose payload is model bytes and one rANS stream.
+constexpr bool isRansCoder(PtmCoder coder) {
+  return coder != PtmCoder::kZstd;
+}
+/// True for the coders whose later channels' contexts follow the residual coded before them.
+constexpr bool isChainedCoder(PtmCoder coder) {
+  return coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixtureChained;
+}
 
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec
 /// table's entry uses the defaults; the codec study compares the others.

@@ -105,7 +105,7 @@ struct PlaneCoder {
 };
 
 // The rANS encoder's side: symbols and their contexts in decoding order, coded afterwards
-// (rANS codes backwards). `kChainedContexts`: coder 2 (codeResiduals).
+// (rANS codes backwards). `kChainedContexts`: coders 2 and 4 (codeResiduals).
 template <bool kChainedContexts>
 struct RansRecorder {
   static constexpr bool kContexts = true;
@@ -122,11 +122,11 @@ struct RansRecorder {
   }
 };
 
-template <bool kChainedContexts>
+template <bool kChainedContexts, rans::FamilyId kFamily>
 struct RansReader {
   static constexpr bool kContexts = true;
   static constexpr bool kChained = kChainedContexts;
-  rans::Decoder decoder;
+  rans::Decoder<rans::scaleBits(kFamily)> decoder;
   const rans::Model* models[4][kParentContexts];
   void residual(uint32_t channel, uint32_t context, uint8_t& symbol) {
     symbol = decoder.decode(channel, *models[channel][context]);
@@ -134,7 +134,14 @@ struct RansReader {
   void remainder(uint32_t channel, uint32_t context, uint8_t& symbol) {
     symbol = decoder.decode(channel, *models[channel][kCodedContexts + context]);
   }
+  bool failed() const { return decoder.failed(); }
 };
+
+// Coders 1 and 2 take their models from family 1, coders 3 and 4 from family 2.
+rans::FamilyId familyOf(PtmCoder coder) {
+  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ? rans::FamilyId::kGeometric12
+                                                                     : rans::FamilyId::kMixture15;
+}
 
 // Size class of a residual symbol read as signed: 0, 1, 2-3, 4 and more.
 inline uint32_t residualSizeClass(uint8_t symbol) {
@@ -218,6 +225,9 @@ void codeTexels(const Walk& walk, Coder& coder) {
       kPredictor == Predictor::kRoot || kExpectedRemainder || Coder::kContexts;
   const size_t stride = size_t(width) * kChannels;
   for (uint32_t y = 0; y < height; ++y) {
+    // A reader that has run out of input can only fail: stop at the row, not the tile's end.
+    if constexpr (requires { coder.failed(); })
+      if (coder.failed()) return;
     uint8_t* row = texels + y * stride;
     const uint8_t* up_row = y > 0 ? row - stride : nullptr;
     const uint8_t* parent_row = nullptr;
@@ -449,8 +459,8 @@ PlaneCoder<kEncode> planesIn(std::vector<uint8_t>& plane, uint32_t channels,
   return planes;
 }
 
-// Decodes coder 1 or 2's model bytes and stream into walk.texels.
-template <bool kChained>
+// Decodes a rANS coder's model bytes and stream into walk.texels.
+template <bool kChained, rans::FamilyId kFamily>
 Result<void> decodeRans(std::span<const uint8_t> payload, Predictor predictor, uint32_t channels,
                         uint32_t contexts, const Walk& walk) {
   const size_t params_bytes = size_t(contexts) * channels;
@@ -458,8 +468,8 @@ Result<void> decodeRans(std::span<const uint8_t> payload, Predictor predictor, u
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
                             payload.size(), params_bytes));
-  RansReader<kChained> reader;
-  const rans::Model* family = rans::models();
+  RansReader<kChained, kFamily> reader;
+  const rans::Model* family = rans::models(kFamily);
   // Every parameter byte names a model, so a corrupt one shows only as a stream that does not
   // finish cleanly (checked below), and then only if its context is used.
   static_assert(rans::kModelCount == 256);
@@ -505,11 +515,11 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
                   state->upsampled.data()};
   std::vector<uint8_t> payload = {uint8_t(predictor), uint8_t(coder)};
 
-  if (coder == PtmCoder::kRans || coder == PtmCoder::kRansChained) {
+  if (isRansCoder(coder)) {
     const size_t symbols = size_t(width) * height * channels;
     state->plane.resize(symbols);
     state->contexts.resize(symbols);
-    if (coder == PtmCoder::kRansChained) {
+    if (isChainedCoder(coder)) {
       RansRecorder<true> recorder{state->plane.data(), state->contexts.data()};
       code<true>(predictor, channels, walk, recorder);
     } else {
@@ -518,15 +528,15 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
     }
     const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
     std::vector<uint8_t> params;
-    const double bits =
-        rans::chooseModels(state->plane, state->contexts, channels, contexts, params);
+    const double bits = rans::chooseModels(familyOf(coder), state->plane, state->contexts, channels,
+                                           contexts, params);
     if (estimated_bytes != nullptr) {
       *estimated_bytes = payload.size() + params.size() + size_t(bits / 8) + 4 * channels;
       return std::vector<uint8_t>{};
     }
     payload.insert(payload.end(), params.begin(), params.end());
-    rans::encode(state->plane, state->contexts, channels, contexts, params, state->compressed,
-                 payload);
+    rans::encode(familyOf(coder), state->plane, state->contexts, channels, contexts, params,
+                 state->compressed, payload);
     return payload;
   }
 
@@ -628,7 +638,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
                 fmt::format("ptm payload: {} bytes, shorter than its header", payload.size()));
   if (payload[0] > uint8_t(Predictor::kParentCorrected))
     return fail(ErrorCode::kCorrupt, fmt::format("ptm payload: unknown predictor {}", payload[0]));
-  if (payload[1] > uint8_t(PtmCoder::kRansChained))
+  if (payload[1] > uint8_t(PtmCoder::kRansMixtureChained))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);
@@ -651,12 +661,20 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
                   &rows,
                   state->upsampled.data()};
 
-  if (coder == PtmCoder::kRans)
-    return decodeRans<false>(payload, predictor, channels,
-                             has_parent ? kParentContexts : kRootContexts, walk);
-  if (coder == PtmCoder::kRansChained)
-    return decodeRans<true>(payload, predictor, channels,
-                            has_parent ? kParentContexts : kRootContexts, walk);
+  const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
+  using rans::FamilyId;
+  switch (coder) {
+    case PtmCoder::kZstd: break;
+    case PtmCoder::kRans:
+      return decodeRans<false, FamilyId::kGeometric12>(payload, predictor, channels, contexts,
+                                                       walk);
+    case PtmCoder::kRansChained:
+      return decodeRans<true, FamilyId::kGeometric12>(payload, predictor, channels, contexts, walk);
+    case PtmCoder::kRansMixture:
+      return decodeRans<false, FamilyId::kMixture15>(payload, predictor, channels, contexts, walk);
+    case PtmCoder::kRansMixtureChained:
+      return decodeRans<true, FamilyId::kMixture15>(payload, predictor, channels, contexts, walk);
+  }
 
   const SymbolCounts counts =
       countSymbols(width, height, has_parent ? &columns : nullptr, has_parent ? &rows : nullptr);

@@ -1,10 +1,11 @@
 #pragma once
-// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coder 1): byte-wise
-// rANS with one state per channel over a shared byte stream, whose symbol distributions come
-// from a fixed family of discretised geometric distributions, so a tile sends one byte per
-// context instead of a frequency table. Decoding never reads outside its input and never
-// loops: renormalisation takes at most two bytes, and a read past the end returns 0 and sets a
-// flag that the caller checks once at the end.
+// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coders 1-4):
+// byte-wise rANS with one state per channel over a shared byte stream, whose symbol
+// distributions come from a fixed family of discretised distributions, so a tile sends one
+// byte per context instead of a frequency table. Decoding never reads outside its input and
+// takes a bounded number of steps per symbol: renormalisation at most two bytes, the symbol
+// search at most kAlphabet; a read past the end returns 0 and sets a flag that the caller
+// checks once at the end.
 
 #include <cstddef>
 #include <cstdint>
@@ -13,28 +14,68 @@
 
 namespace tessera::detail::rans {
 
-inline constexpr uint32_t kScaleBits = 12;
-inline constexpr uint32_t kScale = 1u << kScaleBits;
 /// Symbols 0..62 are zigzag residuals; 63 escapes a residual of 63..255, sent as 8 uniform bits.
 inline constexpr uint32_t kAlphabet = 64;
 inline constexpr uint32_t kEscape = kAlphabet - 1;
-/// Distributions in the family: every value of a context's parameter byte names one (models
-/// 0-63 are the first family's, so payloads written with it decode unchanged).
+/// Distributions in each family: every value of a context's parameter byte names one.
 inline constexpr uint32_t kModelCount = 256;
 /// The lower bound of the state between symbols, and the value every state starts at.
 inline constexpr uint32_t kLower = 1u << 23;
+/// The decoder looks a slot's symbol up in a table of kBuckets buckets per model, each naming
+/// the symbol of its first slot: at 12 bits a bucket is a slot; at 15 bits it is 8 slots, and
+/// one where a later symbol starts is marked kSharedBucket and sends the decoder on a short
+/// search (rarely, so the branch stays predicted). A full 15-bit table would be 32 KiB per
+/// model; fewer buckets holding frequency and start, 2^6 to 2^10 of them, decoded 10 % slower.
+inline constexpr uint32_t kBucketBits = 12;
+inline constexpr uint8_t kSharedBucket = 0x80;
+inline constexpr uint32_t kBuckets = 1u << kBucketBits;
 
-/// One member of the family: frequencies summing to kScale, each at least 1.
-struct Model {
-  uint16_t freq[kAlphabet];
-  uint16_t start[kAlphabet];
-  uint8_t symbol_of_slot[kScale];
-  float cost_bits[kAlphabet];  ///< encoder only: -log2 of the symbol's probability
+/// The two model families (docs/codecs.md, "ptm (6)"). Coders 1 and 2 use the first, coders 3
+/// and 4 the second.
+enum class FamilyId : uint8_t {
+  /// 12-bit probabilities; geometric in the zigzag code (models 0-63, so payloads written
+  /// before the other kinds existed decode unchanged) or in |residual| with symbol 0's weight
+  /// as is, doubled or halved.
+  kGeometric12,
+  /// 15-bit probabilities; in |residual|, a geometric plus a share (0, 1/32, 1/8 or 1/2) of a
+  /// geometric with the fourth root of its ratio, which gives the heavier tails that mixed
+  /// activity leaves, with symbol 0's weight as is or doubled.
+  kMixture15,
 };
 
-/// The family, built once (thread-safe) with integer arithmetic only, so every platform
-/// derives identical tables.
-const Model* models();
+/// The probability resolution of a family, in bits.
+constexpr uint32_t scaleBits(FamilyId family) {
+  return family == FamilyId::kGeometric12 ? 12 : 15;
+}
+
+/// One member of a family: frequencies summing to the family's scale, each at least 1.
+struct Model {
+  /// The symbol of each bucket's first slot, with kSharedBucket where another starts inside.
+  uint8_t bucket_symbol[kBuckets];
+  /// start | freq << 16 per symbol; entry[kAlphabet] is the sentinel start, the scale.
+  uint32_t entry[kAlphabet + 1];
+  uint16_t freq[kAlphabet];
+  uint16_t start[kAlphabet];
+  float cost_bits[kAlphabet];  ///< encoder only: -log2 of the symbol's probability
+
+  /// The symbol whose slots [start, start + freq) hold `slot` (below the scale).
+  template <uint32_t kScaleBits>
+  uint32_t symbolOf(uint32_t slot) const {
+    static_assert(kScaleBits >= kBucketBits);
+    uint32_t symbol = bucket_symbol[slot >> (kScaleBits - kBucketBits)];
+    if constexpr (kScaleBits > kBucketBits) {
+      if ((symbol & kSharedBucket) != 0) [[unlikely]] {
+        symbol &= ~uint32_t(kSharedBucket);
+        while (slot >= (entry[symbol + 1] & 0xffff)) ++symbol;
+      }
+    }
+    return symbol;
+  }
+};
+
+/// A family's kModelCount models, built once (thread-safe) with integer arithmetic only, so
+/// every platform derives identical tables.
+const Model* models(FamilyId family);
 
 /// Zigzag map of a residual byte read as a signed value: 0, -1, 1, -2, ... -> 0, 1, 2, 3, ...
 inline uint32_t zigzag(uint8_t residual) {
@@ -45,9 +86,14 @@ inline uint8_t unzigzag(uint32_t code) {
   return uint8_t((code & 1) != 0 ? -int(code >> 1) - 1 : int(code >> 1));
 }
 
-/// Bounded forward reader of the encoded bytes.
+/// Bounded forward reader of the encoded bytes, for models of kScaleBits-bit probabilities.
+template <uint32_t kScaleBits>
 class Decoder {
  public:
+  static constexpr uint32_t kScale = 1u << kScaleBits;
+  // After a decode x >= (kLower >> kScaleBits) * freq >= 2^8, so two bytes always renormalise.
+  static_assert(kScaleBits <= 15 && kScaleBits >= 8);
+
   /// `bytes` starts with the initial state of each of `states` channels (u32 LE each).
   /// Returns false when the bytes cannot hold them or a state is out of range.
   bool start(std::span<const uint8_t> bytes, uint32_t states) {
@@ -65,18 +111,26 @@ class Decoder {
 
   /// Decodes one residual byte of channel `state` under `model`.
   uint8_t decode(uint32_t state, const Model& model) {
-    uint32_t symbol = decodeSymbol(state, model);
+    uint32_t& x = state_[state];
+    const uint32_t slot = x & (kScale - 1);
+    uint32_t symbol = model.symbolOf<kScaleBits>(slot);
+    const uint32_t entry = model.entry[symbol];
+    x = (entry >> 16) * (x >> kScaleBits) + slot - (entry & 0xffff);
+    renormalise(x);
     if (symbol == kEscape) [[unlikely]] {
       // Uniform 8 bits: frequency kScale / 256 for every byte value.
-      uint32_t& x = state_[state];
-      const uint32_t slot = x & (kScale - 1);
-      symbol = slot >> (kScaleBits - 8);
-      x = (kScale >> 8) * (x >> kScaleBits) + (slot & ((kScale >> 8) - 1));
+      const uint32_t uniform_slot = x & (kScale - 1);
+      symbol = uniform_slot >> (kScaleBits - 8);
+      x = (kScale >> 8) * (x >> kScaleBits) + (uniform_slot & ((kScale >> 8) - 1));
       renormalise(x);
       if (symbol < kEscape) failed_ = true;  // the encoder escapes only what 0..62 cannot say
     }
     return unzigzag(symbol);
   }
+
+  /// True once a symbol was read past the end of the input or an escape was malformed: the
+  /// stream can no longer finish cleanly.
+  bool failed() const { return failed_; }
 
   /// True when every symbol was read from inside the input, all of it was used, and every
   /// state ended where the encoder started it.
@@ -88,16 +142,6 @@ class Decoder {
   }
 
  private:
-  uint32_t decodeSymbol(uint32_t state, const Model& model) {
-    uint32_t& x = state_[state];
-    const uint32_t slot = x & (kScale - 1);
-    const uint32_t symbol = model.symbol_of_slot[slot];
-    x = model.freq[symbol] * (x >> kScaleBits) + slot - model.start[symbol];
-    renormalise(x);
-    return symbol;
-  }
-
-  // x >= kLower before a decode and freq >= 1 leave x >= 2^11, so two bytes always suffice.
   void renormalise(uint32_t& x) {
     if (x < kLower) {
       x = (x << 8) | nextByte();
@@ -119,18 +163,19 @@ class Decoder {
   bool failed_ = false;
 };
 
-/// Encodes `residuals[i]` (channel i % channels) with model `models()[params[context]]` where
-/// context = `contexts[i]` + channel * contexts_per_channel, in reverse, so that Decoder reads
-/// them in order i = 0, 1, .... Appends the states and bytes to `out`.
-void encode(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+/// Encodes `residuals[i]` (channel i % channels) with model `models(family)[params[context]]`
+/// where context = `contexts[i]` + channel * contexts_per_channel, in reverse, so that Decoder
+/// reads them in order i = 0, 1, .... Appends the states and bytes to `out`.
+void encode(FamilyId family, std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
             uint32_t channels, uint32_t contexts_per_channel, std::span<const uint8_t> params,
             std::vector<uint8_t>& work, std::vector<uint8_t>& out);
 
-/// For each (channel, context), the model that codes its residuals in the fewest bits, by
-/// counting: `params` gets channels * contexts_per_channel bytes (0 for unused contexts).
-/// Returns the bits the symbols cost under those models, which encode() meets to within a few
-/// bytes (its final states).
-double chooseModels(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
-                    uint32_t channels, uint32_t contexts_per_channel, std::vector<uint8_t>& params);
+/// For each (channel, context), the model of `family` that codes its residuals in the fewest
+/// bits, by counting: `params` gets channels * contexts_per_channel bytes (0 for unused
+/// contexts). Returns the bits the symbols cost under those models, which encode() meets to
+/// within a few bytes (its final states).
+double chooseModels(FamilyId family, std::span<const uint8_t> residuals,
+                    std::span<const uint8_t> contexts, uint32_t channels,
+                    uint32_t contexts_per_channel, std::vector<uint8_t>& params);
 
 }  // namespace tessera::detail::rans

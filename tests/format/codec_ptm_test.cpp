@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <optional>
+#include <span>
 #include <vector>
 
 #include <fmt/format.h>
@@ -145,8 +146,8 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
-              EXPECT_TRUE((*payload)[1] == uint8_t(PtmCoder::kRans) ||
-                          (*payload)[1] == uint8_t(PtmCoder::kRansChained));
+              EXPECT_TRUE(isRansCoder(PtmCoder((*payload)[1])) &&
+                          (*payload)[1] <= uint8_t(PtmCoder::kRansMixtureChained));
             }
             return payload;
           },
@@ -155,10 +156,33 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
   }
 }
 
+// What the default encoder must write, by the rule docs/codecs.md states: the predictor (of
+// nearest parent, neighbour median and parent-corrected) that coder 4 codes in the fewest bytes,
+// then of coders 1, 2, 3 and 4 (fastest to decode first) the first whose size estimate is within
+// 3 % of the smallest.
+std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexels* parent) {
+  const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                  Predictor::kParentCorrected};
+  const Predictor predictor = *smallestPtmPredictor(
+      tile.view(), {}, parent, candidates, PtmCoder::kRansMixtureChained, nullptr, nullptr);
+  const PtmCoder by_speed[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
+                               PtmCoder::kRansMixtureChained};
+  std::vector<size_t> bytes;
+  for (PtmCoder coder : by_speed)
+    bytes.push_back(*estimatePtmBytes(tile.view(), {}, parent, predictor, coder, nullptr));
+  const size_t smallest = *std::min_element(bytes.begin(), bytes.end());
+  size_t chosen = 0;
+  while (bytes[chosen] * 100 > smallest * 103) ++chosen;
+  return *encodePtm(tile.view(), {}, parent, predictor, by_speed[chosen], nullptr);
+}
+
 constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
                                            Predictor::kNeighbourMedian,
                                            Predictor::kParentCorrected};
-constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans, PtmCoder::kRansChained};
+constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans, PtmCoder::kRansChained,
+                                PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained};
+constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
+                                    PtmCoder::kRansMixtureChained};
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   struct Case {
@@ -225,7 +249,7 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
     EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels) << "effort " << effort;
     return *payload;
   };
-  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 1 rANS, 2 rANS with chained contexts).
+  // Byte 0 is the predictor, byte 1 the coder (0 zstd, 1-4 rANS: docs/codecs.md).
   const std::vector<uint8_t> fast = payloadAt(1);
   EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
   EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
@@ -233,37 +257,41 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest[1], uint8_t(PtmCoder::kZstd));
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
-  // The default: the predictor that suits chained contexts best, and then the coder that
-  // decodes faster unless chaining saves at least 3 %.
+  // The default: the predictor that suits coder 4 best, and then the fastest coder within 3 %
+  // of the smallest.
   const std::vector<uint8_t> smallest = payloadAt(0);
-  const Predictor predictor = Predictor(smallest[0]);
-  EXPECT_EQ(predictor, *smallestPtmPredictor(child.view(), {}, &parent, candidates,
-                                             PtmCoder::kRansChained, nullptr, nullptr));
-  const auto chained =
-      *encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansChained, nullptr);
-  const auto plain = *encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRans, nullptr);
-  EXPECT_EQ(smallest, chained.size() * 100 <= plain.size() * 97 ? chained : plain);
+  EXPECT_EQ(smallest, expectedDefaultPayload(child, &parent));
   EXPECT_EQ(payloadAt(3), smallest);
   EXPECT_EQ(payloadAt(9), smallest);
   EXPECT_LE(zstd_smallest.size(), fast.size());
 }
 
-TEST(PtmRans, EveryModelIsAProperDistributionAndZigzagIsABijection) {
-  const rans::Model* models = rans::models();
+template <uint32_t kScaleBits>
+void expectProperFamily(rans::FamilyId id) {
+  constexpr uint32_t kScale = 1u << kScaleBits;
+  const rans::Model* models = rans::models(id);
   for (uint32_t k = 0; k < rans::kModelCount; ++k) {
     uint32_t sum = 0;
     for (uint32_t s = 0; s < rans::kAlphabet; ++s) {
       ASSERT_GE(models[k].freq[s], 1u) << "model " << k << " symbol " << s;
       EXPECT_EQ(models[k].start[s], sum);
+      EXPECT_EQ(models[k].entry[s], sum | uint32_t(models[k].freq[s]) << 16);
+      // The decoder's bucket search finds the symbol of every slot.
       for (uint32_t i = 0; i < models[k].freq[s]; ++i)
-        ASSERT_EQ(models[k].symbol_of_slot[sum + i], s);
+        ASSERT_EQ(models[k].template symbolOf<kScaleBits>(sum + i), s)
+            << "model " << k << " slot " << sum + i;
       sum += models[k].freq[s];
     }
-    EXPECT_EQ(sum, rans::kScale) << "model " << k;
+    EXPECT_EQ(sum, kScale) << "model " << k;
   }
-  // The family runs from near-certain zero to spread-out residuals.
-  EXPECT_GT(models[0].freq[0], rans::kScale * 9 / 10);
-  EXPECT_LT(models[rans::kModelCount - 1].freq[0], rans::kScale / 20);
+  // Each kind runs from near-certain zero to spread-out residuals.
+  EXPECT_GT(models[0].freq[0], kScale * 9 / 10);
+  EXPECT_LT(models[rans::kModelCount - 1].freq[0], kScale / 20);
+}
+
+TEST(PtmRans, EveryModelIsAProperDistributionAndZigzagIsABijection) {
+  expectProperFamily<rans::scaleBits(rans::FamilyId::kGeometric12)>(rans::FamilyId::kGeometric12);
+  expectProperFamily<rans::scaleBits(rans::FamilyId::kMixture15)>(rans::FamilyId::kMixture15);
   for (uint32_t v = 0; v < 256; ++v) {
     EXPECT_LT(rans::zigzag(uint8_t(v)), 256u);
     EXPECT_EQ(rans::unzigzag(rans::zigzag(uint8_t(v))), uint8_t(v));
@@ -271,6 +299,96 @@ TEST(PtmRans, EveryModelIsAProperDistributionAndZigzagIsABijection) {
   EXPECT_EQ(rans::zigzag(0), 0u);
   EXPECT_EQ(rans::zigzag(uint8_t(-1)), 1u);
   EXPECT_EQ(rans::zigzag(1), 2u);
+}
+
+// A 12x10 RGB tile coded without a parent by coders 1 and 2 before model family 2 and the
+// decoder's bucket tables existed: family 1's payloads must decode, and encode, unchanged.
+Image makeGoldenTile() {
+  Image tile(12, 10, 3);
+  for (uint32_t y = 0; y < 10; ++y)
+    for (uint32_t x = 0; x < 12; ++x)
+      for (uint32_t c = 0; c < 3; ++c)
+        tile.row(y)[size_t(x) * 3 + c] =
+            uint8_t(40 + 9 * x + 5 * y + 30 * c + ((x * y + c) % 7) * 3);
+  return tile;
+}
+constexpr uint8_t kGoldenCoder1[] = {
+    0x00, 0x01, 0x80, 0x00, 0x00, 0x80, 0x80, 0xc1, 0xb0, 0xf5, 0xf3, 0x00, 0x00, 0xeb, 0xeb, 0xee,
+    0xf1, 0xec, 0x80, 0x00, 0x00, 0x80, 0x80, 0xb1, 0x06, 0xab, 0xff, 0x5f, 0x9c, 0x02, 0x26, 0xaf,
+    0x20, 0x5a, 0xff, 0xff, 0x5d, 0x07, 0xb4, 0x10, 0x49, 0x72, 0xa4, 0x25, 0x78, 0x7e, 0x5a, 0x8c,
+    0x62, 0x9c, 0x82, 0x65, 0x11, 0x32, 0xb5, 0xb8, 0xe0, 0xf3, 0xd8, 0x66, 0xff, 0x97, 0x12, 0x68,
+    0x4f, 0xcd, 0x5c, 0xdd, 0x66, 0x68, 0x3a, 0x00, 0x00, 0xcf, 0x77, 0xc8, 0xf9, 0x67, 0x75, 0x1f,
+    0xd6, 0x4e, 0x2d, 0xd0, 0x34, 0xd1, 0x9d, 0xce, 0xb0, 0x68, 0x8c, 0x69, 0x5b, 0x95, 0x8b, 0xd7,
+    0x4c, 0xcc, 0xf1, 0x6e, 0x65, 0xcb, 0xa2, 0x0f, 0x01, 0x57, 0xd2, 0x9c, 0x11, 0x38, 0x40, 0x58,
+    0x7b, 0x04, 0xfc, 0xb3, 0x15, 0xf2, 0xf9, 0xcf, 0x87, 0xaf, 0x57, 0x57, 0x64, 0x02, 0xde, 0xff,
+    0x35, 0x14, 0xd4, 0x53, 0xe9, 0x61, 0x3b, 0x95, 0xd4, 0x93, 0xe8, 0xfe, 0x55, 0xe0, 0x43, 0x32,
+    0x00, 0xa8, 0xe9, 0x95, 0x68, 0xd4, 0xea, 0xa2, 0x89, 0x06, 0xb6, 0xf2, 0xe6, 0xe3, 0xb2, 0xa9,
+    0xaa, 0xb7, 0x2b, 0x3d, 0xfd, 0xba, 0x73, 0xd7, 0x0a, 0x13, 0xe3, 0xcf, 0xd9, 0x98, 0x78, 0xeb,
+    0x11, 0x3c, 0x75, 0x00, 0x38, 0xd2, 0x20, 0x78, 0x5a, 0xb0, 0xd3, 0x91, 0x92, 0x25, 0xec, 0xed,
+    0x3c, 0x6f, 0x0a, 0x6b, 0xd3, 0x9b, 0x4c, 0xd5, 0xde, 0x59, 0xda, 0xd0, 0x21, 0xe5, 0xdf, 0xd8,
+    0x5c, 0xcd, 0x18, 0x21, 0x95, 0x77, 0xd7, 0xa9, 0xd8, 0x67, 0x6f, 0x15, 0x53, 0x0f, 0x87, 0xff,
+    0xf9, 0x5a, 0x35, 0xd6, 0xe5, 0x4b, 0x1d, 0x58, 0x81, 0x48, 0xa3, 0x96,
+};
+constexpr uint8_t kGoldenCoder2[] = {
+    0x00, 0x02, 0xf3, 0x00, 0x00, 0xeb, 0xeb, 0xee, 0xf1, 0xec, 0x00, 0x00, 0x00, 0x80, 0x00, 0x80,
+    0x80, 0xaf, 0x80, 0x80, 0x80, 0xaf, 0x00, 0x00, 0x3c, 0xb1, 0x26, 0xaf, 0x20, 0x5a, 0xff, 0x6f,
+    0xa9, 0x00, 0xda, 0x0f, 0x79, 0x22, 0x72, 0x44, 0x1a, 0x5b, 0x27, 0xad, 0x7e, 0x5a, 0x8c, 0x62,
+    0x9c, 0x82, 0x65, 0x11, 0x32, 0xb5, 0x8f, 0xe0, 0x4a, 0xf3, 0x51, 0x1f, 0xff, 0xf0, 0x19, 0x8e,
+    0x4f, 0xcd, 0xdd, 0xa7, 0x32, 0x68, 0x3a, 0xa8, 0xcf, 0xd3, 0xc9, 0x77, 0x71, 0x5e, 0x75, 0x11,
+    0xa7, 0x4e, 0x13, 0x33, 0x34, 0x58, 0x7f, 0x9d, 0xd9, 0x8c, 0xe0, 0x69, 0x73, 0x98, 0x8b, 0x07,
+    0x81, 0x4c, 0xb0, 0x04, 0xf1, 0x30, 0x89, 0x70, 0xa2, 0x8b, 0xd2, 0x98, 0x11, 0x6f, 0x38, 0x99,
+    0xf7, 0x58, 0xb3, 0x32, 0xb3, 0x15, 0xf7, 0x9d, 0xea, 0x1e, 0x57, 0xb6, 0x73, 0xd0, 0x57, 0xde,
+    0xb3, 0x81, 0x35, 0x29, 0xf2, 0xd4, 0x1b, 0x3b, 0xe9, 0xea, 0x4c, 0x85, 0x93, 0x50, 0xb7, 0xe0,
+    0x9a, 0x00, 0x4a, 0x95, 0xa8, 0xc5, 0xea, 0x68, 0xcc, 0x8d, 0xa2, 0x59, 0x5c, 0x42, 0xf2, 0xb2,
+    0xda, 0xa4, 0x2b, 0xc2, 0x3f, 0xe4, 0x90, 0xd7, 0xef, 0xa4, 0x1a, 0x0a, 0x13, 0xd8, 0xce, 0xeb,
+    0x05, 0xe4, 0x3c, 0x40, 0x7b, 0x38, 0xeb, 0x44, 0x78, 0xc1, 0x33, 0xb0, 0x77, 0x18, 0x25, 0xec,
+    0x43, 0x6f, 0xd9, 0x39, 0x6b, 0xe0, 0x44, 0xde, 0x59, 0xda, 0x95, 0xfd, 0xd0, 0xe5, 0x54, 0xac,
+    0x1e, 0xcd, 0xf9, 0x95, 0x0c, 0x9c, 0xd7, 0xd8, 0x9f, 0x67, 0x6f, 0xcf, 0xcb, 0x53, 0xe7, 0x77,
+    0x87, 0x79, 0x5e, 0x35, 0xf5, 0xd0, 0x4b, 0x8b, 0xc1, 0x48, 0x59, 0x96, 0xb2, 0xb9,
+};
+
+TEST(PtmCodec, PayloadsOfModelFamilyOneDecodeAndEncodeAsWrittenBefore) {
+  const Image tile = makeGoldenTile();
+  for (auto [coder, golden] :
+       {std::pair{PtmCoder::kRans, std::span<const uint8_t>(kGoldenCoder1)},
+        std::pair{PtmCoder::kRansChained, std::span<const uint8_t>(kGoldenCoder2)}}) {
+    Image out(12, 10, 3);
+    ASSERT_TRUE(decodeTile(Codec::kPtm, golden, out, nullptr).has_value()) << int(coder);
+    EXPECT_EQ(out.texels, tile.texels) << int(coder);
+    auto payload = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, coder, nullptr);
+    ASSERT_TRUE(payload.has_value());
+    EXPECT_TRUE(std::equal(payload->begin(), payload->end(), golden.begin(), golden.end()))
+        << int(coder);
+  }
+}
+
+// Residuals of one context drawn from two Laplacians, a quiet one most of the time and a busy
+// one otherwise, as where a context's activity class holds flat and textured texels alike.
+std::vector<uint8_t> mixedResiduals(size_t count, uint32_t seed) {
+  std::vector<uint8_t> residuals(count);
+  uint32_t random = seed;
+  for (uint8_t& r : residuals) {
+    const double scale = nextRandom(random) % 10 < 7 ? 0.6 : 8.0;
+    const double u = (nextRandom(random) % 1000000 + 0.5) / 1e6;
+    const int size = int(-scale * std::log(u));
+    r = uint8_t(nextRandom(random) % 2 ? size : -size);
+  }
+  return residuals;
+}
+
+TEST(PtmRans, TheMixtureFamilyCodesMixedResidualsInFewerBits) {
+  const std::vector<uint8_t> residuals = mixedResiduals(20000, 5);
+  const std::vector<uint8_t> contexts(residuals.size(), 0);
+  std::vector<uint8_t> params;
+  const double geometric =
+      rans::chooseModels(rans::FamilyId::kGeometric12, residuals, contexts, 1, 1, params);
+  const double mixture =
+      rans::chooseModels(rans::FamilyId::kMixture15, residuals, contexts, 1, 1, params);
+  EXPECT_LT(mixture, geometric * 0.97) << mixture << " bits against " << geometric;
+  // And the coder meets the model's count.
+  std::vector<uint8_t> work, out;
+  rans::encode(rans::FamilyId::kMixture15, residuals, contexts, 1, 1, params, work, out);
+  EXPECT_LE(std::abs(double(out.size()) - mixture / 8), 5.0);
 }
 
 TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
@@ -286,7 +404,7 @@ TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
     EXPECT_LT(payload->size(), root->size()) << int(predictor);
     EXPECT_EQ(decodeOrDie(*payload, child.width_px, 3, &parent).texels, child.texels);
   }
-  for (PtmCoder coder : {PtmCoder::kRans, PtmCoder::kRansChained}) {
+  for (PtmCoder coder : kRansCoders) {
     auto rans_root = encodePtm(child.view(), {}, nullptr, Predictor::kRoot, coder, nullptr);
     ASSERT_TRUE(rans_root.has_value());
     for (Predictor predictor :
@@ -314,31 +432,36 @@ Image makeTileWhoseChannelsErrTogether(uint32_t seed) {
 }
 
 TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
-  // Coder 2 codes green first and lets its residual choose the others' contexts.
+  // Coders 2 and 4 code green first and let its residual choose the others' contexts.
   const Image tile = makeTileWhoseChannelsErrTogether(17);
-  auto per_channel =
-      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRans, nullptr);
-  auto chained =
-      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRansChained, nullptr);
-  ASSERT_TRUE(per_channel.has_value());
-  ASSERT_TRUE(chained.has_value());
-  EXPECT_LT(chained->size() * 10, per_channel->size() * 9)
-      << chained->size() << " against " << per_channel->size();
-  EXPECT_EQ(decodeOrDie(*chained, 64, 3, nullptr).texels, tile.texels);
+  const std::pair<PtmCoder, PtmCoder> pairs[] = {
+      {PtmCoder::kRans, PtmCoder::kRansChained},
+      {PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained}};
+  for (auto [plain, chaining] : pairs) {
+    auto per_channel = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, plain, nullptr);
+    auto chained = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, chaining, nullptr);
+    ASSERT_TRUE(per_channel.has_value());
+    ASSERT_TRUE(chained.has_value());
+    EXPECT_LT(chained->size() * 10, per_channel->size() * 9)
+        << chained->size() << " against " << per_channel->size();
+    EXPECT_EQ(decodeOrDie(*chained, 64, 3, nullptr).texels, tile.texels);
+  }
 }
 
-TEST(PtmCodec, TheDefaultChainsContextsOnlyWhereThatSavesBytes) {
-  // One channel has nothing to chain: coder 2 would be coder 1 in another order, no smaller, so
-  // the default keeps the faster coder 1.
+TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfTheSmallest) {
+  // One channel has nothing to chain: coders 2 and 4 are 1 and 3 in another order, no
+  // smaller, so the default never picks them.
   Image grey = makeLevel0(64, 64, 1, 4);
   auto grey_payload = encodeTile(Codec::kPtm, grey.view(), {}, nullptr);
   ASSERT_TRUE(grey_payload.has_value());
-  EXPECT_EQ((*grey_payload)[1], uint8_t(PtmCoder::kRans));
+  EXPECT_FALSE(isChainedCoder(PtmCoder((*grey_payload)[1]))) << int((*grey_payload)[1]);
+  EXPECT_EQ(*grey_payload, expectedDefaultPayload(grey, nullptr));
   // Colour channels that err together: chaining saves far more than 3 %.
   const Image colour = makeTileWhoseChannelsErrTogether(23);
   auto colour_payload = encodeTile(Codec::kPtm, colour.view(), {}, nullptr);
   ASSERT_TRUE(colour_payload.has_value());
-  EXPECT_EQ((*colour_payload)[1], uint8_t(PtmCoder::kRansChained));
+  EXPECT_TRUE(isChainedCoder(PtmCoder((*colour_payload)[1]))) << int((*colour_payload)[1]);
+  EXPECT_EQ(*colour_payload, expectedDefaultPayload(colour, nullptr));
   EXPECT_EQ(decodeOrDie(*colour_payload, 64, 3, nullptr).texels, colour.texels);
 }
 
@@ -439,13 +562,13 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad[0] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = 3;
+  bad[1] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   // Every model byte names a model of the family; one changed under a used context (the first
   // position's flattest class in slot 0, which this smooth tile uses) leaves the rANS stream
   // unfinished.
   bad = tile.payload;
-  ASSERT_EQ(bad[1], uint8_t(PtmCoder::kRansChained));
+  ASSERT_TRUE(isRansCoder(PtmCoder(bad[1])));
   bad[2] = uint8_t(bad[2] ^ 0x40);
   auto model = decodeTile(Codec::kPtm, bad, out, &parent);
   ASSERT_FALSE(model.has_value());
