@@ -14,6 +14,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -395,6 +396,17 @@ void study(const std::string& input, double min_seconds, const std::string& only
                total / raw_base, raw_base / total, 100.0 * (total - base_alone) / base_alone,
                pyramid_px / fastest_round / 1e6, exact ? "" : " (NOT EXACT)",
                pyramid_px / encode_seconds / 1e6);
+    if (ptm && variant.as_built) {
+      // What the default chose: its share of the pyramid's bytes per (predictor, coder).
+      std::map<std::pair<int, int>, double> chosen;
+      for (const auto& level : payloads)
+        for (const auto& payload : level) chosen[{payload[0], payload[1]}] += payload.size();
+      std::string shares;
+      for (const auto& [key, bytes] : chosen)
+        shares += fmt::format("{}predictor {} coder {} {:.1f} %", shares.empty() ? "" : ", ",
+                              key.first, key.second, 100.0 * bytes / total);
+      fmt::print("\n(default's bytes by predictor and coder: {})\n\n", shares);
+    }
     if (per_level) {
       // Where the overhead lies: each level's bytes as coded in the pyramid, and the same level
       // coded on its own, both in bits per texel.
