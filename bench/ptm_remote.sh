@@ -31,6 +31,13 @@ REPEATS=${1:-2}
 # codec[:effort]; ptm:1 is ptm's fastest-decoding mode (nearest parent, zstd; docs/codecs.md).
 CODECS=(ptm ptm:1 png webp zstd jpeg)
 mkdir -p "$WORK/src"
+# Archives are kept between runs, but only for the tessera binary that built them: a changed
+# encoder must not be measured through a stale archive.
+stamp=$(sha256sum "$TESSERA" | cut -d' ' -f1)
+if [[ $(cat "$WORK/tessera.sha256" 2>/dev/null) != "$stamp" ]]; then
+  rm -f "$WORK"/*.tess
+  echo "$stamp" >"$WORK/tessera.sha256"
+fi
 
 if ! command -v dwebp >/dev/null 2>&1; then
   sudo_cmd=()

@@ -21,11 +21,12 @@ inline constexpr uint32_t kEscape = kAlphabet - 1;
 inline constexpr uint32_t kModelCount = 256;
 /// The lower bound of the state between symbols, and the value every state starts at.
 inline constexpr uint32_t kLower = 1u << 23;
-/// The decoder looks a slot's symbol up in a table of kBuckets buckets per model, each naming
-/// the symbol of its first slot: at 12 bits a bucket is a slot; at 15 bits it is 8 slots, and
-/// one where a later symbol starts is marked kSharedBucket and sends the decoder on a short
-/// search (rarely, so the branch stays predicted). A full 15-bit table would be 32 KiB per
-/// model; fewer buckets holding frequency and start, 2^6 to 2^10 of them, decoded 10 % slower.
+/// The decoder finds a slot's symbol in a table of kBuckets buckets per model, each naming the
+/// symbol of its first slot: at 12 bits a bucket is one slot; at 15 bits it is 8, and a bucket
+/// in which a symbol ends is marked kSharedBucket and sends the decoder on a short search over
+/// the starts (rare, so the branch stays predicted). A full 15-bit table would be 32 KiB per
+/// model; buckets holding frequency and start instead, 2^6 to 2^10 of them, decoded 10 %
+/// slower.
 inline constexpr uint32_t kBucketBits = 12;
 inline constexpr uint8_t kSharedBucket = 0x80;
 inline constexpr uint32_t kBuckets = 1u << kBucketBits;
@@ -37,9 +38,9 @@ enum class FamilyId : uint8_t {
   /// before the other kinds existed decode unchanged) or in |residual| with symbol 0's weight
   /// as is, doubled or halved.
   kGeometric12,
-  /// 15-bit probabilities; in |residual|, a geometric plus a share (0, 1/32, 1/8 or 1/2) of a
-  /// geometric with the fourth root of its ratio, which gives the heavier tails that mixed
-  /// activity leaves, with symbol 0's weight as is or doubled.
+  /// 15-bit probabilities; mostly geometric mixtures in |residual|, a geometric plus a share
+  /// of one with the fourth root of its ratio, for the heavier tails that contexts of mixed
+  /// activity see (the eight kinds: docs/codecs.md).
   kMixture15,
 };
 
