@@ -24,7 +24,8 @@ namespace {
 // zigzag code); kinds 1-4 have shares 0, 1/32, 1/8 and 1/2; kinds 5 and 6 shares 0 and 1/8
 // with symbol 0's weight doubled, kind 7 share 0 with it halved. On four level-0 tiles of the
 // codec study's photograph (neighbour median, chained contexts) the symbols cost 5 % fewer
-// bits than with family 1, and 1 % fewer on the other predictors; the scale alone was 3 %.
+// bits than with family 1, and 1-2 % fewer with the other predictors; the scale alone was
+// about 3 %.
 constexpr uint64_t kFirstMeanQ16 = 655;
 constexpr uint64_t kMeanStepQ16 = 75235;
 constexpr uint32_t kMeansPerKind = 64;
