@@ -45,6 +45,8 @@ struct CodecScratch::State {
   std::vector<uint8_t> compressed;
   /// ptm: the parent bilinearly upsampled to the tile, 16 times the texel scale.
   std::vector<int16_t> upsampled;
+  /// ptm: predictor 4's detail of each coded texel (16 texel - upsampled).
+  std::vector<int16_t> detail;
   /// ptm: the context of each residual symbol, for the rANS coder's encoder.
   std::vector<uint8_t> contexts;
 };

@@ -203,6 +203,9 @@ struct Walk {
   const AxisMap* columns;
   const AxisMap* rows;
   const int16_t* upsampled;
+  /// Predictor 4: each decoded texel's departure from the upsampled parent, 16 t - upsampled,
+  /// kept for the texels after it instead of recomputed from both planes.
+  int16_t* detail;
 };
 
 // One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
@@ -217,6 +220,13 @@ void codeTexels(const Walk& walk, Coder& coder) {
   const AxisMap* const columns = walk.columns;
   const AxisMap* const rows = walk.rows;
   const int16_t* const upsampled = walk.upsampled;
+  int16_t* const details = walk.detail;
+  // Predictor 4 reads each texel's detail three times, as the left, up and up-left neighbour.
+  auto keepDetail = [&](const uint8_t* texel, size_t index) {
+    if constexpr (kPredictor == Predictor::kParentCorrected)
+      for (uint32_t c = 0; c < kChannels; ++c)
+        details[index + c] = int16_t(16 * texel[c] - upsampled[index + c]);
+  };
   constexpr bool kColourTransform = kChannels >= 3;
   constexpr bool kHasParent = kPredictor != Predictor::kRoot;
   constexpr bool kExpectedRemainder =
@@ -299,6 +309,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
               texel[c] = uint8_t(known + expected + symbol);
             }
           }
+          keepDetail(texel, index);
           continue;
         }
         position = row_position + columns->second[x];
@@ -319,12 +330,12 @@ void codeTexels(const Walk& walk, Coder& coder) {
         } else {
           const int16_t* u = upsampled + index + c;
           const uint8_t* t = texel + c;
+          const int16_t* d = details + index + c;
           int estimate = *u;
           if (!origin) {
             // The neighbours' departure from the upsampled parent carries the detail the
             // parent lost.
-            estimate += medPredict(16 * t[left] - u[left], 16 * t[up] - u[up],
-                                   16 * t[up_left] - u[up_left]);
+            estimate += medPredict(d[left], d[up], d[up_left]);
           }
           if (full_row && columns->full[x]) {
             // Eq. 3 fixes the block's sum; what the texels still to come would need, by the
@@ -364,6 +375,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
         }
         for (uint32_t c = 0; c < kChannels; ++c) texel[c] = uint8_t(predicted[c] + symbols[c]);
       }
+      keepDetail(texel, index);
     }
   }
 }
@@ -394,8 +406,9 @@ void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder
 }
 
 void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
-              const AxisMap& rows, std::vector<int16_t>& out) {
+              const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail) {
   out.resize(columns.parent.size() * rows.parent.size() * channels);
+  detail.resize(out.size());
   switch (channels) {
     case 1: return upsampleParent<1>(parent, columns, rows, out.data());
     case 2: return upsampleParent<2>(parent, columns, rows, out.data());
@@ -503,7 +516,7 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
   if (predictor == Predictor::kParentCorrected)
-    upsample(channels, parent->texels, columns, rows, state->upsampled);
+    upsample(channels, parent->texels, columns, rows, state->upsampled, state->detail);
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   // Encoding only reads the texels; the shared routine takes a mutable pointer for decoding.
   const Walk walk{const_cast<uint8_t*>(packed.data()),
@@ -512,7 +525,8 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
                   has_parent ? &parent->texels : nullptr,
                   &columns,
                   &rows,
-                  state->upsampled.data()};
+                  state->upsampled.data(),
+                  state->detail.data()};
   std::vector<uint8_t> payload = {uint8_t(predictor), uint8_t(coder)};
 
   if (isRansCoder(coder)) {
@@ -652,14 +666,15 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
   if (predictor == Predictor::kParentCorrected)
-    upsample(channels, parent->texels, columns, rows, state->upsampled);
+    upsample(channels, parent->texels, columns, rows, state->upsampled, state->detail);
   const Walk walk{out.texels.data(),
                   width,
                   height,
                   has_parent ? &parent->texels : nullptr,
                   &columns,
                   &rows,
-                  state->upsampled.data()};
+                  state->upsampled.data(),
+                  state->detail.data()};
 
   const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
   using rans::FamilyId;
