@@ -76,9 +76,8 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 3 and the default: the same predictors entropy-coded by rANS. Of its four coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), each tile takes the fastest whose estimated size is within 3 % of the
-//   smallest. Smaller than effort 1 but a fifth to a ninth of its decode
-//   speed. Bytes are what ptm is for (storage, and remote refinement over a link), so the
-//   smallest is the default.
+//   smallest. Smaller than effort 1 but a fifth to a ninth of its decode speed. Bytes are what
+//   ptm is for (storage, and remote refinement over a link), so the smallest is the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
@@ -101,13 +100,14 @@ Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const Encod
                                PtmCoder::kZstd, scratch);
     default: {
       // The predictor that suits the most elaborate coder, then the coder by size and speed.
-      size_t bytes[std::size(kRansCodersByDecodeSpeed)];
+      constexpr size_t kSlowest = std::size(kRansCodersByDecodeSpeed) - 1;
+      size_t bytes[kSlowest + 1];
       TESSERA_ASSIGN_OR_RETURN(
           Predictor predictor,
           smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
-                               kRansCodersByDecodeSpeed[3], scratch, &bytes[3]));
-      size_t smallest = bytes[3];
-      for (size_t i = 0; i < 3; ++i) {
+                               kRansCodersByDecodeSpeed[kSlowest], scratch, &bytes[kSlowest]));
+      size_t smallest = bytes[kSlowest];
+      for (size_t i = 0; i < kSlowest; ++i) {
         TESSERA_ASSIGN_OR_RETURN(bytes[i], estimatePtmBytes(tile, stream_options, parent, predictor,
                                                             kRansCodersByDecodeSpeed[i], scratch));
         smallest = std::min(smallest, bytes[i]);
