@@ -73,15 +73,17 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
 //   prediction, with zstd;
-// - 3 and the default: the same predictors entropy-coded by rANS. Of its four coders, fastest to
+// - 3 and the default: the same predictors entropy-coded by rANS. Of its five coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
-//   family 2), 4 (both), each tile takes the fastest whose estimated size is within 3 % of the
-//   smallest. Smaller than effort 1 but a fifth to a ninth of its decode speed. Bytes are what
-//   ptm is for (storage, and remote refinement over a link), so the smallest is the default.
+//   family 2), 4 (both), 5 (4 with the neighbours' errors in the activity), each tile takes the
+//   fastest whose estimated size is within 3 % of the smallest. Smaller than effort 1 but a
+//   fifth to a ninth of its decode speed. Bytes are what ptm is for (storage, and remote
+//   refinement over a link), so the smallest is the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
-    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained};
+    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
+    PtmCoder::kRansMixtureChainedErrors};
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 

@@ -47,6 +47,8 @@ struct CodecScratch::State {
   std::vector<int16_t> upsampled;
   /// ptm: predictor 4's detail of each coded texel (16 texel - upsampled).
   std::vector<int16_t> detail;
+  /// ptm, coder 5: each texel's coded error (sum of its symbols' magnitudes over channels).
+  std::vector<uint16_t> errors;
   /// ptm: the context of each residual symbol, for the rANS coder's encoder.
   std::vector<uint8_t> contexts;
 };
@@ -119,6 +121,9 @@ enum class PtmCoder : uint8_t {
   kRansMixture = 3,
   /// kRansChained with the second model family
   kRansMixtureChained = 4,
+  /// kRansMixtureChained whose activity also weighs the errors coded at the left and upper
+  /// texels, as CALIC's error energy does
+  kRansMixtureChainedErrors = 5,
 };
 
 /// True for the rANS coders, whose payload is model bytes and one rANS stream.
@@ -127,7 +132,12 @@ constexpr bool isRansCoder(PtmCoder coder) {
 }
 /// True for the coders whose later channels' contexts follow the residual coded before them.
 constexpr bool isChainedCoder(PtmCoder coder) {
-  return coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixtureChained;
+  return coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixtureChained ||
+         coder == PtmCoder::kRansMixtureChainedErrors;
+}
+/// True for the coders whose activity class weighs the neighbours' coded errors.
+constexpr bool isErrorActivityCoder(PtmCoder coder) {
+  return coder == PtmCoder::kRansMixtureChainedErrors;
 }
 
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec

@@ -147,7 +147,7 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
               EXPECT_TRUE(isRansCoder(PtmCoder((*payload)[1])) &&
-                          (*payload)[1] <= uint8_t(PtmCoder::kRansMixtureChained));
+                          (*payload)[1] <= uint8_t(PtmCoder::kRansMixtureChainedErrors));
             }
             return payload;
           },
@@ -157,16 +157,16 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
 }
 
 // What the default encoder must write, by the rule docs/codecs.md states: the predictor (of
-// nearest parent, neighbour median and parent-corrected) that coder 4 codes in the fewest bytes,
-// then of coders 1, 2, 3 and 4 (fastest to decode first) the first whose size estimate is within
-// 3 % of the smallest.
+// nearest parent, neighbour median and parent-corrected) that coder 5 codes in the fewest bytes,
+// then of coders 1 to 5 (fastest to decode first) the first whose size estimate is within 3 % of
+// the smallest.
 std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexels* parent) {
   const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
                                   Predictor::kParentCorrected};
   const Predictor predictor = *smallestPtmPredictor(
-      tile.view(), {}, parent, candidates, PtmCoder::kRansMixtureChained, nullptr, nullptr);
+      tile.view(), {}, parent, candidates, PtmCoder::kRansMixtureChainedErrors, nullptr, nullptr);
   const PtmCoder by_speed[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
-                               PtmCoder::kRansMixtureChained};
+                               PtmCoder::kRansMixtureChained, PtmCoder::kRansMixtureChainedErrors};
   std::vector<size_t> bytes;
   for (PtmCoder coder : by_speed)
     bytes.push_back(*estimatePtmBytes(tile.view(), {}, parent, predictor, coder, nullptr));
@@ -179,10 +179,15 @@ std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexel
 constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
                                            Predictor::kNeighbourMedian,
                                            Predictor::kParentCorrected};
-constexpr PtmCoder kCoders[] = {PtmCoder::kZstd, PtmCoder::kRans, PtmCoder::kRansChained,
-                                PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained};
+constexpr PtmCoder kCoders[] = {PtmCoder::kZstd,
+                                PtmCoder::kRans,
+                                PtmCoder::kRansChained,
+                                PtmCoder::kRansMixture,
+                                PtmCoder::kRansMixtureChained,
+                                PtmCoder::kRansMixtureChainedErrors};
 constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
-                                    PtmCoder::kRansMixtureChained};
+                                    PtmCoder::kRansMixtureChained,
+                                    PtmCoder::kRansMixtureChainedErrors};
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   struct Case {
@@ -448,6 +453,39 @@ TEST(PtmCodec, ChainedContextsPayOffWhereColourChannelsErrTogether) {
   }
 }
 
+// A 64x64 RGB tile of smooth slopes, which the median predicts exactly, beside patches of
+// noise whose gradients are as large on average: activity alone puts both in the same classes;
+// the errors coded next to a texel tell them apart.
+Image makeTileOfSlopesBesideNoise(uint32_t seed) {
+  Image tile(64, 64, 3);
+  uint32_t random = seed;
+  for (uint32_t y = 0; y < 64; ++y)
+    for (uint32_t x = 0; x < 64; ++x) {
+      const bool slope = (x / 16) % 2 == 0 || (y / 16) % 2 == 0;
+      for (uint32_t c = 0; c < 3; ++c) {
+        const uint32_t noise = nextRandom(random) % 15;
+        tile.texels[(size_t(y) * 64 + x) * 3 + c] =
+            uint8_t(slope ? 40 + 6 * (x % 16) + 3 * (15 - y % 16) + 10 * c : 120 + 10 * c + noise);
+      }
+    }
+  return tile;
+}
+
+TEST(PtmCodec, ErrorActivityPaysOffWhereSmoothSlopesMeetNoise) {
+  // Coder 5 is coder 4 with the neighbours' coded errors in the activity.
+  const Image tile = makeTileOfSlopesBesideNoise(29);
+  auto without =
+      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRansMixtureChained, nullptr);
+  auto with = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot,
+                        PtmCoder::kRansMixtureChainedErrors, nullptr);
+  ASSERT_TRUE(without.has_value());
+  ASSERT_TRUE(with.has_value());
+  // Chaining already separates the later channels of a texel; the gain is the first one's.
+  EXPECT_LT(with->size() * 100, without->size() * 95)
+      << with->size() << " against " << without->size();
+  EXPECT_EQ(decodeOrDie(*with, 64, 3, nullptr).texels, tile.texels);
+}
+
 TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfTheSmallest) {
   // One channel has nothing to chain: coders 2 and 4 are 1 and 3 in another order, no
   // smaller, so the default never picks them.
@@ -518,13 +556,14 @@ ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predic
 
 // Every predictor that reads the parent, with each coder: what the truncation and corruption
 // tests sweep. Coders 3 and 4 run the texel walks of coders 1 and 2 with other tables, so they
-// are swept at three channels only (the two sweeps are the longest tests under ASan).
+// are swept at three channels only (the two sweeps are the longest tests under ASan); coder 5
+// walks its own error plane and is swept at every channel count.
 std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   std::vector<ChildPayload> payloads;
   for (PtmCoder coder : kCoders) {
-    const bool family_two =
+    const bool walk_of_coder_1_or_2 =
         coder == PtmCoder::kRansMixture || coder == PtmCoder::kRansMixtureChained;
-    if (family_two && channels != 3) continue;
+    if (walk_of_coder_1_or_2 && channels != 3) continue;
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
   }
@@ -567,7 +606,7 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad[0] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = 5;
+  bad[1] = uint8_t(PtmCoder::kRansMixtureChainedErrors) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   // Every model byte names a model of the family; one changed under a used context (the first
   // position's flattest class in slot 0, which this smooth tile uses) leaves the rANS stream
