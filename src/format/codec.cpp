@@ -76,8 +76,8 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 3 and the default: the same predictors entropy-coded by rANS. Of its five coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), 5 (4 with the neighbours' errors in the activity), each tile takes the
-//   fastest whose estimated size is within 3 % of the smallest. Smaller than effort 1 but a
-//   fifth to a ninth of its decode speed. Bytes are what ptm is for (storage, and remote
+//   fastest whose estimated size is within 3 % of coder 5's. Smaller than effort 1 but a fifth
+//   to a ninth of its decode speed. Bytes are what ptm is for (storage, and remote
 //   refinement over a link), so the smallest is the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
@@ -101,21 +101,22 @@ Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const Encod
       return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
                                PtmCoder::kZstd, scratch);
     default: {
-      // The predictor that suits the most elaborate coder, then the coder by size and speed.
+      // The predictor that suits the most elaborate coder (the smallest, as a rule), then the
+      // fastest coder within 3 % of it: estimated fastest first, so a tile that a fast coder
+      // codes well costs one estimate more, not four.
       constexpr size_t kSlowest = std::size(kRansCodersByDecodeSpeed) - 1;
-      size_t bytes[kSlowest + 1];
+      size_t slowest_bytes = 0;
       TESSERA_ASSIGN_OR_RETURN(
           Predictor predictor,
           smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
-                               kRansCodersByDecodeSpeed[kSlowest], scratch, &bytes[kSlowest]));
-      size_t smallest = bytes[kSlowest];
-      for (size_t i = 0; i < kSlowest; ++i) {
-        TESSERA_ASSIGN_OR_RETURN(bytes[i], estimatePtmBytes(tile, stream_options, parent, predictor,
-                                                            kRansCodersByDecodeSpeed[i], scratch));
-        smallest = std::min(smallest, bytes[i]);
-      }
+                               kRansCodersByDecodeSpeed[kSlowest], scratch, &slowest_bytes));
       size_t chosen = 0;
-      while (bytes[chosen] * 100 > smallest * (100 + kSlowerCoderMinSavingPercent)) ++chosen;
+      for (; chosen < kSlowest; ++chosen) {
+        TESSERA_ASSIGN_OR_RETURN(size_t bytes,
+                                 estimatePtmBytes(tile, stream_options, parent, predictor,
+                                                  kRansCodersByDecodeSpeed[chosen], scratch));
+        if (bytes * 100 <= slowest_bytes * (100 + kSlowerCoderMinSavingPercent)) break;
+      }
       return encodePtm(tile, stream_options, parent, predictor, kRansCodersByDecodeSpeed[chosen],
                        scratch);
     }
