@@ -1,5 +1,5 @@
 #pragma once
-// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coders 1-4):
+// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coders 1-5):
 // byte-wise rANS with one state per channel over a shared byte stream, whose symbol
 // distributions come from a fixed family of discretised distributions, so a tile sends one
 // byte per context instead of a frequency table. Decoding never reads outside its input and
@@ -32,7 +32,7 @@ inline constexpr uint8_t kSharedBucket = 0x80;
 inline constexpr uint32_t kBuckets = 1u << kBucketBits;
 
 /// The two model families (docs/codecs.md, "ptm (6)"). Coders 1 and 2 use the first, coders 3
-/// and 4 the second.
+/// to 5 the second.
 enum class FamilyId : uint8_t {
   /// 12-bit probabilities; geometric in the zigzag code (models 0-63, so payloads written
   /// before the other kinds existed decode unchanged) or in |residual| with symbol 0's weight

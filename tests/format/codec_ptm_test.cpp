@@ -265,8 +265,8 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest[1], uint8_t(PtmCoder::kZstd));
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
-  // The default: the predictor that suits coder 4 best, and then the fastest coder within 3 %
-  // of the smallest.
+  // The default: the predictor that suits coder 5 best, and then the fastest coder within 3 %
+  // of coder 5.
   const std::vector<uint8_t> smallest = payloadAt(0);
   EXPECT_EQ(smallest, expectedDefaultPayload(child, &parent));
   EXPECT_EQ(payloadAt(3), smallest);
