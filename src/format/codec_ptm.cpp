@@ -80,8 +80,9 @@ constexpr int kActivityBounds[kActivityClasses - 1] = {1, 3, 6, 10, 16, 26, 42};
 // the upper one, in the manner of CALIC's error energy (Wu & Memon, "Context-based, adaptive,
 // lossless image coding", d_h + d_v + 2 |e_w|). Where the texture is fine-grained, what the
 // predictor just got wrong says more about the next error than the gradients do: 3 % smaller
-// on the codec study's photograph, 1 % on the map and the synthetic source. Remainders count
-// twice their magnitude (a remainder spans a quarter of a residual's range). Weights measured.
+// on the codec study's photograph, 1 % on the map and the synthetic source. A remainder symbol
+// is small by construction (0..3 less the expected one), so it counts twice its magnitude.
+// The weights were the best of a small grid on the three inputs (docs/benchmarks.md).
 constexpr int kErrorWeightLeft = 2;
 constexpr int kErrorWeightUp = 1;
 constexpr int kRemainderErrorWeight = 2;
