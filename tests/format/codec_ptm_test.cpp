@@ -565,15 +565,16 @@ ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predic
 }
 
 // Every predictor that reads the parent, with each coder: what the truncation and corruption
-// tests sweep. Coders 3 and 4 run the texel walks of coders 1 and 2 with other tables, so they
-// are swept at three channels only (the two sweeps are the longest tests under ASan); coder 5
-// walks its own error plane and is swept at every channel count.
+// tests sweep (the two longest tests under ASan). At three channels every coder; at the other
+// counts coders 0, 1 and 5 only: coders 3 and 4 run the texel walks of coders 1 and 2 with
+// other tables, and coder 5 runs coder 2's chained walk with its own error plane.
 std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   std::vector<ChildPayload> payloads;
   for (PtmCoder coder : kCoders) {
-    const bool walk_of_coder_1_or_2 =
-        coder == PtmCoder::kRansMixture || coder == PtmCoder::kRansMixtureChained;
-    if (walk_of_coder_1_or_2 && channels != 3) continue;
+    const bool walk_swept_by_another = coder == PtmCoder::kRansChained ||
+                                       coder == PtmCoder::kRansMixture ||
+                                       coder == PtmCoder::kRansMixtureChained;
+    if (walk_swept_by_another && channels != 3) continue;
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
   }
