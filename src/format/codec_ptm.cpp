@@ -158,10 +158,15 @@ rans::FamilyId familyOf(PtmCoder coder) {
                                                                      : rans::FamilyId::kMixture15;
 }
 
+// The magnitude of a residual or remainder symbol read as signed (0..128).
+inline uint32_t symbolMagnitude(uint8_t symbol) {
+  const int value = int8_t(symbol);
+  return uint32_t(value < 0 ? -value : value);
+}
+
 // Size class of a residual symbol read as signed: 0, 1, 2-3, 4 and more.
 inline uint32_t residualSizeClass(uint8_t symbol) {
-  const int value = int8_t(symbol);
-  const int size = value < 0 ? -value : value;
+  const uint32_t size = symbolMagnitude(symbol);
   return size == 0 ? 0 : size == 1 ? 1 : size <= 3 ? 2 : 3;
 }
 
@@ -274,6 +279,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
     for (uint32_t x = 0; x < width; ++x) {
       uint8_t* texel = row + size_t(x) * kChannels;
       const size_t index = size_t(y) * stride + size_t(x) * kChannels;
+      [[maybe_unused]] const size_t texel_index = size_t(y) * width + x;  // for kErrors
       // Causal neighbours, with LOCO-I's substitutes on the first row and column; offsets from
       // `index` so that the detail plane of predictor 4 can use the same ones.
       ptrdiff_t left = 0, up = 0, up_left = 0, up_right = 0;
@@ -304,7 +310,6 @@ void codeTexels(const Walk& walk, Coder& coder) {
         if constexpr (kErrors) {
           if (!origin) {
             // The same substitutes as the texels', in texel units.
-            const size_t texel_index = size_t(y) * width + x;
             const size_t left_error = y == 0 || x > 0 ? texel_index - 1 : texel_index - width;
             const size_t up_error = y == 0 ? texel_index - 1 : texel_index - width;
             activity = activity / 2 + kErrorWeightLeft * errors[left_error] +
@@ -339,11 +344,10 @@ void codeTexels(const Walk& walk, Coder& coder) {
               coder.remainder(c, context, symbol);
               texel[c] = uint8_t(known + expected + symbol);
             }
-            if constexpr (kErrors)
-              error_sum += kRemainderErrorWeight * uint32_t(std::abs(int(int8_t(symbol))));
+            if constexpr (kErrors) error_sum += kRemainderErrorWeight * symbolMagnitude(symbol);
           }
           keepDetail(texel, index);
-          if constexpr (kErrors) errors[size_t(y) * width + x] = uint16_t(error_sum);
+          if constexpr (kErrors) errors[texel_index] = uint16_t(error_sum);
           continue;
         }
         position = row_position + columns->second[x];
@@ -403,9 +407,8 @@ void codeTexels(const Walk& walk, Coder& coder) {
       }
       codeResiduals<kChannels>(coder, position, context, symbols);
       if constexpr (kErrors) {
-        for (uint32_t c = 0; c < kChannels; ++c)
-          error_sum += uint32_t(std::abs(int(int8_t(symbols[c]))));
-        errors[size_t(y) * width + x] = uint16_t(error_sum);
+        for (uint32_t c = 0; c < kChannels; ++c) error_sum += symbolMagnitude(symbols[c]);
+        errors[texel_index] = uint16_t(error_sum);
       }
       if constexpr (!kEncode) {
         if constexpr (kColourTransform) {
