@@ -90,9 +90,9 @@ int main(int argc, char** argv) {
   }
   // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
   // the encoder at efforts 1 (nearest parent, zstd), 2 (smallest, zstd) and 3 (smallest, rANS,
-  // whichever coder the default picks), and each rANS coder forced ("c1" to "c5"), so all are
+  // whichever coder the default picks), and each rANS coder forced ("c1" to "c6"), so all are
   // seeded whatever the default picks for these small tiles.
-  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5"};
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5", "c6"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {

@@ -73,17 +73,19 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
 //   prediction, with zstd;
-// - 3 and the default: the same predictors entropy-coded by rANS. Of its five coders, fastest to
+// - 3 and the default: the same predictors entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
-//   family 2), 4 (both), 5 (4 with the neighbours' errors in the activity), each tile takes the
-//   fastest whose estimated size is within 3 % of coder 5's. Smaller than effort 1 but a fifth
-//   to a ninth of its decode speed. Bytes are what ptm is for (storage, and remote
-//   refinement over a link), so the smallest is the default.
+//   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
+//   activity), each tile takes the fastest whose estimated size is within 3 % of coder 6's.
+//   Coder 5 (4 with the neighbours' gradients and errors) is left out: coder 6 is smaller at
+//   the same decode speed. Smaller than effort 1 but a fifth to a ninth of its decode speed.
+//   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
+//   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
-    PtmCoder::kRansMixtureChainedErrors};
+    PtmCoder::kRansParentErrors};
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 

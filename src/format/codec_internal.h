@@ -47,7 +47,7 @@ struct CodecScratch::State {
   std::vector<int16_t> upsampled;
   /// ptm: predictor 4's detail of each coded texel (16 texel - upsampled).
   std::vector<int16_t> detail;
-  /// ptm, coder 5: each texel's coded error (sum of its symbols' magnitudes over channels).
+  /// ptm, coders 5 and 6: each texel's coded error (sum of its symbols' magnitudes over channels).
   std::vector<uint16_t> errors;
   /// ptm: the context of each residual symbol, for the rANS coder's encoder.
   std::vector<uint8_t> contexts;
@@ -124,6 +124,10 @@ enum class PtmCoder : uint8_t {
   /// kRansMixtureChained whose activity also weighs the errors coded at the left and upper
   /// texels, as CALIC's error energy does
   kRansMixtureChainedErrors = 5,
+  /// kRansMixtureChainedErrors whose activity takes the parent's gradients in place of the
+  /// decoded neighbours', plus each coded texel's prediction's distance from its parent texel;
+  /// at the coarsest level, without a parent, it codes as kRansMixtureChainedErrors
+  kRansParentErrors = 6,
 };
 
 /// True for the rANS coders, whose payload is model bytes and one rANS stream.
@@ -133,11 +137,15 @@ constexpr bool isRansCoder(PtmCoder coder) {
 /// True for the coders whose later channels' contexts follow the residual coded before them.
 constexpr bool isChainedCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixtureChained ||
-         coder == PtmCoder::kRansMixtureChainedErrors;
+         coder == PtmCoder::kRansMixtureChainedErrors || coder == PtmCoder::kRansParentErrors;
 }
 /// True for the coders whose activity class weighs the neighbours' coded errors.
 constexpr bool isErrorActivityCoder(PtmCoder coder) {
-  return coder == PtmCoder::kRansMixtureChainedErrors;
+  return coder == PtmCoder::kRansMixtureChainedErrors || coder == PtmCoder::kRansParentErrors;
+}
+/// True for the coder whose activity reads the parent instead of the decoded neighbours.
+constexpr bool isParentActivityCoder(PtmCoder coder) {
+  return coder == PtmCoder::kRansParentErrors;
 }
 
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec

@@ -147,7 +147,8 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
               EXPECT_TRUE(isRansCoder(PtmCoder((*payload)[1])) &&
-                          (*payload)[1] <= uint8_t(PtmCoder::kRansMixtureChainedErrors));
+                          (*payload)[1] <= uint8_t(PtmCoder::kRansParentErrors) &&
+                          (*payload)[1] != uint8_t(PtmCoder::kRansMixtureChainedErrors));
             }
             return payload;
           },
@@ -157,19 +158,19 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
 }
 
 // What the default encoder must write, by the rule docs/codecs.md states: the predictor (of
-// nearest parent, neighbour median and parent-corrected) that coder 5 codes in the fewest bytes,
+// nearest parent, neighbour median and parent-corrected) that coder 6 codes in the fewest bytes,
 // then of coders 1 to 4 (fastest to decode first) the first whose size estimate is within 3 % of
-// coder 5's, else coder 5.
+// coder 6's, else coder 6. Coder 5 is never the default's.
 std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexels* parent) {
   const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
                                   Predictor::kParentCorrected};
-  const Predictor predictor = *smallestPtmPredictor(
-      tile.view(), {}, parent, candidates, PtmCoder::kRansMixtureChainedErrors, nullptr, nullptr);
-  const size_t reference = *estimatePtmBytes(tile.view(), {}, parent, predictor,
-                                             PtmCoder::kRansMixtureChainedErrors, nullptr);
+  const Predictor predictor = *smallestPtmPredictor(tile.view(), {}, parent, candidates,
+                                                    PtmCoder::kRansParentErrors, nullptr, nullptr);
+  const size_t reference =
+      *estimatePtmBytes(tile.view(), {}, parent, predictor, PtmCoder::kRansParentErrors, nullptr);
   const PtmCoder by_speed[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
                                PtmCoder::kRansMixtureChained};
-  PtmCoder chosen = PtmCoder::kRansMixtureChainedErrors;
+  PtmCoder chosen = PtmCoder::kRansParentErrors;
   for (PtmCoder coder : by_speed)
     if (*estimatePtmBytes(tile.view(), {}, parent, predictor, coder, nullptr) * 100 <=
         reference * 103) {
@@ -187,10 +188,14 @@ constexpr PtmCoder kCoders[] = {PtmCoder::kZstd,
                                 PtmCoder::kRansChained,
                                 PtmCoder::kRansMixture,
                                 PtmCoder::kRansMixtureChained,
-                                PtmCoder::kRansMixtureChainedErrors};
-constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
+                                PtmCoder::kRansMixtureChainedErrors,
+                                PtmCoder::kRansParentErrors};
+constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans,
+                                    PtmCoder::kRansChained,
+                                    PtmCoder::kRansMixture,
                                     PtmCoder::kRansMixtureChained,
-                                    PtmCoder::kRansMixtureChainedErrors};
+                                    PtmCoder::kRansMixtureChainedErrors,
+                                    PtmCoder::kRansParentErrors};
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   struct Case {
@@ -265,8 +270,8 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest[1], uint8_t(PtmCoder::kZstd));
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
-  // The default: the predictor that suits coder 5 best, and then the fastest coder within 3 %
-  // of coder 5.
+  // The default: the predictor that suits coder 6 best, and then the fastest coder within 3 %
+  // of coder 6.
   const std::vector<uint8_t> smallest = payloadAt(0);
   EXPECT_EQ(smallest, expectedDefaultPayload(child, &parent));
   EXPECT_EQ(payloadAt(3), smallest);
@@ -489,9 +494,65 @@ TEST(PtmCodec, ErrorActivityPaysOffWhereSmoothSlopesMeetNoise) {
   EXPECT_EQ(decodeOrDie(*with, 64, 3, nullptr).texels, tile.texels);
 }
 
-TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfCoderFive) {
+// A 128x128 level 0: a flat, gently shaded field with one 2x2 block in 16 of noise, and its
+// floor average. Inside a tile a noisy block starts without warning from the texels decoded
+// before it (its first texel has quiet neighbours), but not from its parent texel.
+struct SmallPyramid {
+  Image child, parent;
+};
+SmallPyramid makeIsolatedNoisyBlocks(uint32_t seed) {
+  Image level0(128, 128, 3);
+  uint32_t random = seed;
+  std::vector<bool> noisy(64 * 64);
+  for (size_t i = 0; i < noisy.size(); ++i) noisy[i] = nextRandom(random) % 16 == 0;
+  for (uint32_t y = 0; y < 128; ++y)
+    for (uint32_t x = 0; x < 128; ++x)
+      for (uint32_t c = 0; c < 3; ++c)
+        level0.texels[(size_t(y) * 128 + x) * 3 + c] = uint8_t(
+            noisy[(y / 2) * 64 + x / 2] ? 60 + nextRandom(random) % 41 : 100 + 10 * c + x / 8);
+  return {cutStoredTile(level0, 64, 0, 1, 1), floorDownsample(level0)};
+}
+
+TEST(PtmCodec, ParentActivityPaysOffWhereNoisyBlocksStartWithoutWarning) {
+  // Coder 6 is coder 5 with the parent's gradients in place of the decoded neighbours' and
+  // each prediction's distance from its parent texel.
+  const SmallPyramid pyramid = makeIsolatedNoisyBlocks(37);
+  const ParentTexels parent = parentOf(pyramid.parent, 1, 1, 64, 0);
+  for (Predictor predictor : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+    auto errors = encodePtm(pyramid.child.view(), {}, &parent, predictor,
+                            PtmCoder::kRansMixtureChainedErrors, nullptr);
+    auto with_parent = encodePtm(pyramid.child.view(), {}, &parent, predictor,
+                                 PtmCoder::kRansParentErrors, nullptr);
+    ASSERT_TRUE(errors.has_value());
+    ASSERT_TRUE(with_parent.has_value());
+    EXPECT_LT(with_parent->size() * 100, errors->size() * 97)
+        << int(predictor) << ": " << with_parent->size() << " against " << errors->size();
+    EXPECT_EQ(decodeOrDie(*with_parent, 64, 3, &parent).texels, pyramid.child.texels);
+  }
+  // The default takes coder 6 there.
+  auto by_default = encodeTile(Codec::kPtm, pyramid.child.view(), {}, &parent);
+  ASSERT_TRUE(by_default.has_value());
+  EXPECT_EQ((*by_default)[1], uint8_t(PtmCoder::kRansParentErrors));
+  EXPECT_EQ(*by_default, expectedDefaultPayload(pyramid.child, &parent));
+}
+
+TEST(PtmCodec, WithoutAParentCoderSixCodesAsCoderFive) {
+  const Image tile = makeTileOfSlopesBesideNoise(41);
+  auto five = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot,
+                        PtmCoder::kRansMixtureChainedErrors, nullptr);
+  auto six =
+      encodePtm(tile.view(), {}, nullptr, Predictor::kRoot, PtmCoder::kRansParentErrors, nullptr);
+  ASSERT_TRUE(five.has_value());
+  ASSERT_TRUE(six.has_value());
+  ASSERT_EQ(five->size(), six->size());
+  EXPECT_EQ((*six)[1], uint8_t(PtmCoder::kRansParentErrors));
+  (*six)[1] = (*five)[1];
+  EXPECT_EQ(*six, *five);
+}
+
+TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfCoderSix) {
   // One channel has nothing to chain: coders 2 and 4 are 1 and 3 in another order, no
-  // smaller, so the default never picks them; nor coder 5, whose errors do not save 3 % on
+  // smaller, so the default never picks them; nor coder 6, whose errors do not save 3 % on
   // this smooth tile.
   Image grey = makeLevel0(64, 64, 1, 4);
   auto grey_payload = encodeTile(Codec::kPtm, grey.view(), {}, nullptr);
@@ -505,11 +566,12 @@ TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfCoderFive) {
   EXPECT_TRUE(isChainedCoder(PtmCoder((*colour_payload)[1]))) << int((*colour_payload)[1]);
   EXPECT_EQ(*colour_payload, expectedDefaultPayload(colour, nullptr));
   EXPECT_EQ(decodeOrDie(*colour_payload, 64, 3, nullptr).texels, colour.texels);
-  // Slopes beside noise: only coder 5 tells them apart, by more than 3 %.
+  // Slopes beside noise: only the neighbours' errors tell them apart, by more than 3 %. Without
+  // a parent, coder 6 codes as coder 5.
   const Image slopes = makeTileOfSlopesBesideNoise(31);
   auto slopes_payload = encodeTile(Codec::kPtm, slopes.view(), {}, nullptr);
   ASSERT_TRUE(slopes_payload.has_value());
-  EXPECT_EQ((*slopes_payload)[1], uint8_t(PtmCoder::kRansMixtureChainedErrors));
+  EXPECT_EQ((*slopes_payload)[1], uint8_t(PtmCoder::kRansParentErrors));
   EXPECT_EQ(*slopes_payload, expectedDefaultPayload(slopes, nullptr));
   EXPECT_EQ(decodeOrDie(*slopes_payload, 64, 3, nullptr).texels, slopes.texels);
 }
@@ -567,14 +629,15 @@ ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predic
 
 // Every predictor that reads the parent, with each coder: what the truncation and corruption
 // tests sweep (the two longest tests under ASan). At three channels every coder; at the other
-// counts coders 0, 1 and 5 only: coders 3 and 4 run the texel walks of coders 1 and 2 with
-// other tables, and coder 5 runs coder 2's chained walk with its own error plane.
+// counts coders 0, 1 and 6 only: coders 3 and 4 run the texel walks of coders 1 and 2 with
+// other tables, coder 6 runs coder 2's chained walk with its own error plane and parent
+// activity, and coder 5 puts coder 1's activity together with coder 6's error plane.
 std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   std::vector<ChildPayload> payloads;
   for (PtmCoder coder : kCoders) {
-    const bool walk_swept_by_another = coder == PtmCoder::kRansChained ||
-                                       coder == PtmCoder::kRansMixture ||
-                                       coder == PtmCoder::kRansMixtureChained;
+    const bool walk_swept_by_another =
+        coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixture ||
+        coder == PtmCoder::kRansMixtureChained || coder == PtmCoder::kRansMixtureChainedErrors;
     if (walk_swept_by_another && channels != 3) continue;
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
@@ -618,13 +681,12 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad[0] = 5;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = uint8_t(PtmCoder::kRansMixtureChainedErrors) + 1;
+  bad[1] = uint8_t(PtmCoder::kRansParentErrors) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   // Every model byte names a model of the family; one changed under a used context (the first
-  // position's flattest class in slot 0, which this smooth tile uses) leaves the rANS stream
-  // unfinished.
-  bad = tile.payload;
-  ASSERT_TRUE(isRansCoder(PtmCoder(bad[1])));
+  // position's flattest class in slot 0, which this smooth tile uses with coder 1's gradient
+  // activity) leaves the rANS stream unfinished.
+  bad = makeChildPayload(3, Predictor::kNeighbourMedian, PtmCoder::kRans).payload;
   bad[2] = uint8_t(bad[2] ^ 0x40);
   auto model = decodeTile(Codec::kPtm, bad, out, &parent);
   ASSERT_FALSE(model.has_value());
