@@ -12,6 +12,7 @@
 // archive codec.
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <map>
@@ -339,6 +340,10 @@ void study(const std::string& input, double min_seconds, const std::string& only
 #endif
     return bool(decodeTile(variant.codec, payload, out, parent ? &*parent : nullptr, &scratch));
   };
+  // The size target compares the default with the smaller of PNG and WebP-lossless;
+  // the ratio columns round too coarsely to tell a near tie.
+  double smallest_peer_bytes = 0;
+  std::string smallest_peer;
   for (const Variant& variant : variants) {
     if (!only.empty() && variant.name.find(only) == std::string::npos) continue;
     const bool ptm = variant.codec == Codec::kPtm;
@@ -412,6 +417,11 @@ void study(const std::string& input, double min_seconds, const std::string& only
                total / raw_base, raw_base / total, 100.0 * (total - base_alone) / base_alone,
                pyramid_px / fastest_round / 1e6, exact ? "" : " (NOT EXACT)",
                pyramid_px / encode_seconds / 1e6);
+    if ((variant.codec == Codec::kPng || variant.codec == Codec::kWebp) &&
+        (smallest_peer_bytes == 0 || total < smallest_peer_bytes)) {
+      smallest_peer_bytes = total;
+      smallest_peer = variant.name;
+    }
     if (ptm && variant.as_built) {
       // What the default chose: its share of the pyramid's bytes per (predictor, coder).
       std::map<std::pair<int, int>, double> chosen;
@@ -421,7 +431,13 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (const auto& [key, bytes] : chosen)
         shares += fmt::format("{}predictor {} coder {} {:.1f} %", shares.empty() ? "" : ", ",
                               key.first, key.second, 100.0 * bytes / total);
-      fmt::print("\n(default's bytes by predictor and coder: {})\n\n", shares);
+      fmt::print("\n(default's bytes by predictor and coder: {})\n", shares);
+      if (smallest_peer_bytes > 0)
+        fmt::print("(default: {:.0f} bytes; {}: {:.0f} bytes; the default is {:.2f} % {})\n", total,
+                   smallest_peer, smallest_peer_bytes,
+                   100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,
+                   total <= smallest_peer_bytes ? "smaller" : "larger");
+      fmt::print("\n");
     }
     if (per_level) {
       // Where the overhead lies: each level's bytes as coded in the pyramid, and the same level
