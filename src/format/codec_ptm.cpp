@@ -297,6 +297,10 @@ void codeTexels(const Walk& walk, Coder& coder) {
       uint8_t* texel = row + size_t(x) * kChannels;
       const size_t index = size_t(y) * stride + size_t(x) * kChannels;
       [[maybe_unused]] const size_t texel_index = size_t(y) * width + x;  // for kErrors
+      // The offset of the block's parent texel P in parent_row (and of the texel beside it in
+      // parent_near).
+      [[maybe_unused]] const size_t parent_at =
+          kHasParent ? size_t(columns->parent[x]) * kChannels : 0;
       // Causal neighbours, with LOCO-I's substitutes on the first row and column; offsets from
       // `index` so that the detail plane of predictor 4 can use the same ones.
       ptrdiff_t left = 0, up = 0, up_left = 0, up_right = 0;
@@ -326,11 +330,10 @@ void codeTexels(const Walk& walk, Coder& coder) {
       uint32_t context = 0;
       [[maybe_unused]] int activity = 0;  // coder 6 adds to it per coded texel
       if constexpr (kParentActivity) {
-        const size_t j = size_t(columns->parent[x]) * kChannels;
         const size_t jn = size_t(columns->neighbour[x]) * kChannels;
         for (uint32_t c = 0; c < kChannels; ++c) {
-          const int p = parent_row[j + c], horizontal = parent_row[jn + c];
-          activity += std::abs(p - horizontal) + std::abs(p - parent_near[j + c]) +
+          const int p = parent_row[parent_at + c], horizontal = parent_row[jn + c];
+          activity += std::abs(p - horizontal) + std::abs(p - parent_near[parent_at + c]) +
                       std::abs(parent_near[jn + c] - horizontal);
         }
         activity = activity / 2 + neighbourErrors(kParentErrorWeightLeft, kParentErrorWeightUp);
@@ -350,7 +353,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
       [[maybe_unused]] uint32_t error_sum = 0;
       uint32_t position = 0;
       if constexpr (kHasParent) {
-        const uint8_t* p = parent_row + size_t(columns->parent[x]) * kChannels;
+        const uint8_t* p = parent_row + parent_at;
         if (derived_row && columns->derived[x]) {
           // Marvie & Bouatouch eq. 3: d = 4 * parent + e - a - b - c.
           const uint8_t* b = up_row + size_t(x) * kChannels;
@@ -386,9 +389,9 @@ void codeTexels(const Walk& walk, Coder& coder) {
           predicted[c] =
               origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
         } else if constexpr (kPredictor == Predictor::kParentNearest) {
-          predicted[c] = parent_row[size_t(columns->parent[x]) * kChannels + c];
+          predicted[c] = parent_row[parent_at + c];
         } else if constexpr (kPredictor == Predictor::kParentBilinear) {
-          const size_t j = size_t(columns->parent[x]) * kChannels + c;
+          const size_t j = parent_at + c;
           const size_t jn = size_t(columns->neighbour[x]) * kChannels + c;
           predicted[c] =
               (9 * parent_row[j] + 3 * parent_row[jn] + 3 * parent_near[j] + parent_near[jn] + 8) >>
@@ -407,7 +410,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
             // Eq. 3 fixes the block's sum; what the texels still to come would need, by the
             // same estimate, pulls this one. Weights 1/2, 1/4, 1/2 of the shortfall per texel
             // still unknown: measured on the codec study's inputs.
-            const int sum16 = 64 * parent_row[size_t(columns->parent[x]) * kChannels + c] + 24;
+            const int sum16 = 64 * parent_row[parent_at + c] + 24;
             const int detail = estimate - *u;
             const ptrdiff_t cx = ptrdiff_t(kChannels), sy = ptrdiff_t(stride);
             if (position == 0) {
@@ -425,9 +428,9 @@ void codeTexels(const Walk& walk, Coder& coder) {
         }
       }
       if constexpr (kParentActivity) {
-        const uint8_t* p = parent_row + size_t(columns->parent[x]) * kChannels;
         int departure = 0;
-        for (uint32_t c = 0; c < kChannels; ++c) departure += std::abs(predicted[c] - p[c]);
+        for (uint32_t c = 0; c < kChannels; ++c)
+          departure += std::abs(predicted[c] - parent_row[parent_at + c]);
         context = activityClass<kChannels>(activity + departure);
       }
       // Subtract-green on residuals: colour channels share most of their error.
