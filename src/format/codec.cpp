@@ -68,62 +68,10 @@ constexpr CodecFunctions makeEntry(Codec codec, bool lossless) {
   return {codec, /*needs_parent=*/false, lossless, &encodeChecked<encode>, &decodeChecked<decode>};
 }
 
-// `effort` picks ptm's point on its size/decode-speed trade-off, measured on the codec study's
-// three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
-// - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
-// - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
-//   prediction, with zstd;
-// - 3 and the default: the same predictors entropy-coded by rANS. Of its coders, fastest to
-//   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
-//   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
-//   activity), each tile takes the fastest whose estimated size is within 3 % of coder 6's.
-//   Coder 5 (4 with the neighbours' gradients and errors) is left out: coder 6 coded the
-//   study's photograph 2.8 % smaller and its other inputs within 0.4 %, 0-8 % slower to
-//   decode. Smaller than effort 1 but a fifth to a ninth of its decode speed.
-//   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
-//   the default.
-constexpr size_t kSlowerCoderMinSavingPercent = 3;
-// Fastest to decode first (docs/codecs.md, "ptm (6)").
-constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
-    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
-    PtmCoder::kRansParentErrors};
-constexpr Predictor kSmallestPtmPredictors[] = {
-    Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
-
 Result<std::vector<uint8_t>> encodePtmChecked(const ImageView& tile, const EncodeOptions& options,
                                               const ParentTexels* parent, CodecScratch* scratch) {
   checkTile(tile);
-  // The effort selects the mode, so zstd's streams keep their measured level.
-  EncodeOptions stream_options = options;
-  stream_options.effort = 0;
-  switch (options.effort) {
-    case 1:
-      return encodePtm(tile, stream_options, parent, Predictor::kParentNearest, PtmCoder::kZstd,
-                       scratch);
-    case 2:
-      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
-                               PtmCoder::kZstd, scratch);
-    default: {
-      // The predictor that suits the most elaborate coder (the smallest, as a rule), then the
-      // fastest coder within 3 % of it: estimated fastest first, so a tile that a fast coder
-      // codes well costs one estimate more, not four.
-      constexpr size_t kSlowest = std::size(kRansCodersByDecodeSpeed) - 1;
-      size_t slowest_bytes = 0;
-      TESSERA_ASSIGN_OR_RETURN(
-          Predictor predictor,
-          smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
-                               kRansCodersByDecodeSpeed[kSlowest], scratch, &slowest_bytes));
-      size_t chosen = 0;
-      for (; chosen < kSlowest; ++chosen) {
-        TESSERA_ASSIGN_OR_RETURN(size_t bytes,
-                                 estimatePtmBytes(tile, stream_options, parent, predictor,
-                                                  kRansCodersByDecodeSpeed[chosen], scratch));
-        if (bytes * 100 <= slowest_bytes * (100 + kSlowerCoderMinSavingPercent)) break;
-      }
-      return encodePtm(tile, stream_options, parent, predictor, kRansCodersByDecodeSpeed[chosen],
-                       scratch);
-    }
-  }
+  return encodePtmForEffort(tile, options, parent, scratch);
 }
 
 Result<void> decodePtmChecked(std::span<const uint8_t> payload, Image& out,

@@ -44,7 +44,7 @@ class CodecScratch {
   ~CodecScratch();
   CodecScratch(const CodecScratch&) = delete;
   CodecScratch& operator=(const CodecScratch&) = delete;
-  struct State;  ///< defined in codec.cpp; members are lazily created per codec
+  struct State;  ///< defined in codec_internal.h; members are lazily created per codec
   State& state() { return *state_; }
 
  private:

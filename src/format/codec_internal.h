@@ -172,6 +172,11 @@ Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOption
                                        const ParentTexels* parent,
                                        std::span<const Predictor> predictors, PtmCoder coder,
                                        CodecScratch* scratch, size_t* estimated_bytes);
+/// The codec table's ptm encoder: `options.effort` picks the predictor and coder rule (1:
+/// nearest parent with zstd; 2: the smallest predictor with zstd; 0 and 3 and above: the
+/// default, by rANS estimates). docs/codecs.md, "ptm (6)", has the rule and its figures.
+Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const EncodeOptions& options,
+                                                const ParentTexels* parent, CodecScratch* scratch);
 /// Decodes any ptm payload; `parent` is required unless the payload is kRoot.
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
                        CodecScratch* scratch);

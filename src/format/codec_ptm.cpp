@@ -5,7 +5,6 @@
 // (eq. 3). Byte layout and the measurements behind the choices: docs/codecs.md, "ptm (6)".
 #include <algorithm>
 #include <cstring>
-#include <optional>
 
 #include <fmt/format.h>
 
@@ -687,53 +686,6 @@ Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& opti
   size_t bytes = 0;
   TESSERA_TRY(encodePtmOrEstimate(tile, options, parent, predictor, coder, scratch, &bytes));
   return bytes;
-}
-
-Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,
-                                       const ParentTexels* parent,
-                                       std::span<const Predictor> predictors, PtmCoder coder,
-                                       CodecScratch* scratch, size_t* estimated_bytes) {
-  if (parent == nullptr || predictors.empty()) {
-    if (estimated_bytes != nullptr) {
-      TESSERA_ASSIGN_OR_RETURN(
-          *estimated_bytes,
-          estimatePtmBytes(tile, options, nullptr, Predictor::kRoot, coder, scratch));
-    }
-    return Predictor::kRoot;
-  }
-  Predictor best = predictors[0];
-  size_t best_bytes = SIZE_MAX;
-  for (Predictor predictor : predictors) {
-    TESSERA_ASSIGN_OR_RETURN(size_t bytes,
-                             estimatePtmBytes(tile, options, parent, predictor, coder, scratch));
-    if (bytes < best_bytes) {
-      best = predictor;
-      best_bytes = bytes;
-    }
-  }
-  if (estimated_bytes != nullptr) *estimated_bytes = best_bytes;
-  return best;
-}
-
-Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
-                                               const ParentTexels* parent,
-                                               std::span<const Predictor> predictors,
-                                               PtmCoder coder, CodecScratch* scratch) {
-  if (parent == nullptr || predictors.empty())
-    return encodePtm(tile, options, nullptr, Predictor::kRoot, coder, scratch);
-  if (coder == PtmCoder::kZstd) {
-    std::optional<std::vector<uint8_t>> smallest;
-    for (Predictor predictor : predictors) {
-      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
-                               encodePtm(tile, options, parent, predictor, coder, scratch));
-      if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
-    }
-    return std::move(*smallest);
-  }
-  // rANS: chosen by estimate, then coded once.
-  TESSERA_ASSIGN_OR_RETURN(Predictor best, smallestPtmPredictor(tile, options, parent, predictors,
-                                                                coder, scratch, nullptr));
-  return encodePtm(tile, options, parent, best, coder, scratch);
 }
 
 Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,

@@ -1,0 +1,119 @@
+// Which predictor and entropy coder a ptm tile gets (docs/codecs.md, "ptm (6)"): the smallest
+// predictor by estimate, the smallest encoding among predictors, and what each `effort`
+// writes. The codec itself (codec_ptm.cpp) codes whatever it is told.
+#include <iterator>
+#include <optional>
+
+#include "codec_internal.h"
+
+namespace tessera::detail {
+
+namespace {
+
+// `effort` picks ptm's point on its size/decode-speed trade-off, measured on the codec study's
+// three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
+// - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
+// - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
+//   prediction, with zstd;
+// - 3 and the default: the same predictors entropy-coded by rANS. Of its coders, fastest to
+//   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
+//   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
+//   activity), each tile takes the fastest whose estimated size is within 3 % of coder 6's.
+//   Coder 5 (4 with the neighbours' gradients and errors) is left out: coder 6 coded the
+//   study's photograph 2.8 % smaller and its other inputs within 0.4 %, 0-8 % slower to
+//   decode. Smaller than effort 1 but a fifth to a ninth of its decode speed.
+//   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
+//   the default.
+constexpr size_t kSlowerCoderMinSavingPercent = 3;
+// Fastest to decode first (docs/codecs.md, "ptm (6)").
+constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
+    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
+    PtmCoder::kRansParentErrors};
+constexpr Predictor kSmallestPtmPredictors[] = {
+    Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
+
+}  // namespace
+
+Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent,
+                                       std::span<const Predictor> predictors, PtmCoder coder,
+                                       CodecScratch* scratch, size_t* estimated_bytes) {
+  if (parent == nullptr || predictors.empty()) {
+    if (estimated_bytes != nullptr) {
+      TESSERA_ASSIGN_OR_RETURN(
+          *estimated_bytes,
+          estimatePtmBytes(tile, options, nullptr, Predictor::kRoot, coder, scratch));
+    }
+    return Predictor::kRoot;
+  }
+  Predictor best = predictors[0];
+  size_t best_bytes = SIZE_MAX;
+  for (Predictor predictor : predictors) {
+    TESSERA_ASSIGN_OR_RETURN(size_t bytes,
+                             estimatePtmBytes(tile, options, parent, predictor, coder, scratch));
+    if (bytes < best_bytes) {
+      best = predictor;
+      best_bytes = bytes;
+    }
+  }
+  if (estimated_bytes != nullptr) *estimated_bytes = best_bytes;
+  return best;
+}
+
+Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const EncodeOptions& options,
+                                               const ParentTexels* parent,
+                                               std::span<const Predictor> predictors,
+                                               PtmCoder coder, CodecScratch* scratch) {
+  if (parent == nullptr || predictors.empty())
+    return encodePtm(tile, options, nullptr, Predictor::kRoot, coder, scratch);
+  if (coder == PtmCoder::kZstd) {
+    std::optional<std::vector<uint8_t>> smallest;
+    for (Predictor predictor : predictors) {
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
+                               encodePtm(tile, options, parent, predictor, coder, scratch));
+      if (!smallest || payload.size() < smallest->size()) smallest = std::move(payload);
+    }
+    return std::move(*smallest);
+  }
+  // rANS: chosen by estimate, then coded once.
+  TESSERA_ASSIGN_OR_RETURN(Predictor best, smallestPtmPredictor(tile, options, parent, predictors,
+                                                                coder, scratch, nullptr));
+  return encodePtm(tile, options, parent, best, coder, scratch);
+}
+
+Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const EncodeOptions& options,
+                                                const ParentTexels* parent, CodecScratch* scratch) {
+  // The effort selects the mode, so zstd's streams keep their measured level.
+  EncodeOptions stream_options = options;
+  stream_options.effort = 0;
+  switch (options.effort) {
+    case 1:
+      return encodePtm(tile, stream_options, parent, Predictor::kParentNearest, PtmCoder::kZstd,
+                       scratch);
+    case 2:
+      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
+                               PtmCoder::kZstd, scratch);
+    default: {
+      // The predictor that suits the most elaborate coder (the smallest, as a rule), then the
+      // fastest coder within 3 % of it: estimated fastest first, so a tile that a fast coder
+      // codes well costs one estimate more, not four.
+      constexpr size_t kSlowest = std::size(kRansCodersByDecodeSpeed) - 1;
+      size_t slowest_bytes = 0;
+      TESSERA_ASSIGN_OR_RETURN(
+          Predictor predictor,
+          smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors,
+                               kRansCodersByDecodeSpeed[kSlowest], scratch, &slowest_bytes));
+      size_t chosen = 0;
+      for (; chosen < kSlowest; ++chosen) {
+        TESSERA_ASSIGN_OR_RETURN(size_t bytes,
+                                 estimatePtmBytes(tile, stream_options, parent, predictor,
+                                                  kRansCodersByDecodeSpeed[chosen], scratch));
+        if (bytes * 100 <= slowest_bytes * (100 + kSlowerCoderMinSavingPercent)) break;
+      }
+      return encodePtm(tile, stream_options, parent, predictor, kRansCodersByDecodeSpeed[chosen],
+                       scratch);
+    }
+  }
+}
+
+}  // namespace tessera::detail
