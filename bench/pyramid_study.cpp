@@ -294,6 +294,11 @@ void study(const std::string& input, double min_seconds, const std::string& only
      PtmCoder::kRansParentErrors},
     {"ptm smallest of 1/3/4 + rANS parent errors", Codec::kPtm, 0, Predictor::kRoot,
      PtmCoder::kRansParentErrors, true},
+    {"ptm least-squares + zstd", Codec::kPtm, 0, Predictor::kLeastSquares, PtmCoder::kZstd},
+    {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
+     PtmCoder::kRansParentErrors},
+    {"ptm effort 3 (the default's rule without least squares)", Codec::kPtm, 3, Predictor::kRoot,
+     PtmCoder::kRansMixtureChained, false, false, true},
     {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0, Predictor::kRoot,
      PtmCoder::kRansMixtureChained, false, false, true},
 #if TESSERA_STUDY_JXL
@@ -433,8 +438,9 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (const auto& [key, bytes] : chosen)
         shares += fmt::format("{}predictor {} coder {} {:.1f} %", shares.empty() ? "" : ", ",
                               key.first, key.second, 100.0 * bytes / total);
-      fmt::print("\n(default's bytes by predictor and coder: {})\n", shares);
-      if (smallest_peer_bytes > 0)
+      fmt::print("\n({}'s bytes by predictor and coder: {})\n",
+                 variant.effort == 0 ? "default" : "effort 3", shares);
+      if (smallest_peer_bytes > 0 && variant.effort == 0)
         fmt::print("(default: {:.0f} bytes; {}: {:.0f} bytes; the default is {:.2f} % {})\n", total,
                    smallest_peer, smallest_peer_bytes,
                    100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,

@@ -108,6 +108,12 @@ enum class Predictor : uint8_t {
   /// the bilinear parent plus the neighbours' median departure from it, pulled towards what
   /// the 2x2 block's sum (eq. 3) leaves for the texels not yet decoded; remainder as in 3
   kParentCorrected = 4,
+  /// the neighbour median plus a linear combination of eight texels' and one prediction's
+  /// departures from it (the left, up, up-left and up-right texels, the four parent texels
+  /// bilinear upsampling weighs, predictor 4's estimate before the pull), with weights per
+  /// block position and channel that the encoder fits to the tile by least squares and stores
+  /// in the payload; remainder as in 3, from the same prediction of the derived texel
+  kLeastSquares = 5,
 };
 
 /// How a ptm payload entropy-codes its symbols; stored in the payload's second byte.
@@ -148,11 +154,20 @@ constexpr bool isParentActivityCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansParentErrors;
 }
 
+/// Predictor 5's weights as fitted to one tile and its parent. They depend on nothing else, so
+/// a caller that estimates a tile with several coders passes one of these to fit it once.
+struct PtmLeastSquaresFit {
+  bool fitted = false;
+  int8_t weights[4 * 4 * 9] = {};  ///< [position][channel][term], the payload's layout
+};
+
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec
-/// table's entry uses the defaults; the codec study compares the others.
+/// table's entry uses the defaults; the codec study compares the others. With predictor 5, a
+/// `fit` already fitted to this tile supplies the weights; one not yet fitted receives them.
 Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOptions& options,
                                        const ParentTexels* parent, Predictor predictor,
-                                       PtmCoder coder, CodecScratch* scratch);
+                                       PtmCoder coder, CodecScratch* scratch,
+                                       PtmLeastSquaresFit* fit = nullptr);
 /// Encodes the tile with the one of `predictors` (with a parent; kRoot without) that gives the
 /// smallest payload with `coder`: which predictor suits a tile depends on the image
 /// (docs/codecs.md, "ptm (6)"). zstd payloads are compared as coded; rANS ones by
@@ -165,7 +180,7 @@ Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const Enco
 /// within a few bytes for the rANS coders (walk and model choice only), exactly for zstd.
 Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& options,
                                 const ParentTexels* parent, Predictor predictor, PtmCoder coder,
-                                CodecScratch* scratch);
+                                CodecScratch* scratch, PtmLeastSquaresFit* fit = nullptr);
 /// Which of `predictors` gives the smallest payload with `coder` by estimatePtmBytes (kRoot
 /// without a parent); its estimate goes to `estimated_bytes` when given.
 Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,

@@ -157,17 +157,28 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
   }
 }
 
-// What the default encoder must write, by the rule docs/codecs.md states: the predictor (of
-// nearest parent, neighbour median and parent-corrected) that coder 6 codes in the fewest bytes,
-// then of coders 1 to 4 (fastest to decode first) the first whose size estimate is within 3 % of
-// coder 6's, else coder 6. Coder 5 is never the default's.
-std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexels* parent) {
+// What the default encoder (or effort 3, `least_squares` false) must write, by the rule
+// docs/codecs.md states: the predictor (of nearest parent, neighbour median and
+// parent-corrected) that coder 6 codes in the fewest bytes, or, where that is the neighbour
+// median, least squares if coder 6 codes it at least 3 % smaller; then of coders 1 to 4
+// (fastest to decode first) the first whose size estimate is within 3 % of coder 6's, else
+// coder 6. Coder 5 is never the default's.
+std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexels* parent,
+                                            bool least_squares = true) {
   const Predictor candidates[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
                                   Predictor::kParentCorrected};
-  const Predictor predictor = *smallestPtmPredictor(tile.view(), {}, parent, candidates,
-                                                    PtmCoder::kRansParentErrors, nullptr, nullptr);
-  const size_t reference =
+  Predictor predictor = *smallestPtmPredictor(tile.view(), {}, parent, candidates,
+                                              PtmCoder::kRansParentErrors, nullptr, nullptr);
+  size_t reference =
       *estimatePtmBytes(tile.view(), {}, parent, predictor, PtmCoder::kRansParentErrors, nullptr);
+  if (predictor == Predictor::kNeighbourMedian && least_squares) {
+    const size_t fitted = *estimatePtmBytes(tile.view(), {}, parent, Predictor::kLeastSquares,
+                                            PtmCoder::kRansParentErrors, nullptr);
+    if (fitted * 100 <= reference * 97) {
+      predictor = Predictor::kLeastSquares;
+      reference = fitted;
+    }
+  }
   const PtmCoder by_speed[] = {PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture,
                                PtmCoder::kRansMixtureChained};
   PtmCoder chosen = PtmCoder::kRansParentErrors;
@@ -181,8 +192,8 @@ std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexel
 }
 
 constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
-                                           Predictor::kNeighbourMedian,
-                                           Predictor::kParentCorrected};
+                                           Predictor::kNeighbourMedian, Predictor::kParentCorrected,
+                                           Predictor::kLeastSquares};
 constexpr PtmCoder kCoders[] = {PtmCoder::kZstd,
                                 PtmCoder::kRans,
                                 PtmCoder::kRansChained,
@@ -271,10 +282,11 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(zstd_smallest,
             *encodePtmSmallest(child.view(), {}, &parent, candidates, PtmCoder::kZstd, nullptr));
   // The default: the predictor that suits coder 6 best, and then the fastest coder within 3 %
-  // of coder 6.
+  // of coder 6. Effort 3 applies the same rule without predictor 5.
   const std::vector<uint8_t> smallest = payloadAt(0);
   EXPECT_EQ(smallest, expectedDefaultPayload(child, &parent));
-  EXPECT_EQ(payloadAt(3), smallest);
+  EXPECT_EQ(payloadAt(3), expectedDefaultPayload(child, &parent, false));
+  EXPECT_NE(payloadAt(3)[0], uint8_t(Predictor::kLeastSquares));
   EXPECT_EQ(payloadAt(9), smallest);
   EXPECT_LE(zstd_smallest.size(), fast.size());
 }
@@ -536,6 +548,78 @@ TEST(PtmCodec, ParentActivityPaysOffWhereNoisyBlocksStartWithoutWarning) {
   EXPECT_EQ(*by_default, expectedDefaultPayload(pyramid.child, &parent));
 }
 
+// Level 0 of a smooth field plus an offset per 2x2 block: the parent knows each block's offset,
+// which no neighbour of the block's first texel shows, while the median follows the field
+// inside the block. Only a prediction that weighs both does well.
+SmallPyramid makeBlockOffsetsOnASlope(uint32_t seed) {
+  Image level0(128, 128, 3);
+  uint32_t random = seed;
+  std::vector<int> offsets(64 * 64);
+  for (int& offset : offsets) offset = int(nextRandom(random) % 25) - 12;
+  for (uint32_t y = 0; y < 128; ++y)
+    for (uint32_t x = 0; x < 128; ++x)
+      for (uint32_t c = 0; c < 3; ++c) {
+        const int value =
+            60 + int(x) / 2 + int(y) / 3 + 10 * int(c) + offsets[(y / 2) * 64 + x / 2];
+        level0.row(y)[size_t(x) * 3 + c] = uint8_t(std::clamp(value, 0, 255));
+      }
+  return {cutStoredTile(level0, 64, 0, 1, 1), floorDownsample(level0)};
+}
+
+TEST(PtmCodec, LeastSquaresPaysOffWhereTheParentKnowsWhatNoNeighbourShows) {
+  const SmallPyramid pyramid = makeBlockOffsetsOnASlope(43);
+  const ParentTexels parent = parentOf(pyramid.parent, 1, 1, 64, 0);
+  auto fitted = encodePtm(pyramid.child.view(), {}, &parent, Predictor::kLeastSquares,
+                          PtmCoder::kRansParentErrors, nullptr);
+  ASSERT_TRUE(fitted.has_value());
+  EXPECT_EQ(decodeOrDie(*fitted, 64, 3, &parent).texels, pyramid.child.texels);
+  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear,
+                              Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+    auto other = encodePtm(pyramid.child.view(), {}, &parent, predictor,
+                           PtmCoder::kRansParentErrors, nullptr);
+    ASSERT_TRUE(other.has_value());
+    EXPECT_LT(fitted->size() * 100, other->size() * 97)
+        << int(predictor) << ": " << fitted->size() << " against " << other->size();
+  }
+  // The default takes predictor 5 there; effort 3 does not.
+  auto by_default = encodeTile(Codec::kPtm, pyramid.child.view(), {}, &parent);
+  ASSERT_TRUE(by_default.has_value());
+  EXPECT_EQ((*by_default)[0], uint8_t(Predictor::kLeastSquares));
+  EXPECT_EQ(*by_default, expectedDefaultPayload(pyramid.child, &parent));
+  EncodeOptions effort3;
+  effort3.effort = 3;
+  auto without = encodeTile(Codec::kPtm, pyramid.child.view(), effort3, &parent);
+  ASSERT_TRUE(without.has_value());
+  EXPECT_NE((*without)[0], uint8_t(Predictor::kLeastSquares));
+  EXPECT_EQ(*without, expectedDefaultPayload(pyramid.child, &parent, false));
+  // The weights travel in the payload: a changed weight changes the predictions, which either
+  // fails the rANS stream's end check or gives other texels, and a fit passed in is used as is.
+  std::vector<uint8_t> changed = *fitted;
+  changed[2 + 4] = uint8_t(changed[2 + 4] + 40);  // position 0, channel 0, the parent term
+  Image out(64, 64, 3);
+  auto decoded = decodeTile(Codec::kPtm, changed, out, &parent);
+  if (decoded.has_value()) {
+    EXPECT_NE(out.texels, pyramid.child.texels);
+  }
+  PtmLeastSquaresFit fit;
+  auto first = encodePtm(pyramid.child.view(), {}, &parent, Predictor::kLeastSquares,
+                         PtmCoder::kZstd, nullptr, &fit);
+  ASSERT_TRUE(first.has_value());
+  EXPECT_TRUE(fit.fitted);
+  EXPECT_TRUE(std::equal(first->begin() + 2, first->begin() + 2 + 4 * 3 * 9, fitted->begin() + 2));
+  fit.weights[4] = 0;
+  auto forced = encodePtm(pyramid.child.view(), {}, &parent, Predictor::kLeastSquares,
+                          PtmCoder::kZstd, nullptr, &fit);
+  ASSERT_TRUE(forced.has_value());
+  EXPECT_EQ((*forced)[2 + 4], 0);
+  EXPECT_EQ(decodeOrDie(*forced, 64, 3, &parent).texels, pyramid.child.texels);
+  // Cut inside the weights: named as such.
+  std::vector<uint8_t> cut(fitted->begin(), fitted->begin() + 20);
+  auto short_weights = decodeTile(Codec::kPtm, cut, out, &parent);
+  ASSERT_FALSE(short_weights.has_value());
+  EXPECT_NE(short_weights.error().message.find("predictor weights"), std::string::npos);
+}
+
 TEST(PtmCodec, WithoutAParentCoderSixCodesAsCoderFive) {
   const Image tile = makeTileOfSlopesBesideNoise(41);
   auto five = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot,
@@ -631,7 +715,9 @@ ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predic
 // tests sweep (the two longest tests under ASan). At three channels every coder; at the other
 // counts coders 0, 1 and 6 only: coders 3 and 4 run the texel walks of coders 1 and 2 with
 // other tables, coder 6 runs coder 2's chained walk with its own error plane and parent
-// activity, and coder 5 puts coder 1's activity together with coder 6's error plane.
+// activity, and coder 5 puts coder 1's activity together with coder 6's error plane. Predictor
+// 5 with coders 0 and 6 only: its weights and walk are the same whatever codes the symbols
+// (which the round-trip tests cover), and the sweeps are the longest tests.
 std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   std::vector<ChildPayload> payloads;
   for (PtmCoder coder : kCoders) {
@@ -639,8 +725,12 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
         coder == PtmCoder::kRansChained || coder == PtmCoder::kRansMixture ||
         coder == PtmCoder::kRansMixtureChained || coder == PtmCoder::kRansMixtureChainedErrors;
     if (walk_swept_by_another && channels != 3) continue;
-    for (Predictor predictor : kParentPredictors)
+    for (Predictor predictor : kParentPredictors) {
+      if (predictor == Predictor::kLeastSquares && coder != PtmCoder::kZstd &&
+          coder != PtmCoder::kRansParentErrors)
+        continue;
       payloads.push_back(makeChildPayload(channels, predictor, coder));
+    }
   }
   return payloads;
 }
@@ -678,7 +768,7 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   ParentTexels parent = parentOf(tile.parent, 1, 1, 64, 1);
   Image out(66, 66, 3);
   std::vector<uint8_t> bad = tile.payload;
-  bad[0] = 5;
+  bad[0] = uint8_t(Predictor::kLeastSquares) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
   bad[1] = uint8_t(PtmCoder::kRansParentErrors) + 1;
