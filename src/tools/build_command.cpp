@@ -101,7 +101,7 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--quality", args->options.quality, "JPEG quality (1..100)")
       ->capture_default_str();
   cmd->add_option("--effort", args->options.effort,
-                  "Codec effort: zstd level, PNG/WebP effort, ptm mode 1-3 (0 = codec default)")
+                  "Codec effort: zstd level, PNG/WebP effort, ptm mode 1-4 (0 = codec default)")
       ->capture_default_str();
   cmd->add_option("--chroma", args->chroma, "JPEG chroma subsampling: 420 or 444")
       ->check(CLI::IsMember({"420", "444"}))
