@@ -110,9 +110,9 @@ enum class Predictor : uint8_t {
   kParentCorrected = 4,
   /// the neighbour median plus a linear combination of eight texels' and one prediction's
   /// departures from it (the left, up, up-left and up-right texels, the four parent texels
-  /// bilinear upsampling weighs, predictor 4's estimate before the pull), with weights per
-  /// block position and channel that the encoder fits to the tile by least squares and stores
-  /// in the payload; remainder as in 3, from the same prediction of the derived texel
+  /// bilinear upsampling weighs, predictor 4's prediction), with weights per block position
+  /// and channel that the encoder fits to the tile by least squares and stores in the
+  /// payload; remainder as in 3, from the same prediction of the derived texel
   kLeastSquares = 5,
 };
 

@@ -128,7 +128,8 @@ constexpr size_t lsWeightBytes(uint32_t channels) {
 // suffices). Plain least squares let the edges' large errors pull the weights away from what
 // codes the many small residuals best: with these weights the study's photograph coded 4 %
 // smaller (15.9:1 against 15.3:1 with predictor 5 alone) and the map 2 %; 2, 8 and 16 levels,
-// weights 1 / (|r| + k) and a second walk weighted by the fit's own residuals were no better.
+// weights 1 / (|r| + k) and a second walk weighted by the fit's own residuals were no better
+// on the three inputs together.
 constexpr int kLsRobustTarget = 16 * 4;
 
 // The normal equations of predictor 5's fit per position and channel, weighted. The weights

@@ -35,11 +35,11 @@ constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRansParentErrors};
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
-// Predictor 5 decodes at about two thirds of the others' speed (its fitted sum of nine terms on
-// top of predictor 4's estimate), so the default takes it only where it saves this much.
+// Predictor 5 decodes at about half the others' speed (its fitted sum of nine terms on top of
+// predictor 4's estimate), so the default takes it only where it saves this much.
 constexpr size_t kLeastSquaresMinSavingPercent = 3;
-// The effort that applies the default's rule without predictor 5: half the encoding time, and
-// on images where predictor 5 wins, twice the decode speed for larger tiles.
+// The effort that applies the default's rule without predictor 5: on images where predictor 5
+// wins, a third of the encoding time and twice the decode speed, for larger tiles.
 constexpr int kEffortWithoutLeastSquares = 3;
 // Predictor 5 refines the neighbour median with the parent, and on the codec study's inputs it
 // beat the best of the others by 3 % only in tiles where the median was that best: trying it
