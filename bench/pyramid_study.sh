@@ -3,7 +3,7 @@
 # fetches real imagery from Debian packages into a temporary directory and runs
 # tessera-pyramid-study on it and on the synthetic source. JPEG XL lossless is a peer: the
 # script installs libjxl-dev (bench/install_peers.sh) and rebuilds the study against it.
-# About three and a half minutes on 2 cores once the peers are installed, most of it libjxl's
+# About four minutes on 2 cores once the peers are installed, most of it libjxl's
 # effort-7 and libwebp's effort-6 encoders. Standard output carries only the study's tables.
 #   bench/pyramid_study.sh [BUILD_DIR]   (default: build)
 set -euo pipefail
