@@ -4,13 +4,13 @@
 // kept, and the fourth follows from the parent and the remainder of the integer average
 // (eq. 3). Byte layout and the measurements behind the choices: docs/codecs.md, "ptm (6)".
 #include <algorithm>
-#include <cmath>
 #include <cstring>
 #include <memory>
 
 #include <fmt/format.h>
 
 #include "codec_internal.h"
+#include "ptm_least_squares.h"
 #include "ptm_rans.h"
 
 namespace tessera::detail {
@@ -99,58 +99,6 @@ constexpr int kRemainderErrorWeight = 2;
 // (docs/benchmarks.md).
 constexpr int kParentErrorWeightLeft = 3;
 constexpr int kParentErrorWeightUp = 1;
-
-// Predictor 5: a linear prediction whose weights the encoder fits to each tile. Its terms are
-// departures from the neighbour median in sixteenths of a level: the left, up, up-left and
-// up-right texels, the four parent texels that bilinear upsampling weighs, and predictor 4's
-// prediction (in sixteenths, the block's pull included; for a derived texel without it). The
-// median alone predicts well where the texture follows edges the neighbours show; the parent
-// knows where the block's mean lies, which the median cannot see, and how much to trust each
-// depends on the image, so the fit decides (as in the least-squares predictors of lossless
-// coders such as Meyer & Tischer's GLICBAWLS, but once per tile, not per texel). The weights
-// are signed bytes in 1/128 units, per block position (0-3; a derived texel's guess at eq. 3's
-// remainder uses position 3's) and channel. On the codec study's photograph the default's
-// pyramid came out 20 % smaller with it (docs/benchmarks.md). Terms relative to the median keep
-// the weights' rounding cheap; absolute texel values, where a rounded weight errs by its share
-// of the whole level, gave up most of the gain.
-constexpr uint32_t kLsTerms = 9;
-constexpr uint32_t kLsSets = 4;
-constexpr int kLsWeightScale = 128;
-// A term is in 1/16 units and a weight in 1/128 ones: their products in 1/2048.
-constexpr int kLsProductShift = 11;
-
-constexpr size_t lsWeightBytes(uint32_t channels) {
-  return size_t(kLsSets) * channels * kLsTerms;
-}
-
-// Texels whose median residual exceeds 4 levels count in the fit in inverse proportion to it
-// (Huber's weights, from the median's residual rather than the fit's own so that one walk
-// suffices). Plain least squares let the edges' large errors pull the weights away from what
-// codes the many small residuals best: with these weights the study's photograph coded 4 %
-// smaller (15.9:1 against 15.3:1 with predictor 5 alone) and the map 2 %; 2, 8 and 16 levels,
-// weights 1 / (|r| + k) and a second walk weighted by the fit's own residuals were no better
-// on the three inputs together.
-constexpr int kLsRobustTarget = 16 * 4;
-
-// The normal equations of predictor 5's fit per position and channel, weighted. The weights
-// travel in the payload, so the fit need not be reproducible anywhere but in the encoder that
-// ran it; terms stay below 2^15 in magnitude, so doubles hold the sums of a 2048-px tile with
-// room to spare.
-struct LsFit {
-  double gram[kLsSets][4][kLsTerms][kLsTerms] = {};  ///< the upper triangle, i <= j
-  double moment[kLsSets][4][kLsTerms] = {};
-  void add(uint32_t set, uint32_t channel, const int* terms, int target) {
-    auto& gram_c = gram[set][channel];
-    const double weight =
-        std::abs(target) > kLsRobustTarget ? double(kLsRobustTarget) / std::abs(target) : 1.0;
-    double t[kLsTerms];
-    for (uint32_t i = 0; i < kLsTerms; ++i) t[i] = terms[i];
-    for (uint32_t i = 0; i < kLsTerms; ++i) {
-      for (uint32_t j = i; j < kLsTerms; ++j) gram_c[i][j] += weight * t[i] * t[j];
-      moment[set][channel][i] += weight * t[i] * target;
-    }
-  }
-};
 
 template <uint32_t kChannels>
 inline uint32_t activityClass(int activity) {
@@ -311,36 +259,6 @@ struct Walk {
   /// Predictor 5's fitting walk (encoder only): where each coded texel's terms go.
   LsFit* ls_fit;
 };
-
-// Predictor 5's terms for one channel of the texel at `texel` (neighbour offsets as the walk
-// sets them; all zero at the tile's first texel, which has no neighbours), relative to the
-// neighbour median `median`. `estimate16` is predictor 4's estimate in sixteenths.
-inline void leastSquaresTerms(const uint8_t* texel, ptrdiff_t left, ptrdiff_t up, ptrdiff_t up_left,
-                              ptrdiff_t up_right, bool origin, const uint8_t* parent,
-                              const uint8_t* parent_side, const uint8_t* parent_near,
-                              const uint8_t* parent_diagonal, int estimate16, int median,
-                              int* terms) {
-  const int base = 16 * median;
-  if (origin) {
-    for (uint32_t k = 0; k < 4; ++k) terms[k] = -base;
-  } else {
-    terms[0] = 16 * texel[left] - base;
-    terms[1] = 16 * texel[up] - base;
-    terms[2] = 16 * texel[up_left] - base;
-    terms[3] = 16 * texel[up_right] - base;
-  }
-  terms[4] = 16 * *parent - base;
-  terms[5] = 16 * *parent_side - base;
-  terms[6] = 16 * *parent_near - base;
-  terms[7] = 16 * *parent_diagonal - base;
-  terms[8] = estimate16 - base;
-}
-
-inline int leastSquaresPredict(const int8_t* weights, int median, const int* terms) {
-  int sum = 0;
-  for (uint32_t k = 0; k < kLsTerms; ++k) sum += weights[k] * terms[k];
-  return std::clamp(median + ((sum + (1 << (kLsProductShift - 1))) >> kLsProductShift), 0, 255);
-}
 
 // One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
 // `texels` and hands symbols to `coder`; decoding takes them from `coder` and writes `texels`.
@@ -631,34 +549,6 @@ void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns
   }
 }
 
-// Predictor 5's weights for one position and channel: least squares with a light ridge, so
-// that a position or channel the tile barely uses gets small weights rather than wild ones,
-// rounded to signed bytes. Gaussian elimination with partial pivoting on the 9x9 system.
-void solveLeastSquares(const double (&gram)[kLsTerms][kLsTerms], const double (&moment)[kLsTerms],
-                       int8_t* weights) {
-  double a[kLsTerms][kLsTerms + 1];
-  for (uint32_t i = 0; i < kLsTerms; ++i) {
-    for (uint32_t j = 0; j < kLsTerms; ++j) a[i][j] = i <= j ? gram[i][j] : gram[j][i];
-    a[i][i] += 1e-3 * a[i][i] + 1;
-    a[i][kLsTerms] = moment[i];
-  }
-  for (uint32_t i = 0; i < kLsTerms; ++i) {
-    uint32_t pivot = i;
-    for (uint32_t k = i + 1; k < kLsTerms; ++k)
-      if (std::abs(a[k][i]) > std::abs(a[pivot][i])) pivot = k;
-    std::swap(a[i], a[pivot]);
-    for (uint32_t k = 0; k < kLsTerms; ++k) {
-      if (k == i) continue;
-      const double factor = a[k][i] / a[i][i];
-      for (uint32_t j = i; j <= kLsTerms; ++j) a[k][j] -= factor * a[i][j];
-    }
-  }
-  for (uint32_t i = 0; i < kLsTerms; ++i) {
-    const double weight = std::round(kLsWeightScale * a[i][kLsTerms] / a[i][i]);
-    weights[i] = int8_t(std::clamp(weight, -128.0, 127.0));
-  }
-}
-
 // Fits predictor 5's weights to the tile `walk` covers (its ls_weights, zero, are read but
 // do not matter: the fit uses the texels, not the predictions) into `weights`.
 void fitLeastSquares(const Walk& walk, uint32_t channels, int8_t* weights) {
@@ -668,10 +558,7 @@ void fitLeastSquares(const Walk& walk, uint32_t channels, int8_t* weights) {
   fitting.errors = nullptr;
   DiscardingCoder discard;
   code<true>(Predictor::kLeastSquares, channels, fitting, discard);
-  for (uint32_t set = 0; set < kLsSets; ++set)
-    for (uint32_t c = 0; c < channels; ++c)
-      solveLeastSquares(fit->gram[set][c], fit->moment[set][c],
-                        weights + (set * channels + c) * kLsTerms);
+  solveLeastSquares(*fit, channels, weights);
 }
 
 // Coders 5 and 6's error plane in `state`, sized to the tile; null for the other coders.
