@@ -177,6 +177,11 @@ if [[ $("${CXX:-c++}" --version 2>/dev/null) == *"Free Software Foundation"* ]];
   release_flags="-Wno-error=array-bounds -Wno-error=stringop-overflow -Wno-error=stringop-overread"
 fi
 
+# The sanitizer stages keep RelWithDebInfo's -O2 but with -g1: line tables only, which is all a
+# sanitizer's symbolized stack needs. Full -g made these stages' compiles about 30 % slower
+# (codec_ptm.cpp under ASan + UBSan: 173 s against 119 s), and the two builds are most of CI's time.
+sanitizer_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG")
+
 start=$SECONDS
 for stage in $stages; do
   case $stage in
@@ -185,9 +190,9 @@ for stage in $stages; do
       build_and_test release Release "" "" "$timeout_s" -DTESSERA_BUILD_BENCH=ON \
         -DTESSERA_WERROR="$werror" -DCMAKE_CXX_FLAGS="$release_flags" ;;
     asan)
-      build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) ;;
+      build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) "${sanitizer_flags[@]}" ;;
     tsan)
-      build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) ;;
+      build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) "${sanitizer_flags[@]}" ;;
     *) echo "ci: unknown stage '$stage' (known: format release asan tsan)" >&2; exit 2 ;;
   esac
 done
