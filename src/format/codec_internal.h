@@ -49,8 +49,6 @@ struct CodecScratch::State {
   std::vector<int16_t> detail;
   /// ptm, coders 5 and 6: each texel's coded error (sum of its symbols' magnitudes over channels).
   std::vector<uint16_t> errors;
-  /// ptm: the context of each residual symbol, for the rANS coder's encoder.
-  std::vector<uint8_t> contexts;
 };
 
 /// Resolves a possibly null CodecScratch to a usable State: the caller's, or one that lives
@@ -181,6 +179,34 @@ Result<std::vector<uint8_t>> encodePtmSmallest(const ImageView& tile, const Enco
 Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& options,
                                 const ParentTexels* parent, Predictor predictor, PtmCoder coder,
                                 CodecScratch* scratch, PtmLeastSquaresFit* fit = nullptr);
+/// A tile's symbols and their contexts as one of the rANS coders' texel walks records them,
+/// with the payload's header (and predictor 5's weights). Coders 1 and 3 walk alike, as do 2
+/// and 4; they differ only in the family their models come from. So a recording made for one
+/// coder estimates and encodes every coder that walks as it does (walksAlike), and the default
+/// encoder walks a tile once for an estimate and the payload that follows it instead of twice.
+struct PtmRecording {
+  PtmCoder coder = PtmCoder::kRans;  ///< the coder it was recorded for
+  uint32_t channels = 0;
+  uint32_t contexts = 0;         ///< contexts per channel
+  std::vector<uint8_t> header;   ///< predictor, coder, predictor 5's weights
+  std::vector<uint8_t> symbols;  ///< in decoding order
+  std::vector<uint8_t> symbol_contexts;
+};
+/// True when coders `a` and `b` (both rANS) record the same symbols and contexts.
+constexpr bool walksAlike(PtmCoder a, PtmCoder b) {
+  return isChainedCoder(a) == isChainedCoder(b) &&
+         isErrorActivityCoder(a) == isErrorActivityCoder(b) &&
+         isParentActivityCoder(a) == isParentActivityCoder(b);
+}
+/// Walks the tile as encodePtm does with the rANS coder `coder` into `recording`.
+Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predictor predictor,
+                       PtmCoder coder, CodecScratch* scratch, PtmLeastSquaresFit* fit,
+                       PtmRecording& recording);
+/// estimatePtmBytes of the recorded tile with `coder`, which must walk as the recording's does.
+size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder);
+/// encodePtm's payload of the recorded tile with `coder` (walking as the recording's does).
+std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
+                                       CodecScratch* scratch);
 /// Which of `predictors` gives the smallest payload with `coder` by estimatePtmBytes (kRoot
 /// without a parent); its estimate goes to `estimated_bytes` when given.
 Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,

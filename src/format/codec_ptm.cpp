@@ -654,11 +654,14 @@ Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predic
 // encodePtm, or with `estimated_bytes` and a rANS coder only the payload's size to within a
 // few bytes: the texel walk and the model choice, without the rANS pass (a quarter of a
 // tile's encoding time), for choosing between predictors and coders.
+// With `recording` (a rANS coder only), only the walk: its symbols, contexts and header go
+// there, for estimateRecordedPtm and encodeRecordedPtm.
 Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
                                                  const EncodeOptions& options,
                                                  const ParentTexels* parent, Predictor predictor,
                                                  PtmCoder coder, CodecScratch* scratch,
-                                                 PtmLeastSquaresFit* fit, size_t* estimated_bytes) {
+                                                 PtmLeastSquaresFit* fit, size_t* estimated_bytes,
+                                                 PtmRecording* recording = nullptr) {
   ScratchRef state(scratch);
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
@@ -698,34 +701,36 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   }
 
   if (isRansCoder(coder)) {
+    PtmRecording local;
+    PtmRecording& out = recording != nullptr ? *recording : local;
+    out.coder = coder;
+    out.channels = channels;
+    out.contexts = has_parent ? kParentContexts : kRootContexts;
+    out.header = std::move(payload);
     const size_t symbols = size_t(width) * height * channels;
-    state->plane.resize(symbols);
-    state->contexts.resize(symbols);
+    out.symbols.resize(symbols);
+    out.symbol_contexts.resize(symbols);
+    uint8_t* const symbols_at = out.symbols.data();
+    uint8_t* const contexts_at = out.symbol_contexts.data();
     if (isParentActivityCoder(coder)) {
-      RansRecorder<true, true, true> recorder{state->plane.data(), state->contexts.data()};
+      RansRecorder<true, true, true> recorder{symbols_at, contexts_at};
       code<true>(predictor, channels, walk, recorder);
     } else if (isErrorActivityCoder(coder)) {
-      RansRecorder<true, true> recorder{state->plane.data(), state->contexts.data()};
+      RansRecorder<true, true> recorder{symbols_at, contexts_at};
       code<true>(predictor, channels, walk, recorder);
     } else if (isChainedCoder(coder)) {
-      RansRecorder<true, false> recorder{state->plane.data(), state->contexts.data()};
+      RansRecorder<true, false> recorder{symbols_at, contexts_at};
       code<true>(predictor, channels, walk, recorder);
     } else {
-      RansRecorder<false, false> recorder{state->plane.data(), state->contexts.data()};
+      RansRecorder<false, false> recorder{symbols_at, contexts_at};
       code<true>(predictor, channels, walk, recorder);
     }
-    const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
-    std::vector<uint8_t> params;
-    const double bits = rans::chooseModels(familyOf(coder), state->plane, state->contexts, channels,
-                                           contexts, params);
+    if (recording != nullptr) return std::vector<uint8_t>{};
     if (estimated_bytes != nullptr) {
-      *estimated_bytes = payload.size() + params.size() + size_t(bits / 8) + 4 * channels;
+      *estimated_bytes = estimateRecordedPtm(out, coder);
       return std::vector<uint8_t>{};
     }
-    payload.insert(payload.end(), params.begin(), params.end());
-    rans::encode(familyOf(coder), state->plane, state->contexts, channels, contexts, params,
-                 state->compressed, payload);
-    return payload;
+    return encodeRecordedPtm(out, coder, scratch);
   }
 
   const SymbolCounts counts =
@@ -761,6 +766,38 @@ Result<std::vector<uint8_t>> encodePtm(const ImageView& tile, const EncodeOption
                                        PtmCoder coder, CodecScratch* scratch,
                                        PtmLeastSquaresFit* fit) {
   return encodePtmOrEstimate(tile, options, parent, predictor, coder, scratch, fit, nullptr);
+}
+
+Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predictor predictor,
+                       PtmCoder coder, CodecScratch* scratch, PtmLeastSquaresFit* fit,
+                       PtmRecording& recording) {
+  if (!isRansCoder(coder))
+    return fail(ErrorCode::kInvalidArgument, "ptm: only the rANS coders' walks are recorded");
+  TESSERA_TRY(
+      encodePtmOrEstimate(tile, {}, parent, predictor, coder, scratch, fit, nullptr, &recording));
+  return {};
+}
+
+size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder) {
+  std::vector<uint8_t> params;
+  const double bits =
+      rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                         recording.channels, recording.contexts, params);
+  return recording.header.size() + params.size() + size_t(bits / 8) + 4 * recording.channels;
+}
+
+std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
+                                       CodecScratch* scratch) {
+  ScratchRef state(scratch);
+  std::vector<uint8_t> params;
+  rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                     recording.channels, recording.contexts, params);
+  std::vector<uint8_t> payload = recording.header;
+  payload[1] = uint8_t(coder);
+  payload.insert(payload.end(), params.begin(), params.end());
+  rans::encode(familyOf(coder), recording.symbols, recording.symbol_contexts, recording.channels,
+               recording.contexts, params, state->compressed, payload);
+  return payload;
 }
 
 Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& options,

@@ -1,8 +1,13 @@
 // Which predictor and entropy coder a ptm tile gets (docs/codecs.md, "ptm (6)"): the smallest
 // predictor by estimate, the smallest encoding among predictors, and what each `effort`
 // writes. The codec itself (codec_ptm.cpp) codes whatever it is told.
+#include <algorithm>
+#include <cstdint>
 #include <iterator>
 #include <optional>
+#include <span>
+#include <utility>
+#include <vector>
 
 #include "codec_internal.h"
 
@@ -110,37 +115,55 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
     default: {
       // The predictor that suits the most elaborate coder (the smallest, as a rule), then the
       // fastest coder within 3 % of it: estimated fastest first, so a tile that a fast coder
-      // codes well costs one estimate more, not four.
+      // codes well costs one estimate more, not four. Each walk is recorded once and serves
+      // every estimate of a coder that walks alike, and the payload that follows.
       constexpr size_t kSlowest = std::size(kRansCodersByDecodeSpeed) - 1;
       constexpr PtmCoder kReference = kRansCodersByDecodeSpeed[kSlowest];
-      size_t slowest_bytes = 0;
-      TESSERA_ASSIGN_OR_RETURN(
-          Predictor predictor,
-          smallestPtmPredictor(tile, stream_options, parent, kSmallestPtmPredictors, kReference,
-                               scratch, &slowest_bytes));
+      constexpr Predictor kWithoutParent[] = {Predictor::kRoot};
+      const std::span<const Predictor> predictors =
+          parent != nullptr ? std::span<const Predictor>(kSmallestPtmPredictors) : kWithoutParent;
+      PtmRecording reference, candidate;
+      Predictor predictor = predictors[0];
+      size_t slowest_bytes = SIZE_MAX;
+      for (Predictor tried : predictors) {
+        TESSERA_TRY(recordPtm(tile, parent, tried, kReference, scratch, nullptr, candidate));
+        const size_t bytes = estimateRecordedPtm(candidate, kReference);
+        if (bytes < slowest_bytes) {
+          std::swap(reference, candidate);
+          predictor = tried;
+          slowest_bytes = bytes;
+        }
+      }
       // Predictor 5 where it saves at least kLeastSquaresMinSavingPercent, tried only where
       // the neighbour median won (kLeastSquaresOnlyAfterTheMedian); its weights are fitted once
-      // for every estimate that follows.
+      // for every walk that follows.
       PtmLeastSquaresFit fit;
       if (options.effort != kEffortWithoutLeastSquares &&
           predictor == Predictor::kNeighbourMedian) {
-        TESSERA_ASSIGN_OR_RETURN(size_t fitted_bytes, estimatePtmBytes(tile, stream_options, parent,
-                                                                       Predictor::kLeastSquares,
-                                                                       kReference, scratch, &fit));
+        TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, kReference, scratch, &fit,
+                              candidate));
+        const size_t fitted_bytes = estimateRecordedPtm(candidate, kReference);
         if (fitted_bytes * 100 <= slowest_bytes * (100 - kLeastSquaresMinSavingPercent)) {
+          std::swap(reference, candidate);
           predictor = Predictor::kLeastSquares;
           slowest_bytes = fitted_bytes;
         }
       }
-      size_t chosen = 0;
-      for (; chosen < kSlowest; ++chosen) {
-        TESSERA_ASSIGN_OR_RETURN(size_t bytes,
-                                 estimatePtmBytes(tile, stream_options, parent, predictor,
-                                                  kRansCodersByDecodeSpeed[chosen], scratch, &fit));
-        if (bytes * 100 <= slowest_bytes * (100 + kSlowerCoderMinSavingPercent)) break;
+      std::vector<PtmRecording> walks;  // of the faster coders, one per kind of walk
+      for (size_t chosen = 0; chosen < kSlowest; ++chosen) {
+        const PtmCoder coder = kRansCodersByDecodeSpeed[chosen];
+        auto walk = std::find_if(walks.begin(), walks.end(), [&](const PtmRecording& recorded) {
+          return walksAlike(recorded.coder, coder);
+        });
+        if (walk == walks.end()) {
+          walk = walks.emplace(walks.end());
+          TESSERA_TRY(recordPtm(tile, parent, predictor, coder, scratch, &fit, *walk));
+        }
+        if (estimateRecordedPtm(*walk, coder) * 100 <=
+            slowest_bytes * (100 + kSlowerCoderMinSavingPercent))
+          return encodeRecordedPtm(*walk, coder, scratch);
       }
-      return encodePtm(tile, stream_options, parent, predictor, kRansCodersByDecodeSpeed[chosen],
-                       scratch, &fit);
+      return encodeRecordedPtm(reference, kReference, scratch);
     }
   }
 }

@@ -555,6 +555,44 @@ TEST(PtmCodec, EstimatesMatchTheRansPayloadsToWithinTheirStates) {
     }
 }
 
+// The default encoder records a walk once and estimates and encodes every coder that walks
+// alike from it: that must give what estimating and encoding each coder on its own gives.
+TEST(PtmCodec, ARecordedWalkEstimatesAndEncodesEveryCoderThatWalksAlike) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 17);
+  const Image child = pyramid.tile(0, 0, 1);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  ParentTexels parent = parentOf(parent_tile, 0, 1, 128, 0);
+  EXPECT_TRUE(walksAlike(PtmCoder::kRans, PtmCoder::kRansMixture));
+  EXPECT_TRUE(walksAlike(PtmCoder::kRansChained, PtmCoder::kRansMixtureChained));
+  EXPECT_FALSE(walksAlike(PtmCoder::kRans, PtmCoder::kRansChained));
+  EXPECT_FALSE(walksAlike(PtmCoder::kRansMixtureChainedErrors, PtmCoder::kRansParentErrors));
+  const ParentTexels* const parents[] = {&parent, nullptr};  // coded against it, and on its own
+  for (const ParentTexels* with : parents)
+    for (PtmCoder recorded_for : kCoders) {
+      if (!isRansCoder(recorded_for)) continue;
+      for (Predictor predictor : kParentPredictors) {
+        PtmLeastSquaresFit fit;
+        PtmRecording recording;
+        ASSERT_TRUE(recordPtm(child.view(), with, predictor, recorded_for, nullptr, &fit, recording)
+                        .has_value());
+        for (PtmCoder coder : kCoders) {
+          if (!isRansCoder(coder) || !walksAlike(recorded_for, coder)) continue;
+          const auto estimate = estimatePtmBytes(child.view(), {}, with, predictor, coder, nullptr);
+          const auto payload = encodePtm(child.view(), {}, with, predictor, coder, nullptr);
+          ASSERT_TRUE(estimate.has_value() && payload.has_value());
+          EXPECT_EQ(estimateRecordedPtm(recording, coder), *estimate)
+              << int(predictor) << " coder " << int(coder) << " recorded for " << int(recorded_for);
+          EXPECT_EQ(encodeRecordedPtm(recording, coder, nullptr), *payload)
+              << int(predictor) << " coder " << int(coder) << " recorded for " << int(recorded_for);
+        }
+      }
+    }
+  PtmRecording unused;
+  EXPECT_FALSE(recordPtm(child.view(), &parent, Predictor::kParentNearest, PtmCoder::kZstd, nullptr,
+                         nullptr, unused)
+                   .has_value());
+}
+
 TEST(PtmCodec, ARemainderOutsideZeroToThreeStillDecodesExactly) {
   // A parent that is not the floor average of its children (as in a level's padding) makes
   // eq. 3's remainder any byte; modulo-256 arithmetic keeps the tile lossless.
