@@ -14,16 +14,12 @@
 
 #include "format/codec.h"
 #include "format/codec_internal.h"
+#include "support/test_images.h"
 
 namespace tessera::detail {
 namespace {
 
-uint32_t nextRandom(uint32_t& state) {
-  state ^= state << 13;
-  state ^= state >> 17;
-  state ^= state << 5;
-  return state;
-}
+using test::nextRandom;
 
 // Smooth shading, an edge and noise: residuals that are neither all zero nor all random.
 Image makeLevel0(uint32_t width, uint32_t height, uint32_t channels, uint32_t seed) {

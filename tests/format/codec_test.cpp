@@ -10,6 +10,8 @@
 #include <turbojpeg.h>
 #include <zstd.h>
 
+#include "support/test_images.h"
+
 namespace tessera::detail {
 namespace {
 
@@ -26,13 +28,7 @@ struct Size {
 };
 constexpr Size kSizes[] = {{1, 1}, {3, 5}, {64, 64}, {258, 258}};
 
-uint32_t nextRandom(uint32_t& state) {
-  // xorshift32: deterministic noise without <random>'s per-platform differences.
-  state ^= state << 13;
-  state ^= state >> 17;
-  state ^= state << 5;
-  return state;
-}
+using test::nextRandom;
 
 // Photo-like texels: smooth low-frequency shading, a hard-edged disk, and a little sensor
 // noise, so compressors see the statistics of real tiles rather than flat or random data.

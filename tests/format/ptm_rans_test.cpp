@@ -13,17 +13,12 @@
 #include "format/codec.h"
 #include "format/codec_internal.h"
 #include "format/ptm_rans.h"
+#include "support/test_images.h"
 
 namespace tessera::detail {
 namespace {
 
-// xorshift32: the same residuals on every platform, unlike std's distributions.
-uint32_t nextRandom(uint32_t& state) {
-  state ^= state << 13;
-  state ^= state >> 17;
-  state ^= state << 5;
-  return state;
-}
+using test::nextRandom;
 
 template <uint32_t kScaleBits>
 void expectProperFamily(rans::FamilyId id) {

@@ -11,6 +11,15 @@
 
 namespace tessera::test {
 
+/// xorshift32 (Marsaglia): the next of a deterministic sequence from a non-zero `state`, the
+/// same on every platform, unlike <random>'s distributions.
+inline uint32_t nextRandom(uint32_t& state) {
+  state ^= state << 13;
+  state ^= state >> 17;
+  state ^= state << 5;
+  return state;
+}
+
 /// Deterministic 8-bit test pixels, `channels` interleaved: smooth gradients plus a little
 /// noise, so lossy codecs behave as on photographs and exact round trips catch any byte moved.
 std::vector<uint8_t> makeTestPixels(uint32_t width_px, uint32_t height_px, uint32_t channels,
