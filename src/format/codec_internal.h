@@ -203,10 +203,14 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
                        PtmCoder coder, CodecScratch* scratch, PtmLeastSquaresFit* fit,
                        PtmRecording& recording);
 /// estimatePtmBytes of the recorded tile with `coder`, which must walk as the recording's does.
-size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder);
-/// encodePtm's payload of the recorded tile with `coder` (walking as the recording's does).
+/// The model bytes it chose go to `models` when given, for encodeRecordedPtm.
+size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
+                           std::vector<uint8_t>* models = nullptr);
+/// encodePtm's payload of the recorded tile with `coder` (walking as the recording's does),
+/// with the `models` estimateRecordedPtm chose for it, or choosing them when null.
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
-                                       CodecScratch* scratch);
+                                       CodecScratch* scratch,
+                                       const std::vector<uint8_t>* models = nullptr);
 /// Which of `predictors` gives the smallest payload with `coder` by estimatePtmBytes (kRoot
 /// without a parent); its estimate goes to `estimated_bytes` when given.
 Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,

@@ -778,8 +778,10 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
   return {};
 }
 
-size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder) {
-  std::vector<uint8_t> params;
+size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
+                           std::vector<uint8_t>* models) {
+  std::vector<uint8_t> chosen;
+  std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
   const double bits =
       rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
                          recording.channels, recording.contexts, params);
@@ -787,16 +789,19 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder) {
 }
 
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
-                                       CodecScratch* scratch) {
+                                       CodecScratch* scratch, const std::vector<uint8_t>* models) {
   ScratchRef state(scratch);
-  std::vector<uint8_t> params;
-  rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                     recording.channels, recording.contexts, params);
+  std::vector<uint8_t> chosen;
+  if (models == nullptr) {
+    rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                       recording.channels, recording.contexts, chosen);
+    models = &chosen;
+  }
   std::vector<uint8_t> payload = recording.header;
   payload[1] = uint8_t(coder);
-  payload.insert(payload.end(), params.begin(), params.end());
+  payload.insert(payload.end(), models->begin(), models->end());
   rans::encode(familyOf(coder), recording.symbols, recording.symbol_contexts, recording.channels,
-               recording.contexts, params, state->compressed, payload);
+               recording.contexts, *models, state->compressed, payload);
   return payload;
 }
 

@@ -122,14 +122,17 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
       constexpr Predictor kWithoutParent[] = {Predictor::kRoot};
       const std::span<const Predictor> predictors =
           parent != nullptr ? std::span<const Predictor>(kSmallestPtmPredictors) : kWithoutParent;
+      // Each kept recording with the model bytes its estimate chose, which its payload reuses.
       PtmRecording reference, candidate;
+      std::vector<uint8_t> reference_models, candidate_models;
       Predictor predictor = predictors[0];
       size_t slowest_bytes = SIZE_MAX;
       for (Predictor tried : predictors) {
         TESSERA_TRY(recordPtm(tile, parent, tried, kReference, scratch, nullptr, candidate));
-        const size_t bytes = estimateRecordedPtm(candidate, kReference);
+        const size_t bytes = estimateRecordedPtm(candidate, kReference, &candidate_models);
         if (bytes < slowest_bytes) {
           std::swap(reference, candidate);
+          std::swap(reference_models, candidate_models);
           predictor = tried;
           slowest_bytes = bytes;
         }
@@ -142,9 +145,10 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
           predictor == Predictor::kNeighbourMedian) {
         TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, kReference, scratch, &fit,
                               candidate));
-        const size_t fitted_bytes = estimateRecordedPtm(candidate, kReference);
+        const size_t fitted_bytes = estimateRecordedPtm(candidate, kReference, &candidate_models);
         if (fitted_bytes * 100 <= slowest_bytes * (100 - kLeastSquaresMinSavingPercent)) {
           std::swap(reference, candidate);
+          std::swap(reference_models, candidate_models);
           predictor = Predictor::kLeastSquares;
           slowest_bytes = fitted_bytes;
         }
@@ -159,11 +163,11 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
           walk = walks.emplace(walks.end());
           TESSERA_TRY(recordPtm(tile, parent, predictor, coder, scratch, &fit, *walk));
         }
-        if (estimateRecordedPtm(*walk, coder) * 100 <=
+        if (estimateRecordedPtm(*walk, coder, &candidate_models) * 100 <=
             slowest_bytes * (100 + kSlowerCoderMinSavingPercent))
-          return encodeRecordedPtm(*walk, coder, scratch);
+          return encodeRecordedPtm(*walk, coder, scratch, &candidate_models);
       }
-      return encodeRecordedPtm(reference, kReference, scratch);
+      return encodeRecordedPtm(reference, kReference, scratch, &reference_models);
     }
   }
 }

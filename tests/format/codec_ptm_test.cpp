@@ -576,10 +576,14 @@ TEST(PtmCodec, ARecordedWalkEstimatesAndEncodesEveryCoderThatWalksAlike) {
           const auto estimate = estimatePtmBytes(child.view(), {}, with, predictor, coder, nullptr);
           const auto payload = encodePtm(child.view(), {}, with, predictor, coder, nullptr);
           ASSERT_TRUE(estimate.has_value() && payload.has_value());
-          EXPECT_EQ(estimateRecordedPtm(recording, coder), *estimate)
+          std::vector<uint8_t> models;
+          EXPECT_EQ(estimateRecordedPtm(recording, coder, &models), *estimate)
               << int(predictor) << " coder " << int(coder) << " recorded for " << int(recorded_for);
           EXPECT_EQ(encodeRecordedPtm(recording, coder, nullptr), *payload)
               << int(predictor) << " coder " << int(coder) << " recorded for " << int(recorded_for);
+          // The models the estimate chose make the same payload.
+          EXPECT_EQ(encodeRecordedPtm(recording, coder, nullptr, &models), *payload)
+              << int(predictor) << " coder " << int(coder);
         }
       }
     }
