@@ -1,6 +1,7 @@
 // Which predictor and entropy coder a ptm tile gets (docs/codecs.md, "ptm (6)"): the smallest
 // predictor by estimate, the smallest encoding among predictors, and what each `effort`
-// writes. The codec itself (codec_ptm.cpp) codes whatever it is told.
+// writes. The codec itself (codec_ptm.cpp, codec_ptm_decode.cpp, ptm_walk.h) codes whatever it
+// is told.
 #include <algorithm>
 #include <cstdint>
 #include <iterator>

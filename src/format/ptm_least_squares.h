@@ -1,7 +1,7 @@
 #pragma once
 // ptm's predictor 5 (least squares; docs/codecs.md, "ptm (6)"): its terms, its prediction from
 // the payload's weights, and the encoder's fit of those weights. The texel walk that uses them
-// is codec_ptm.cpp's.
+// is ptm_walk.h's.
 
 #include <algorithm>
 #include <cstddef>

@@ -1,0 +1,161 @@
+// ptm's decoder (docs/codecs.md, "ptm (6)"): checks a payload's header and streams, then runs
+// the texel walk (ptm_walk.h) against the decoded parent.
+#include <cstring>
+#include <string>
+
+#include <fmt/format.h>
+
+#include "codec_internal.h"
+#include "ptm_least_squares.h"
+#include "ptm_rans.h"
+#include "ptm_walk.h"
+
+namespace tessera::detail {
+
+using namespace ptm;
+
+namespace {
+
+// Decodes a rANS coder's model bytes and stream into walk.texels.
+template <bool kChained, rans::FamilyId kFamily, bool kErrors = false, bool kParent = false>
+Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predictor predictor,
+                        uint32_t channels, uint32_t contexts, const Walk& walk) {
+  const size_t params_bytes = size_t(contexts) * channels;
+  if (payload.size() - body_at < params_bytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
+                            payload.size(), params_bytes));
+  RansReader<kChained, kFamily, kErrors, kParent> reader;
+  const rans::Model* family = rans::models(kFamily);
+  // Every parameter byte names a model, so a corrupt one shows only as a stream that does not
+  // finish cleanly (checked below), and then only if its context is used.
+  static_assert(rans::kModelCount == 256);
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t k = 0; k < contexts; ++k)
+      reader.models[c][k] = &family[payload[body_at + c * contexts + k]];
+  if (!reader.decoder.start(payload.subspan(body_at + params_bytes), channels))
+    return fail(ErrorCode::kCorrupt,
+                "ptm payload: rANS stream too short for its initial states, or one is out of "
+                "range");
+  code<false>(predictor, channels, walk, reader);
+  if (!reader.decoder.finishedCleanly(channels))
+    return fail(ErrorCode::kCorrupt,
+                "ptm payload: rANS stream truncated, corrupt or followed by trailing bytes");
+  return {};
+}
+
+}  // namespace
+
+Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
+                       CodecScratch* scratch) {
+  ScratchRef state(scratch);
+  const uint32_t width = out.width_px, height = out.height_px, channels = out.channels;
+  if (payload.size() < kHeaderBytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: {} bytes, shorter than its header", payload.size()));
+  if (payload[0] > uint8_t(Predictor::kLeastSquares))
+    return fail(ErrorCode::kCorrupt, fmt::format("ptm payload: unknown predictor {}", payload[0]));
+  if (payload[1] > uint8_t(PtmCoder::kRansParentErrors))
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
+  const Predictor predictor = Predictor(payload[0]);
+  const PtmCoder coder = PtmCoder(payload[1]);
+  const bool has_parent = predictor != Predictor::kRoot;
+  if (has_parent && parent == nullptr)
+    return fail(ErrorCode::kCorrupt,
+                "ptm payload: coded against a parent tile, but the tile has none (coarsest "
+                "level)");
+  AxisMap columns, rows;
+  if (has_parent)
+    TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
+  if (predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares)
+    upsample(channels, parent->texels, columns, rows, state->upsampled, state->detail);
+  // Predictor 5's weights follow the header; any byte is a valid weight.
+  int8_t ls_weights[lsWeightBytes(4)] = {};
+  size_t body_at = kHeaderBytes;
+  if (predictor == Predictor::kLeastSquares) {
+    if (payload.size() - kHeaderBytes < lsWeightBytes(channels))
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("ptm payload: {} bytes, shorter than its {} predictor weights",
+                              payload.size(), lsWeightBytes(channels)));
+    std::memcpy(ls_weights, payload.data() + kHeaderBytes, lsWeightBytes(channels));
+    body_at += lsWeightBytes(channels);
+  }
+  const Walk walk{out.texels.data(),
+                  width,
+                  height,
+                  has_parent ? &parent->texels : nullptr,
+                  &columns,
+                  &rows,
+                  state->upsampled.data(),
+                  state->detail.data(),
+                  errorPlane(coder, width, height, *state),
+                  ls_weights,
+                  nullptr};
+
+  const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
+  using rans::FamilyId;
+  switch (coder) {
+    case PtmCoder::kZstd: break;
+    case PtmCoder::kRans:
+      return decodeRans<false, FamilyId::kGeometric12>(payload, body_at, predictor, channels,
+                                                       contexts, walk);
+    case PtmCoder::kRansChained:
+      return decodeRans<true, FamilyId::kGeometric12>(payload, body_at, predictor, channels,
+                                                      contexts, walk);
+    case PtmCoder::kRansMixture:
+      return decodeRans<false, FamilyId::kMixture15>(payload, body_at, predictor, channels,
+                                                     contexts, walk);
+    case PtmCoder::kRansMixtureChained:
+      return decodeRans<true, FamilyId::kMixture15>(payload, body_at, predictor, channels, contexts,
+                                                    walk);
+    case PtmCoder::kRansMixtureChainedErrors:
+      return decodeRans<true, FamilyId::kMixture15, true>(payload, body_at, predictor, channels,
+                                                          contexts, walk);
+    case PtmCoder::kRansParentErrors:
+      return decodeRans<true, FamilyId::kMixture15, true, true>(payload, body_at, predictor,
+                                                                channels, contexts, walk);
+  }
+
+  const SymbolCounts counts =
+      countSymbols(width, height, has_parent ? &columns : nullptr, has_parent ? &rows : nullptr);
+  PlaneCoder<false> planes = planesIn<false>(state->plane, channels, counts);
+  size_t position = body_at;
+  auto readStream = [&](uint8_t* symbols, size_t count, const char* what,
+                        uint32_t channel) -> Result<void> {
+    if (payload.size() - position < kStreamLengthBytes)
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("ptm payload: truncated before the {} of channel {}", what, channel));
+    uint32_t length = 0;
+    for (size_t i = 0; i < kStreamLengthBytes; ++i)
+      length |= uint32_t(payload[position + i]) << (8 * i);
+    position += kStreamLengthBytes;
+    if (length > payload.size() - position)
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("ptm payload: {} of channel {} is {} bytes, only {} left", what,
+                              channel, length, payload.size() - position));
+    if (count == 0) {
+      if (length != 0)
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("ptm payload: {} of channel {} must be empty", what, channel));
+      return {};
+    }
+    const std::string name = fmt::format("ptm payload: {} of channel {}", what, channel);
+    TESSERA_TRY(decompressZstdFrame(payload.subspan(position, length), {symbols, count},
+                                    name.c_str(), *state));
+    position += length;
+    return {};
+  };
+  for (uint32_t c = 0; c < channels; ++c)
+    TESSERA_TRY(readStream(planes.residuals[c], counts.coded, "residuals", c));
+  if (has_parent)
+    for (uint32_t c = 0; c < channels; ++c)
+      TESSERA_TRY(readStream(planes.remainders[c], counts.derived, "remainders", c));
+  if (position != payload.size())
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: {} trailing bytes", payload.size() - position));
+  code<false>(predictor, channels, walk, planes);
+  return {};
+}
+
+}  // namespace tessera::detail

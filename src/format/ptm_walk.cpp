@@ -1,0 +1,109 @@
+// ptm's texel walk: the parts that are not templates (ptm_walk.h).
+#include "ptm_walk.h"
+
+#include <fmt/format.h>
+
+namespace tessera::detail::ptm {
+
+namespace {
+
+// Returns false when a child texel's block falls outside the parent tile: the caller passed
+// geometry that does not come from one image's quadtree.
+bool mapAxis(uint32_t child_px, uint32_t parent_px, uint64_t offset, AxisMap& map) {
+  map.parent.resize(child_px);
+  map.neighbour.resize(child_px);
+  map.second.resize(child_px);
+  map.full.resize(child_px);
+  map.derived.resize(child_px);
+  for (uint32_t i = 0; i < child_px; ++i) {
+    const uint64_t u = offset + i;
+    const uint64_t j = u >> 1;
+    if (j >= parent_px) return false;
+    const bool second = (u & 1) != 0;
+    map.parent[i] = uint32_t(j);
+    // Bilinear upsampling weights the parent texel on the child's side of its block.
+    map.neighbour[i] =
+        second ? uint32_t(std::min<uint64_t>(j + 1, parent_px - 1)) : uint32_t(j == 0 ? 0 : j - 1);
+    map.second[i] = second;
+    // A block whose first child lies before the tile (odd border) is coded texel by texel.
+    map.full[i] = second ? i > 0 : i + 1 < child_px;
+    map.derived[i] = second && i > 0;
+  }
+  return true;
+}
+
+// The parent bilinearly upsampled to every child texel, times 16, plus 6: a floor-average
+// parent sits 0.375 below its block's mean.
+template <uint32_t kChannels>
+void upsampleParent(const ImageView& parent, const AxisMap& columns, const AxisMap& rows,
+                    int16_t* out) {
+  const uint32_t width = uint32_t(columns.parent.size()), height = uint32_t(rows.parent.size());
+  for (uint32_t y = 0; y < height; ++y) {
+    const uint8_t* parent_row = parent.row(rows.parent[y]);
+    const uint8_t* parent_near = parent.row(rows.neighbour[y]);
+    for (uint32_t x = 0; x < width; ++x) {
+      const size_t j = size_t(columns.parent[x]) * kChannels;
+      const size_t jn = size_t(columns.neighbour[x]) * kChannels;
+      for (uint32_t c = 0; c < kChannels; ++c)
+        *out++ = int16_t(9 * parent_row[j + c] + 3 * parent_row[jn + c] + 3 * parent_near[j + c] +
+                         parent_near[jn + c] + 6);
+    }
+  }
+}
+
+}  // namespace
+
+rans::FamilyId familyOf(PtmCoder coder) {
+  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ? rans::FamilyId::kGeometric12
+                                                                     : rans::FamilyId::kMixture15;
+}
+
+void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
+              const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail) {
+  out.resize(columns.parent.size() * rows.parent.size() * channels);
+  detail.resize(out.size());
+  switch (channels) {
+    case 1: return upsampleParent<1>(parent, columns, rows, out.data());
+    case 2: return upsampleParent<2>(parent, columns, rows, out.data());
+    case 3: return upsampleParent<3>(parent, columns, rows, out.data());
+    default: return upsampleParent<4>(parent, columns, rows, out.data());
+  }
+}
+
+uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, CodecScratch::State& state) {
+  if (!isErrorActivityCoder(coder)) return nullptr;
+  state.errors.resize(size_t(width) * height);
+  return state.errors.data();
+}
+
+SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,
+                          const AxisMap* rows) {
+  const size_t total = size_t(width) * height;
+  if (columns == nullptr) return {total, 0};
+  size_t derived_columns = 0, derived_rows = 0;
+  for (uint8_t d : columns->derived) derived_columns += d;
+  for (uint8_t d : rows->derived) derived_rows += d;
+  const size_t derived = derived_columns * derived_rows;
+  return {total - derived, derived};
+}
+
+Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent, uint32_t width,
+                       uint32_t height, uint32_t channels, AxisMap& columns, AxisMap& rows) {
+  if (parent_view.channels != channels)
+    return fail(ErrorCode::kInvalidArgument, fmt::format("ptm: parent has {} channels, tile {}",
+                                                         parent_view.channels, channels));
+  if (parent.quadrant_x > 1 || parent.quadrant_y > 1 ||
+      !mapAxis(width, parent_view.width_px,
+               uint64_t(parent.quadrant_x) * parent.tile_size_px + parent.border_px, columns) ||
+      !mapAxis(height, parent_view.height_px,
+               uint64_t(parent.quadrant_y) * parent.tile_size_px + parent.border_px, rows))
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("ptm: a {}x{} tile in quadrant ({},{}) at tile size {}, border {} "
+                    "does not fit its {}x{} parent",
+                    width, height, parent.quadrant_x, parent.quadrant_y, parent.tile_size_px,
+                    parent.border_px, parent_view.width_px, parent_view.height_px));
+  return {};
+}
+
+}  // namespace tessera::detail::ptm
