@@ -1,0 +1,598 @@
+// The HTTP byte source's I/O thread (http_source_impl.h): it alone drives libcurl's multi
+// handle, starts, retries and stalls out attempts, checks every response against the range
+// asked and the version opened, and completes the callers' transfers.
+#include <algorithm>
+#include <cstring>
+#include <random>
+
+#include <fmt/format.h>
+
+#include "http_source_impl.h"
+
+namespace tessera::detail {
+
+namespace {
+
+std::string trim(std::string_view text) {
+  size_t begin = 0, end = text.size();
+  while (begin < end && std::isspace(static_cast<unsigned char>(text[begin]))) ++begin;
+  while (end > begin && std::isspace(static_cast<unsigned char>(text[end - 1]))) --end;
+  return std::string(text.substr(begin, end - begin));
+}
+
+/// "bytes A-B/T" (T may be "*"): the range a 206 carries, or the size a 416 reports
+/// ("bytes */T", has_range false).
+struct ContentRange {
+  bool has_range = false;
+  uint64_t first = 0, last = 0;
+  bool has_total = false;
+  uint64_t total = 0;
+};
+
+bool parseUint(std::string_view text, uint64_t& out) {
+  if (text.empty() || text.size() > 19) return false;
+  uint64_t value = 0;
+  for (char c : text) {
+    if (c < '0' || c > '9') return false;
+    value = value * 10 + uint64_t(c - '0');
+  }
+  out = value;
+  return true;
+}
+
+bool parseContentRange(const std::string& header, ContentRange& out) {
+  std::string_view text = header;
+  if (lowercase(std::string(text.substr(0, 6))) != "bytes ") return false;
+  text.remove_prefix(6);
+  const size_t slash = text.find('/');
+  if (slash == std::string_view::npos) return false;
+  std::string_view range = text.substr(0, slash), total = text.substr(slash + 1);
+  if (total == "*") {
+    out.has_total = false;
+  } else {
+    if (!parseUint(total, out.total)) return false;
+    out.has_total = true;
+  }
+  if (range == "*") {
+    out.has_range = false;
+    return out.has_total;
+  }
+  const size_t dash = range.find('-');
+  if (dash == std::string_view::npos) return false;
+  if (!parseUint(range.substr(0, dash), out.first) || !parseUint(range.substr(dash + 1), out.last))
+    return false;
+  out.has_range = out.first <= out.last;
+  return out.has_range;
+}
+
+/// Statuses worth another attempt: the server or a proxy may answer the next one.
+bool retryableStatus(long status) {
+  return status == 408 || status == 429 || (status >= 500 && status <= 599);
+}
+
+bool retryableCurlCode(CURLcode code) {
+  switch (code) {
+    case CURLE_COULDNT_CONNECT:
+    case CURLE_OPERATION_TIMEDOUT:
+    case CURLE_PARTIAL_FILE:
+    case CURLE_RECV_ERROR:
+    case CURLE_SEND_ERROR:
+    case CURLE_GOT_NOTHING:
+    case CURLE_HTTP2:
+    case CURLE_HTTP2_STREAM:
+    case CURLE_SSL_CONNECT_ERROR: return true;
+    default: return false;
+  }
+}
+
+}  // namespace
+
+void HttpSource::ioLoop() {
+  std::vector<std::shared_ptr<Transfer>> active, waiting;
+  std::mt19937_64 random{std::random_device{}()};
+  for (;;) {
+    {
+      std::lock_guard lock(mutex_);
+      if (stopping_) break;
+      for (auto& transfer : submitted_) waiting.push_back(std::move(transfer));
+      submitted_.clear();
+    }
+    const auto now = Clock::now();
+    bool watch_cancel = false;
+    for (auto it = waiting.begin(); it != waiting.end();) {
+      const std::shared_ptr<Transfer>& transfer = *it;
+      if (transfer->cancel && transfer->cancel->load(std::memory_order_acquire)) {
+        complete(*transfer, Unexpected(cancelledOf(*transfer)), false);
+        it = waiting.erase(it);
+      } else if (transfer->not_before <= now) {
+        startAttempt(*transfer);
+        active.push_back(*it);
+        it = waiting.erase(it);
+      } else {
+        ++it;
+      }
+    }
+    for (auto it = active.begin(); it != active.end();) {
+      Transfer& transfer = **it;
+      if (transfer.cancel && transfer.cancel->load(std::memory_order_acquire)) {
+        // Removing the handle closes the transfer now, whether or not bytes are arriving.
+        stopAttempt(transfer);
+        complete(transfer, Unexpected(cancelledOf(transfer)), false);
+        it = active.erase(it);
+        continue;
+      }
+      // Stall detection of our own: curl's low-speed limit averages over seconds, so a
+      // transfer that stalls after a burst would look alive for several more.
+      if (!transfer.request_sent) {
+        // Time waiting in libcurl's queue for a connection is not a stall.
+        curl_off_t sent_us = 0;
+        curl_easy_getinfo(transfer.easy, CURLINFO_PRETRANSFER_TIME_T, &sent_us);
+        if (sent_us > 0) {
+          transfer.request_sent = true;
+          transfer.last_activity = std::max(transfer.last_activity, now);
+        }
+      }
+      if (transfer.request_sent && options_.stall_timeout.count() > 0 &&
+          now - transfer.last_activity > options_.stall_timeout) {
+        transfer.fault = Fault::kStalled;
+        std::shared_ptr<Transfer> stalled = *it;
+        it = active.erase(it);
+        if (finishAttempt(*stalled, CURLE_OPERATION_TIMEDOUT, random)) waiting.push_back(stalled);
+        continue;
+      }
+      watch_cancel |= transfer.cancel != nullptr;
+      ++it;
+    }
+    {
+      std::lock_guard lock(mutex_);
+      stats_.in_flight = uint32_t(active.size());
+    }
+    int running = 0;
+    curl_multi_perform(multi_, &running);
+    int left = 0;
+    while (CURLMsg* message = curl_multi_info_read(multi_, &left)) {
+      if (message->msg != CURLMSG_DONE) continue;
+      Transfer* finished = nullptr;
+      curl_easy_getinfo(message->easy_handle, CURLINFO_PRIVATE, &finished);
+      const CURLcode code = message->data.result;
+      auto it = std::find_if(active.begin(), active.end(),
+                             [&](const auto& t) { return t.get() == finished; });
+      if (it == active.end()) continue;
+      std::shared_ptr<Transfer> transfer = *it;
+      active.erase(it);
+      if (finishAttempt(*transfer, code, random)) waiting.push_back(transfer);
+    }
+    // Sleep until curl has work, a request is submitted (curl_multi_wakeup), a retry is
+    // due, or (with cancellable requests about) the next look at their flags.
+    int timeout_ms = 1000;
+    const auto after = Clock::now();
+    for (const auto& transfer : waiting) {
+      watch_cancel |= transfer->cancel != nullptr;
+      const int64_t due_ms =
+          std::chrono::ceil<std::chrono::milliseconds>(transfer->not_before - after).count();
+      timeout_ms = int(std::clamp<int64_t>(due_ms, 0, timeout_ms));
+    }
+    if (watch_cancel) timeout_ms = std::min(timeout_ms, kCancelPollMs);
+    if (!active.empty() && options_.stall_timeout.count() > 0)
+      timeout_ms = std::min(timeout_ms, kStallPollMs);
+    curl_multi_poll(multi_, nullptr, 0, timeout_ms, nullptr);
+  }
+  // Closing: nothing waits for reads (the source's owner is gone), only fetch-aheads.
+  for (const auto& transfer : active) {
+    stopAttempt(*transfer);
+    complete(*transfer, fail(ErrorCode::kCancelled, url_ + ": source closed"), false);
+  }
+  for (const auto& transfer : waiting)
+    complete(*transfer, fail(ErrorCode::kCancelled, url_ + ": source closed"), false);
+  std::lock_guard lock(mutex_);
+  for (const auto& transfer : submitted_) {
+    transfer->done = true;
+    transfer->result = fail(ErrorCode::kCancelled, url_ + ": source closed");
+  }
+  submitted_.clear();
+}
+
+Error HttpSource::cancelledOf(const Transfer& transfer) const {
+  return {ErrorCode::kCancelled,
+          fmt::format("{}: read of {} cancelled", url_, rangeText(transfer))};
+}
+
+std::string HttpSource::rangeText(const Transfer& transfer) {
+  if (transfer.kind == Transfer::Kind::kHeadAfterChange) return "HEAD";
+  return fmt::format("bytes={}-{}", transfer.offset_bytes,
+                     transfer.offset_bytes + transfer.length_bytes - 1);
+}
+
+CURL* HttpSource::takeEasy() {
+  if (idle_easy_.empty()) return curl_easy_init();
+  CURL* easy = idle_easy_.back();
+  idle_easy_.pop_back();
+  curl_easy_reset(easy);
+  return easy;
+}
+
+void HttpSource::startAttempt(Transfer& transfer) {
+  ++transfer.attempt;
+  transfer.status = 0;
+  transfer.status_text.clear();
+  transfer.content_range.clear();
+  transfer.etag.clear();
+  transfer.last_modified.clear();
+  transfer.retry_after.clear();
+  transfer.body_started = false;
+  transfer.last_activity = Clock::now();
+  transfer.request_sent = false;
+  transfer.received = 0;
+  transfer.wire_bytes = 0;
+  transfer.fault = Fault::kNone;
+  transfer.fault_detail.clear();
+  transfer.curl_error[0] = 0;
+  transfer.source = this;
+  CURL* easy = transfer.easy = takeEasy();
+  curl_easy_setopt(easy, CURLOPT_URL, url_.c_str());
+  curl_easy_setopt(easy, CURLOPT_PRIVATE, &transfer);
+  curl_easy_setopt(easy, CURLOPT_ERRORBUFFER, transfer.curl_error);
+  curl_easy_setopt(easy, CURLOPT_NOSIGNAL, 1L);
+  curl_easy_setopt(easy, CURLOPT_PROTOCOLS_STR, "http,https");
+  curl_easy_setopt(easy, CURLOPT_REDIR_PROTOCOLS_STR, "http,https");
+  curl_easy_setopt(easy, CURLOPT_FOLLOWLOCATION, 1L);
+  curl_easy_setopt(easy, CURLOPT_MAXREDIRS, 5L);
+  curl_easy_setopt(easy, CURLOPT_USERAGENT, options_.user_agent.c_str());
+  curl_easy_setopt(easy, CURLOPT_TCP_KEEPALIVE, 1L);
+  curl_easy_setopt(easy, CURLOPT_CONNECTTIMEOUT_MS, long(options_.connect_timeout.count()));
+  curl_easy_setopt(easy, CURLOPT_TIMEOUT_MS, long(options_.request_timeout.count()));
+  const bool https = lowercase(url_.substr(0, 8)) == "https://";
+  curl_easy_setopt(easy, CURLOPT_HTTP_VERSION,
+                   long(options_.http2_prior_knowledge ? CURL_HTTP_VERSION_2_PRIOR_KNOWLEDGE
+                                                       : CURL_HTTP_VERSION_2TLS));
+  // Where HTTP/2 is possible, a new request waits for the connection being set up rather
+  // than opening another: it becomes a stream of that one.
+  if (https || options_.http2_prior_knowledge) curl_easy_setopt(easy, CURLOPT_PIPEWAIT, 1L);
+  if (!options_.verify_tls) {
+    curl_easy_setopt(easy, CURLOPT_SSL_VERIFYPEER, 0L);
+    curl_easy_setopt(easy, CURLOPT_SSL_VERIFYHOST, 0L);
+  }
+  curl_easy_setopt(easy, CURLOPT_HEADERFUNCTION, &HttpSource::onHeader);
+  curl_easy_setopt(easy, CURLOPT_HEADERDATA, &transfer);
+  curl_easy_setopt(easy, CURLOPT_WRITEFUNCTION, &HttpSource::onBody);
+  curl_easy_setopt(easy, CURLOPT_WRITEDATA, &transfer);
+  curl_easy_setopt(easy, CURLOPT_NOPROGRESS, 0L);
+  curl_easy_setopt(easy, CURLOPT_XFERINFOFUNCTION, &HttpSource::onProgress);
+  curl_easy_setopt(easy, CURLOPT_XFERINFODATA, &transfer);
+  curl_slist_free_all(transfer.headers);
+  transfer.headers = nullptr;
+  if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
+    curl_easy_setopt(easy, CURLOPT_NOBODY, 1L);
+  } else {
+    const std::string range = fmt::format("{}-{}", transfer.offset_bytes,
+                                          transfer.offset_bytes + transfer.length_bytes - 1);
+    curl_easy_setopt(easy, CURLOPT_RANGE, range.c_str());
+    // The version rule: a changed file answers 412 (If-Match), or, from a server that
+    // ignores it, the whole new file (If-Range) whose transfer onBody stops at once.
+    if (transfer.kind == Transfer::Kind::kRead) {
+      if (!etag_.empty()) {
+        transfer.headers = curl_slist_append(transfer.headers, ("If-Match: " + etag_).c_str());
+        transfer.headers = curl_slist_append(transfer.headers, ("If-Range: " + etag_).c_str());
+      } else if (!last_modified_.empty()) {
+        transfer.headers =
+            curl_slist_append(transfer.headers, ("If-Unmodified-Since: " + last_modified_).c_str());
+        transfer.headers =
+            curl_slist_append(transfer.headers, ("If-Range: " + last_modified_).c_str());
+      }
+    }
+  }
+  curl_easy_setopt(easy, CURLOPT_HTTPHEADER, transfer.headers);
+  curl_multi_add_handle(multi_, easy);
+  std::lock_guard lock(mutex_);
+  ++stats_.requests;
+  if (transfer.attempt > 1) ++stats_.retries;
+}
+
+void HttpSource::stopAttempt(Transfer& transfer) {
+  if (!transfer.easy) return;
+  curl_multi_remove_handle(multi_, transfer.easy);
+  idle_easy_.push_back(transfer.easy);
+  transfer.easy = nullptr;
+  std::lock_guard lock(mutex_);
+  stats_.bytes_received += transfer.wire_bytes;
+  transfer.wire_bytes = 0;
+}
+
+bool HttpSource::finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_64& random) {
+  curl_off_t total_us = 0, first_byte_us = 0;
+  curl_easy_getinfo(transfer.easy, CURLINFO_TOTAL_TIME_T, &total_us);
+  curl_easy_getinfo(transfer.easy, CURLINFO_STARTTRANSFER_TIME_T, &first_byte_us);
+  stopAttempt(transfer);
+  const std::string what = fmt::format("{}: {}", url_, rangeText(transfer));
+  auto retryOrFail = [&](ErrorCode error_code, const std::string& cause,
+                         std::chrono::milliseconds server_wait) -> bool {
+    if (transfer.attempt < options_.max_attempts) {
+      const uint32_t shift = std::min<uint32_t>(transfer.attempt - 1, 20);
+      auto backoff = std::min<std::chrono::milliseconds>(options_.retry_initial * (1u << shift),
+                                                         options_.retry_max);
+      backoff = std::chrono::milliseconds(int64_t(
+          double(backoff.count()) * std::uniform_real_distribution<double>(0.5, 1.0)(random)));
+      if (server_wait.count() > 0) backoff = std::min(server_wait, options_.retry_after_max);
+      transfer.not_before = Clock::now() + backoff;
+      return true;
+    }
+    complete(
+        transfer,
+        fail(error_code, fmt::format("{}: {} (after {} attempts)", what, cause, transfer.attempt)),
+        true);
+    return false;
+  };
+
+  if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
+    std::string now = !transfer.etag.empty()            ? transfer.etag
+                      : !transfer.last_modified.empty() ? transfer.last_modified
+                                                        : "unknown";
+    Error error = transfer.change_error;
+    error.message = fmt::format("{}, now {}); reopen it", error.message, now);
+    setChanged(error);
+    complete(transfer, Unexpected(error), true);
+    return false;
+  }
+  if (transfer.fault == Fault::kCancelled) {
+    complete(transfer, Unexpected(cancelledOf(transfer)), false);
+    return false;
+  }
+  if (transfer.fault == Fault::kStalled)
+    return retryOrFail(ErrorCode::kIo,
+                       fmt::format("stalled: no byte for {} ms", options_.stall_timeout.count()),
+                       {});
+  if (transfer.fault == Fault::kChanged) {
+    beginChangeReport(transfer, transfer.fault_detail);
+    return true;
+  }
+  if (transfer.fault == Fault::kWholeFile) {
+    if (transfer.kind == Transfer::Kind::kRead && !transfer.etag.empty() &&
+        transfer.etag != etag_) {
+      beginChangeReport(transfer, "");
+      return true;
+    }
+    complete(transfer,
+             fail(ErrorCode::kUnsupported,
+                  fmt::format("{}: server does not honour byte ranges (answered 200 with the "
+                              "whole file to a Range request)",
+                              what)),
+             true);
+    return false;
+  }
+  if (transfer.fault == Fault::kBadRange || transfer.fault == Fault::kTooLong) {
+    complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, transfer.fault_detail)),
+             true);
+    return false;
+  }
+  if (code != CURLE_OK) {
+    const std::string cause =
+        transfer.curl_error[0] ? std::string(transfer.curl_error) : curl_easy_strerror(code);
+    if (code == CURLE_PARTIAL_FILE)
+      return retryOrFail(ErrorCode::kIo, "truncated response: " + cause, {});
+    if (retryableCurlCode(code)) return retryOrFail(ErrorCode::kIo, cause, {});
+    complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, cause)), true);
+    return false;
+  }
+  const long status = transfer.status;
+  const std::string status_line = fmt::format(
+      "HTTP {}{}{}", status, transfer.status_text.empty() ? "" : " ", transfer.status_text);
+  if (status == 206) {
+    if (!transfer.body_started) return retryOrFail(ErrorCode::kIo, "206 without a body", {});
+    if (transfer.received != transfer.length_bytes)
+      return retryOrFail(ErrorCode::kIo,
+                         fmt::format("truncated response: {} of {} bytes", transfer.received,
+                                     transfer.length_bytes),
+                         {});
+    if (transfer.kind == Transfer::Kind::kProbe) {
+      transfer.length_bytes = transfer.received;
+    }
+    recordSample(transfer, double(total_us) / 1e6, double(first_byte_us) / 1e6);
+    complete(transfer, {}, false);
+    return false;
+  }
+  if (status == 412 && transfer.kind == Transfer::Kind::kRead) {
+    beginChangeReport(transfer, "");
+    return true;
+  }
+  if (status == 416) {
+    ContentRange range;
+    if (transfer.kind == Transfer::Kind::kProbe &&
+        parseContentRange(transfer.content_range, range) && !range.has_range && range.has_total &&
+        range.total == 0) {
+      transfer.probe_total = 0;
+      transfer.received = 0;
+      complete(transfer, {}, false);
+      return false;
+    }
+    if (transfer.kind == Transfer::Kind::kRead &&
+        parseContentRange(transfer.content_range, range) && range.has_total &&
+        range.total != size_bytes_) {
+      beginChangeReport(transfer,
+                        fmt::format("size was {} bytes, now {}", size_bytes_, range.total));
+      return true;
+    }
+    complete(transfer,
+             fail(ErrorCode::kIo, fmt::format("{}: {} (range not satisfiable)", what, status_line)),
+             true);
+    return false;
+  }
+  if (status == 404 || status == 410) {
+    complete(transfer, fail(ErrorCode::kNotFound, fmt::format("{}: {}", what, status_line)), true);
+    return false;
+  }
+  if (retryableStatus(status))
+    return retryOrFail(
+        ErrorCode::kIo, status_line,
+        status == 429 || status == 503 ? retryAfter(transfer) : std::chrono::milliseconds(0));
+  complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, status_line)), true);
+  return false;
+}
+
+std::chrono::milliseconds HttpSource::retryAfter(const Transfer& transfer) const {
+  if (transfer.retry_after.empty()) return std::chrono::milliseconds(0);
+  uint64_t seconds = 0;
+  if (parseUint(transfer.retry_after, seconds))
+    return std::chrono::milliseconds(std::min<uint64_t>(seconds, 86400) * 1000);
+  const time_t when = curl_getdate(transfer.retry_after.c_str(), nullptr);
+  if (when < 0) return std::chrono::milliseconds(0);
+  const time_t now = ::time(nullptr);
+  return std::chrono::milliseconds(when > now ? int64_t(when - now) * 1000 : 0);
+}
+
+void HttpSource::beginChangeReport(Transfer& transfer, const std::string& detail) {
+  const std::string was =
+      !etag_.empty() ? "ETag was " + etag_ : "Last-Modified was " + last_modified_;
+  transfer.change_error = {
+      ErrorCode::kCorrupt,
+      fmt::format("{}: {}: archive changed on the server ({}{}", url_, rangeText(transfer),
+                  detail.empty() ? "" : detail + "; ", was)};
+  transfer.kind = Transfer::Kind::kHeadAfterChange;
+  transfer.attempt = 0;
+  transfer.not_before = Clock::now();
+}
+
+void HttpSource::setChanged(const Error& error) {
+  std::lock_guard lock(mutex_);
+  if (changed_.message.empty()) changed_ = error;
+}
+
+void HttpSource::recordSample(const Transfer& transfer, double seconds, double first_byte_seconds) {
+  std::lock_guard lock(mutex_);
+  recent_.push_back({Clock::now(), transfer.received, seconds, first_byte_seconds});
+  if (recent_.size() > kRecentSamples) recent_.pop_front();
+  if (transfer.prefetch) stats_.prefetched_bytes += transfer.received;
+}
+
+void HttpSource::complete(Transfer& transfer, Result<void> result, bool is_error) {
+  curl_slist_free_all(transfer.headers);
+  transfer.headers = nullptr;
+  {
+    std::lock_guard lock(mutex_);
+    if (is_error) ++stats_.errors;
+    if (!result && result.error().code == ErrorCode::kCancelled && transfer.cancel)
+      ++stats_.cancelled;
+    if (transfer.prefetch)
+      transfer.prefetch->state =
+          result ? PrefetchEntry::State::kReady : PrefetchEntry::State::kFailed;
+    if (transfer.prefetch && !result) {
+      auto it = std::find(prefetched_.begin(), prefetched_.end(), transfer.prefetch);
+      if (it != prefetched_.end()) dropLocked(it);
+    }
+    transfer.result = std::move(result);
+    transfer.done = true;
+  }
+  done_.notify_all();
+}
+
+bool HttpSource::acceptResponse(Transfer& transfer) const {
+  ContentRange range;
+  if (!parseContentRange(transfer.content_range, range) || !range.has_range) {
+    transfer.fault = Fault::kBadRange;
+    transfer.fault_detail =
+        fmt::format("206 without a usable Content-Range (\"{}\")", transfer.content_range);
+    return false;
+  }
+  if (transfer.kind == Transfer::Kind::kProbe) {
+    if (!range.has_total || range.total == 0 || range.first != 0 ||
+        range.last != std::min(kOpenBytes, range.total) - 1) {
+      transfer.fault = Fault::kBadRange;
+      transfer.fault_detail = fmt::format("server answered \"Content-Range: {}\" to bytes=0-{}",
+                                          transfer.content_range, kOpenBytes - 1);
+      return false;
+    }
+    transfer.probe_total = range.total;
+    transfer.length_bytes = range.last + 1;
+    return true;
+  }
+  if (range.has_total && range.total != size_bytes_) {
+    transfer.fault = Fault::kChanged;
+    transfer.fault_detail = fmt::format("size was {} bytes, now {}", size_bytes_, range.total);
+    return false;
+  }
+  if ((!etag_.empty() && !transfer.etag.empty() && transfer.etag != etag_) ||
+      (etag_.empty() && !last_modified_.empty() && !transfer.last_modified.empty() &&
+       transfer.last_modified != last_modified_)) {
+    transfer.fault = Fault::kChanged;
+    return false;
+  }
+  if (range.first != transfer.offset_bytes ||
+      range.last != transfer.offset_bytes + transfer.length_bytes - 1) {
+    transfer.fault = Fault::kBadRange;
+    transfer.fault_detail = fmt::format("server answered bytes {}-{}", range.first, range.last);
+    return false;
+  }
+  return true;
+}
+
+size_t HttpSource::onHeader(char* data, size_t size, size_t count, void* user) {
+  Transfer& transfer = *static_cast<Transfer*>(user);
+  const size_t bytes = size * count;
+  transfer.last_activity = Clock::now();
+  transfer.request_sent = true;
+  std::string_view line(data, bytes);
+  if (line.rfind("HTTP/", 0) == 0) {
+    // A new response (after a redirect or an interim 1xx): forget the previous one's.
+    transfer.content_range.clear();
+    transfer.etag.clear();
+    transfer.last_modified.clear();
+    transfer.retry_after.clear();
+    const size_t space = line.find(' ');
+    if (space != std::string_view::npos) {
+      std::string rest = trim(line.substr(space + 1));
+      transfer.status = std::strtol(rest.c_str(), nullptr, 10);
+      const size_t text = rest.find(' ');
+      transfer.status_text = text == std::string::npos ? "" : rest.substr(text + 1);
+    }
+    return bytes;
+  }
+  const size_t colon = line.find(':');
+  if (colon == std::string_view::npos) return bytes;
+  const std::string key = lowercase(trim(line.substr(0, colon)));
+  std::string value = trim(line.substr(colon + 1));
+  if (key == "content-range")
+    transfer.content_range = std::move(value);
+  else if (key == "etag")
+    transfer.etag = std::move(value);
+  else if (key == "last-modified")
+    transfer.last_modified = std::move(value);
+  else if (key == "retry-after")
+    transfer.retry_after = std::move(value);
+  return bytes;
+}
+
+size_t HttpSource::onBody(char* data, size_t size, size_t count, void* user) {
+  Transfer& transfer = *static_cast<Transfer*>(user);
+  const size_t bytes = size * count;
+  transfer.wire_bytes += bytes;
+  transfer.last_activity = Clock::now();
+  if (transfer.status == 200) {
+    // Never download a whole archive by accident: stop at its first bytes.
+    transfer.fault = Fault::kWholeFile;
+    return CURL_WRITEFUNC_ERROR;
+  }
+  if (transfer.status != 206) return bytes;  // an error page: read and dropped
+  if (!transfer.body_started) {
+    transfer.body_started = true;
+    if (!transfer.source->acceptResponse(transfer)) return CURL_WRITEFUNC_ERROR;
+  }
+  if (transfer.received + bytes > transfer.length_bytes) {
+    transfer.fault = Fault::kTooLong;
+    transfer.fault_detail =
+        fmt::format("server sent more than the {} bytes asked", transfer.length_bytes);
+    return CURL_WRITEFUNC_ERROR;
+  }
+  std::memcpy(transfer.out + transfer.received, data, bytes);
+  transfer.received += bytes;
+  return bytes;
+}
+
+int HttpSource::onProgress(void* user, curl_off_t, curl_off_t, curl_off_t, curl_off_t) {
+  Transfer& transfer = *static_cast<Transfer*>(user);
+  if (transfer.cancel && transfer.cancel->load(std::memory_order_acquire)) {
+    transfer.fault = Fault::kCancelled;
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace tessera::detail
