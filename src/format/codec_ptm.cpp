@@ -49,26 +49,14 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   ScratchRef state(scratch);
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
-  AxisMap columns, rows;
   const bool has_parent = predictor != Predictor::kRoot;
-  if (has_parent)
-    TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
-  if (predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares)
-    upsample(channels, parent->texels, columns, rows, state->upsampled, state->detail);
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
+  AxisMap columns, rows;
   // Encoding only reads the texels; the shared routine takes a mutable pointer for decoding.
-  const Walk walk{const_cast<uint8_t*>(packed.data()),
-                  width,
-                  height,
-                  has_parent ? &parent->texels : nullptr,
-                  &columns,
-                  &rows,
-                  state->upsampled.data(),
-                  state->detail.data(),
-                  errorPlane(coder, width, height, *state),
-                  ls_weights,
-                  nullptr};
+  TESSERA_ASSIGN_OR_RETURN(
+      const Walk walk, prepareWalk(const_cast<uint8_t*>(packed.data()), width, height, channels,
+                                   parent, predictor, coder, ls_weights, *state, columns, rows));
   std::vector<uint8_t> payload = {uint8_t(predictor), uint8_t(coder)};
   if (predictor == Predictor::kLeastSquares) {
     static_assert(sizeof fit->weights == sizeof ls_weights);

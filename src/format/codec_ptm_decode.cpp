@@ -65,11 +65,6 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
     return fail(ErrorCode::kCorrupt,
                 "ptm payload: coded against a parent tile, but the tile has none (coarsest "
                 "level)");
-  AxisMap columns, rows;
-  if (has_parent)
-    TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
-  if (predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares)
-    upsample(channels, parent->texels, columns, rows, state->upsampled, state->detail);
   // Predictor 5's weights follow the header; any byte is a valid weight.
   int8_t ls_weights[lsWeightBytes(4)] = {};
   size_t body_at = kHeaderBytes;
@@ -81,17 +76,10 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
     std::memcpy(ls_weights, payload.data() + kHeaderBytes, lsWeightBytes(channels));
     body_at += lsWeightBytes(channels);
   }
-  const Walk walk{out.texels.data(),
-                  width,
-                  height,
-                  has_parent ? &parent->texels : nullptr,
-                  &columns,
-                  &rows,
-                  state->upsampled.data(),
-                  state->detail.data(),
-                  errorPlane(coder, width, height, *state),
-                  ls_weights,
-                  nullptr};
+  AxisMap columns, rows;
+  TESSERA_ASSIGN_OR_RETURN(
+      const Walk walk, prepareWalk(out.texels.data(), width, height, channels, parent, predictor,
+                                   coder, ls_weights, *state, columns, rows));
 
   const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
   using rans::FamilyId;

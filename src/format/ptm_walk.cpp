@@ -51,13 +51,15 @@ void upsampleParent(const ImageView& parent, const AxisMap& columns, const AxisM
   }
 }
 
-}  // namespace
-
-rans::FamilyId familyOf(PtmCoder coder) {
-  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ? rans::FamilyId::kGeometric12
-                                                                     : rans::FamilyId::kMixture15;
+// Coders 5 and 6's error plane in `state`, sized to the tile; null for the other coders.
+uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, CodecScratch::State& state) {
+  if (!isErrorActivityCoder(coder)) return nullptr;
+  state.errors.resize(size_t(width) * height);
+  return state.errors.data();
 }
 
+// The parent bilinearly upsampled to every child texel into `out`, and `detail` sized to
+// match it.
 void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
               const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail) {
   out.resize(columns.parent.size() * rows.parent.size() * channels);
@@ -70,23 +72,7 @@ void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns
   }
 }
 
-uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, CodecScratch::State& state) {
-  if (!isErrorActivityCoder(coder)) return nullptr;
-  state.errors.resize(size_t(width) * height);
-  return state.errors.data();
-}
-
-SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,
-                          const AxisMap* rows) {
-  const size_t total = size_t(width) * height;
-  if (columns == nullptr) return {total, 0};
-  size_t derived_columns = 0, derived_rows = 0;
-  for (uint8_t d : columns->derived) derived_columns += d;
-  for (uint8_t d : rows->derived) derived_rows += d;
-  const size_t derived = derived_columns * derived_rows;
-  return {total - derived, derived};
-}
-
+// Maps both axes, or explains why the parent does not fit.
 Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent, uint32_t width,
                        uint32_t height, uint32_t channels, AxisMap& columns, AxisMap& rows) {
   if (parent_view.channels != channels)
@@ -104,6 +90,46 @@ Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent,
                     width, height, parent.quadrant_x, parent.quadrant_y, parent.tile_size_px,
                     parent.border_px, parent_view.width_px, parent_view.height_px));
   return {};
+}
+
+}  // namespace
+
+rans::FamilyId familyOf(PtmCoder coder) {
+  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ? rans::FamilyId::kGeometric12
+                                                                     : rans::FamilyId::kMixture15;
+}
+
+SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,
+                          const AxisMap* rows) {
+  const size_t total = size_t(width) * height;
+  if (columns == nullptr) return {total, 0};
+  size_t derived_columns = 0, derived_rows = 0;
+  for (uint8_t d : columns->derived) derived_columns += d;
+  for (uint8_t d : rows->derived) derived_rows += d;
+  const size_t derived = derived_columns * derived_rows;
+  return {total - derived, derived};
+}
+
+Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
+                         const ParentTexels* parent, Predictor predictor, PtmCoder coder,
+                         const int8_t* ls_weights, CodecScratch::State& state, AxisMap& columns,
+                         AxisMap& rows) {
+  const bool has_parent = predictor != Predictor::kRoot;
+  if (has_parent)
+    TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
+  if (predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares)
+    upsample(channels, parent->texels, columns, rows, state.upsampled, state.detail);
+  return Walk{texels,
+              width,
+              height,
+              has_parent ? &parent->texels : nullptr,
+              &columns,
+              &rows,
+              state.upsampled.data(),
+              state.detail.data(),
+              errorPlane(coder, width, height, state),
+              ls_weights,
+              nullptr};
 }
 
 }  // namespace tessera::detail::ptm

@@ -489,13 +489,14 @@ void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder
   }
 }
 
-// The parent bilinearly upsampled to every child texel (times 16, plus 6: a floor-average
-// parent sits 0.375 below its block's mean) into `out`, and `detail` sized to match it.
-void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
-              const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail);
-
-// Coders 5 and 6's error plane in `state`, sized to the tile; null for the other coders.
-uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, CodecScratch::State& state);
+// The walk of `texels` (width x height x channels) with `predictor` and `coder`: the
+// parent's axes mapped into `columns` and `rows` (none for predictor 0, whose `parent` may be
+// null), the parent upsampled for predictors 4 and 5 and coders 5 and 6's error plane, both in
+// `state`; or why the parent does not fit. `ls_weights` may be filled in afterwards.
+Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
+                         const ParentTexels* parent, Predictor predictor, PtmCoder coder,
+                         const int8_t* ls_weights, CodecScratch::State& state, AxisMap& columns,
+                         AxisMap& rows);
 
 // Symbol counts of one tile: `coded` residuals and `derived` remainders per channel.
 struct SymbolCounts {
@@ -506,10 +507,6 @@ struct SymbolCounts {
 // Counts a tile's symbols; `columns` and `rows` are null for a tile without a parent.
 SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,
                           const AxisMap* rows);
-
-// Maps both axes, or explains why the parent does not fit.
-Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent, uint32_t width,
-                       uint32_t height, uint32_t channels, AxisMap& columns, AxisMap& rows);
 
 // The symbol planes of the zstd coder, laid out in `plane`: residuals of each channel, then
 // remainders of each channel.
