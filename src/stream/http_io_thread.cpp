@@ -2,8 +2,10 @@
 // handle, starts, retries and stalls out attempts, checks every response against the range
 // asked and the version opened, and completes the callers' transfers.
 #include <algorithm>
+#include <charconv>
 #include <cstring>
 #include <random>
+#include <system_error>
 
 #include <fmt/format.h>
 
@@ -29,15 +31,11 @@ struct ContentRange {
   uint64_t total = 0;
 };
 
+// Decimal digits only, the whole text, within 64 bits (from_chars takes no sign or space for
+// an unsigned type).
 bool parseUint(std::string_view text, uint64_t& out) {
-  if (text.empty() || text.size() > 19) return false;
-  uint64_t value = 0;
-  for (char c : text) {
-    if (c < '0' || c > '9') return false;
-    value = value * 10 + uint64_t(c - '0');
-  }
-  out = value;
-  return true;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), out);
+  return error == std::errc() && end == text.data() + text.size();
 }
 
 bool parseContentRange(const std::string& header, ContentRange& out) {

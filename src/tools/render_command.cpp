@@ -1,8 +1,10 @@
 // `tessera render`: the CPU reference picture of one orthographic view, as PNG. The web tests
 // compare what browsers draw (Tessera's viewer, OpenSeadragon, Leaflet) against it.
+#include <charconv>
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <system_error>
 
 #include <fmt/format.h>
 
@@ -30,14 +32,8 @@ bool parseViewport(const std::string& text, uint32_t& w, uint32_t& h) {
   size_t x = text.find('x');
   if (x == std::string::npos || x == 0 || x + 1 >= text.size()) return false;
   auto parse = [](const std::string& digits, uint32_t& out) {
-    if (digits.empty() || digits.size() > 5) return false;
-    uint32_t value = 0;
-    for (char c : digits) {
-      if (c < '0' || c > '9') return false;
-      value = value * 10 + uint32_t(c - '0');
-    }
-    out = value;
-    return value >= 1 && value <= 16384;
+    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), out);
+    return error == std::errc() && end == digits.data() + digits.size() && out >= 1 && out <= 16384;
   };
   return parse(text.substr(0, x), w) && parse(text.substr(x + 1), h);
 }
