@@ -33,12 +33,12 @@ struct AxisMap {
 };
 
 // LOCO-I's median edge detector (Weinberger et al., "The LOCO-I lossless image compression
-// algorithm").
+// algorithm"), written as the median of left, up and left + up - up_left: the same predictor
+// without branches. Whether a texel sits on an edge is as hard to guess as the texel, and the
+// branches cost the decoder 5-11 % (docs/benchmarks.md, "decoder experiments").
 inline int medPredict(int left, int up, int up_left) {
   const int low = std::min(left, up), high = std::max(left, up);
-  if (up_left >= high) return low;
-  if (up_left <= low) return high;
-  return left + up - up_left;
+  return std::min(high, std::max(low, left + up - up_left));
 }
 
 // Contexts of the rANS coder, per channel: for coded texels, the position in the 2x2 block
