@@ -4,6 +4,8 @@
 #include <cstring>
 #include <memory>
 
+#include <tessera/check.h>
+
 #include "codec_internal.h"
 #include "ptm_least_squares.h"
 #include "ptm_rans.h"
@@ -152,6 +154,8 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
 
 size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
                            std::vector<uint8_t>* models) {
+  // Another walk's symbols under this coder's contexts would estimate nothing meaningful.
+  TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
   const double bits =
@@ -162,6 +166,8 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
 
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
                                        CodecScratch* scratch, const std::vector<uint8_t>* models) {
+  // Coded under another walk's contexts, the payload would not decode to the tile.
+  TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   ScratchRef state(scratch);
   std::vector<uint8_t> chosen;
   if (models == nullptr) {
