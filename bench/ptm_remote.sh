@@ -11,7 +11,9 @@
 # at every codec's size; then a jump into the centre at 1 texel per pixel, held for 10 s.
 # "Refinement" is what the loader read from the jump to the first frame at full detail after
 # it: the finer levels of the view, which for ptm are residuals against the levels the client
-# holds. "To full detail" adds the overview's bytes. Link 20 Mbit/s with a 40 ms RTT (`tessera fly --link`, the
+# holds. "To full detail" adds the overview's bytes. A second flight starts cold at the centre at
+# 1 texel per pixel and holds for 6 s: "cold start" is the time to its first frame at full
+# detail, where a dependent codec's levels cannot all be read at once. Link 20 Mbit/s with a 40 ms RTT (`tessera fly --link`, the
 # simulated link of docs/runtime.md), loader settings of tuneForRemoteSource.
 #
 # Inputs: synthetic:4096x4096:2:3, and /usr/share/backgrounds/gnome/wood-d.webp from Debian
@@ -64,6 +66,7 @@ overview = max(w / 1920, h / 1080, 1.0)
 for t, tpp, jump in [(0, overview, ""), (4, overview, ""), (4, 1, "0 jump"), (14, 1, "")]:
     print(f"{t} {w / 2} {h / 2} {tpp} {jump}")
 EOF
+  printf '0 %s %s 1\n6 %s %s 1\n' $((w / 2)) $((h / 2)) $((w / 2)) $((h / 2)) >"$WORK/$image-cold.path"
   for spec in "${CODECS[@]}"; do
     codec=${spec/:/-e}
     effort=()
@@ -74,6 +77,8 @@ EOF
     for r in $(seq 1 "$REPEATS"); do
       "$TESSERA" fly "$archive" --link "$LINK" --path "$WORK/$image.path" --viewport 1920x1080 \
         --fps 30 --loader-priority nice -q --out "$WORK/run-$image-$codec-$r"
+      "$TESSERA" fly "$archive" --link "$LINK" --path "$WORK/$image-cold.path" \
+        --viewport 1920x1080 --fps 30 --loader-priority nice -q --out "$WORK/cold-$image-$codec-$r"
     done
   done
 done
@@ -100,20 +105,29 @@ def flight(image, codec, r):
             "parents": summary["parents_queued"], "fallbacks": summary["parent_fallbacks"],
             "failures": summary["load_failures"]}
 
+def cold_start(image, codec, r):
+    rows = csv.DictReader(open(f"{work}/cold-{image}-{codec}-{r}/frames.csv"))
+    full = [float(x["t_ms"]) for x in rows
+            if int(x["desired_level"]) == 0 and float(x["coverage_desired"]) >= 1.0]
+    return full[0] if full else None
+
 def med(values):
     return statistics.median(values) if values else None
 
 mib = lambda b: f"{b / 2**20:.2f}"
 print(f"Link {link}; medians of {repeats} flights.\n")
-print("| image | codec | archive MiB | overview bytes | refinement bytes | to full detail | vs ptm | full detail after the jump | parents queued / fallbacks |")
-print("|---|---|---:|---:|---:|---:|---:|---:|---|")
+print("| image | codec | archive MiB | overview bytes | refinement bytes | to full detail | vs ptm | full detail after the jump | cold start to full detail | parents queued / fallbacks |")
+print("|---|---|---:|---:|---:|---:|---:|---:|---:|---|")
 for image in images:
     base = None
     for codec in codecs:
         runs = [f for f in (flight(image, codec, r) for r in range(1, repeats + 1)) if f]
         size = os.path.getsize(f"{work}/{image}-{codec}.tess")
+        colds = [c for c in (cold_start(image, codec, r) for r in range(1, repeats + 1))
+                 if c is not None]
+        cold = f"{med(colds) / 1000:.2f} s" if len(colds) == repeats else "never"
         if not runs:
-            print(f"| {image} | {codec} | {mib(size)} | - | - | - | - | never | - |")
+            print(f"| {image} | {codec} | {mib(size)} | - | - | - | - | never | {cold} | - |")
             continue
         refine = med([f["refine"] for f in runs])
         if codec == "ptm":
@@ -121,6 +135,6 @@ for image in images:
         ratio = f"{refine / base:.2f}x" if base else "-"
         print(f"| {image} | {codec} | {mib(size)} | {mib(med([f['overview'] for f in runs]))} MiB "
               f"| {mib(refine)} MiB | {mib(med([f['total'] for f in runs]))} MiB | {ratio} "
-              f"| {med([f['ms'] for f in runs]) / 1000:.2f} s "
+              f"| {med([f['ms'] for f in runs]) / 1000:.2f} s | {cold} "
               f"| {max(f['parents'] for f in runs)} / {max(f['fallbacks'] for f in runs)} |")
 EOF

@@ -51,6 +51,7 @@ struct LoaderPool::Batch {
     TileEntry entry;
   };
   TileId first;
+  bool early = false;  ///< taken while its first tile's parent was loading (takeBatchLocked)
   std::vector<TileId> candidates;
   std::vector<Item> items;
 };
@@ -151,10 +152,10 @@ void LoaderPool::queueMissingAncestorsLocked(
   }
 }
 
-bool LoaderPool::waitsForParentLocked(const TileId& id, Clock::time_point now) {
-  if (!needsParent(id)) return false;
+LoaderPool::ParentWait LoaderPool::parentWaitLocked(const TileId& id, Clock::time_point now) {
+  if (!needsParent(id)) return ParentWait::kNone;
   const TileId parent = Archive::parentTile(id);
-  if (in_flight_.count(parent)) return true;
+  if (in_flight_.count(parent)) return ParentWait::kLoading;
   // The queue's ids, gathered once per take and only when a tile needs them; the set keeps its
   // buckets from one take to the next.
   if (!queued_ids_valid_) {
@@ -162,11 +163,20 @@ bool LoaderPool::waitsForParentLocked(const TileId& id, Clock::time_point now) {
     for (const Pending& pending : queue_) queued_ids_.insert(pending.id);
     queued_ids_valid_ = true;
   }
-  if (!queued_ids_.count(parent)) return false;
+  if (!queued_ids_.count(parent)) return ParentWait::kNone;
   // A parent waiting out a backoff does not hold its children: they read it themselves and
   // fail with it, naming both tiles, instead of waiting unseen.
   auto retry = retries_.find(parent);
-  return retry == retries_.end() || retry->second.not_before <= now;
+  return retry == retries_.end() || retry->second.not_before <= now ? ParentWait::kQueued
+                                                                    : ParentWait::kNone;
+}
+
+bool LoaderPool::waitForParentLoad(const TileId& id) {
+  const TileId parent = Archive::parentTile(id);
+  std::unique_lock lock(mutex_);
+  // finish() wakes every worker when a tile above level 0 (a parent) ends, loaded or not.
+  work_ready_.wait(lock, [&] { return stopping_ || !in_flight_.count(parent); });
+  return !stopping_;
 }
 
 bool LoaderPool::anyWantedLocked(std::span<const TileId> tiles) const {
@@ -221,35 +231,62 @@ void LoaderPool::waitIdle() {
 
 bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
   // Dependent codecs: a tile whose parent is loading or queued waits for it, so it decodes
-  // against the cached parent instead of reading the parent a second time.
+  // against the cached parent instead of reading the parent a second time. When nothing else
+  // is ready, a worker takes a tile whose parent is loading (the second pass): it reads the
+  // child's payload during the parent's load and decodes it after (waitForParentLoad). Over a
+  // network each level then costs one round trip less than a level after the other; a worker
+  // that would otherwise sleep only blocks instead, and never on a parent nobody loads, so
+  // waits cannot form a cycle (a parent is always a coarser level). At most all workers but
+  // one hold such a batch at a time.
   queued_ids_valid_ = false;
-  for (size_t i = 0; i < queue_.size(); ++i) {
-    auto retry = retries_.find(queue_[i].id);
-    if (retry != retries_.end() && retry->second.not_before > now) continue;
-    if (any_dependent_ && waitsForParentLocked(queue_[i].id, now)) continue;
-    batch.first = queue_[i].id;
-    const uint32_t first_urgency = queue_[i].urgency;
-    batch.candidates.clear();
-    batch.items.clear();
-    queue_.erase(queue_.begin() + ptrdiff_t(i));
-    in_flight_.insert(batch.first);
-    if (auto it = wanted_.find(batch.first); it != wanted_.end()) link_.queueWait(now - it->second);
-    // A fair share of the class's queue at most, so the other workers decode the rest of the
-    // screen in parallel instead of waiting for one worker's long batch.
-    size_t same_class = 0;
-    for (size_t j = i; j < queue_.size(); ++j) same_class += queue_[j].urgency == first_urgency;
-    const size_t share = std::min(kMergeCandidates, same_class / thread_count_);
-    for (size_t j = i; j < queue_.size() && batch.candidates.size() < share; ++j) {
-      const TileId& other = queue_[j].id;
-      if (other.image == batch.first.image && other.level == batch.first.level &&
-          queue_[j].urgency == first_urgency && !retries_.count(other) &&
-          !(any_dependent_ && waitsForParentLocked(other, now)))
-        batch.candidates.push_back(other);
+  for (const bool early : {false, true}) {
+    // One worker always stays free of waits, for the work the next frame may bring.
+    if (early && (!any_dependent_ || early_batches_ + 1 >= thread_count_)) break;
+    for (size_t i = 0; i < queue_.size(); ++i) {
+      auto retry = retries_.find(queue_[i].id);
+      if (retry != retries_.end() && retry->second.not_before > now) continue;
+      if (any_dependent_) {
+        const ParentWait wait = parentWaitLocked(queue_[i].id, now);
+        if (wait == ParentWait::kQueued || (wait == ParentWait::kLoading && !early)) continue;
+      }
+      takeLocked(batch, i, early, now);
+      return true;
     }
-    stats_.queued = queue_.size();
-    return true;
   }
   return false;
+}
+
+void LoaderPool::takeLocked(Batch& batch, size_t index, bool early, Clock::time_point now) {
+  batch.first = queue_[index].id;
+  batch.early = early;
+  const uint32_t first_urgency = queue_[index].urgency;
+  batch.candidates.clear();
+  batch.items.clear();
+  queue_.erase(queue_.begin() + ptrdiff_t(index));
+  in_flight_.insert(batch.first);
+  if (early) {
+    ++early_batches_;
+    ++stats_.children_read_early;
+  }
+  if (auto it = wanted_.find(batch.first); it != wanted_.end()) link_.queueWait(now - it->second);
+  // A fair share of the class's queue at most, so the other workers decode the rest of the
+  // screen in parallel instead of waiting for one worker's long batch.
+  size_t same_class = 0;
+  for (size_t j = index; j < queue_.size(); ++j) same_class += queue_[j].urgency == first_urgency;
+  const size_t share = std::min(kMergeCandidates, same_class / thread_count_);
+  for (size_t j = index; j < queue_.size() && batch.candidates.size() < share; ++j) {
+    const TileId& other = queue_[j].id;
+    if (other.image != batch.first.image || other.level != batch.first.level ||
+        queue_[j].urgency != first_urgency || retries_.count(other))
+      continue;
+    if (any_dependent_) {
+      // An early batch may carry siblings whose parent is loading too; they wait as it does.
+      const ParentWait wait = parentWaitLocked(other, now);
+      if (wait == ParentWait::kQueued || (wait == ParentWait::kLoading && !early)) continue;
+    }
+    batch.candidates.push_back(other);
+  }
+  stats_.queued = queue_.size();
 }
 
 void LoaderPool::run(uint32_t) {
@@ -303,6 +340,7 @@ void LoaderPool::run(uint32_t) {
     hintReadAhead(read_ahead);
     loadBatch(batch, scratch);
     lock.lock();
+    if (batch.early) --early_batches_;
   }
 }
 
@@ -536,6 +574,8 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
       if (it == queue_.end()) continue;
       queue_.erase(it);
       in_flight_.insert(item.id);
+      if (any_dependent_ && needsParent(item.id) && in_flight_.count(Archive::parentTile(item.id)))
+        ++stats_.children_read_early;
       if (auto w = wanted_.find(item.id); w != wanted_.end()) link_.queueWait(now - w->second);
       batch.items.push_back(item);
     }
@@ -623,6 +663,12 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
         finish(item.id, {item.id, false, false, verified.error().message}, true);
         continue;
       }
+    }
+    // A child taken while its parent loaded finishes after it (decoding against the cached
+    // parent), as every child does: the order does not depend on the worker that took it.
+    if (any_dependent_ && needsParent(item.id) && !waitForParentLoad(item.id)) {
+      finish(item.id, {item.id, false, true, "", true}, false);
+      continue;
     }
     // The budget counts buffers in flight: no room means try again later, not an error.
     if (!cache_.reserve(tile_bytes)) {

@@ -69,6 +69,10 @@ struct LoaderStats {
   /// Children decoded after reading their parent chain in the same job, because the parent
   /// left the cache (or could not be loaded) between its load and the child's decode.
   uint64_t parent_fallbacks = 0;
+  /// Tiles taken while their parent was being loaded, because no other work was ready: their
+  /// payloads are read during the parent's load, and they decode after it (docs/runtime.md,
+  /// "Dependent codecs").
+  uint64_t children_read_early = 0;
   LinkEstimate link;  ///< throughput, latency and queue wait measured on every read
   /// When the queue and in-flight set last became empty together (the end of a load).
   std::chrono::steady_clock::time_point idle_since{};
@@ -128,13 +132,23 @@ class LoaderPool {
   bool anyWantedLocked(std::span<const TileId> tiles) const;
   void run(uint32_t worker_index);
   bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
+  /// Moves queue_[index] into `batch` (in flight) with the candidates it may merge with; an
+  /// `early` batch (its tile's parent loading) may take siblings whose parent is loading too.
+  void takeLocked(Batch& batch, size_t index, bool early,
+                  std::chrono::steady_clock::time_point now);
   void loadBatch(Batch& batch, CodecScratch& scratch);
   /// True when `id` is coded against a parent (its image's codec is dependent and it is below
   /// the coarsest level). Lock-free: reads constant members only.
   bool needsParent(const TileId& id) const;
-  /// Whether a dependent tile must wait: its parent is being loaded, or queued and ready to be
-  /// taken (not waiting out a retry backoff). Under mutex_, within one takeBatchLocked.
-  bool waitsForParentLocked(const TileId& id, std::chrono::steady_clock::time_point now);
+  /// Where a tile stands towards its parent: free to load (independent, or its parent is
+  /// neither loading nor ready in the queue), its parent loading, or its parent queued and
+  /// ready to be taken (not waiting out a retry backoff).
+  enum class ParentWait { kNone, kLoading, kQueued };
+  /// ParentWait of `id`. Under mutex_, within one takeBatchLocked.
+  ParentWait parentWaitLocked(const TileId& id, std::chrono::steady_clock::time_point now);
+  /// Blocks this worker until `id`'s parent is no longer being loaded: a child taken while its
+  /// parent loaded (takeBatchLocked) finishes only after it. False when the pool is stopping.
+  bool waitForParentLoad(const TileId& id);
   /// Adds to `wanted` and the queue, coarsest first, the ancestors of `request` that a
   /// dependent codec needs and that are neither wanted, cached nor loading. Under mutex_.
   void queueMissingAncestorsLocked(
@@ -184,7 +198,9 @@ class LoaderPool {
   std::vector<ActiveRead*> active_reads_;
   LinkEstimator link_;
   std::unordered_set<TileId, TileIdHash> in_flight_;
-  /// Dependent codecs: the queue's ids, for waitsForParentLocked; valid within one take.
+  /// Batches taken while their first tile's parent was loading, not finished yet.
+  uint32_t early_batches_ = 0;
+  /// Dependent codecs: the queue's ids, for parentWaitLocked; valid within one take.
   std::unordered_set<TileId, TileIdHash> queued_ids_;
   bool queued_ids_valid_ = false;
   std::unordered_map<TileId, RetryState, TileIdHash> retries_;

@@ -186,6 +186,36 @@ TEST_P(DependentCodecTest, AChildWantedAloneQueuesItsMissingAncestorsCoarsestFir
   EXPECT_EQ(bytesReadFrom(first_access), entryOf(sibling).length_bytes);
 }
 
+TEST_P(DependentCodecTest, AChildIsReadWhileItsParentLoadsAndDecodedAfterIt) {
+  LoaderPool& pool = start(2);
+  const uint32_t coarsest = archive_->images()[0].level_count - 1;
+  const TileId child = encodedChildAt(coarsest - 1);
+  const TileId parent = Archive::parentTile(child);
+  source_->closeGate();
+  const size_t first_access = source_->accesses().size();
+  pool.setWanted(requestsFor({parent, child}));
+  // Both reads wait at the gate at once: the worker without other work started the child's
+  // read during the parent's load instead of sleeping until it ended (over a network, one
+  // round trip less per level).
+  ASSERT_TRUE(source_->waitUntilBlocked(2));
+  source_->openGate();
+  pool.waitIdle();
+
+  std::vector<LoadEvent> events;
+  pool.poll(events);
+  ASSERT_EQ(events.size(), 2u);
+  EXPECT_EQ(events[0].id, parent);
+  EXPECT_EQ(events[1].id, child);
+  for (const LoadEvent& event : events) EXPECT_TRUE(event.ok) << event.error;
+  expectCachedExactly(parent);
+  expectCachedExactly(child);
+  LoaderStats stats = pool.stats();
+  EXPECT_EQ(stats.children_read_early, 1u);
+  EXPECT_EQ(stats.parent_fallbacks, 0u);  // decoded against the parent the cache received
+  EXPECT_EQ(bytesReadFrom(first_access),
+            entryOf(parent).length_bytes + entryOf(child).length_bytes);
+}
+
 TEST_P(DependentCodecTest, AParentEvictedBeforeItsChildDecodesIsReadAgainInTheChildsJob) {
   LoaderPool& pool = start(1);
   const TileId child = encodedChildAt(0);
