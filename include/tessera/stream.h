@@ -150,9 +150,11 @@ struct FrameReport {
   uint64_t reads_cancelled_total = 0;  ///< reads abandoned in flight (every tile left the view)
   /// Dependent codecs (ptm; docs/runtime.md, "Dependent codecs"): parents the loader queued
   /// itself for wanted children, and children whose parent had left the cache by their decode
-  /// (the parent chain was read again in the same job; its bytes are in bytes_read_total).
+  /// (the parent chain was read again in the same job; its bytes are in bytes_read_total),
+  /// and children whose payload was read while their parent loaded (decoded after it).
   uint64_t parents_queued_total = 0;
   uint64_t parent_fallbacks_total = 0;
+  uint64_t children_read_early_total = 0;
 
   // Adaptive scheduling (StreamerOptions::adaptive; Marvie & Bouatouch, part III).
   bool adaptive = false;    ///< the adaptive policy chose this frame's requests

@@ -4,6 +4,8 @@
 #include <cmath>
 #include <limits>
 
+#include <tessera/archive.h>
+
 namespace tessera::detail {
 
 namespace {
@@ -108,14 +110,19 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
   uint64_t deferred = 0;
   uint64_t requested_bytes = 0;
   size_t kept = 0;
+  admitted_.clear();
   for (const TileRequest& request : requests) {
     bool admit = request.id.level >= level;
-    const uint64_t payload = facts(request.id).payload_bytes;
+    const TileFacts f = facts(request.id);
+    // Requests come coarse first, so a parent requested this frame is admitted by now.
+    const bool parent_missing = !f.parent_ready && request.id.level < coarsest &&
+                                !admitted_.count(Archive::parentTile(request.id));
     if (admit && request.urgency > 1) {
-      admit = !view_pending && on_the_way + double(payload) <= byte_budget &&
+      admit = !parent_missing && !view_pending &&
+              on_the_way + double(f.payload_bytes) <= byte_budget &&
               memory + tile_bytes_ <= memory_budget;
       if (admit) {
-        on_the_way += double(payload);
+        on_the_way += double(f.payload_bytes);
         memory += tile_bytes_;
       }
     }
@@ -124,7 +131,14 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
       ++deferred;
       continue;
     }
-    requested_bytes += payload;
+    // The view's own tiles are counted in their levels' memory; the parent the loader will
+    // queue for one of them is not. Once counted, it serves its other children too.
+    if (parent_missing) {
+      memory += tile_bytes_;
+      admitted_.insert(Archive::parentTile(request.id));
+    }
+    admitted_.insert(request.id);
+    requested_bytes += f.payload_bytes;
     requests[kept++] = request;
   }
   requests.resize(kept);

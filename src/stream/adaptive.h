@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <unordered_set>
 #include <vector>
 
 #include <tessera/link.h>
@@ -21,6 +22,10 @@ struct TileFacts {
   bool held = false;           ///< loaded or resident: occupies memory, needs no transfer
   bool in_flight = false;      ///< being read: its bytes are on their way
   uint64_t payload_bytes = 0;  ///< what its transfer costs (an estimate when not yet known)
+  /// Dependent codecs (ptm; docs/runtime.md, "Dependent codecs"): whether the loader can
+  /// decode the tile without loading its parent first, because the parent is in the host
+  /// cache or on its way. True for a tile without a parent, and for every other codec.
+  bool parent_ready = true;
 };
 
 class AdaptiveScheduler {
@@ -38,8 +43,11 @@ class AdaptiveScheduler {
   /// the memory budget; the first level that does not fit ends refinement. The coarsest
   /// level is always requested. Once every visible tile of the accepted levels has arrived,
   /// the rest of the clip regions and the prefetch (urgency 2-3) at accepted levels follow
-  /// while the bytes on their way fit the time limit's bytes and the memory budget. Fills the
-  /// adaptive fields of `report`.
+  /// while the bytes on their way fit the time limit's bytes and the memory budget. A tile
+  /// whose parent is not ready (TileFacts::parent_ready) and not requested this frame makes
+  /// the loader queue the parent too: such a tile of the view counts the parent's decoded
+  /// bytes in the memory, and one of the rest of the regions waits for its parent's request.
+  /// Fills the adaptive fields of `report`.
   void schedule(const View& view, Clock::time_point now, const LinkEstimate& link,
                 std::span<const TileRequest> wanted,
                 const std::function<TileFacts(const TileId&)>& facts,
@@ -63,6 +71,7 @@ class AdaptiveScheduler {
   bool last_still_ = false;
   std::vector<uint64_t> missing_bytes_, level_memory_;
   std::vector<TileFacts> facts_;
+  std::unordered_set<TileId, TileIdHash> admitted_;  ///< this frame's requests so far
 };
 
 }  // namespace tessera::detail

@@ -210,12 +210,17 @@ const FrameUpdate& TileStreamer::update(const View& view) {
           s.options.adaptive, info.level_count, info.storedTileBytes(),
           s.options.cache_budget_bytes);
     s.loader->inFlight(s.in_flight);
+    const bool dependent = codecNeedsParent(info.default_codec);
     auto facts = [&](const TileId& id) {
       detail::TileFacts f;
       f.held = s.resident.count(id) || s.awaiting_upload.count(id) || s.loaded.count(id) ||
                uploading.count(id);
       f.in_flight = s.in_flight.count(id) > 0;
       f.payload_bytes = s.payloadBytes(id);
+      if (dependent && id.level + 1 < info.level_count) {
+        const TileId parent = Archive::parentTile(id);
+        f.parent_ready = s.cache->contains(parent) || s.in_flight.count(parent) > 0;
+      }
       return f;
     };
     const auto now = s.options.adaptive.clock ? s.options.adaptive.clock() : Clock::now();
@@ -258,6 +263,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   report.reads_cancelled_total = loader_stats.reads_cancelled;
   report.parents_queued_total = loader_stats.parents_queued;
   report.parent_fallbacks_total = loader_stats.parent_fallbacks;
+  report.children_read_early_total = loader_stats.children_read_early;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }

@@ -425,7 +425,8 @@ int runFly(const FlyArgs& args) {
       {"requests_cancelled", last.cancelled_total},
       {"reads_cancelled", last.reads_cancelled_total},
       {"parents_queued", last.parents_queued_total},
-      {"parent_fallbacks", last.parent_fallbacks_total}};
+      {"parent_fallbacks", last.parent_fallbacks_total},
+      {"children_read_early", last.children_read_early_total}};
   if (adaptive) summary["still_after_s"] = args.still_after_s;
   if (std::optional<LinkStats> link_stats = (*archive)->source().linkStats()) {
     // Over a network: what the link did, and what the requests saw of it (the last ones).

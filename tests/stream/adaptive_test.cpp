@@ -79,6 +79,7 @@ class AdaptivePolicyTest : public testing::Test {
           TileFacts f;
           f.held = held_.count(key(id)) > 0;
           f.payload_bytes = kPayload;
+          f.parent_ready = not_ready_.count(key(id)) == 0;
           return f;
         },
         requests, report_);
@@ -100,6 +101,8 @@ class AdaptivePolicyTest : public testing::Test {
 
   std::vector<TileRequest> wanted_;
   std::set<std::tuple<uint32_t, uint32_t, uint32_t>> held_;
+  /// Tiles of a dependent codec (ptm) whose parent is neither in the host cache nor loading.
+  std::set<std::tuple<uint32_t, uint32_t, uint32_t>> not_ready_;
   AdaptiveOptions options_;
   FrameReport report_;
 };
@@ -214,6 +217,49 @@ TEST_F(AdaptivePolicyTest, MemoryBudgetLimitsTheLevelsAndTheRing) {
   schedule(capped, 0, linkOf(1e9, 0));
   EXPECT_EQ(report_.memory_budget_bytes, 20 * kTileBytes);
   EXPECT_EQ(report_.requested_level, 2u);
+}
+
+TEST_F(AdaptivePolicyTest, ADependentTileWaitsForItsParentsRequestOrCountsTheParent) {
+  // ptm: a tile decodes only after its parent, and the loader queues a parent nobody asked
+  // for. The ring's parents (level 1) are not wanted and not ready: its tiles wait, instead of
+  // bringing in parents the memory budget never saw.
+  for (const TileRequest& r : wanted_) {
+    if (r.urgency <= 1)
+      held_.insert(key(r.id));
+    else
+      not_ready_.insert(key(r.id));
+  }
+  AdaptiveScheduler policy = make();
+  std::vector<TileRequest> requests = schedule(policy, 0, linkOf(1e6, 0.1));  // 1.9 MB
+  EXPECT_EQ(countAt(requests, 0, 2), 0u);
+  EXPECT_EQ(report_.deferred_tiles, 36u);
+  // The parent of the first two ring tiles is wanted ahead of them: they follow it.
+  wanted_.insert(wanted_.begin() + 85, TileRequest{{0, 1, 50, 0}, 84.5, false, 2});
+  AdaptiveScheduler with_parent = make();
+  requests = schedule(with_parent, 0, linkOf(1e6, 0.1));
+  EXPECT_EQ(countAt(requests, 1, 2), 1u);
+  ASSERT_EQ(countAt(requests, 0, 2), 2u);
+  for (const TileRequest& r : requests) {
+    if (r.id.level == 0) {
+      EXPECT_LT(r.id.x, 102u);
+    }
+  }
+
+  // The view's level 0 wanted, level 1 held (resident) but not in the host cache: the loader
+  // will queue level 1's 16 tiles again, and the memory counts each once.
+  held_.clear();
+  not_ready_.clear();
+  for (const TileRequest& r : wanted_)
+    if (r.id.level >= 1 && r.urgency <= 1) held_.insert(key(r.id));
+  AdaptiveScheduler ready = make();
+  schedule(ready, 0, linkOf(1e9, 0));
+  const uint64_t ready_memory = report_.memory_bytes;
+  for (const TileRequest& r : wanted_)
+    if (r.id.level == 0 && r.urgency == 1) not_ready_.insert(key(r.id));
+  AdaptiveScheduler counting = make();
+  requests = schedule(counting, 0, linkOf(1e9, 0));
+  EXPECT_EQ(countAt(requests, 0, 1), 64u);
+  EXPECT_EQ(report_.memory_bytes, ready_memory + 16 * kTileBytes);
 }
 
 TEST_F(AdaptivePolicyTest, StillBudgetsApplyAfterTheViewHasNotChangedForNSeconds) {
