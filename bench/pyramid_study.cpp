@@ -435,9 +435,12 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (const auto& level : payloads)
         for (const auto& payload : level) chosen[{payload[0], payload[1]}] += payload.size();
       std::string shares;
+      // The coder byte's tables flag says that explicit tables follow (docs/codecs.md).
       for (const auto& [key, bytes] : chosen)
-        shares += fmt::format("{}predictor {} coder {} {:.1f} %", shares.empty() ? "" : ", ",
-                              key.first, key.second, 100.0 * bytes / total);
+        shares += fmt::format("{}predictor {} coder {}{} {:.1f} %", shares.empty() ? "" : ", ",
+                              key.first, key.second & ~int(tessera::detail::kPtmTablesFlag),
+                              (key.second & tessera::detail::kPtmTablesFlag) != 0 ? "+tables" : "",
+                              100.0 * bytes / total);
       fmt::print("\n({}'s bytes by predictor and coder: {})\n",
                  variant.effort == 0 ? "default" : "effort 3", shares);
       if (smallest_peer_bytes > 0 && variant.effort == 0)

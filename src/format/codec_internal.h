@@ -13,6 +13,7 @@
 #include <tessera/result.h>
 
 #include "codec.h"
+#include "ptm_rans.h"
 
 struct ZSTD_CCtx_s;
 struct ZSTD_DCtx_s;
@@ -49,6 +50,8 @@ struct CodecScratch::State {
   std::vector<int16_t> detail;
   /// ptm, coders 5 and 6: each texel's coded error (sum of its symbols' magnitudes over channels).
   std::vector<uint16_t> errors;
+  /// ptm: the models of a payload's explicit tables.
+  std::vector<rans::Model> ptm_tables;
 };
 
 /// Resolves a possibly null CodecScratch to a usable State: the caller's, or one that lives
@@ -135,6 +138,9 @@ enum class PtmCoder : uint8_t {
 };
 
 /// True for the rANS coders, whose payload is model bytes and one rANS stream.
+/// Set in a rANS coder's byte when explicit tables follow its model bytes (docs/codecs.md,
+/// "ptm (6)", "Tables").
+inline constexpr uint8_t kPtmTablesFlag = 0x08;
 constexpr bool isRansCoder(PtmCoder coder) {
   return coder != PtmCoder::kZstd;
 }

@@ -158,10 +158,13 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
-  const double bits =
-      rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                         recording.channels, recording.contexts, params);
-  return recording.header.size() + params.size() + size_t(bits / 8) + 4 * recording.channels;
+  rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                     recording.channels, recording.contexts, params);
+  rans::Tables tables;
+  rans::chooseTables(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                     recording.channels, recording.contexts, params, tables);
+  return recording.header.size() + params.size() + tables.section.size() + size_t(tables.bits / 8) +
+         4 * recording.channels;
 }
 
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
@@ -175,11 +178,16 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
                        recording.channels, recording.contexts, chosen);
     models = &chosen;
   }
+  rans::Tables tables;
+  const bool with_tables =
+      rans::chooseTables(familyOf(coder), recording.symbols, recording.symbol_contexts,
+                         recording.channels, recording.contexts, *models, tables);
   std::vector<uint8_t> payload = recording.header;
-  payload[1] = uint8_t(coder);
+  payload[1] = uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0);
   payload.insert(payload.end(), models->begin(), models->end());
+  payload.insert(payload.end(), tables.section.begin(), tables.section.end());
   rans::encode(familyOf(coder), recording.symbols, recording.symbol_contexts, recording.channels,
-               recording.contexts, *models, state->compressed, payload);
+               recording.contexts, tables.context_models, state->compressed, payload);
   return payload;
 }
 

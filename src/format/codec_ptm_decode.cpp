@@ -19,7 +19,8 @@ namespace {
 // Decodes a rANS coder's model bytes and stream into walk.texels.
 template <bool kChained, rans::FamilyId kFamily, bool kErrors = false, bool kParent = false>
 Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predictor predictor,
-                        uint32_t channels, uint32_t contexts, const Walk& walk) {
+                        uint32_t channels, uint32_t contexts, bool with_tables,
+                        std::vector<rans::Model>& table_models, const Walk& walk) {
   const size_t params_bytes = size_t(contexts) * channels;
   if (payload.size() - body_at < params_bytes)
     return fail(ErrorCode::kCorrupt,
@@ -30,10 +31,24 @@ Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predic
   // Every parameter byte names a model, so a corrupt one shows only as a stream that does not
   // finish cleanly (checked below), and then only if its context is used.
   static_assert(rans::kModelCount == 256);
+  const rans::Model* context_models[4 * kParentContexts];
   for (uint32_t c = 0; c < channels; ++c)
     for (uint32_t k = 0; k < contexts; ++k)
-      reader.models[c][k] = &family[payload[body_at + c * contexts + k]];
-  if (!reader.decoder.start(payload.subspan(body_at + params_bytes), channels))
+      context_models[c * contexts + k] = &family[payload[body_at + c * contexts + k]];
+  size_t stream_at = body_at + params_bytes;
+  if (with_tables) {
+    const size_t section =
+        rans::readTables(payload.subspan(stream_at), channels * contexts, rans::scaleBits(kFamily),
+                         table_models, std::span(context_models, channels * contexts));
+    if (section == 0)
+      return fail(ErrorCode::kCorrupt,
+                  "ptm payload: explicit tables truncated, empty, or with a count outside 1..64 "
+                  "or padding bits set");
+    stream_at += section;
+  }
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t k = 0; k < contexts; ++k) reader.models[c][k] = context_models[c * contexts + k];
+  if (!reader.decoder.start(payload.subspan(stream_at), channels))
     return fail(ErrorCode::kCorrupt,
                 "ptm payload: rANS stream too short for its initial states, or one is out of "
                 "range");
@@ -55,11 +70,15 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
                 fmt::format("ptm payload: {} bytes, shorter than its header", payload.size()));
   if (payload[0] > uint8_t(Predictor::kLeastSquares))
     return fail(ErrorCode::kCorrupt, fmt::format("ptm payload: unknown predictor {}", payload[0]));
-  if (payload[1] > uint8_t(PtmCoder::kRansParentErrors))
+  // The tables flag goes with the rANS coders only.
+  const bool with_tables = (payload[1] & kPtmTablesFlag) != 0;
+  const uint8_t coder_byte = payload[1] & uint8_t(~kPtmTablesFlag);
+  if (coder_byte > uint8_t(PtmCoder::kRansParentErrors) ||
+      (with_tables && !isRansCoder(PtmCoder(coder_byte))))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);
-  const PtmCoder coder = PtmCoder(payload[1]);
+  const PtmCoder coder = PtmCoder(coder_byte);
   const bool has_parent = predictor != Predictor::kRoot;
   if (has_parent && parent == nullptr)
     return fail(ErrorCode::kCorrupt,
@@ -86,23 +105,23 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   switch (coder) {
     case PtmCoder::kZstd: break;
     case PtmCoder::kRans:
-      return decodeRans<false, FamilyId::kGeometric12>(payload, body_at, predictor, channels,
-                                                       contexts, walk);
+      return decodeRans<false, FamilyId::kGeometric12>(
+          payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansChained:
-      return decodeRans<true, FamilyId::kGeometric12>(payload, body_at, predictor, channels,
-                                                      contexts, walk);
+      return decodeRans<true, FamilyId::kGeometric12>(
+          payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansMixture:
-      return decodeRans<false, FamilyId::kMixture15>(payload, body_at, predictor, channels,
-                                                     contexts, walk);
+      return decodeRans<false, FamilyId::kMixture15>(
+          payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansMixtureChained:
       return decodeRans<true, FamilyId::kMixture15>(payload, body_at, predictor, channels, contexts,
-                                                    walk);
+                                                    with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansMixtureChainedErrors:
-      return decodeRans<true, FamilyId::kMixture15, true>(payload, body_at, predictor, channels,
-                                                          contexts, walk);
+      return decodeRans<true, FamilyId::kMixture15, true>(
+          payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansParentErrors:
-      return decodeRans<true, FamilyId::kMixture15, true, true>(payload, body_at, predictor,
-                                                                channels, contexts, walk);
+      return decodeRans<true, FamilyId::kMixture15, true, true>(
+          payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
   }
 
   const SymbolCounts counts =

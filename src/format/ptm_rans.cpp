@@ -49,22 +49,28 @@ constexpr MixtureKind kMixtureKinds[] = {{0, 0, false}, {0, 0}, {5, 0}, {3, 0},
                                          {1, 0},        {0, 1}, {3, 1}, {0, -1}};
 static_assert(std::size(kMixtureKinds) * kMixtureMeansPerKind == kModelCount);
 
-// Frequencies summing to 2^scale_bits from the symbols' weights, each at least 1, and the
-// decoder's tables.
-void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& model) {
+// Frequencies summing to 2^scale_bits from the symbols' weights, each at least 1.
+void frequencies(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits,
+                 uint16_t (&freq)[kAlphabet]) {
   const uint32_t scale = 1u << scale_bits;
   uint64_t total = 0;
   for (uint64_t w : weight) total += w;
   uint32_t sum = 0, largest = 0;
   for (uint32_t s = 0; s < kAlphabet; ++s) {
     const uint64_t f = (weight[s] * scale) / total;
-    model.freq[s] = uint16_t(f == 0 ? 1 : f);
-    sum += model.freq[s];
-    if (model.freq[s] > model.freq[largest]) largest = s;
+    freq[s] = uint16_t(f == 0 ? 1 : f);
+    sum += freq[s];
+    if (freq[s] > freq[largest]) largest = s;
   }
   // Flooring loses at most kAlphabet; raising zeros to 1 adds at most kAlphabet, and the largest
   // frequency is at least scale / kAlphabet, so it stays positive.
-  model.freq[largest] = uint16_t(int(model.freq[largest]) + int(scale) - int(sum));
+  freq[largest] = uint16_t(int(freq[largest]) + int(scale) - int(sum));
+}
+
+// frequencies(), and the decoder's tables.
+void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& model) {
+  const uint32_t scale = 1u << scale_bits;
+  frequencies(weight, scale_bits, model.freq);
   const uint32_t bucket_slots = scale >> kBucketBits;
   uint32_t start = 0;
   for (uint32_t s = 0; s < kAlphabet; ++s) {
@@ -173,9 +179,9 @@ inline void put(uint32_t& x, uint32_t start, uint32_t freq, uint8_t*& out) {
 }
 
 template <uint32_t kScaleBits>
-void encodeAt(const Model* family, std::span<const uint8_t> residuals,
-              std::span<const uint8_t> contexts, uint32_t channels, uint32_t contexts_per_channel,
-              std::span<const uint8_t> params, std::vector<uint8_t>& work,
+void encodeAt(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+              uint32_t channels, uint32_t contexts_per_channel,
+              std::span<const Model* const> context_models, std::vector<uint8_t>& work,
               std::vector<uint8_t>& out) {
   // Each symbol emits at most 2 bytes, an escaped one 4; then 4 bytes of state per channel.
   work.resize(residuals.size() * 4 + 16);
@@ -185,7 +191,7 @@ void encodeAt(const Model* family, std::span<const uint8_t> residuals,
   uint32_t channel = uint32_t(residuals.size() % channels);
   for (size_t i = residuals.size(); i-- > 0;) {
     channel = channel == 0 ? channels - 1 : channel - 1;
-    const Model& model = family[params[channel * contexts_per_channel + contexts[i]]];
+    const Model& model = *context_models[channel * contexts_per_channel + contexts[i]];
     const uint32_t z = zigzag(residuals[i]);
     uint32_t& x = state[channel];
     if (z >= kEscape) {
@@ -276,14 +282,174 @@ double chooseModels(FamilyId family_id, std::span<const uint8_t> residuals,
 }
 
 void encode(FamilyId family, std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
-            uint32_t channels, uint32_t contexts_per_channel, std::span<const uint8_t> params,
-            std::vector<uint8_t>& work, std::vector<uint8_t>& out) {
+            uint32_t channels, uint32_t contexts_per_channel,
+            std::span<const Model* const> context_models, std::vector<uint8_t>& work,
+            std::vector<uint8_t>& out) {
   if (family == FamilyId::kGeometric12)
-    encodeAt<scaleBits(FamilyId::kGeometric12)>(models(family), residuals, contexts, channels,
-                                                contexts_per_channel, params, work, out);
+    encodeAt<scaleBits(FamilyId::kGeometric12)>(residuals, contexts, channels, contexts_per_channel,
+                                                context_models, work, out);
   else
-    encodeAt<scaleBits(FamilyId::kMixture15)>(models(family), residuals, contexts, channels,
-                                              contexts_per_channel, params, work, out);
+    encodeAt<scaleBits(FamilyId::kMixture15)>(residuals, contexts, channels, contexts_per_channel,
+                                              context_models, work, out);
+}
+
+namespace {
+
+// 256 * 2^(k / 4): a table level's weight is one of these shifted by (q - 1) / 4.
+constexpr uint64_t kLevelMantissa[4] = {256, 304, 362, 431};
+
+// The level that stands for a frequency `f` of the family's scale: 4 log2 f, rounded, plus 1.
+uint8_t levelOf(double f) {
+  return uint8_t(
+      std::clamp(std::lround(4 * std::log2(std::max(1.0, f))), 0L, long(kTableLevels) - 2) + 1);
+}
+
+// A table's weights: level q > 0 stands for 256 x 2^((q - 1) / 4), symbols from `count` on 0.
+void tableWeights(const uint8_t* levels, uint32_t count, uint64_t (&weight)[kAlphabet]) {
+  for (uint32_t s = 0; s < kAlphabet; ++s)
+    weight[s] = s < count && levels[s] != 0
+                    ? kLevelMantissa[(levels[s] - 1u) & 3u] << ((levels[s] - 1u) >> 2)
+                    : 0;
+}
+
+}  // namespace
+
+void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model) {
+  uint64_t weight[kAlphabet];
+  tableWeights(levels, count, weight);
+  quantise(weight, scale_bits, model);
+}
+
+bool chooseTables(FamilyId family_id, std::span<const uint8_t> residuals,
+                  std::span<const uint8_t> contexts, uint32_t channels,
+                  uint32_t contexts_per_channel, std::span<const uint8_t> params, Tables& tables) {
+  const uint32_t context_count = channels * contexts_per_channel;
+  const uint32_t scale_bits = scaleBits(family_id);
+  const Model* family = models(family_id);
+  std::vector<uint32_t> counts(size_t(context_count) * kAlphabet, 0);
+  uint32_t channel = 0;
+  for (size_t i = 0; i < residuals.size(); ++i) {
+    const uint32_t z = zigzag(residuals[i]);
+    ++counts[size_t(channel * contexts_per_channel + contexts[i]) * kAlphabet +
+             (z < kEscape ? z : kEscape)];
+    if (++channel == channels) channel = 0;
+  }
+  tables = {};
+  tables.context_models.resize(context_count);
+  std::vector<uint8_t> levels(size_t(context_count) * kAlphabet, 0);
+  std::vector<uint32_t> table_count(context_count, 0);
+  std::vector<uint32_t> flagged;
+  double family_bits = 0, saved_bits = 0;
+  uint64_t weight[kAlphabet];
+  uint16_t freq[kAlphabet];
+  for (uint32_t context = 0; context < context_count; ++context) {
+    const uint32_t* count = &counts[size_t(context) * kAlphabet];
+    const Model& model = family[params[context]];
+    tables.context_models[context] = &model;
+    double total = 0, bits = 0;
+    uint32_t symbols = 0;
+    for (uint32_t s = 0; s < kAlphabet; ++s) {
+      if (count[s] == 0) continue;
+      total += count[s];
+      bits += count[s] * double(model.cost_bits[s]);
+      symbols = s + 1;
+    }
+    family_bits += bits;
+    if (symbols == 0) continue;
+    uint8_t* level = &levels[size_t(context) * kAlphabet];
+    for (uint32_t s = 0; s < symbols; ++s)
+      if (count[s] != 0) level[s] = levelOf(count[s] * double(1u << scale_bits) / total);
+    // The candidate's frequencies alone price it; the decoder's tables are built for the chosen.
+    tableWeights(level, symbols, weight);
+    frequencies(weight, scale_bits, freq);
+    double table_bits = 0;
+    for (uint32_t s = 0; s < symbols; ++s)
+      if (count[s] != 0)
+        table_bits += count[s] * (double(scale_bits) - std::log2(double(freq[s])) +
+                                  (s == kEscape ? 8.0 : 0.0));
+    const double gain = bits - table_bits - 8.0 * double(tableBytes(symbols));
+    if (gain <= 0) continue;
+    saved_bits += gain;
+    table_count[context] = symbols;
+    flagged.push_back(context);
+  }
+  const size_t bitmap_bytes = (context_count + 7) / 8;
+  if (flagged.empty() || saved_bits <= 8.0 * double(bitmap_bytes)) {
+    tables.bits = family_bits;
+    return false;
+  }
+  tables.section.assign(bitmap_bytes, 0);
+  tables.models.resize(flagged.size());
+  tables.bits = family_bits;
+  for (size_t t = 0; t < flagged.size(); ++t) {
+    const uint32_t context = flagged[t];
+    const uint32_t symbols = table_count[context];
+    const uint8_t* level = &levels[size_t(context) * kAlphabet];
+    tables.section[context / 8] |= uint8_t(1u << (context % 8));
+    tables.section.push_back(uint8_t(symbols));
+    uint32_t acc = 0, acc_bits = 0;
+    for (uint32_t s = 0; s < symbols; ++s) {
+      acc |= uint32_t(level[s]) << acc_bits;
+      acc_bits += kTableLevelBits;
+      while (acc_bits >= 8) {
+        tables.section.push_back(uint8_t(acc));
+        acc >>= 8;
+        acc_bits -= 8;
+      }
+    }
+    if (acc_bits > 0) tables.section.push_back(uint8_t(acc));
+    Model& model = tables.models[t];
+    buildTableModel(level, symbols, scale_bits, model);
+    const uint32_t* count = &counts[size_t(context) * kAlphabet];
+    for (uint32_t s = 0; s < symbols; ++s)
+      tables.bits += count[s] * (double(model.cost_bits[s]) -
+                                 double(tables.context_models[context]->cost_bits[s]));
+    tables.context_models[context] = &model;
+  }
+  return true;
+}
+
+size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32_t scale_bits,
+                  std::vector<Model>& models, std::span<const Model*> context_models) {
+  const size_t bitmap_bytes = (size_t(context_count) + 7) / 8;
+  if (bytes.size() < bitmap_bytes) return 0;
+  // Bits past the last context are zero, and at least one context has a table: an encoder
+  // that chose none sends no section.
+  if (context_count % 8 != 0 && (bytes[bitmap_bytes - 1] >> (context_count % 8)) != 0) return 0;
+  uint32_t flagged = 0;
+  for (uint32_t context = 0; context < context_count; ++context)
+    flagged += (bytes[context / 8] >> (context % 8)) & 1u;
+  if (flagged == 0) return 0;
+  models.resize(flagged);
+  size_t position = bitmap_bytes;
+  uint32_t table = 0;
+  uint8_t levels[kAlphabet];
+  for (uint32_t context = 0; context < context_count; ++context) {
+    if (((bytes[context / 8] >> (context % 8)) & 1u) == 0) continue;
+    if (position >= bytes.size()) return 0;
+    const uint32_t symbols = bytes[position];
+    if (symbols == 0 || symbols > kAlphabet || bytes.size() - position < tableBytes(symbols))
+      return 0;
+    uint32_t acc = 0, acc_bits = 0, any = 0;
+    size_t next = position + 1;
+    for (uint32_t s = 0; s < symbols; ++s) {
+      if (acc_bits < kTableLevelBits) {
+        acc |= uint32_t(bytes[next++]) << acc_bits;
+        acc_bits += 8;
+      }
+      levels[s] = uint8_t(acc & (kTableLevels - 1));
+      any |= levels[s];
+      acc >>= kTableLevelBits;
+      acc_bits -= kTableLevelBits;
+    }
+    // Padding bits are zero, and some symbol has a weight (a model needs one).
+    if (acc != 0 || any == 0) return 0;
+    position += tableBytes(symbols);
+    buildTableModel(levels, symbols, scale_bits, models[table]);
+    context_models[context] = &models[table];
+    ++table;
+  }
+  return position;
 }
 
 }  // namespace tessera::detail::rans

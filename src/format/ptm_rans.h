@@ -1,11 +1,12 @@
 #pragma once
-// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coders 1-5):
+// The ptm codec's context-modelled entropy coder (docs/codecs.md, "ptm (6)", coders 1-6):
 // byte-wise rANS with one state per channel over a shared byte stream, whose symbol
 // distributions come from a fixed family of discretised distributions, so a tile sends one
-// byte per context instead of a frequency table. Decoding never reads outside its input and
-// takes a bounded number of steps per symbol: renormalisation at most two bytes, the symbol
-// search at most kAlphabet; a read past the end returns 0 and sets a flag that the caller
-// checks once at the end.
+// byte per context instead of a frequency table, and a table only for a context that no
+// family model fits well enough to be worth its bytes ("Tables"). Decoding never reads
+// outside its input and takes a bounded number of steps per symbol: renormalisation at most
+// two bytes, the symbol search at most kAlphabet; a read past the end returns 0 and sets a
+// flag that the caller checks once at the end.
 
 #include <cstddef>
 #include <cstdint>
@@ -164,12 +165,54 @@ class Decoder {
   bool failed_ = false;
 };
 
-/// Encodes `residuals[i]` (channel i % channels) with model `models(family)[params[context]]`
-/// where context = `contexts[i]` + channel * contexts_per_channel, in reverse, so that Decoder
-/// reads them in order i = 0, 1, .... Appends the states and bytes to `out`.
+/// Encodes `residuals[i]` (channel i % channels) with model `context_models[context]` where
+/// context = `contexts[i]` + channel * contexts_per_channel, in reverse, so that Decoder reads
+/// them in order i = 0, 1, .... Appends the states and bytes to `out`.
 void encode(FamilyId family, std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
-            uint32_t channels, uint32_t contexts_per_channel, std::span<const uint8_t> params,
-            std::vector<uint8_t>& work, std::vector<uint8_t>& out);
+            uint32_t channels, uint32_t contexts_per_channel,
+            std::span<const Model* const> context_models, std::vector<uint8_t>& work,
+            std::vector<uint8_t>& out);
+
+/// Explicit tables (docs/codecs.md, "ptm (6)", "Tables"): a context whose symbols a table of
+/// their own codes in fewer bits than its family model, the table's bytes included, sends one.
+/// A table gives each symbol s < count a level 0..63: 0 for an absent symbol, else q for a
+/// weight of 2^((q - 1) / 4); symbols from count on have level 0. Frequencies follow from the
+/// weights as a family model's do (each at least 1), so every table is a valid model.
+inline constexpr uint32_t kTableLevels = 64;
+inline constexpr uint32_t kTableLevelBits = 6;
+
+/// Bytes of a table of `count` symbols: the count, then the levels packed 6 bits each.
+constexpr size_t tableBytes(uint32_t count) {
+  return 1 + (size_t(count) * kTableLevelBits + 7) / 8;
+}
+
+/// The model of a table: `levels[s]` for s < count, 0 after; `scale_bits` as the family's.
+void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model);
+
+/// The tables a payload sends, and every context's model with them.
+struct Tables {
+  /// As in the payload: a bitmap of channels * contexts_per_channel bits (bit i of byte i / 8
+  /// for context i, channel-major), then each flagged context's table in context order.
+  std::vector<uint8_t> section;
+  std::vector<Model> models;  ///< one per table, in context order
+  /// Every context's model: a table's, else the family model its parameter byte names.
+  std::vector<const Model*> context_models;
+  /// The symbols' bits under context_models (table bytes not included).
+  double bits = 0;
+};
+
+/// Chooses the tables for symbols whose family models are `params` (chooseModels'): a context
+/// takes one where its bits fall by more than the table's bytes. Returns false, and `tables`
+/// empty but for context_models, when no context gains enough to pay for the bitmap too.
+bool chooseTables(FamilyId family, std::span<const uint8_t> residuals,
+                  std::span<const uint8_t> contexts, uint32_t channels,
+                  uint32_t contexts_per_channel, std::span<const uint8_t> params, Tables& tables);
+
+/// Reads a tables section of `context_count` contexts at the start of `bytes` into `models` and
+/// `context_models` (whose family entries the caller set): the section's length, or 0 when it
+/// is truncated, a count is outside 1..64, or padding bits are set.
+size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32_t scale_bits,
+                  std::vector<Model>& models, std::span<const Model*> context_models);
 
 /// For each (channel, context), the model of `family` that codes its residuals in the fewest
 /// bits, by counting: `params` gets channels * contexts_per_channel bytes (0 for unused

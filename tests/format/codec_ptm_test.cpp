@@ -21,6 +21,14 @@ namespace {
 
 using test::nextRandom;
 
+// The coder a payload names, without its tables flag.
+PtmCoder coderIn(std::span<const uint8_t> payload) {
+  return PtmCoder(payload[1] & uint8_t(~kPtmTablesFlag));
+}
+bool hasTables(std::span<const uint8_t> payload) {
+  return (payload[1] & kPtmTablesFlag) != 0;
+}
+
 // Smooth shading, an edge and noise: residuals that are neither all zero nor all random.
 Image makeLevel0(uint32_t width, uint32_t height, uint32_t channels, uint32_t seed) {
   Image image(width, height, channels);
@@ -80,9 +88,12 @@ struct PyramidTiles {
   }
 };
 
+// `step` > 1 rounds level 0's texels down to its multiples: residuals on a comb, as a palette's
+// steps leave them, which no family model fits and explicit tables do.
 PyramidTiles makePyramid(uint32_t width, uint32_t height, uint32_t channels, uint32_t tile_px,
-                         uint32_t border_px, uint32_t seed) {
+                         uint32_t border_px, uint32_t seed, uint32_t step = 1) {
   PyramidTiles pyramid{tile_px, border_px, {makeLevel0(width, height, channels, seed)}};
+  for (uint8_t& texel : pyramid.levels[0].texels) texel = uint8_t(texel / step * step);
   while (pyramid.levels.back().width_px > tile_px || pyramid.levels.back().height_px > tile_px)
     pyramid.levels.push_back(floorDownsample(pyramid.levels.back()));
   return pyramid;
@@ -141,9 +152,9 @@ TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedPar
             auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
             if (payload) {
               EXPECT_EQ((*payload)[0] == uint8_t(Predictor::kRoot), parent == nullptr);
-              EXPECT_TRUE(isRansCoder(PtmCoder((*payload)[1])) &&
-                          (*payload)[1] <= uint8_t(PtmCoder::kRansParentErrors) &&
-                          (*payload)[1] != uint8_t(PtmCoder::kRansMixtureChainedErrors));
+              EXPECT_TRUE(isRansCoder(coderIn(*payload)) &&
+                          coderIn(*payload) <= PtmCoder::kRansParentErrors &&
+                          coderIn(*payload) != PtmCoder::kRansMixtureChainedErrors);
             }
             return payload;
           },
@@ -218,7 +229,7 @@ TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
                 auto payload = encodePtm(tile.view(), {}, parent, predictor, coder, nullptr);
                 if (payload) {
                   EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
-                  EXPECT_EQ((*payload)[1], uint8_t(coder));
+                  EXPECT_EQ(coderIn(*payload), coder);
                 }
                 return payload;
               },
@@ -414,18 +425,18 @@ TEST(PtmCodec, ParentActivityPaysOffWhereNoisyBlocksStartWithoutWarning) {
   // The default takes coder 6 there.
   auto by_default = encodeTile(Codec::kPtm, pyramid.child.view(), {}, &parent);
   ASSERT_TRUE(by_default.has_value());
-  EXPECT_EQ((*by_default)[1], uint8_t(PtmCoder::kRansParentErrors));
+  EXPECT_EQ(coderIn(*by_default), PtmCoder::kRansParentErrors);
   EXPECT_EQ(*by_default, expectedDefaultPayload(pyramid.child, &parent));
 }
 
 // Level 0 of a smooth field plus an offset per 2x2 block: the parent knows each block's offset,
 // which no neighbour of the block's first texel shows, while the median follows the field
 // inside the block. Only a prediction that weighs both does well.
-SmallPyramid makeBlockOffsetsOnASlope(uint32_t seed) {
+SmallPyramid makeBlockOffsetsOnASlope(uint32_t seed, int spread) {
   Image level0(128, 128, 3);
   uint32_t random = seed;
   std::vector<int> offsets(64 * 64);
-  for (int& offset : offsets) offset = int(nextRandom(random) % 25) - 12;
+  for (int& offset : offsets) offset = int(nextRandom(random) % uint32_t(2 * spread + 1)) - spread;
   for (uint32_t y = 0; y < 128; ++y)
     for (uint32_t x = 0; x < 128; ++x)
       for (uint32_t c = 0; c < 3; ++c) {
@@ -437,7 +448,7 @@ SmallPyramid makeBlockOffsetsOnASlope(uint32_t seed) {
 }
 
 TEST(PtmCodec, LeastSquaresPaysOffWhereTheParentKnowsWhatNoNeighbourShows) {
-  const SmallPyramid pyramid = makeBlockOffsetsOnASlope(43);
+  const SmallPyramid pyramid = makeBlockOffsetsOnASlope(43, 12);
   const ParentTexels parent = parentOf(pyramid.parent, 1, 1, 64, 0);
   auto fitted = encodePtm(pyramid.child.view(), {}, &parent, Predictor::kLeastSquares,
                           PtmCoder::kRansParentErrors, nullptr);
@@ -451,10 +462,10 @@ TEST(PtmCodec, LeastSquaresPaysOffWhereTheParentKnowsWhatNoNeighbourShows) {
     EXPECT_LT(fitted->size() * 100, other->size() * 97)
         << int(predictor) << ": " << fitted->size() << " against " << other->size();
   }
-  // The default takes predictor 5 there; effort 3 does not.
+  // The default fits predictor 5 only where the median wins the first round (on this tile,
+  // since explicit tables, the nearest parent does), and writes what its rule says.
   auto by_default = encodeTile(Codec::kPtm, pyramid.child.view(), {}, &parent);
   ASSERT_TRUE(by_default.has_value());
-  EXPECT_EQ((*by_default)[0], uint8_t(Predictor::kLeastSquares));
   EXPECT_EQ(*by_default, expectedDefaultPayload(pyramid.child, &parent));
   EncodeOptions effort3;
   effort3.effort = 3;
@@ -490,6 +501,41 @@ TEST(PtmCodec, LeastSquaresPaysOffWhereTheParentKnowsWhatNoNeighbourShows) {
   EXPECT_NE(short_weights.error().message.find("predictor weights"), std::string::npos);
 }
 
+TEST(PtmCodec, ExplicitTablesCodeCombsSmallerAndRoundTrip) {
+  // Texels on multiples of 16: every residual of the median, and most of the parent's, is a
+  // multiple of 4 or 16, which no model of the families is shaped for.
+  for (uint32_t channels = 1; channels <= 4; ++channels) {
+    PyramidTiles comb = makePyramid(128, 128, channels, 64, 0, channels, 16);
+    size_t with_tables = 0;
+    expectCoarseToFineRoundTrip(
+        comb, channels,
+        [&](const Image& tile, const ParentTexels* parent) {
+          auto payload = encodeTile(Codec::kPtm, tile.view(), {}, parent);
+          if (payload) with_tables += hasTables(*payload);
+          return payload;
+        },
+        fmt::format("comb, {} channels", channels));
+    EXPECT_EQ(with_tables, 5u) << "every tile of the comb pyramid carries tables";
+    // The tables are worth their bytes: against the same walk with the family models alone,
+    // as the recording estimates it without them.
+    const Image tile = comb.tile(0, 0, 0), parent_tile = comb.tile(1, 0, 0);
+    const ParentTexels parent = parentOf(parent_tile, 0, 0, 64, 0);
+    PtmRecording recording;
+    ASSERT_TRUE(recordPtm(tile.view(), &parent, Predictor::kNeighbourMedian, PtmCoder::kRans,
+                          nullptr, nullptr, recording)
+                    .has_value());
+    std::vector<uint8_t> params;
+    const double family_bits =
+        rans::chooseModels(rans::FamilyId::kGeometric12, recording.symbols,
+                           recording.symbol_contexts, channels, recording.contexts, params);
+    const std::vector<uint8_t> payload = encodeRecordedPtm(recording, PtmCoder::kRans, nullptr);
+    ASSERT_TRUE(hasTables(payload));
+    EXPECT_LT(double(payload.size()), 0.9 * family_bits / 8)
+        << payload.size() << " bytes against " << family_bits / 8 << " without tables";
+    EXPECT_EQ(decodeOrDie(payload, 64, channels, &parent).texels, tile.texels);
+  }
+}
+
 TEST(PtmCodec, WithoutAParentCoderSixCodesAsCoderFive) {
   const Image tile = makeTileOfSlopesBesideNoise(41);
   auto five = encodePtm(tile.view(), {}, nullptr, Predictor::kRoot,
@@ -499,7 +545,7 @@ TEST(PtmCodec, WithoutAParentCoderSixCodesAsCoderFive) {
   ASSERT_TRUE(five.has_value());
   ASSERT_TRUE(six.has_value());
   ASSERT_EQ(five->size(), six->size());
-  EXPECT_EQ((*six)[1], uint8_t(PtmCoder::kRansParentErrors));
+  EXPECT_EQ(coderIn(*six), PtmCoder::kRansParentErrors);
   (*six)[1] = (*five)[1];
   EXPECT_EQ(*six, *five);
 }
@@ -511,13 +557,13 @@ TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfCoderSix) {
   Image grey = makeLevel0(64, 64, 1, 4);
   auto grey_payload = encodeTile(Codec::kPtm, grey.view(), {}, nullptr);
   ASSERT_TRUE(grey_payload.has_value());
-  EXPECT_FALSE(isChainedCoder(PtmCoder((*grey_payload)[1]))) << int((*grey_payload)[1]);
+  EXPECT_FALSE(isChainedCoder(coderIn(*grey_payload))) << int((*grey_payload)[1]);
   EXPECT_EQ(*grey_payload, expectedDefaultPayload(grey, nullptr));
   // Colour channels that err together: chaining saves far more than 3 %.
   const Image colour = makeTileWhoseChannelsErrTogether(23);
   auto colour_payload = encodeTile(Codec::kPtm, colour.view(), {}, nullptr);
   ASSERT_TRUE(colour_payload.has_value());
-  EXPECT_TRUE(isChainedCoder(PtmCoder((*colour_payload)[1]))) << int((*colour_payload)[1]);
+  EXPECT_TRUE(isChainedCoder(coderIn(*colour_payload))) << int((*colour_payload)[1]);
   EXPECT_EQ(*colour_payload, expectedDefaultPayload(colour, nullptr));
   EXPECT_EQ(decodeOrDie(*colour_payload, 64, 3, nullptr).texels, colour.texels);
   // Slopes beside noise: only the neighbours' errors tell them apart, by more than 3 %. Without
@@ -525,7 +571,7 @@ TEST(PtmCodec, TheDefaultTakesTheFastestCoderWithinThreePercentOfCoderSix) {
   const Image slopes = makeTileOfSlopesBesideNoise(31);
   auto slopes_payload = encodeTile(Codec::kPtm, slopes.view(), {}, nullptr);
   ASSERT_TRUE(slopes_payload.has_value());
-  EXPECT_EQ((*slopes_payload)[1], uint8_t(PtmCoder::kRansParentErrors));
+  EXPECT_EQ(coderIn(*slopes_payload), PtmCoder::kRansParentErrors);
   EXPECT_EQ(*slopes_payload, expectedDefaultPayload(slopes, nullptr));
   EXPECT_EQ(decodeOrDie(*slopes_payload, 64, 3, nullptr).texels, slopes.texels);
 }
@@ -619,9 +665,9 @@ struct ChildPayload {
 
 // The default encoder's payload, or one with `predictor` and `coder`.
 ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predictor = {},
-                              PtmCoder coder = PtmCoder::kRans) {
+                              PtmCoder coder = PtmCoder::kRans, uint32_t step = 1) {
   // The child, tile (1, 1) of level 0, is cut by the image's right and bottom edges.
-  PyramidTiles pyramid = makePyramid(56, 51, channels, kSweepTilePx, 1, 11);
+  PyramidTiles pyramid = makePyramid(56, 51, channels, kSweepTilePx, 1, 11, step);
   ChildPayload result{pyramid.tile(1, 0, 0), pyramid.tile(0, 1, 1), {}};
   ParentTexels parent = parentOf(result.parent, 1, 1, kSweepTilePx, 1);
   result.payload = predictor
@@ -638,6 +684,9 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (PtmCoder coder : kCoders)
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
+  // And the default's payload of a comb, which carries explicit tables.
+  payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
+  EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
   return payloads;
 }
 
@@ -679,6 +728,13 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad = tile.payload;
   bad[1] = uint8_t(PtmCoder::kRansParentErrors) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
+  // The tables flag on zstd, or on a coder past the last.
+  for (const uint8_t coder_byte :
+       {kPtmTablesFlag, uint8_t(kPtmTablesFlag | (uint8_t(PtmCoder::kRansParentErrors) + 1))}) {
+    bad = tile.payload;
+    bad[1] = coder_byte;
+    EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value()) << int(coder_byte);
+  }
   // Every model byte names a model of the family; one changed under a used context (the first
   // position's flattest class in slot 0, which this smooth tile uses with coder 1's gradient
   // activity) leaves the rANS stream unfinished.

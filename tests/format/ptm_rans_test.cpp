@@ -141,8 +141,106 @@ TEST(PtmRans, TheMixtureFamilyCodesMixedResidualsInFewerBits) {
   EXPECT_LT(mixture, geometric * 0.97) << mixture << " bits against " << geometric;
   // And the coder meets the model's count.
   std::vector<uint8_t> work, out;
-  rans::encode(rans::FamilyId::kMixture15, residuals, contexts, 1, 1, params, work, out);
+  const rans::Model* model = &rans::models(rans::FamilyId::kMixture15)[params[0]];
+  rans::encode(rans::FamilyId::kMixture15, residuals, contexts, 1, 1, std::span(&model, 1), work,
+               out);
   EXPECT_LE(std::abs(double(out.size()) - mixture / 8), 5.0);
+}
+
+// Residuals on a comb (even magnitudes only, as a palette's steps leave them): no family
+// model is shaped so, in context 1; context 0 holds plain geometric residuals a family model
+// fits, so it needs no table.
+void combAndPlain(size_t count, std::vector<uint8_t>& residuals, std::vector<uint8_t>& contexts) {
+  uint32_t random = 9;
+  for (size_t i = 0; i < count; ++i) {
+    const bool comb = i % 2 == 1;
+    const double u = (nextRandom(random) % 1000000 + 0.5) / 1e6;
+    int size = int(-3.0 * std::log(u));
+    if (comb) size *= 2;
+    residuals.push_back(uint8_t(nextRandom(random) % 2 ? size : -size));
+    contexts.push_back(uint8_t(comb));
+  }
+}
+
+TEST(PtmRans, ATableCodesWhatNoFamilyModelFitsAndDecodesExactly) {
+  std::vector<uint8_t> residuals, contexts;
+  combAndPlain(40000, residuals, contexts);
+  for (const rans::FamilyId family : {rans::FamilyId::kGeometric12, rans::FamilyId::kMixture15}) {
+    std::vector<uint8_t> params;
+    const double family_bits = rans::chooseModels(family, residuals, contexts, 1, 2, params);
+    rans::Tables tables;
+    ASSERT_TRUE(rans::chooseTables(family, residuals, contexts, 1, 2, params, tables));
+    ASSERT_EQ(tables.models.size(), 1u);  // the comb's context only
+    EXPECT_EQ(tables.section[0], 0b10);
+    EXPECT_LT(tables.bits + 8.0 * double(tables.section.size()), family_bits * 0.9)
+        << tables.bits << " bits and a " << tables.section.size() << "-byte table against "
+        << family_bits;
+    std::vector<uint8_t> work, stream;
+    rans::encode(family, residuals, contexts, 1, 2, tables.context_models, work, stream);
+    EXPECT_LE(std::abs(double(stream.size()) - tables.bits / 8), 5.0);
+
+    // The decoder's models, from the section alone, decode every residual.
+    const rans::Model* decoder_models[2] = {&rans::models(family)[params[0]],
+                                            &rans::models(family)[params[1]]};
+    std::vector<rans::Model> read;
+    ASSERT_EQ(rans::readTables(tables.section, 2, rans::scaleBits(family), read, decoder_models),
+              tables.section.size());
+    ASSERT_EQ(read.size(), 1u);
+    for (uint32_t s = 0; s < rans::kAlphabet; ++s)
+      EXPECT_EQ(read[0].freq[s], tables.models[0].freq[s]) << "symbol " << s;
+    auto decodeAll = [&]<uint32_t kScaleBits>() {
+      rans::Decoder<kScaleBits> decoder;
+      EXPECT_TRUE(decoder.start(stream, 1));
+      for (size_t i = 0; i < residuals.size(); ++i)
+        ASSERT_EQ(decoder.decode(0, *decoder_models[contexts[i]]), residuals[i]) << "symbol " << i;
+      EXPECT_TRUE(decoder.finishedCleanly(1));
+    };
+    if (family == rans::FamilyId::kGeometric12)
+      decodeAll.template operator()<12>();
+    else
+      decodeAll.template operator()<15>();
+  }
+}
+
+TEST(PtmRans, AMalformedTablesSectionIsRefused) {
+  std::vector<uint8_t> residuals, contexts;
+  combAndPlain(20000, residuals, contexts);
+  std::vector<uint8_t> params;
+  rans::chooseModels(rans::FamilyId::kMixture15, residuals, contexts, 1, 2, params);
+  rans::Tables tables;
+  ASSERT_TRUE(
+      rans::chooseTables(rans::FamilyId::kMixture15, residuals, contexts, 1, 2, params, tables));
+  const std::vector<uint8_t> good = tables.section;
+  auto read = [](std::vector<uint8_t> section) {
+    std::vector<rans::Model> models;
+    const rans::Model* context_models[2] = {};
+    return rans::readTables(section, 2, 15, models, context_models);
+  };
+  ASSERT_EQ(read(good), good.size());
+  for (size_t length = 0; length < good.size(); ++length)  // every truncation
+    EXPECT_EQ(read({good.begin(), good.begin() + ptrdiff_t(length)}), 0u) << length;
+  std::vector<uint8_t> bad = good;
+  bad[0] = 0;  // no table flagged
+  EXPECT_EQ(read(bad), 0u);
+  bad = good;
+  bad[0] |= 0x04;  // a context past the last
+  EXPECT_EQ(read(bad), 0u);
+  for (uint8_t count : {0, 65, 255}) {
+    bad = good;
+    bad[1] = count;
+    EXPECT_EQ(read(bad), 0u) << int(count);
+  }
+  // Every level zero: no symbol has a weight.
+  bad = good;
+  std::fill(bad.begin() + 2, bad.end(), uint8_t(0));
+  EXPECT_EQ(read(bad), 0u);
+  // A padding bit set (6 bits a level rarely fill the last byte).
+  const size_t levels = good[1];
+  if (levels * rans::kTableLevelBits % 8 != 0) {
+    bad = good;
+    bad.back() |= 0x80;
+    EXPECT_EQ(read(bad), 0u);
+  }
 }
 
 }  // namespace
