@@ -349,11 +349,11 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
     ImGui::Text("cancelled: %llu queued requests, %llu reads in flight",
                 (unsigned long long)r.cancelled_total, (unsigned long long)r.reads_cancelled_total);
     if (r.parents_queued_total || r.parent_fallbacks_total || r.children_read_early_total)
-      ImGui::Text("ptm parents: %llu queued for children, %llu read again for a decode, "
-                  "%llu children read during their load",
-                  (unsigned long long)r.parents_queued_total,
-                  (unsigned long long)r.parent_fallbacks_total,
-                  (unsigned long long)r.children_read_early_total);
+      ImGui::Text(
+          "ptm parents: %llu queued for children, %llu read again for a decode, "
+          "%llu children read during their load",
+          (unsigned long long)r.parents_queued_total, (unsigned long long)r.parent_fallbacks_total,
+          (unsigned long long)r.children_read_early_total);
   }
 
   if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen)) {
