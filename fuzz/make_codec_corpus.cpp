@@ -92,21 +92,28 @@ int main(int argc, char** argv) {
   // the encoder at efforts 1 (nearest parent, zstd), 2 (smallest, zstd) and 3 (smallest, rANS,
   // whichever coder the default picks), and each rANS coder forced ("c1" to "c6"), so all are
   // seeded whatever the default picks for these small tiles; and predictor 5 (least squares,
-  // whose weights follow the header) with zstd and with coder 6 ("l0", "l6").
-  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5", "c6", "l0", "l6"};
+  // whose weights follow the header) with zstd and with coder 6 ("l0", "l6"); and the default on
+  // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
+  // carry explicit tables.
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3",
+                               "c4", "c5", "c6", "l0", "l6", "t0"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
-        const Image tile = makeTile(16, 16, channels);
-        const Image parent_texels = tessera::fuzz::fuzzParentTexels(16, channels);
-        const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, 16, 0};
+        const uint32_t side = mode[0] == 't' ? 64 : 16;
+        Image tile = makeTile(side, side, channels);
+        if (mode[0] == 't')
+          for (uint8_t& texel : tile.texels) texel = uint8_t(texel & 0xf0);
+        const Image parent_texels = tessera::fuzz::fuzzParentTexels(side, channels);
+        const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, side,
+                                                   0};
         constexpr tessera::detail::Predictor kCandidates[] = {
             tessera::detail::Predictor::kParentNearest,
             tessera::detail::Predictor::kNeighbourMedian,
             tessera::detail::Predictor::kParentCorrected};
         auto encode = [&]() {
           tessera::detail::EncodeOptions options;
-          if (mode[0] == 'e') {
+          if (mode[0] == 'e' || mode[0] == 't') {
             options.effort = mode[1] - '0';
             return tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
           }
@@ -124,9 +131,10 @@ int main(int argc, char** argv) {
           return 1;
         }
         std::vector<uint8_t> input =
-            tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, 16, 16, false, quadrant);
+            tessera::fuzz::codecFuzzHeader(Codec::kPtm, channels, side, side, false, quadrant);
         input.insert(input.end(), payload->begin(), payload->end());
-        if (!writeFile(dir / ("ptm_parent_" + mode + "_q" + std::to_string(quadrant) + "_16x16x" +
+        if (!writeFile(dir / ("ptm_parent_" + mode + "_q" + std::to_string(quadrant) + "_" +
+                              std::to_string(side) + "x" + std::to_string(side) + "x" +
                               std::to_string(channels)),
                        input))
           return 1;
