@@ -137,10 +137,10 @@ enum class PtmCoder : uint8_t {
   kRansParentErrors = 6,
 };
 
-/// True for the rANS coders, whose payload is model bytes and one rANS stream.
 /// Set in a rANS coder's byte when explicit tables follow its model bytes (docs/codecs.md,
 /// "ptm (6)", "Tables").
 inline constexpr uint8_t kPtmTablesFlag = 0x08;
+/// True for the rANS coders, whose payload is model bytes and one rANS stream.
 constexpr bool isRansCoder(PtmCoder coder) {
   return coder != PtmCoder::kZstd;
 }
@@ -197,6 +197,8 @@ struct PtmRecording {
   std::vector<uint8_t> header;   ///< predictor, coder, predictor 5's weights
   std::vector<uint8_t> symbols;  ///< in decoding order
   std::vector<uint8_t> symbol_contexts;
+  /// The symbols counted per context, once for every estimate of the coders that walk alike.
+  rans::ContextCounts counts;
 };
 /// True when coders `a` and `b` (both rANS) record the same symbols and contexts.
 constexpr bool walksAlike(PtmCoder a, PtmCoder b) {

@@ -99,6 +99,7 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
       RansRecorder<false, false> recorder{symbols_at, contexts_at};
       code<true>(predictor, channels, walk, recorder);
     }
+    out.counts = rans::countByContext(out.symbols, out.symbol_contexts, channels, out.contexts);
     if (recording != nullptr) return std::vector<uint8_t>{};
     if (estimated_bytes != nullptr) {
       *estimated_bytes = estimateRecordedPtm(out, coder);
@@ -158,11 +159,9 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
-  rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                     recording.channels, recording.contexts, params);
+  rans::chooseModels(familyOf(coder), recording.counts, params);
   rans::Tables tables;
-  rans::chooseTables(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                     recording.channels, recording.contexts, params, tables);
+  rans::chooseTables(familyOf(coder), recording.counts, params, tables);
   return recording.header.size() + params.size() + tables.section.size() + size_t(tables.bits / 8) +
          4 * recording.channels;
 }
@@ -174,14 +173,11 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
   ScratchRef state(scratch);
   std::vector<uint8_t> chosen;
   if (models == nullptr) {
-    rans::chooseModels(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                       recording.channels, recording.contexts, chosen);
+    rans::chooseModels(familyOf(coder), recording.counts, chosen);
     models = &chosen;
   }
   rans::Tables tables;
-  const bool with_tables =
-      rans::chooseTables(familyOf(coder), recording.symbols, recording.symbol_contexts,
-                         recording.channels, recording.contexts, *models, tables);
+  const bool with_tables = rans::chooseTables(familyOf(coder), recording.counts, *models, tables);
   std::vector<uint8_t> payload = recording.header;
   payload[1] = uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0);
   payload.insert(payload.end(), models->begin(), models->end());

@@ -215,19 +215,26 @@ const Model* models(FamilyId family) {
   return family == FamilyId::kGeometric12 ? geometric.get() : mixture.get();
 }
 
-double chooseModels(FamilyId family_id, std::span<const uint8_t> residuals,
-                    std::span<const uint8_t> contexts, uint32_t channels,
-                    uint32_t contexts_per_channel, std::vector<uint8_t>& params) {
-  const uint32_t context_count = channels * contexts_per_channel;
-  std::vector<uint32_t> counts(size_t(context_count) * kAlphabet, 0);
+ContextCounts countByContext(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+                             uint32_t channels, uint32_t contexts_per_channel) {
+  ContextCounts out;
+  out.context_count = channels * contexts_per_channel;
+  out.counts.assign(size_t(out.context_count) * kAlphabet, 0);
   // A channel counter, not i % channels: a division per symbol cost a third of the encoder.
   uint32_t channel = 0;
   for (size_t i = 0; i < residuals.size(); ++i) {
     const uint32_t z = zigzag(residuals[i]);
     const uint32_t context = channel * contexts_per_channel + contexts[i];
-    ++counts[size_t(context) * kAlphabet + (z < kEscape ? z : kEscape)];
+    ++out.counts[size_t(context) * kAlphabet + (z < kEscape ? z : kEscape)];
     if (++channel == channels) channel = 0;
   }
+  return out;
+}
+
+double chooseModels(FamilyId family_id, const ContextCounts& context_counts,
+                    std::vector<uint8_t>& params) {
+  const uint32_t context_count = context_counts.context_count;
+  const std::vector<uint32_t>& counts = context_counts.counts;
   const Model* family = models(family_id);
   const bool geometric = family_id == FamilyId::kGeometric12;
   const uint32_t means_per_kind = geometric ? kMeansPerKind : kMixtureMeansPerKind;
@@ -320,20 +327,12 @@ void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits,
   quantise(weight, scale_bits, model);
 }
 
-bool chooseTables(FamilyId family_id, std::span<const uint8_t> residuals,
-                  std::span<const uint8_t> contexts, uint32_t channels,
-                  uint32_t contexts_per_channel, std::span<const uint8_t> params, Tables& tables) {
-  const uint32_t context_count = channels * contexts_per_channel;
+bool chooseTables(FamilyId family_id, const ContextCounts& context_counts,
+                  std::span<const uint8_t> params, Tables& tables) {
+  const uint32_t context_count = context_counts.context_count;
+  const std::vector<uint32_t>& counts = context_counts.counts;
   const uint32_t scale_bits = scaleBits(family_id);
   const Model* family = models(family_id);
-  std::vector<uint32_t> counts(size_t(context_count) * kAlphabet, 0);
-  uint32_t channel = 0;
-  for (size_t i = 0; i < residuals.size(); ++i) {
-    const uint32_t z = zigzag(residuals[i]);
-    ++counts[size_t(channel * contexts_per_channel + contexts[i]) * kAlphabet +
-             (z < kEscape ? z : kEscape)];
-    if (++channel == channels) channel = 0;
-  }
   tables = {};
   tables.context_models.resize(context_count);
   std::vector<uint8_t> levels(size_t(context_count) * kAlphabet, 0);

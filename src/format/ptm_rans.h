@@ -173,6 +173,17 @@ void encode(FamilyId family, std::span<const uint8_t> residuals, std::span<const
             std::span<const Model* const> context_models, std::vector<uint8_t>& work,
             std::vector<uint8_t>& out);
 
+/// How often each symbol occurs in each context, the same for both families, so that every
+/// choice made for one walk's symbols counts them once: counts[context * kAlphabet + symbol],
+/// with context = channel * contexts_per_channel + contexts[i] for residuals[i] of channel
+/// i % channels, and symbol the zigzag code, kEscape for any code from kEscape on.
+struct ContextCounts {
+  uint32_t context_count = 0;
+  std::vector<uint32_t> counts;
+};
+ContextCounts countByContext(std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
+                             uint32_t channels, uint32_t contexts_per_channel);
+
 /// Explicit tables (docs/codecs.md, "ptm (6)", "Tables"): a context whose symbols a table of
 /// their own codes in fewer bits than its family model, the table's bytes included, sends one.
 /// A table gives each symbol s < count a level 0..63: 0 for an absent symbol, else q for a
@@ -204,9 +215,8 @@ struct Tables {
 /// Chooses the tables for symbols whose family models are `params` (chooseModels'): a context
 /// takes one where its bits fall by more than the table's bytes. Returns false, and `tables`
 /// empty but for context_models, when no context gains enough to pay for the bitmap too.
-bool chooseTables(FamilyId family, std::span<const uint8_t> residuals,
-                  std::span<const uint8_t> contexts, uint32_t channels,
-                  uint32_t contexts_per_channel, std::span<const uint8_t> params, Tables& tables);
+bool chooseTables(FamilyId family, const ContextCounts& counts, std::span<const uint8_t> params,
+                  Tables& tables);
 
 /// Reads a tables section of `context_count` contexts at the start of `bytes` into `models` and
 /// `context_models` (whose family entries the caller set): the section's length, or 0 when it
@@ -215,11 +225,9 @@ size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32
                   std::vector<Model>& models, std::span<const Model*> context_models);
 
 /// For each (channel, context), the model of `family` that codes its residuals in the fewest
-/// bits, by counting: `params` gets channels * contexts_per_channel bytes (0 for unused
-/// contexts). Returns the bits the symbols cost under those models, which encode() meets to
-/// within a few bytes (its final states).
-double chooseModels(FamilyId family, std::span<const uint8_t> residuals,
-                    std::span<const uint8_t> contexts, uint32_t channels,
-                    uint32_t contexts_per_channel, std::vector<uint8_t>& params);
+/// bits: `params` gets one byte per context of `counts` (0 for unused contexts). Returns the
+/// bits the symbols cost under those models, which encode() meets to within a few bytes (its
+/// final states).
+double chooseModels(FamilyId family, const ContextCounts& counts, std::vector<uint8_t>& params);
 
 }  // namespace tessera::detail::rans

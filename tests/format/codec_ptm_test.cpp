@@ -526,8 +526,7 @@ TEST(PtmCodec, ExplicitTablesCodeCombsSmallerAndRoundTrip) {
                     .has_value());
     std::vector<uint8_t> params;
     const double family_bits =
-        rans::chooseModels(rans::FamilyId::kGeometric12, recording.symbols,
-                           recording.symbol_contexts, channels, recording.contexts, params);
+        rans::chooseModels(rans::FamilyId::kGeometric12, recording.counts, params);
     const std::vector<uint8_t> payload = encodeRecordedPtm(recording, PtmCoder::kRans, nullptr);
     ASSERT_TRUE(hasTables(payload));
     EXPECT_LT(double(payload.size()), 0.9 * family_bits / 8)

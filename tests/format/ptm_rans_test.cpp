@@ -133,11 +133,10 @@ std::vector<uint8_t> mixedResiduals(size_t count, uint32_t seed) {
 TEST(PtmRans, TheMixtureFamilyCodesMixedResidualsInFewerBits) {
   const std::vector<uint8_t> residuals = mixedResiduals(20000, 5);
   const std::vector<uint8_t> contexts(residuals.size(), 0);
+  const rans::ContextCounts counts = rans::countByContext(residuals, contexts, 1, 1);
   std::vector<uint8_t> params;
-  const double geometric =
-      rans::chooseModels(rans::FamilyId::kGeometric12, residuals, contexts, 1, 1, params);
-  const double mixture =
-      rans::chooseModels(rans::FamilyId::kMixture15, residuals, contexts, 1, 1, params);
+  const double geometric = rans::chooseModels(rans::FamilyId::kGeometric12, counts, params);
+  const double mixture = rans::chooseModels(rans::FamilyId::kMixture15, counts, params);
   EXPECT_LT(mixture, geometric * 0.97) << mixture << " bits against " << geometric;
   // And the coder meets the model's count.
   std::vector<uint8_t> work, out;
@@ -165,11 +164,12 @@ void combAndPlain(size_t count, std::vector<uint8_t>& residuals, std::vector<uin
 TEST(PtmRans, ATableCodesWhatNoFamilyModelFitsAndDecodesExactly) {
   std::vector<uint8_t> residuals, contexts;
   combAndPlain(40000, residuals, contexts);
+  const rans::ContextCounts counts = rans::countByContext(residuals, contexts, 1, 2);
   for (const rans::FamilyId family : {rans::FamilyId::kGeometric12, rans::FamilyId::kMixture15}) {
     std::vector<uint8_t> params;
-    const double family_bits = rans::chooseModels(family, residuals, contexts, 1, 2, params);
+    const double family_bits = rans::chooseModels(family, counts, params);
     rans::Tables tables;
-    ASSERT_TRUE(rans::chooseTables(family, residuals, contexts, 1, 2, params, tables));
+    ASSERT_TRUE(rans::chooseTables(family, counts, params, tables));
     ASSERT_EQ(tables.models.size(), 1u);  // the comb's context only
     EXPECT_EQ(tables.section[0], 0b10);
     EXPECT_LT(tables.bits + 8.0 * double(tables.section.size()), family_bits * 0.9)
@@ -205,11 +205,11 @@ TEST(PtmRans, ATableCodesWhatNoFamilyModelFitsAndDecodesExactly) {
 TEST(PtmRans, AMalformedTablesSectionIsRefused) {
   std::vector<uint8_t> residuals, contexts;
   combAndPlain(20000, residuals, contexts);
+  const rans::ContextCounts counts = rans::countByContext(residuals, contexts, 1, 2);
   std::vector<uint8_t> params;
-  rans::chooseModels(rans::FamilyId::kMixture15, residuals, contexts, 1, 2, params);
+  rans::chooseModels(rans::FamilyId::kMixture15, counts, params);
   rans::Tables tables;
-  ASSERT_TRUE(
-      rans::chooseTables(rans::FamilyId::kMixture15, residuals, contexts, 1, 2, params, tables));
+  ASSERT_TRUE(rans::chooseTables(rans::FamilyId::kMixture15, counts, params, tables));
   const std::vector<uint8_t> good = tables.section;
   auto read = [](std::vector<uint8_t> section) {
     std::vector<rans::Model> models;
