@@ -171,6 +171,12 @@ LoaderPool::ParentWait LoaderPool::parentWaitLocked(const TileId& id, Clock::tim
                                                                     : ParentWait::kNone;
 }
 
+bool LoaderPool::mayTakeLocked(const TileId& id, bool early, Clock::time_point now) {
+  if (!any_dependent_) return true;
+  const ParentWait wait = parentWaitLocked(id, now);
+  return wait == ParentWait::kNone || (wait == ParentWait::kLoading && early);
+}
+
 bool LoaderPool::waitForParentLoad(const TileId& id) {
   const TileId parent = Archive::parentTile(id);
   std::unique_lock lock(mutex_);
@@ -245,10 +251,7 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
     for (size_t i = 0; i < queue_.size(); ++i) {
       auto retry = retries_.find(queue_[i].id);
       if (retry != retries_.end() && retry->second.not_before > now) continue;
-      if (any_dependent_) {
-        const ParentWait wait = parentWaitLocked(queue_[i].id, now);
-        if (wait == ParentWait::kQueued || (wait == ParentWait::kLoading && !early)) continue;
-      }
+      if (!mayTakeLocked(queue_[i].id, early, now)) continue;
       takeLocked(batch, i, early, now);
       return true;
     }
@@ -279,12 +282,8 @@ void LoaderPool::takeLocked(Batch& batch, size_t index, bool early, Clock::time_
     if (other.image != batch.first.image || other.level != batch.first.level ||
         queue_[j].urgency != first_urgency || retries_.count(other))
       continue;
-    if (any_dependent_) {
-      // An early batch may carry siblings whose parent is loading too; they wait as it does.
-      const ParentWait wait = parentWaitLocked(other, now);
-      if (wait == ParentWait::kQueued || (wait == ParentWait::kLoading && !early)) continue;
-    }
-    batch.candidates.push_back(other);
+    // An early batch may carry siblings whose parent is loading too; they wait as it does.
+    if (mayTakeLocked(other, early, now)) batch.candidates.push_back(other);
   }
   stats_.queued = queue_.size();
 }

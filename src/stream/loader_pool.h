@@ -146,6 +146,9 @@ class LoaderPool {
   enum class ParentWait { kNone, kLoading, kQueued };
   /// ParentWait of `id`. Under mutex_, within one takeBatchLocked.
   ParentWait parentWaitLocked(const TileId& id, std::chrono::steady_clock::time_point now);
+  /// Whether a worker may take `id` now: its parent is not in its way, or (an `early` take) is
+  /// being loaded. Under mutex_, within one takeBatchLocked.
+  bool mayTakeLocked(const TileId& id, bool early, std::chrono::steady_clock::time_point now);
   /// Blocks this worker until `id`'s parent is no longer being loaded: a child taken while its
   /// parent loaded (takeBatchLocked) finishes only after it. False when the pool is stopping.
   bool waitForParentLoad(const TileId& id);
