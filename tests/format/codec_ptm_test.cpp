@@ -1,7 +1,8 @@
 // ptm coded against its parent: whole pyramids of the integer floor average (Marvie &
 // Bouatouch, eq. 3) round-trip bit-exactly tile by tile, coarse to fine, for odd sizes, every
-// channel count and odd and even borders; hostile payloads and wrong parents are rejected
-// without crashing. Coding without a parent is covered with the other codecs in codec_test.cpp.
+// channel count and odd and even borders, and each predictor and coder earns its place.
+// Hostile payloads are in codec_ptm_hostile_test.cpp; coding without a parent is covered with
+// the other codecs in codec_test.cpp.
 #include <algorithm>
 #include <cmath>
 #include <cstring>
@@ -14,130 +15,13 @@
 
 #include "format/codec.h"
 #include "format/codec_internal.h"
+#include "ptm_test_fixtures.h"
 #include "support/test_images.h"
 
 namespace tessera::detail {
 namespace {
 
 using test::nextRandom;
-
-// The coder a payload names, without its tables flag.
-PtmCoder coderIn(std::span<const uint8_t> payload) {
-  return PtmCoder(payload[1] & uint8_t(~kPtmTablesFlag));
-}
-bool hasTables(std::span<const uint8_t> payload) {
-  return (payload[1] & kPtmTablesFlag) != 0;
-}
-
-// Smooth shading, an edge and noise: residuals that are neither all zero nor all random.
-Image makeLevel0(uint32_t width, uint32_t height, uint32_t channels, uint32_t seed) {
-  Image image(width, height, channels);
-  uint32_t random = seed * 2654435761u + 7;
-  for (uint32_t y = 0; y < height; ++y)
-    for (uint32_t x = 0; x < width; ++x)
-      for (uint32_t c = 0; c < channels; ++c) {
-        int value = int(128 + 90 * std::sin(x * 0.05 + c) * std::cos(y * 0.03)) +
-                    (x > width / 2 ? 40 : 0) + int(nextRandom(random) % 9) - 4;
-        image.row(y)[size_t(x) * channels + c] = uint8_t(std::clamp(value, 0, 255));
-      }
-  return image;
-}
-
-// The pyramid step ptm requires, written independently of src/build: floor of the 2x2 sum
-// over the level extended by replicating its last row and column.
-Image floorDownsample(const Image& level) {
-  Image out((level.width_px + 1) / 2, (level.height_px + 1) / 2, level.channels);
-  for (uint32_t y = 0; y < out.height_px; ++y)
-    for (uint32_t x = 0; x < out.width_px; ++x)
-      for (uint32_t c = 0; c < level.channels; ++c) {
-        uint32_t sum = 0;
-        for (uint32_t dy = 0; dy < 2; ++dy)
-          for (uint32_t dx = 0; dx < 2; ++dx) {
-            uint32_t sx = std::min(2 * x + dx, level.width_px - 1);
-            uint32_t sy = std::min(2 * y + dy, level.height_px - 1);
-            sum += level.row(sy)[size_t(sx) * level.channels + c];
-          }
-        out.row(y)[size_t(x) * level.channels + c] = uint8_t(sum / 4);
-      }
-  return out;
-}
-
-// docs/format.md, "Tiles": texels clamped into the level.
-Image cutStoredTile(const Image& level, uint32_t tile_px, uint32_t border_px, uint32_t x,
-                    uint32_t y) {
-  const uint32_t side = tile_px + 2 * border_px;
-  Image tile(side, side, level.channels);
-  for (uint32_t j = 0; j < side; ++j)
-    for (uint32_t i = 0; i < side; ++i) {
-      int64_t lx = std::clamp<int64_t>(int64_t(x) * tile_px - border_px + i, 0, level.width_px - 1);
-      int64_t ly =
-          std::clamp<int64_t>(int64_t(y) * tile_px - border_px + j, 0, level.height_px - 1);
-      std::memcpy(tile.row(j) + size_t(i) * level.channels,
-                  level.row(uint32_t(ly)) + size_t(lx) * level.channels, level.channels);
-    }
-  return tile;
-}
-
-struct PyramidTiles {
-  uint32_t tile_px, border_px;
-  std::vector<Image> levels;
-  uint32_t tilesX(uint32_t l) const { return (levels[l].width_px + tile_px - 1) / tile_px; }
-  uint32_t tilesY(uint32_t l) const { return (levels[l].height_px + tile_px - 1) / tile_px; }
-  Image tile(uint32_t l, uint32_t x, uint32_t y) const {
-    return cutStoredTile(levels[l], tile_px, border_px, x, y);
-  }
-};
-
-// `step` > 1 rounds level 0's texels down to its multiples: residuals on a comb, as a palette's
-// steps leave them, which no family model fits and explicit tables do.
-PyramidTiles makePyramid(uint32_t width, uint32_t height, uint32_t channels, uint32_t tile_px,
-                         uint32_t border_px, uint32_t seed, uint32_t step = 1) {
-  PyramidTiles pyramid{tile_px, border_px, {makeLevel0(width, height, channels, seed)}};
-  for (uint8_t& texel : pyramid.levels[0].texels) texel = uint8_t(texel / step * step);
-  while (pyramid.levels.back().width_px > tile_px || pyramid.levels.back().height_px > tile_px)
-    pyramid.levels.push_back(floorDownsample(pyramid.levels.back()));
-  return pyramid;
-}
-
-ParentTexels parentOf(const Image& parent, uint32_t x, uint32_t y, uint32_t tile_px,
-                      uint32_t border_px) {
-  return {parent.view(), x & 1, y & 1, tile_px, border_px};
-}
-
-Image decodeOrDie(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
-                  const ParentTexels* parent) {
-  Image out(side, side, channels);
-  auto decoded = decodeTile(Codec::kPtm, payload, out, parent);
-  EXPECT_TRUE(decoded.has_value()) << decoded.error().message;
-  return out;
-}
-
-// Codes every tile of `pyramid` with `encode(tile, parent)` and decodes coarse to fine, each
-// level against the previous level's *decoded* tiles, as a reader does; every texel must come
-// back. `what` names the case in failures.
-template <class Encode>
-void expectCoarseToFineRoundTrip(const PyramidTiles& pyramid, uint32_t channels, Encode&& encode,
-                                 const std::string& what) {
-  const uint32_t side = pyramid.tile_px + 2 * pyramid.border_px;
-  std::vector<std::vector<Image>> decoded(pyramid.levels.size());
-  for (uint32_t l = uint32_t(pyramid.levels.size()); l-- > 0;) {
-    for (uint32_t y = 0; y < pyramid.tilesY(l); ++y) {
-      for (uint32_t x = 0; x < pyramid.tilesX(l); ++x) {
-        Image tile = pyramid.tile(l, x, y);
-        std::optional<ParentTexels> parent;
-        if (l + 1 < pyramid.levels.size())
-          parent = parentOf(decoded[l + 1][(y / 2) * pyramid.tilesX(l + 1) + x / 2], x, y,
-                            pyramid.tile_px, pyramid.border_px);
-        const ParentTexels* parent_texels = parent ? &*parent : nullptr;
-        Result<std::vector<uint8_t>> payload = encode(tile, parent_texels);
-        ASSERT_TRUE(payload.has_value()) << payload.error().message;
-        Image out = decodeOrDie(*payload, side, channels, parent_texels);
-        ASSERT_EQ(out.texels, tile.texels) << what << " tile (" << l << "," << x << "," << y << ")";
-        decoded[l].push_back(std::move(out));
-      }
-    }
-  }
-}
 
 TEST(PtmCodec, EveryLevelOfAFloorPyramidRoundTripsBitExactlyAgainstItsDecodedParent) {
   struct Case {
@@ -196,23 +80,6 @@ std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexel
     }
   return *encodePtm(tile.view(), {}, parent, predictor, chosen, nullptr);
 }
-
-constexpr Predictor kParentPredictors[] = {Predictor::kParentNearest, Predictor::kParentBilinear,
-                                           Predictor::kNeighbourMedian, Predictor::kParentCorrected,
-                                           Predictor::kLeastSquares};
-constexpr PtmCoder kCoders[] = {PtmCoder::kZstd,
-                                PtmCoder::kRans,
-                                PtmCoder::kRansChained,
-                                PtmCoder::kRansMixture,
-                                PtmCoder::kRansMixtureChained,
-                                PtmCoder::kRansMixtureChainedErrors,
-                                PtmCoder::kRansParentErrors};
-constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans,
-                                    PtmCoder::kRansChained,
-                                    PtmCoder::kRansMixture,
-                                    PtmCoder::kRansMixtureChained,
-                                    PtmCoder::kRansMixtureChainedErrors,
-                                    PtmCoder::kRansParentErrors};
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
   struct Case {
@@ -649,169 +516,6 @@ TEST(PtmCodec, ARemainderOutsideZeroToThreeStillDecodesExactly) {
   auto payload = encodeTile(Codec::kPtm, child.view(), {}, &texels);
   ASSERT_TRUE(payload.has_value());
   EXPECT_EQ(decodeOrDie(*payload, 66, 4, &texels).texels, child.texels);
-}
-
-// The hostile-input tests' tiles: 32 px plus a border, small enough that every prefix and
-// every byte can be tried under ASan in seconds, large enough that every coder's contexts, the
-// rANS renormalisation and predictor 5's weights all occur. (64 px took 80 s a sweep there.)
-constexpr uint32_t kSweepTilePx = 32;
-constexpr uint32_t kSweepSide = kSweepTilePx + 2;
-
-struct ChildPayload {
-  Image parent, child;
-  std::vector<uint8_t> payload;
-};
-
-// The default encoder's payload, or one with `predictor` and `coder`.
-ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predictor = {},
-                              PtmCoder coder = PtmCoder::kRans, uint32_t step = 1) {
-  // The child, tile (1, 1) of level 0, is cut by the image's right and bottom edges.
-  PyramidTiles pyramid = makePyramid(56, 51, channels, kSweepTilePx, 1, 11, step);
-  ChildPayload result{pyramid.tile(1, 0, 0), pyramid.tile(0, 1, 1), {}};
-  ParentTexels parent = parentOf(result.parent, 1, 1, kSweepTilePx, 1);
-  result.payload = predictor
-                       ? *encodePtm(result.child.view(), {}, &parent, *predictor, coder, nullptr)
-                       : *encodeTile(Codec::kPtm, result.child.view(), {}, &parent);
-  return result;
-}
-
-// Every predictor that reads the parent with every coder: what the truncation and corruption
-// tests sweep. (On 64-px tiles the sweeps had to leave out the coders whose walks others share;
-// on kSweepTilePx tiles every combination costs less under ASan than that subset did.)
-std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
-  std::vector<ChildPayload> payloads;
-  for (PtmCoder coder : kCoders)
-    for (Predictor predictor : kParentPredictors)
-      payloads.push_back(makeChildPayload(channels, predictor, coder));
-  // And the default's payload of a comb, which carries explicit tables.
-  payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
-  EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
-  return payloads;
-}
-
-TEST(PtmCodec, DecodeRejectsEveryTruncationAndTrailingBytes) {
-  for (uint32_t channels = 1; channels <= 4; ++channels)
-    for (const ChildPayload& tile : everyKindOfChildPayload(channels)) {
-      ParentTexels parent = parentOf(tile.parent, 1, 1, kSweepTilePx, 1);
-      for (size_t length = 0; length < tile.payload.size(); ++length) {
-        // A fresh allocation of exactly `length` bytes, so ASan catches any read past it.
-        std::vector<uint8_t> prefix(tile.payload.begin(), tile.payload.begin() + length);
-        Image out(kSweepSide, kSweepSide, channels);
-        auto decoded = decodeTile(Codec::kPtm, prefix, out, &parent);
-        ASSERT_FALSE(decoded.has_value())
-            << "prefix " << length << " predictor " << int(tile.payload[0]) << " coder "
-            << int(tile.payload[1]);
-        EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
-      }
-      std::vector<uint8_t> longer = tile.payload;
-      longer.push_back(0);
-      Image out(kSweepSide, kSweepSide, channels);
-      auto decoded = decodeTile(Codec::kPtm, longer, out, &parent);
-      ASSERT_FALSE(decoded.has_value());
-      EXPECT_NE(decoded.error().message.find("trailing"), std::string::npos);
-      // A byte missing from the middle of the stream (the total one short, the tail intact) is
-      // caught too.
-      std::vector<uint8_t> gap = tile.payload;
-      gap.erase(gap.begin() + std::ptrdiff_t(gap.size() / 2));
-      EXPECT_FALSE(decodeTile(Codec::kPtm, gap, out, &parent).has_value());
-    }
-}
-
-TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
-  ChildPayload tile = makeChildPayload(3);
-  ParentTexels parent = parentOf(tile.parent, 1, 1, kSweepTilePx, 1);
-  Image out(kSweepSide, kSweepSide, 3);
-  std::vector<uint8_t> bad = tile.payload;
-  bad[0] = uint8_t(Predictor::kLeastSquares) + 1;
-  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
-  bad = tile.payload;
-  bad[1] = uint8_t(PtmCoder::kRansParentErrors) + 1;
-  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
-  // The tables flag on zstd, or on a coder past the last.
-  for (const uint8_t coder_byte :
-       {kPtmTablesFlag, uint8_t(kPtmTablesFlag | (uint8_t(PtmCoder::kRansParentErrors) + 1))}) {
-    bad = tile.payload;
-    bad[1] = coder_byte;
-    EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value()) << int(coder_byte);
-  }
-  // Every model byte names a model of the family; one changed under a used context (the first
-  // position's flattest class in slot 0, which this smooth tile uses with coder 1's gradient
-  // activity) leaves the rANS stream unfinished.
-  bad = makeChildPayload(3, Predictor::kNeighbourMedian, PtmCoder::kRans).payload;
-  bad[2] = uint8_t(bad[2] ^ 0x40);
-  auto model = decodeTile(Codec::kPtm, bad, out, &parent);
-  ASSERT_FALSE(model.has_value());
-  EXPECT_NE(model.error().message.find("rANS stream"), std::string::npos);
-  auto orphan = decodeTile(Codec::kPtm, tile.payload, out, nullptr);
-  ASSERT_FALSE(orphan.has_value());
-  EXPECT_NE(orphan.error().message.find("parent"), std::string::npos);
-}
-
-TEST(PtmCodec, AParentThatDoesNotFitIsRefusedNotRead) {
-  ChildPayload tile = makeChildPayload(3);
-  Image small(kSweepSide - 10, kSweepSide - 10, 3);
-  ParentTexels parent = parentOf(small, 1, 1, kSweepTilePx, 1);
-  Image out(kSweepSide, kSweepSide, 3);
-  auto decoded = decodeTile(Codec::kPtm, tile.payload, out, &parent);
-  ASSERT_FALSE(decoded.has_value());
-  EXPECT_EQ(decoded.error().code, ErrorCode::kInvalidArgument);
-  Image gray(kSweepSide, kSweepSide, 1);
-  ParentTexels wrong_channels = parentOf(gray, 1, 1, kSweepTilePx, 1);
-  EXPECT_FALSE(decodeTile(Codec::kPtm, tile.payload, out, &wrong_channels).has_value());
-}
-
-TEST(PtmCodec, SingleByteCorruptionOfEveryKindOfPayloadNeverCrashes) {
-  for (uint32_t channels = 1; channels <= 4; ++channels)
-    for (const ChildPayload& tile : everyKindOfChildPayload(channels)) {
-      ParentTexels parent = parentOf(tile.parent, 1, 1, kSweepTilePx, 1);
-      CodecScratch scratch;
-      size_t rejected = 0;
-      for (size_t i = 0; i < tile.payload.size(); ++i) {
-        std::vector<uint8_t> corrupt = tile.payload;
-        corrupt[i] ^= uint8_t(1 + i % 255);
-        Image out(kSweepSide, kSweepSide, channels);
-        rejected += !decodeTile(Codec::kPtm, corrupt, out, &parent, &scratch).has_value();
-      }
-      // rANS checks that every state ends where the encoder started it, so most corruption is
-      // caught; a zstd frame without a checksum decodes changed residuals to other texels.
-      if (tile.payload[1] != uint8_t(PtmCoder::kZstd)) {
-        EXPECT_GT(rejected, tile.payload.size() / 2) << "predictor " << int(tile.payload[0]);
-      }
-      Image out(kSweepSide, kSweepSide, channels);
-      ASSERT_TRUE(decodeTile(Codec::kPtm, tile.payload, out, &parent, &scratch).has_value());
-      EXPECT_EQ(out.texels, tile.child.texels);
-    }
-}
-
-TEST(PtmCodec, SingleByteCorruptionNeverCrashesNorPoisonsTheScratch) {
-  ChildPayload tile = makeChildPayload(4);
-  ParentTexels parent = parentOf(tile.parent, 1, 1, kSweepTilePx, 1);
-  CodecScratch scratch;
-  for (size_t i = 0; i < tile.payload.size(); ++i) {
-    std::vector<uint8_t> corrupt = tile.payload;
-    corrupt[i] ^= uint8_t(1 + i % 255);
-    Image out(kSweepSide, kSweepSide, 4);
-    (void)decodeTile(Codec::kPtm, corrupt, out, &parent, &scratch);
-  }
-  // The scratch carries nothing over: the intact payload still decodes exactly.
-  Image out(kSweepSide, kSweepSide, 4);
-  ASSERT_TRUE(decodeTile(Codec::kPtm, tile.payload, out, &parent, &scratch).has_value());
-  EXPECT_EQ(out.texels, tile.child.texels);
-  // The codec cannot be relied on to tell a wrong parent (that is the archive checksum's job):
-  // with zstd it decodes to other texels without failing or reading out of range; with rANS
-  // the changed texels change the contexts, which the final states usually catch.
-  Image other_parent = tile.parent;
-  const size_t inside_quadrant = kSweepSide * 5 / 8;  // quadrant (1, 1) is used
-  other_parent.texels[(inside_quadrant * kSweepSide + inside_quadrant) * 4] ^= 0x55;
-  ParentTexels wrong = parentOf(other_parent, 1, 1, kSweepTilePx, 1);
-  ChildPayload zstd_tile = makeChildPayload(4, Predictor::kParentNearest, PtmCoder::kZstd);
-  ASSERT_TRUE(decodeTile(Codec::kPtm, zstd_tile.payload, out, &wrong).has_value());
-  EXPECT_NE(out.texels, zstd_tile.child.texels);
-  auto rans_decoded = decodeTile(Codec::kPtm, tile.payload, out, &wrong);
-  if (rans_decoded.has_value())
-    EXPECT_NE(out.texels, tile.child.texels);
-  else
-    EXPECT_EQ(rans_decoded.error().code, ErrorCode::kCorrupt);
 }
 
 }  // namespace
