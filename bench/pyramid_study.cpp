@@ -7,10 +7,12 @@
 // codec and reports, against the raw base level (level 0 tiles as stored, padding included):
 // the whole pyramid's bytes, ptm's overhead over its own base level, and single-thread decode
 // and encode throughput in megapixels of pyramid per second (ptm decoded coarse to fine against
-// the decoded parents, as a reader does). `--levels` adds each level's bits per texel. JPEG XL
+// the decoded parents, as a reader does). `--levels` adds each level's bits per texel, and
+// `--groups` the default's bits by a texel's place in its 2x2 block (printSymbolGroups). JPEG XL
 // lossless (libjxl, single-threaded) is a row when the build found libjxl-dev; it is not an
 // archive codec.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -18,6 +20,7 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -31,6 +34,7 @@
 #include "build/downsample.h"
 #include "format/codec.h"
 #include "format/codec_internal.h"
+#include "format/ptm_walk.h"
 
 using namespace tessera;
 using namespace tessera::detail;
@@ -218,7 +222,96 @@ Tiles cutAll(const std::vector<Image>& pyramid) {
   return tiles;
 }
 
-void study(const std::string& input, double min_seconds, const std::string& only, bool per_level) {
+// `--groups`: where the bits of a ptm pyramid go, for the payloads `payloads` holds (the
+// default's, which are all rANS-coded). Each tile below the coarsest level is walked again with
+// its payload's predictor and coder, and its symbols pooled over the level by coder, channel
+// slot and context; the same tiles are walked on their own (predictor 0, the same coder) for
+// comparison. A pool costs its empirical entropy: the code length of one static model per
+// context fitted to the whole level, without model bytes, so that the groups compare without
+// the tiles' side information. Symbols are grouped by their texel's place in its 2x2 block: a,
+// b on top, c and d below. In the pyramid d is eq. 3's remainder; on its own d is coded like
+// the others, and the pools split by place too, since the places of an enlarged image differ.
+void printSymbolGroups(const Tiles& tiles,
+                       const std::vector<std::vector<std::vector<uint8_t>>>& payloads,
+                       CodecScratch& scratch) {
+  using Pools = std::map<std::tuple<int, int, int>, std::array<uint64_t, 256>>;
+  // In the pyramid, groups 0-3 are the residuals of block positions 0-3 (3 only where a block
+  // crosses the tile's edge) and 4 the remainders; on its own, groups 0-3 are the texels of
+  // each block position (a, b, c, d) and 4 is empty.
+  constexpr int kGroups = 5;
+  using Grouped = std::array<Pools, kGroups>;
+  auto poolInPyramid = [](const PtmRecording& recording, Grouped& pools) {
+    for (size_t k = 0; k < recording.symbols.size(); ++k) {
+      const int context = recording.symbol_contexts[k];
+      const int group =
+          context < int(ptm::kCodedContexts) ? context / int(ptm::kActivityClasses) : 4;
+      ++pools[size_t(group)][{int(recording.coder), int(k % recording.channels), context}]
+             [recording.symbols[k]];
+    }
+  };
+  // Without a parent every texel is coded, in raster order.
+  auto poolAlone = [](const PtmRecording& recording, uint32_t width, Grouped& pools) {
+    for (size_t k = 0; k < recording.symbols.size(); ++k) {
+      const size_t texel = k / recording.channels;
+      const int group = int(texel % width % 2 + 2 * (texel / width % 2));
+      ++pools[size_t(group)][{int(recording.coder), int(k % recording.channels),
+                              recording.symbol_contexts[k]}][recording.symbols[k]];
+    }
+  };
+  // Bits per symbol of each group, and the groups' bits in all.
+  auto entropies = [](const Grouped& pools, double(&per_symbol)[kGroups]) {
+    double all = 0;
+    for (int g = 0; g < kGroups; ++g) {
+      double bits = 0, symbols = 0;
+      for (const auto& [key, counts] : pools[size_t(g)]) {
+        double n = 0;
+        for (uint64_t c : counts) n += double(c);
+        for (uint64_t c : counts)
+          if (c != 0) bits -= double(c) * std::log2(double(c) / n);
+        symbols += n;
+      }
+      per_symbol[g] = symbols > 0 ? bits / symbols : 0;
+      all += bits;
+    }
+    return all;
+  };
+  fmt::print(
+      "\n| level | a | b | c | d: remainder (alone: the texel) | level, bits per texel |\n"
+      "|---|---:|---:|---:|---:|---:|\n");
+  for (size_t l = 0; l + 1 < tiles.levels.size(); ++l) {
+    Grouped in_pyramid, alone;
+    for (size_t i = 0; i < tiles.levels[l].size(); ++i) {
+      const std::vector<uint8_t>& payload = payloads[l][i];
+      const auto coder = PtmCoder(payload[1] & ~kPtmTablesFlag);
+      if (!isRansCoder(coder)) continue;
+      const Image& tile = tiles.levels[l][i];
+      const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
+      const ParentTexels parent{tiles.levels[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
+                                x & 1, y & 1, kTilePx, 0};
+      PtmRecording recording;
+      if (recordPtm(tile.view(), &parent, Predictor(payload[0]), coder, &scratch, nullptr,
+                    recording))
+        poolInPyramid(recording, in_pyramid);
+      if (recordPtm(tile.view(), nullptr, Predictor::kRoot, coder, &scratch, nullptr, recording))
+        poolAlone(recording, tile.width_px, alone);
+    }
+    const double texels = double(tiles.levels[l].size()) * kTilePx * kTilePx;
+    double pyramid_bits[kGroups], alone_bits[kGroups];
+    const double pyramid_all = entropies(in_pyramid, pyramid_bits);
+    const double alone_all = entropies(alone, alone_bits);
+    fmt::print("| {} in the pyramid | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} |\n", l,
+               pyramid_bits[0], pyramid_bits[1], pyramid_bits[2], pyramid_bits[4],
+               pyramid_all / texels);
+    fmt::print("| {} alone | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} |\n", l, alone_bits[0],
+               alone_bits[1], alone_bits[2], alone_bits[3], alone_all / texels);
+  }
+  fmt::print(
+      "(a, b, c, d: bits per symbol, one per channel of a texel of that place in its block;"
+      " every figure an empirical entropy over the level)\n");
+}
+
+void study(const std::string& input, double min_seconds, const std::string& only, bool per_level,
+           bool groups) {
   Image level0 = readInput(input);
   if (level0.texels.empty()) {
     fmt::print(stderr, "{}: cannot read\n", input);
@@ -448,6 +541,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
                    smallest_peer, smallest_peer_bytes,
                    100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,
                    total <= smallest_peer_bytes ? "smaller" : "larger");
+      if (groups) printSymbolGroups(tiles, payloads, scratch);
       fmt::print("\n");
     }
     if (per_level) {
@@ -471,15 +565,21 @@ void study(const std::string& input, double min_seconds, const std::string& only
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr, "usage: {} [--seconds S] [--only NAME-PART] [--levels] INPUT...\n", argv[0]);
+    fmt::print(stderr,
+               "usage: {} [--seconds S] [--only NAME-PART] [--levels] [--groups] INPUT...\n",
+               argv[0]);
     return 2;
   }
   double seconds = 0.5;
   std::string only;
-  bool per_level = false;
+  bool per_level = false, groups = false;
   for (int i = 1; i < argc; ++i) {
     if (std::string(argv[i]) == "--levels") {
       per_level = true;
+      continue;
+    }
+    if (std::string(argv[i]) == "--groups") {
+      groups = true;
       continue;
     }
     if (std::string(argv[i]) == "--only" && i + 1 < argc) {
@@ -490,7 +590,7 @@ int main(int argc, char** argv) {
       seconds = std::atof(argv[++i]);
       continue;
     }
-    study(argv[i], seconds, only, per_level);
+    study(argv[i], seconds, only, per_level, groups);
   }
   return 0;
 }
