@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs the peer tools that bench/build_vs_peers.sh (and later the serving benchmarks)
+# Installs the peer tools that bench/build_vs_peers.sh (and the other benchmarks)
 # compare Tessera against, from Debian 12's own packages so anyone can reproduce the figures.
 # Idempotent: packages already present are left alone, and apt is only asked when one is missing.
 set -euo pipefail
@@ -12,6 +12,8 @@ packages=(
   nginx-light    # static serving baseline (serve_bench.sh, link_bench.sh)
   wrk            # HTTP load generator (serve_bench.sh)
   libjxl-dev     # JPEG XL lossless column of the ptm codec study (pyramid_study.sh)
+  libjxl-tools   # cjxl, djxl: JPEG XL flat and Squeeze pyramids (multiresolution_peers.sh)
+  libopenjp2-tools  # opj_compress, opj_decompress: JPEG 2000 lossless (multiresolution_peers.sh)
 )
 
 missing=()

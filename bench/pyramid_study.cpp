@@ -541,6 +541,10 @@ void study(const std::string& input, double min_seconds, const std::string& only
                    smallest_peer, smallest_peer_bytes,
                    100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,
                    total <= smallest_peer_bytes ? "smaller" : "larger");
+      else if (variant.effort == 0)
+        fmt::print("(default: {:.0f} bytes)\n", total);
+      if (variant.effort == 0)
+        fmt::print("(default's base level alone: {:.0f} bytes)\n", base_alone);
       if (groups) printSymbolGroups(tiles, payloads, scratch);
       fmt::print("\n");
     }
