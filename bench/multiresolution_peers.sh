@@ -7,7 +7,7 @@
 # - JPEG 2000 lossless (opj_compress defaults: the reversible 5/3 wavelet, 6 resolutions);
 # - ptm's default pyramid and its base level coded alone (tessera-pyramid-study).
 # Every peer file is decoded back and compared with the source before its figures count.
-# About two minutes on 2 cores once the peers are installed. Output: one Markdown table.
+# About a minute on 2 cores once the peers are installed. Output: one Markdown table.
 #   bench/multiresolution_peers.sh [BUILD_DIR]   (default: build)
 set -euo pipefail
 build=${1:-build}
