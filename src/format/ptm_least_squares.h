@@ -92,6 +92,25 @@ inline int leastSquaresPredict(const int8_t* weights, int median, const int* ter
   return std::clamp(median + ((sum + (1 << (kLsProductShift - 1))) >> kLsProductShift), 0, 255);
 }
 
+// leastSquaresPredict of leastSquaresTerms' terms, without the terms: the median factored out
+// of the sum, sum_k w_k (v_k - 16 m) = sum_k w_k v_k - 16 m sum_k w_k, which is the same
+// integer (no term can overflow) with fewer operations waiting on the left texel and the
+// median. `weight_sum` is the sum of the nine `weights`. Arguments as leastSquaresTerms'.
+inline int leastSquaresPredictFactored(const int8_t* weights, int weight_sum, const uint8_t* texel,
+                                       ptrdiff_t left, ptrdiff_t up, ptrdiff_t up_left,
+                                       ptrdiff_t up_right, bool origin, const uint8_t* parent,
+                                       const uint8_t* parent_side, const uint8_t* parent_near,
+                                       const uint8_t* parent_diagonal, int estimate16, int median) {
+  // At the tile's first texel the neighbour terms are -16 m with m = 0: nothing.
+  const int neighbours = origin ? 0
+                                : weights[0] * texel[left] + weights[1] * texel[up] +
+                                      weights[2] * texel[up_left] + weights[3] * texel[up_right];
+  const int parents = weights[4] * *parent + weights[5] * *parent_side + weights[6] * *parent_near +
+                      weights[7] * *parent_diagonal;
+  const int sum = 16 * (neighbours + parents) + weights[8] * estimate16 - 16 * median * weight_sum;
+  return std::clamp(median + ((sum + (1 << (kLsProductShift - 1))) >> kLsProductShift), 0, 255);
+}
+
 /// Solves `fit`'s normal equations for each position and each of `channels` channels into
 /// `weights`, [position][channel][term], the payload's layout.
 void solveLeastSquares(const LsFit& fit, uint32_t channels, int8_t* weights);

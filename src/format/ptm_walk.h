@@ -242,6 +242,13 @@ void codeTexels(const Walk& walk, Coder& coder) {
                                       kPredictor == Predictor::kParentCorrected ||
                                       kPredictor == Predictor::kLeastSquares;
   constexpr bool kLeastSquares = kPredictor == Predictor::kLeastSquares;
+  // Predictor 5: each position's and channel's weight sum (leastSquaresPredictFactored).
+  [[maybe_unused]] int ls_weight_sums[kLsSets][4] = {};
+  if constexpr (kLeastSquares)
+    for (uint32_t set = 0; set < kLsSets; ++set)
+      for (uint32_t c = 0; c < kChannels; ++c)
+        for (uint32_t k = 0; k < kLsTerms; ++k)
+          ls_weight_sums[set][c] += ls_weights[(set * kChannels + c) * kLsTerms + k];
   // Coder 6 at the coarsest level has no parent and codes as coder 5.
   constexpr bool kParentActivity = Coder::kParentActivity && kHasParent;
   constexpr bool kNeighbours =
@@ -344,14 +351,20 @@ void codeTexels(const Walk& walk, Coder& coder) {
                 const int16_t* d = details + index + c;
                 const int estimate16 =
                     upsampled[index + c] + medPredict(d[left], d[up], d[up_left]);
-                int terms[kLsTerms];
-                leastSquaresTerms(texel + c, left, up, up_left, up_right, false, p + c,
-                                  parent_row + parent_side_at + c, parent_near + parent_at + c,
-                                  parent_near + parent_side_at + c, estimate16, guess, terms);
-                if constexpr (kEncode)
-                  if (ls_fit != nullptr) ls_fit->add(3, c, terms, 16 * (texel[c] - guess));
-                guess =
-                    leastSquaresPredict(ls_weights + (3 * kChannels + c) * kLsTerms, guess, terms);
+                const int8_t* weights = ls_weights + (3 * kChannels + c) * kLsTerms;
+                if (kEncode && ls_fit != nullptr) {
+                  int terms[kLsTerms];
+                  leastSquaresTerms(texel + c, left, up, up_left, up_right, false, p + c,
+                                    parent_row + parent_side_at + c, parent_near + parent_at + c,
+                                    parent_near + parent_side_at + c, estimate16, guess, terms);
+                  ls_fit->add(3, c, terms, 16 * (texel[c] - guess));
+                  guess = leastSquaresPredict(weights, guess, terms);
+                } else {
+                  guess = leastSquaresPredictFactored(
+                      weights, ls_weight_sums[3][c], texel + c, left, up, up_left, up_right, false,
+                      p + c, parent_row + parent_side_at + c, parent_near + parent_at + c,
+                      parent_near + parent_side_at + c, estimate16, guess);
+                }
               }
               guess += a[c] + b[c] + c3[c] - 4 * p[c];
               expected = uint32_t(std::clamp(guess, 0, 3));
@@ -416,15 +429,21 @@ void codeTexels(const Walk& walk, Coder& coder) {
           if constexpr (kLeastSquares) {
             const int median =
                 origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
-            int terms[kLsTerms];
-            leastSquaresTerms(texel + c, left, up, up_left, up_right, origin,
-                              parent_row + parent_at + c, parent_row + parent_side_at + c,
-                              parent_near + parent_at + c, parent_near + parent_side_at + c,
-                              estimate, median, terms);
-            if constexpr (kEncode)
-              if (ls_fit != nullptr) ls_fit->add(position, c, terms, 16 * (texel[c] - median));
-            predicted[c] = leastSquaresPredict(ls_weights + (position * kChannels + c) * kLsTerms,
-                                               median, terms);
+            const int8_t* weights = ls_weights + (position * kChannels + c) * kLsTerms;
+            if (kEncode && ls_fit != nullptr) {
+              int terms[kLsTerms];
+              leastSquaresTerms(texel + c, left, up, up_left, up_right, origin,
+                                parent_row + parent_at + c, parent_row + parent_side_at + c,
+                                parent_near + parent_at + c, parent_near + parent_side_at + c,
+                                estimate, median, terms);
+              ls_fit->add(position, c, terms, 16 * (texel[c] - median));
+              predicted[c] = leastSquaresPredict(weights, median, terms);
+            } else {
+              predicted[c] = leastSquaresPredictFactored(
+                  weights, ls_weight_sums[position][c], texel + c, left, up, up_left, up_right,
+                  origin, parent_row + parent_at + c, parent_row + parent_side_at + c,
+                  parent_near + parent_at + c, parent_near + parent_side_at + c, estimate, median);
+            }
           } else {
             predicted[c] = std::clamp((estimate + 8) >> 4, 0, 255);
           }

@@ -15,6 +15,8 @@
 
 #include "format/codec.h"
 #include "format/codec_internal.h"
+#include "format/ptm_least_squares.h"
+#include "format/ptm_walk.h"
 #include "ptm_test_fixtures.h"
 #include "support/test_images.h"
 
@@ -366,6 +368,38 @@ TEST(PtmCodec, LeastSquaresPaysOffWhereTheParentKnowsWhatNoNeighbourShows) {
   auto short_weights = decodeTile(Codec::kPtm, cut, out, &parent);
   ASSERT_FALSE(short_weights.has_value());
   EXPECT_NE(short_weights.error().message.find("predictor weights"), std::string::npos);
+}
+
+TEST(PtmCodec, LeastSquaresFactoredPredictionIsTheSumOfItsTerms) {
+  // The walk predicts with the median factored out of the sum; the fit and the payload's
+  // meaning are the terms'. Any weights, texels and estimates, extremes included.
+  uint32_t state = 17;
+  const int8_t extremes[] = {-128, -1, 0, 1, 127};
+  for (int round = 0; round < 100000; ++round) {
+    int8_t weights[kLsTerms];
+    int weight_sum = 0;
+    for (int8_t& w : weights) {
+      w = round % 3 == 0 ? extremes[nextRandom(state) % 5] : int8_t(nextRandom(state));
+      weight_sum += w;
+    }
+    // The texel at the centre of a 3-wide, 2-high window; the parent's four texels apart.
+    uint8_t window[6], parents[4];
+    for (uint8_t& t : window)
+      t = round % 5 == 0 ? uint8_t(255 * (nextRandom(state) & 1)) : uint8_t(nextRandom(state));
+    for (uint8_t& t : parents) t = uint8_t(nextRandom(state));
+    const uint8_t* texel = window + 4;
+    const bool origin = round % 7 == 0;
+    const int median = origin ? 0 : ptm::medPredict(texel[-1], texel[-3], texel[-4]);
+    const int estimate16 = int(nextRandom(state) % 4700) - 300;
+    int terms[kLsTerms];
+    leastSquaresTerms(texel, -1, -3, -4, -2, origin, &parents[0], &parents[1], &parents[2],
+                      &parents[3], estimate16, median, terms);
+    ASSERT_EQ(
+        leastSquaresPredictFactored(weights, weight_sum, texel, -1, -3, -4, -2, origin, &parents[0],
+                                    &parents[1], &parents[2], &parents[3], estimate16, median),
+        leastSquaresPredict(weights, median, terms))
+        << "round " << round;
+  }
 }
 
 TEST(PtmCodec, ExplicitTablesCodeCombsSmallerAndRoundTrip) {
