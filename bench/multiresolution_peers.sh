@@ -44,7 +44,10 @@ for name in map photo; do
     rm -f "$work/out.ppm"
     local start end
     start=$(now)
-    "$@" >/dev/null 2>&1
+    if ! "$@" >/dev/null 2>&1; then
+      echo "multiresolution_peers: $coder could not decode $name ($*)" >&2
+      exit 1
+    fi
     end=$(now)
     if ! same_pixels "$work/$name.ppm" "$work/out.ppm" "$raw"; then
       echo "multiresolution_peers: $coder did not decode $name losslessly" >&2
