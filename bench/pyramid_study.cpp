@@ -222,6 +222,13 @@ Tiles cutAll(const std::vector<Image>& pyramid) {
   return tiles;
 }
 
+// The parent of tile `i` of level `l`, taken from `parents`: level l + 1's tiles as coded, or
+// as decoded.
+ParentTexels parentOf(const Tiles& tiles, const std::vector<Image>& parents, size_t l, size_t i) {
+  const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
+  return {parents[(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(), x & 1, y & 1, kTilePx, 0};
+}
+
 // `--groups`: where the bits of a ptm pyramid go, for the payloads `payloads` holds (the
 // default's, which are all rANS-coded). Each tile below the coarsest level is walked again with
 // its payload's predictor and coder, and its symbols pooled over the level by coder, channel
@@ -285,9 +292,7 @@ void printSymbolGroups(const Tiles& tiles,
       const auto coder = PtmCoder(payload[1] & ~kPtmTablesFlag);
       if (!isRansCoder(coder)) continue;
       const Image& tile = tiles.levels[l][i];
-      const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
-      const ParentTexels parent{tiles.levels[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
-                                x & 1, y & 1, kTilePx, 0};
+      const ParentTexels parent = parentOf(tiles, tiles.levels[l + 1], l, i);
       PtmRecording recording;
       if (recordPtm(tile.view(), &parent, Predictor(payload[0]), coder, &scratch, nullptr,
                     recording))
@@ -458,11 +463,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (size_t i = 0; i < tiles.levels[l].size(); ++i) {
         const Image& tile = tiles.levels[l][i];
         std::optional<ParentTexels> parent;
-        if (ptm && l + 1 < tiles.levels.size()) {
-          const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
-          parent = ParentTexels{tiles.levels[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
-                                x & 1, y & 1, kTilePx, 0};
-        }
+        if (ptm && l + 1 < tiles.levels.size()) parent = parentOf(tiles, tiles.levels[l + 1], l, i);
         Result<std::vector<uint8_t>> payload = encodeVariant(variant, tile, options, parent);
         if (!payload) {
           fmt::print(stderr, "{}: {}\n", variant.name, payload.error().message);
@@ -489,11 +490,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (size_t l = tiles.levels.size(); l-- > 0;) {
         for (size_t i = 0; i < payloads[l].size(); ++i) {
           std::optional<ParentTexels> parent;
-          if (ptm && l + 1 < tiles.levels.size()) {
-            const uint32_t x = uint32_t(i % tiles.tiles_x[l]), y = uint32_t(i / tiles.tiles_x[l]);
-            parent = ParentTexels{decoded[l + 1][(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(),
-                                  x & 1, y & 1, kTilePx, 0};
-          }
+          if (ptm && l + 1 < tiles.levels.size()) parent = parentOf(tiles, decoded[l + 1], l, i);
           if (!decodeVariant(variant, payloads[l][i], decoded[l][i], parent)) exact = false;
         }
       }
