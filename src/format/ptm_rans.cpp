@@ -67,6 +67,12 @@ void frequencies(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits,
   freq[largest] = uint16_t(int(freq[largest]) + int(scale) - int(sum));
 }
 
+// What a symbol of frequency `freq` at `scale_bits` costs, in bits: the escape brings its 8
+// uniform bits.
+double symbolBits(uint32_t scale_bits, uint16_t freq, uint32_t symbol) {
+  return double(scale_bits) - std::log2(double(freq)) + (symbol == kEscape ? 8.0 : 0.0);
+}
+
 // frequencies(), and the decoder's tables.
 void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& model) {
   const uint32_t scale = 1u << scale_bits;
@@ -83,10 +89,9 @@ void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& m
          b < kBuckets && b * bucket_slots < end; ++b)
       model.bucket_symbol[b] = uint8_t(s | ((b + 1) * bucket_slots > end ? kSharedBucket : 0));
     start = end;
-    model.cost_bits[s] = float(double(scale_bits) - std::log2(double(model.freq[s])));
+    model.cost_bits[s] = float(symbolBits(scale_bits, model.freq[s], s));
   }
   model.entry[kAlphabet] = scale;
-  model.cost_bits[kEscape] += 8;
 }
 
 // theta, the ratio of successive weights of a geometric distribution with mean mean_q16, Q16.
@@ -363,9 +368,7 @@ bool chooseTables(FamilyId family_id, const ContextCounts& context_counts,
     frequencies(weight, scale_bits, freq);
     double table_bits = 0;
     for (uint32_t s = 0; s < symbols; ++s)
-      if (count[s] != 0)
-        table_bits += count[s] * (double(scale_bits) - std::log2(double(freq[s])) +
-                                  (s == kEscape ? 8.0 : 0.0));
+      if (count[s] != 0) table_bits += count[s] * symbolBits(scale_bits, freq[s], s);
     const double gain = bits - table_bits - 8.0 * double(tableBytes(symbols));
     if (gain <= 0) continue;
     saved_bits += gain;
