@@ -135,6 +135,10 @@ enum class PtmCoder : uint8_t {
   /// decoded neighbours', plus each coded texel's prediction's distance from its parent texel;
   /// at the coarsest level, without a parent, it codes as kRansMixtureChainedErrors
   kRansParentErrors = 6,
+  /// kRans's symbols and contexts (model family 1), with predictor 0 or 3 only, coded in
+  /// bands of eight rows that decode side by side (ptm_lanes.h): one 32-bit state per channel
+  /// and row of the band, a word stream and an escape stream per channel; no tables
+  kRansLanes = 7,
 };
 
 /// Set in a rANS coder's byte when explicit tables follow its model bytes (docs/codecs.md,
@@ -193,6 +197,7 @@ Result<size_t> estimatePtmBytes(const ImageView& tile, const EncodeOptions& opti
 struct PtmRecording {
   PtmCoder coder = PtmCoder::kRans;  ///< the coder it was recorded for
   uint32_t channels = 0;
+  uint32_t width = 0, height = 0;  ///< of the tile, in texels
   uint32_t contexts = 0;         ///< contexts per channel
   std::vector<uint8_t> header;   ///< predictor, coder, predictor 5's weights
   std::vector<uint8_t> symbols;  ///< in decoding order
@@ -226,7 +231,7 @@ Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOption
                                        std::span<const Predictor> predictors, PtmCoder coder,
                                        CodecScratch* scratch, size_t* estimated_bytes);
 /// The codec table's ptm encoder: `options.effort` picks the predictor and coder rule (1:
-/// nearest parent with zstd; 2: the smallest predictor with zstd; 0 and 3 and above: the
+/// nearest parent with zstd; 2: the neighbour median with coder 7; 0 and 3 and above: the
 /// default, by rANS estimates). docs/codecs.md, "ptm (6)", has the rule and its figures.
 Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const EncodeOptions& options,
                                                 const ParentTexels* parent, CodecScratch* scratch);

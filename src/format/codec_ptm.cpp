@@ -7,6 +7,7 @@
 #include <tessera/check.h>
 
 #include "codec_internal.h"
+#include "ptm_lanes.h"
 #include "ptm_least_squares.h"
 #include "ptm_rans.h"
 #include "ptm_walk.h"
@@ -52,6 +53,10 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
   const bool has_parent = predictor != Predictor::kRoot;
+  if (coder == PtmCoder::kRansLanes && predictor != Predictor::kRoot &&
+      predictor != Predictor::kNeighbourMedian)
+    return fail(ErrorCode::kInvalidArgument,
+                "ptm: coder 7 (lanes) codes predictors 0 and 3 only");
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
   AxisMap columns, rows;
@@ -79,6 +84,8 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
     PtmRecording& out = recording != nullptr ? *recording : local;
     out.coder = coder;
     out.channels = channels;
+    out.width = width;
+    out.height = height;
     out.contexts = has_parent ? kParentContexts : kRootContexts;
     out.header = std::move(payload);
     const size_t symbols = size_t(width) * height * channels;
@@ -159,7 +166,10 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
-  rans::chooseModels(familyOf(coder), recording.counts, params);
+  const double bits = rans::chooseModels(familyOf(coder), recording.counts, params);
+  if (coder == PtmCoder::kRansLanes)
+    return recording.header.size() + params.size() + size_t(bits / 8) +
+           lanes::headerBytes(recording.channels);
   rans::Tables tables;
   rans::chooseTables(familyOf(coder), recording.counts, params, tables);
   return recording.header.size() + params.size() + tables.section.size() + size_t(tables.bits / 8) +
@@ -175,6 +185,22 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
   if (models == nullptr) {
     rans::chooseModels(familyOf(coder), recording.counts, chosen);
     models = &chosen;
+  }
+  if (coder == PtmCoder::kRansLanes) {
+    // No tables: the lanes gather every model from the family's array.
+    const Predictor predictor = Predictor(recording.header[0]);
+    TESSERA_CHECK(predictor == Predictor::kRoot || predictor == Predictor::kNeighbourMedian)
+        << "ptm: coder 7 (lanes) codes predictors 0 and 3 only";
+    std::vector<uint8_t> payload = recording.header;
+    payload[1] = uint8_t(coder);
+    payload.insert(payload.end(), models->begin(), models->end());
+    const rans::Model* family = rans::models(lanes::kFamily);
+    std::vector<const rans::Model*> context_models(models->size());
+    for (size_t i = 0; i < models->size(); ++i) context_models[i] = &family[(*models)[i]];
+    lanes::encode(recording.symbols, recording.symbol_contexts, recording.width,
+                  recording.height, recording.channels, recording.contexts, context_models,
+                  payload);
+    return payload;
   }
   rans::Tables tables;
   const bool with_tables = rans::chooseTables(familyOf(coder), recording.counts, *models, tables);

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "codec_internal.h"
+#include "ptm_lanes.h"
 #include "ptm_least_squares.h"
 #include "ptm_rans.h"
 #include "ptm_walk.h"
@@ -73,13 +74,18 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   // The tables flag goes with the rANS coders only.
   const bool with_tables = (payload[1] & kPtmTablesFlag) != 0;
   const uint8_t coder_byte = payload[1] & uint8_t(~kPtmTablesFlag);
-  if (coder_byte > uint8_t(PtmCoder::kRansParentErrors) ||
-      (with_tables && !isRansCoder(PtmCoder(coder_byte))))
+  if (coder_byte > uint8_t(PtmCoder::kRansLanes) ||
+      (with_tables && (!isRansCoder(PtmCoder(coder_byte)) ||
+                       PtmCoder(coder_byte) == PtmCoder::kRansLanes)))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);
   const PtmCoder coder = PtmCoder(coder_byte);
   const bool has_parent = predictor != Predictor::kRoot;
+  if (coder == PtmCoder::kRansLanes && has_parent && predictor != Predictor::kNeighbourMedian)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: coder 7 (lanes) with predictor {}: it codes 0 and 3 only",
+                            payload[0]));
   if (has_parent && parent == nullptr)
     return fail(ErrorCode::kCorrupt,
                 "ptm payload: coded against a parent tile, but the tile has none (coarsest "
@@ -122,6 +128,18 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
     case PtmCoder::kRansParentErrors:
       return decodeRans<true, FamilyId::kMixture15, true, true>(
           payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
+    case PtmCoder::kRansLanes: {
+      const size_t params_bytes = size_t(contexts) * channels;
+      if (payload.size() - body_at < params_bytes)
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
+                                payload.size(), params_bytes));
+      if (!lanes::decode(payload.subspan(body_at + params_bytes), walk, channels, has_parent,
+                         payload.subspan(body_at, params_bytes), state->plane))
+        return fail(ErrorCode::kCorrupt,
+                    "ptm payload: lane streams truncated, corrupt or followed by trailing bytes");
+      return {};
+    }
   }
 
   const SymbolCounts counts =

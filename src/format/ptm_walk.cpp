@@ -95,8 +95,10 @@ Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent,
 }  // namespace
 
 rans::FamilyId familyOf(PtmCoder coder) {
-  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ? rans::FamilyId::kGeometric12
-                                                                     : rans::FamilyId::kMixture15;
+  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ||
+                 coder == PtmCoder::kRansLanes
+             ? rans::FamilyId::kGeometric12
+             : rans::FamilyId::kMixture15;
 }
 
 SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,

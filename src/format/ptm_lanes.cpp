@@ -1,0 +1,597 @@
+// ptm's lane coder (ptm_lanes.h): the encoder, the scalar decoder every processor runs, and
+// the AVX2 decoder that runs the eight rows of a band in the lanes of a vector. Both decoders
+// read each channel's words in the order of the band's rows at each step, so they consume the
+// same bytes and agree on every texel; the tests hold them to it.
+#include "ptm_lanes.h"
+
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+
+namespace tessera::detail::ptm::lanes {
+
+namespace {
+
+constexpr uint32_t kScaleBits = rans::scaleBits(kFamily);
+constexpr uint32_t kScale = 1u << kScaleBits;
+static_assert(kScaleBits == rans::kBucketBits, "a slot's bucket must name its symbol");
+// An escape's byte is the zigzag code itself (63..255), as the byte-wise coders' uniform 8 bits.
+constexpr uint32_t kEscape = rans::kEscape;
+// Reads run ahead of the checks by at most one step: 8 words and 8 escape bytes per channel.
+constexpr size_t kPadding = 32;
+
+// The step at which lane `lane` of a band decodes column x, and the band's step count.
+constexpr uint32_t stepOf(uint32_t x, uint32_t lane) { return x + 2 * lane; }
+constexpr uint32_t stepsPerBand(uint32_t width) { return width + 2 * (kLanes - 1); }
+
+void appendU32(std::vector<uint8_t>& out, uint32_t value) {
+  for (int i = 0; i < 4; ++i) out.push_back(uint8_t(value >> (8 * i)));
+}
+
+uint32_t readU32(const uint8_t* bytes) {
+  uint32_t value = 0;
+  for (int i = 0; i < 4; ++i) value |= uint32_t(bytes[i]) << (8 * i);
+  return value;
+}
+
+// A section's streams copied behind padding, so that a decoder may read a step ahead of its
+// bounds checks.
+struct Streams {
+  uint32_t states[4][kLanes];
+  const uint8_t* words[4];
+  const uint8_t* words_end[4];
+  const uint8_t* escapes[4];
+  const uint8_t* escapes_end[4];
+};
+
+bool parse(std::span<const uint8_t> section, uint32_t channels, std::vector<uint8_t>& padded,
+           Streams& streams) {
+  const size_t header = headerBytes(channels);
+  if (section.size() < header) return false;
+  const uint8_t* at = section.data();
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t k = 0; k < kLanes; ++k) {
+      const uint32_t state = readU32(at);
+      at += 4;
+      if (state < kLower) return false;
+      streams.states[c][k] = state;
+    }
+  uint32_t lengths[4][2];
+  size_t total = 0;
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t i = 0; i < 2; ++i) {
+      lengths[c][i] = readU32(at);
+      at += 4;
+      total += lengths[c][i];
+    }
+  // Every byte belongs to a stream: a section that says otherwise is corrupt.
+  if (total != section.size() - header) return false;
+  for (uint32_t c = 0; c < channels; ++c)
+    if (lengths[c][0] % 2 != 0) return false;
+  padded.assign(total + 2 * channels * kPadding, 0);
+  uint8_t* to = padded.data();
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t i = 0; i < 2; ++i) {
+      std::memcpy(to, at, lengths[c][i]);
+      (i == 0 ? streams.words : streams.escapes)[c] = to;
+      (i == 0 ? streams.words_end : streams.escapes_end)[c] = to + lengths[c][i];
+      at += lengths[c][i];
+      to += lengths[c][i] + kPadding;
+    }
+  return true;
+}
+
+bool finished(const Streams& streams, uint32_t channels) {
+  for (uint32_t c = 0; c < channels; ++c) {
+    if (streams.words[c] != streams.words_end[c] || streams.escapes[c] != streams.escapes_end[c])
+      return false;
+    for (uint32_t k = 0; k < kLanes; ++k)
+      if (streams.states[c][k] != kLower) return false;
+  }
+  return true;
+}
+
+// --- scalar ---------------------------------------------------------------------------------
+
+uint32_t activityClassOf(int activity, uint32_t channels) {
+  uint32_t q = 0;
+  for (int bound : kActivityBounds) q += activity >= bound * int(channels);
+  return q;
+}
+
+// One symbol of channel `c` in lane `lane`: the residual byte, or false at corrupt input.
+bool decodeSymbol(Streams& s, uint32_t c, uint32_t lane, const rans::Model& model,
+                  uint8_t& residual) {
+  uint32_t& x = s.states[c][lane];
+  const uint32_t slot = x & (kScale - 1);
+  const uint32_t symbol = model.bucket_symbol[slot];
+  const uint32_t entry = model.entry[symbol];
+  x = (entry >> 16) * (x >> kScaleBits) + slot - (entry & 0xffff);
+  if (x < kLower) {
+    if (s.words_end[c] - s.words[c] < 2) return false;
+    x = (x << 16) | uint32_t(s.words[c][0]) | uint32_t(s.words[c][1]) << 8;
+    s.words[c] += 2;
+  }
+  uint32_t code = symbol;
+  if (symbol == kEscape) {
+    if (s.escapes[c] == s.escapes_end[c]) return false;
+    code = *s.escapes[c]++;
+    if (code < kEscape) return false;
+  }
+  residual = rans::unzigzag(code);
+  return true;
+}
+
+struct Geometry {
+  uint8_t* texels;
+  uint32_t width, height, channels;
+  bool has_parent;
+  const ImageView* parent;
+  const AxisMap* columns;
+  const AxisMap* rows;
+  const rans::Model* const* models;  // [channel * contexts + context]
+  uint32_t contexts;
+};
+
+// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0 and 3 and
+// coder 1 (ptm_walk.h, codeTexels).
+bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t lane) {
+  const uint32_t ch = g.channels;
+  const ptrdiff_t c1 = ptrdiff_t(ch), stride = ptrdiff_t(g.width) * c1;
+  uint8_t* texel = g.texels + size_t(y) * size_t(stride) + size_t(x) * ch;
+  ptrdiff_t left, up, up_left, up_right;
+  if (y == 0) {
+    left = up = up_left = up_right = -c1;
+  } else if (x == 0) {
+    left = up = up_left = -stride;
+    up_right = x + 1 < g.width ? -stride + c1 : -stride;
+  } else {
+    left = -c1;
+    up = -stride;
+    up_left = -stride - c1;
+    up_right = x + 1 < g.width ? -stride + c1 : -stride;
+  }
+  const bool origin = x == 0 && y == 0;
+  int activity = 0;
+  if (!origin)
+    for (uint32_t c = 0; c < ch; ++c) {
+      const int n = texel[up + c], nw = texel[up_left + c];
+      activity +=
+          std::abs(texel[left + c] - nw) + std::abs(n - nw) + std::abs(texel[up_right + c] - n);
+    }
+  const uint32_t activity_class = activityClassOf(activity, ch);
+  const rans::Model* const* models = g.models;
+  if (g.has_parent && g.rows->derived[y] != 0 && g.columns->derived[x] != 0) {
+    // Marvie & Bouatouch eq. 3, with the remainder the median expects (codeTexels).
+    const uint8_t* p = g.parent->row(g.rows->parent[y]) + size_t(g.columns->parent[x]) * ch;
+    const uint8_t* b = texel + up;
+    const uint8_t* a = texel + up_left;
+    const uint8_t* c3 = texel + left;
+    for (uint32_t c = 0; c < ch; ++c) {
+      const uint32_t known = 4u * p[c] - a[c] - b[c] - c3[c];
+      const int guess = medPredict(c3[c], b[c], a[c]) + a[c] + b[c] + c3[c] - 4 * p[c];
+      const uint32_t expected = uint32_t(std::clamp(guess, 0, 3));
+      uint8_t symbol;
+      if (!decodeSymbol(s, c, lane, *models[c * g.contexts + kCodedContexts + activity_class],
+                        symbol))
+        return false;
+      texel[c] = uint8_t(known + expected + symbol);
+    }
+    return true;
+  }
+  const uint32_t position =
+      g.has_parent ? 2u * g.rows->second[y] + g.columns->second[x] : 0u;
+  const uint32_t context = position * kActivityClasses + activity_class;
+  uint8_t symbols[4];
+  for (uint32_t c = 0; c < ch; ++c)
+    if (!decodeSymbol(s, c, lane, *models[c * g.contexts + context], symbols[c])) return false;
+  if (ch >= 3) {
+    symbols[0] = uint8_t(symbols[0] + symbols[1]);
+    symbols[2] = uint8_t(symbols[2] + symbols[1]);
+  }
+  for (uint32_t c = 0; c < ch; ++c) {
+    const int predicted =
+        origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+    texel[c] = uint8_t(predicted + symbols[c]);
+  }
+  return true;
+}
+
+bool decodeScalar(const Geometry& g, Streams& s) {
+  const uint32_t steps = stepsPerBand(g.width);
+  for (uint32_t y0 = 0; y0 < g.height; y0 += kLanes) {
+    const uint32_t rows = std::min(kLanes, g.height - y0);
+    for (uint32_t t = 0; t < steps; ++t)
+      for (uint32_t k = 0; k < rows; ++k) {
+        if (t < 2 * k || t - 2 * k >= g.width) continue;
+        if (!decodeTexel(g, s, t - 2 * k, y0 + k, k)) return false;
+      }
+  }
+  return true;
+}
+
+// --- AVX2 -----------------------------------------------------------------------------------
+
+// For each mask of lanes that read, where each lane finds its item among those read: lane i
+// takes item (number of reading lanes below i).
+struct Compaction {
+  alignas(32) int32_t index[256][kLanes];
+  Compaction() {
+    for (uint32_t mask = 0; mask < 256; ++mask) {
+      int32_t n = 0;
+      for (uint32_t i = 0; i < kLanes; ++i) index[mask][i] = (mask >> i & 1) != 0 ? n++ : 0;
+    }
+  }
+};
+const Compaction kCompaction;
+
+template <uint32_t kCh>
+__attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
+                                                const int32_t* model_offsets,
+                                                const uint8_t* parent_texels,
+                                                uint32_t parent_stride, int32_t* diagonal) {
+  const uint32_t width = g.width, height = g.height;
+  const size_t stride = size_t(width) * kCh;
+  const uint32_t steps = stepsPerBand(width);
+  const int* family = reinterpret_cast<const int*>(rans::models(kFamily));
+  constexpr int kEntryOffsetWords = int(offsetof(rans::Model, entry) / 4);
+  static_assert(offsetof(rans::Model, entry) % 4 == 0 && sizeof(rans::Model) % 4 == 0);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i two_lane = _mm256_slli_epi32(lane, 1);
+  // Rotates lane k - 1's value into lane k; lane 0's is replaced after.
+  const __m256i rotate = _mm256_setr_epi32(7, 0, 1, 2, 3, 4, 5, 6);
+  const __m256i slot_mask = _mm256_set1_epi32(int(kScale - 1));
+  const __m256i low16 = _mm256_set1_epi32(0xffff);
+  const __m256i byte_mask = _mm256_set1_epi32(0xff);
+  const __m256i one = _mm256_set1_epi32(1);
+  const __m256i escape = _mm256_set1_epi32(int(kEscape));
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i three = _mm256_set1_epi32(3);
+  const __m256i last_column = _mm256_set1_epi32(int(width) - 1);
+  __m256i bounds[kActivityClasses - 1];
+  for (uint32_t i = 0; i < kActivityClasses - 1; ++i)
+    bounds[i] = _mm256_set1_epi32(kActivityBounds[i] * int(kCh) - 1);
+  // Each channel's model offsets by context group (the block positions 0-3, then remainders),
+  // eight activity classes each: a lane picks its model with a permute, not a gather.
+  constexpr uint32_t kGroups = kParentContexts / kActivityClasses;
+  __m256i group_models[kCh][kGroups];
+  for (uint32_t c = 0; c < kCh; ++c)
+    for (uint32_t group = 0; group < kGroups; ++group)
+      group_models[c][group] =
+          group * kActivityClasses < g.contexts
+              ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
+                    model_offsets + c * g.contexts + group * kActivityClasses))
+              : zero;
+  // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
+  // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
+  // columns differ by even numbers, is a first child or every lane a second.
+  const uint32_t column_offset =
+      g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
+  __m256i state[kCh];
+  for (uint32_t c = 0; c < kCh; ++c)
+    state[c] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.states[c]));
+  __m256i failed = zero;
+  for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
+    const uint32_t rows = std::min(kLanes, height - y0);
+    const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
+    // Per lane: its row's parent row offset, second-row and derived-row flags.
+    alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
+                        row_derived[kLanes] = {};
+    if (g.has_parent)
+      for (uint32_t k = 0; k < rows; ++k) {
+        parent_row_at[k] = int32_t(g.rows->parent[y0 + k] * parent_stride);
+        row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
+        row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
+      }
+    const __m256i parent_rows =
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
+    const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
+    const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
+    const bool first_band = y0 == 0;
+    const uint8_t* above = first_band ? nullptr : g.texels + (y0 - 1) * stride;
+    // Each lane's texels of the last three steps: left, and (rotated) the row above's.
+    __m256i back1[kCh], back2[kCh], back3[kCh];
+    for (uint32_t c = 0; c < kCh; ++c) back1[c] = back2[c] = back3[c] = zero;
+    for (uint32_t t = 0; t < steps; ++t) {
+      const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
+      const __m256i active = _mm256_and_si256(
+          _mm256_andnot_si256(_mm256_cmpgt_epi32(zero, xs), _mm256_cmpgt_epi32(_mm256_set1_epi32(int(width)), xs)),
+          row_in);
+      const __m256i first_column = _mm256_cmpeq_epi32(xs, zero);
+      const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
+      // Lane 0's row above comes from the band before (or row 0's substitutes).
+      int up0[kCh] = {}, up_left0[kCh] = {}, up_right0[kCh] = {};
+      if (above != nullptr && t < width)
+        for (uint32_t c = 0; c < kCh; ++c) {
+          up0[c] = above[size_t(t) * kCh + c];
+          up_left0[c] = t > 0 ? above[size_t(t - 1) * kCh + c] : 0;
+          up_right0[c] = t + 1 < width ? above[size_t(t + 1) * kCh + c] : up0[c];
+        }
+      __m256i left[kCh], up[kCh], up_left[kCh], predicted[kCh];
+      __m256i activity = zero;
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i u = _mm256_permutevar8x32_epi32(back2[c], rotate);
+        __m256i ul = _mm256_permutevar8x32_epi32(back3[c], rotate);
+        __m256i ur = _mm256_permutevar8x32_epi32(back1[c], rotate);
+        __m256i l = back1[c];
+        if (first_band) {
+          // Row 0: every neighbour is the left one (LOCO-I's substitutes).
+          u = _mm256_blend_epi32(u, l, 1);
+          ul = _mm256_blend_epi32(ul, l, 1);
+          ur = _mm256_blend_epi32(ur, l, 1);
+        } else {
+          u = _mm256_blend_epi32(u, _mm256_set1_epi32(up0[c]), 1);
+          ul = _mm256_blend_epi32(ul, _mm256_set1_epi32(up_left0[c]), 1);
+          ur = _mm256_blend_epi32(ur, _mm256_set1_epi32(up_right0[c]), 1);
+        }
+        ur = _mm256_blendv_epi8(ur, u, at_last_column);
+        l = _mm256_blendv_epi8(l, u, first_column);
+        ul = _mm256_blendv_epi8(ul, u, first_column);
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(l, ul)));
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(u, ul)));
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(ur, u)));
+        const __m256i low = _mm256_min_epi32(l, u), high = _mm256_max_epi32(l, u);
+        const __m256i gradient = _mm256_sub_epi32(_mm256_add_epi32(l, u), ul);
+        predicted[c] = _mm256_min_epi32(high, _mm256_max_epi32(low, gradient));
+        left[c] = l;
+        up[c] = u;
+        up_left[c] = ul;
+      }
+      __m256i activity_class = zero;
+      for (const __m256i& bound : bounds)
+        activity_class = _mm256_sub_epi32(activity_class, _mm256_cmpgt_epi32(activity, bound));
+      // Each lane's model group: its block position, or the remainders for a derived texel.
+      const uint32_t second_column = g.has_parent ? (t + column_offset) & 1 : 0;
+      __m256i derived = zero;
+      if (g.has_parent && second_column != 0)
+        derived = _mm256_and_si256(_mm256_and_si256(derived_row, active),
+                                   _mm256_cmpgt_epi32(xs, zero));
+      const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
+      // A derived lane's parent texel, in the parent's copy.
+      __m256i parent_at = zero;
+      if (derived_mask != 0) {
+        const __m256i column = _mm256_srli_epi32(
+            _mm256_add_epi32(_mm256_max_epi32(xs, zero), _mm256_set1_epi32(int(column_offset))), 1);
+        parent_at =
+            _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
+      }
+      __m256i residual[kCh];
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
+        if (g.has_parent) {
+          model = _mm256_blendv_epi8(
+              model, _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
+              second_row);
+          if (derived_mask != 0)
+            model = _mm256_blendv_epi8(
+                model, _mm256_permutevar8x32_epi32(group_models[c][kGroups - 1], activity_class),
+                derived);
+        }
+        const __m256i slot = _mm256_and_si256(state[c], slot_mask);
+        const __m256i symbol = _mm256_and_si256(
+            _mm256_i32gather_epi32(family, _mm256_add_epi32(model, slot), 1), byte_mask);
+        const __m256i entry = _mm256_i32gather_epi32(
+            family,
+            _mm256_add_epi32(_mm256_add_epi32(_mm256_srli_epi32(model, 2),
+                                              _mm256_set1_epi32(kEntryOffsetWords)),
+                             symbol),
+            4);
+        __m256i next = _mm256_add_epi32(
+            _mm256_mullo_epi32(_mm256_srli_epi32(entry, 16), _mm256_srli_epi32(state[c], kScaleBits)),
+            _mm256_sub_epi32(slot, _mm256_and_si256(entry, low16)));
+        next = _mm256_blendv_epi8(state[c], next, active);
+        const __m256i reads =
+            _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
+        const int read_mask = _mm256_movemask_ps(_mm256_castsi256_ps(reads));
+        if (read_mask != 0) {
+          const __m256i words = _mm256_cvtepu16_epi32(
+              _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
+          const __m256i mine = _mm256_permutevar8x32_epi32(
+              words, _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
+          next = _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), mine), reads);
+          s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
+        }
+        state[c] = next;
+        __m256i code = symbol;
+        const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbol, escape), active);
+        const int escape_mask = _mm256_movemask_ps(_mm256_castsi256_ps(escaped));
+        if (escape_mask != 0) [[unlikely]] {
+          const __m256i bytes = _mm256_cvtepu8_epi32(
+              _mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.escapes[c])));
+          const __m256i mine = _mm256_permutevar8x32_epi32(
+              bytes,
+              _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[escape_mask])));
+          code = _mm256_blendv_epi8(code, mine, escaped);
+          // The encoder escapes only what 0..62 cannot say.
+          failed = _mm256_or_si256(failed, _mm256_and_si256(escaped, _mm256_cmpgt_epi32(escape, mine)));
+          s.escapes[c] += __builtin_popcount(unsigned(escape_mask));
+        }
+        // Zigzag back to a signed residual: 0, 1, 2, 3, ... -> 0, -1, 1, -2, ...
+        residual[c] = _mm256_xor_si256(_mm256_srli_epi32(code, 1),
+                                       _mm256_sub_epi32(zero, _mm256_and_si256(code, one)));
+      }
+      __m256i coded[kCh];
+      for (uint32_t c = 0; c < kCh; ++c) coded[c] = residual[c];
+      if constexpr (kCh >= 3) {
+        coded[0] = _mm256_add_epi32(coded[0], coded[1]);
+        coded[2] = _mm256_add_epi32(coded[2], coded[1]);
+      }
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i value = _mm256_and_si256(_mm256_add_epi32(predicted[c], coded[c]), byte_mask);
+        if (derived_mask != 0) {
+          // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects
+          // plus the decoded symbol.
+          const __m256i parent = _mm256_and_si256(
+              _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent_texels),
+                                     _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 1),
+              byte_mask);
+          const __m256i sum3 = _mm256_add_epi32(_mm256_add_epi32(left[c], up[c]), up_left[c]);
+          const __m256i four_parent = _mm256_slli_epi32(parent, 2);
+          const __m256i known = _mm256_sub_epi32(four_parent, sum3);
+          const __m256i expected = _mm256_min_epi32(
+              three, _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(predicted[c], sum3),
+                                                             four_parent)));
+          const __m256i remainder_value = _mm256_and_si256(
+              _mm256_add_epi32(_mm256_add_epi32(known, expected), residual[c]), byte_mask);
+          value = _mm256_blendv_epi8(value, remainder_value, derived);
+        }
+        back3[c] = back2[c];
+        back2[c] = back1[c];
+        back1[c] = value;
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + (size_t(t) * kCh + c) * kLanes),
+                            value);
+      }
+      // A corrupt stream may run ahead: stop at the step that passes its end.
+      bool overrun = false;
+      for (uint32_t c = 0; c < kCh; ++c)
+        overrun |= s.words[c] > s.words_end[c] || s.escapes[c] > s.escapes_end[c];
+      if (overrun) return false;
+    }
+    // The band's texels from its steps into rows.
+    for (uint32_t k = 0; k < rows; ++k) {
+      uint8_t* row = g.texels + (y0 + k) * stride;
+      const int32_t* from = diagonal + size_t(stepOf(0, k)) * kCh * kLanes + k;
+      for (uint32_t x = 0; x < width; ++x) {
+        for (uint32_t c = 0; c < kCh; ++c) row[c] = uint8_t(from[c * kLanes]);
+        row += kCh;
+        from += kCh * kLanes;
+      }
+    }
+  }
+  for (uint32_t c = 0; c < kCh; ++c)
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(s.states[c]), state[c]);
+  return _mm256_testz_si256(failed, failed) != 0;
+}
+
+}  // namespace
+
+bool simdAvailable() {
+  static const bool available = __builtin_cpu_supports("avx2") != 0;
+  return available;
+}
+
+void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts, uint32_t width,
+            uint32_t height, uint32_t channels, uint32_t contexts_per_channel,
+            std::span<const rans::Model* const> context_models, std::vector<uint8_t>& out) {
+  // Escape bytes in decoding order; words in reverse (rANS codes backwards), per channel.
+  std::vector<uint8_t> escapes[4];
+  std::vector<uint16_t> words[4];
+  uint32_t states[4][kLanes];
+  for (auto& channel : states)
+    for (uint32_t& state : channel) state = kLower;
+  const uint32_t steps = stepsPerBand(width);
+  for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
+    const uint32_t rows = std::min(kLanes, height - y0);
+    for (uint32_t t = 0; t < steps; ++t)
+      for (uint32_t k = 0; k < rows; ++k) {
+        if (t < 2 * k || t - 2 * k >= width) continue;
+        const size_t at = (size_t(y0 + k) * width + (t - 2 * k)) * channels;
+        for (uint32_t c = 0; c < channels; ++c) {
+          const uint32_t code = rans::zigzag(symbols[at + c]);
+          if (code >= kEscape) escapes[c].push_back(uint8_t(code));
+        }
+      }
+  }
+  const uint32_t bands = (height + kLanes - 1) / kLanes;
+  for (uint32_t band = bands; band-- > 0;) {
+    const uint32_t y0 = band * kLanes;
+    const uint32_t rows = std::min(kLanes, height - y0);
+    for (uint32_t t = steps; t-- > 0;)
+      for (uint32_t k = rows; k-- > 0;) {
+        if (t < 2 * k || t - 2 * k >= width) continue;
+        const size_t at = (size_t(y0 + k) * width + (t - 2 * k)) * channels;
+        for (uint32_t c = 0; c < channels; ++c) {
+          const uint32_t symbol = std::min(rans::zigzag(symbols[at + c]), kEscape);
+          const rans::Model& model = *context_models[c * contexts_per_channel + contexts[at + c]];
+          const uint32_t freq = model.freq[symbol];
+          uint32_t& x = states[c][k];
+          // x stays below 2^32 after coding: x < freq * 2^20 before it.
+          if (x >= (freq << (32 - kScaleBits))) {
+            words[c].push_back(uint16_t(x));
+            x >>= 16;
+          }
+          x = ((x / freq) << kScaleBits) + x % freq + model.start[symbol];
+        }
+      }
+  }
+  for (uint32_t c = 0; c < channels; ++c)
+    for (uint32_t k = 0; k < kLanes; ++k) appendU32(out, states[c][k]);
+  for (uint32_t c = 0; c < channels; ++c) {
+    appendU32(out, uint32_t(words[c].size() * 2));
+    appendU32(out, uint32_t(escapes[c].size()));
+  }
+  for (uint32_t c = 0; c < channels; ++c) {
+    for (size_t i = words[c].size(); i-- > 0;) {
+      out.push_back(uint8_t(words[c][i]));
+      out.push_back(uint8_t(words[c][i] >> 8));
+    }
+    out.insert(out.end(), escapes[c].begin(), escapes[c].end());
+  }
+}
+
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+            bool has_parent, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
+            Path path) {
+  Streams streams;
+  if (!parse(section, channels, padded, streams)) return false;
+  const uint32_t contexts = uint32_t(params.size() / channels);
+  const rans::Model* family = rans::models(kFamily);
+  const rans::Model* models[4 * kParentContexts];
+  for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
+  const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
+                          walk.parent, walk.columns, walk.rows,   models,   contexts};
+  if (path == Path::kScalar || !simdAvailable()) {
+    return decodeScalar(geometry, streams) && finished(streams, channels);
+  }
+  // The SIMD decoder's model offsets, and after the streams in `padded` the parent without
+  // its stride and the band's texels by step.
+  int32_t model_offsets[4 * kParentContexts];
+  for (size_t i = 0; i < params.size(); ++i)
+    model_offsets[i] = int32_t(params[i] * sizeof(rans::Model));
+  constexpr size_t kAlign = 32;
+  const size_t streams_bytes = (padded.size() + kAlign - 1) / kAlign * kAlign;
+  uint32_t parent_stride = 0;
+  size_t parent_bytes = 0;
+  if (has_parent) {
+    parent_stride = walk.parent->width_px * channels;
+    // Gathers read four bytes from a texel's first.
+    parent_bytes = (size_t(walk.parent->height_px) * parent_stride + 4 + kAlign - 1) / kAlign * kAlign;
+  }
+  const size_t diagonal_bytes = size_t(stepsPerBand(walk.width)) * channels * kLanes * 4;
+  // Growing `padded` moves the streams: keep their offsets.
+  const uint8_t* old_base = padded.data();
+  padded.resize(streams_bytes + parent_bytes + diagonal_bytes + kAlign);
+  const ptrdiff_t moved = padded.data() - old_base;
+  for (uint32_t c = 0; c < channels; ++c) {
+    streams.words[c] += moved;
+    streams.words_end[c] += moved;
+    streams.escapes[c] += moved;
+    streams.escapes_end[c] += moved;
+  }
+  uint8_t* aligned = padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
+  uint8_t* parent_texels = aligned + streams_bytes;
+  int32_t* diagonal = reinterpret_cast<int32_t*>(parent_texels + parent_bytes);
+  if (has_parent)
+    for (uint32_t y = 0; y < walk.parent->height_px; ++y)
+      std::memcpy(parent_texels + size_t(y) * parent_stride, walk.parent->row(y), parent_stride);
+  bool ok = false;
+  switch (channels) {
+    case 1:
+      ok = decodeAvx2<1>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
+      break;
+    case 2:
+      ok = decodeAvx2<2>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
+      break;
+    case 3:
+      ok = decodeAvx2<3>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
+      break;
+    default:
+      ok = decodeAvx2<4>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
+      break;
+  }
+  return ok && finished(streams, channels);
+}
+
+}  // namespace tessera::detail::ptm::lanes

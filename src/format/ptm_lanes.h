@@ -1,0 +1,64 @@
+#pragma once
+// ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors 0
+// and 3 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
+// tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at
+// step t, a wavefront in which every texel's left, up-left, up and up-right neighbours were
+// decoded at an earlier step. Each (channel, row of the band) has its own rANS state, with
+// 32-bit states renormalised by 16-bit words, one word stream per channel, and escaped
+// residuals as plain bytes in a stream of their own: so eight texels' symbols of one channel
+// decode with the same instructions (AVX2 gathers where the processor has them). The scalar
+// texel-by-texel walk (ptm_walk.h) decoded the codec study's inputs at 16-40 MP/s per core,
+// bound by its instruction count rather than by latency: running rows side by side is what
+// lets SIMD cut it.
+//
+// The symbols and contexts are exactly coder 1's (RansRecorder<false, false>), so the encoder
+// records a tile with the shared walk and only orders and codes the symbols differently.
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "ptm_rans.h"
+#include "ptm_walk.h"
+
+namespace tessera::detail::ptm::lanes {
+
+/// Rows decoded side by side: one band.
+inline constexpr uint32_t kLanes = 8;
+/// A state's lower bound between symbols; states lie in [kLower, 2^32), and every state starts
+/// (encoder) and must end (decoder) at kLower.
+inline constexpr uint32_t kLower = 1u << 16;
+/// The models come from family 1, whose 12-bit tables name a slot's symbol in one lookup.
+inline constexpr rans::FamilyId kFamily = rans::FamilyId::kGeometric12;
+
+/// Bytes of the section's header: each (channel, lane) state as u32, then per channel the
+/// lengths of its word stream and its escape stream as u32.
+constexpr size_t headerBytes(uint32_t channels) {
+  return size_t(channels) * (kLanes * 4 + 2 * 4);
+}
+
+/// Appends the lane section of a tile of `width` x `height` texels whose symbols and contexts
+/// RansRecorder<false, false> recorded in raster order (`channels` per texel), each coded
+/// under `context_models[channel * contexts_per_channel + context]` (family kFamily).
+void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts, uint32_t width,
+            uint32_t height, uint32_t channels, uint32_t contexts_per_channel,
+            std::span<const rans::Model* const> context_models, std::vector<uint8_t>& out);
+
+/// How decode() may run: the fastest the processor allows, or the scalar lanes only (for tests
+/// that compare the two).
+enum class Path : uint8_t { kFastest, kScalar };
+
+/// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for predictor
+/// 0 (`has_parent` false) or 3 with coder 7; `params` holds each (channel, context)'s model
+/// byte in family kFamily; `padded` is scratch. Returns false when the section is truncated or
+/// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
+/// of a residual that needed none).
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+            bool has_parent, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
+            Path path = Path::kFastest);
+
+/// True when decode() can take its SIMD path on this processor.
+bool simdAvailable();
+
+}  // namespace tessera::detail::ptm::lanes
