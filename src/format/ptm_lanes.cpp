@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
+#include <memory>
 
 namespace tessera::detail::ptm::lanes {
 
@@ -19,8 +20,10 @@ constexpr uint32_t kScale = 1u << kScaleBits;
 static_assert(kScaleBits == rans::kBucketBits, "a slot's bucket must name its symbol");
 // An escape's byte is the zigzag code itself (63..255), as the byte-wise coders' uniform 8 bits.
 constexpr uint32_t kEscape = rans::kEscape;
-// Reads run ahead of the checks by at most one step: 8 words and 8 escape bytes per channel.
-constexpr size_t kPadding = 32;
+// The SIMD decoder checks its streams' bounds every kCheckSteps steps, and in between reads at
+// most 8 words and 8 escape bytes per channel and step, 16 bytes at a time.
+constexpr uint32_t kCheckSteps = 16;
+constexpr size_t kPadding = kCheckSteps * 16 + 16;
 
 // The step at which lane `lane` of a band decodes column x, and the band's step count.
 constexpr uint32_t stepOf(uint32_t x, uint32_t lane) { return x + 2 * lane; }
@@ -227,17 +230,35 @@ struct Compaction {
 };
 const Compaction kCompaction;
 
+// Per model of the family, per slot: symbol | (slot - start) << 6 | freq << 18, so that a lane
+// finds all it needs for a symbol in one gather instead of two (slot to symbol, symbol to
+// frequency and start). 4 MiB, built on the first SIMD decode.
+constexpr uint32_t kSymbolBits = 6, kBiasShift = 6, kFreqShift = 18;
+static_assert(rans::kAlphabet <= 1u << kSymbolBits && kFreqShift - kBiasShift >= kScaleBits);
+const uint32_t* slotTables() {
+  static const std::unique_ptr<uint32_t[]> tables = [] {
+    auto built = std::make_unique<uint32_t[]>(size_t(rans::kModelCount) * kScale);
+    const rans::Model* family = rans::models(kFamily);
+    for (uint32_t m = 0; m < rans::kModelCount; ++m)
+      for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
+        const uint32_t start = family[m].start[symbol], freq = family[m].freq[symbol];
+        for (uint32_t i = 0; i < freq; ++i)
+          built[size_t(m) * kScale + start + i] = symbol | i << kBiasShift | freq << kFreqShift;
+      }
+    return built;
+  }();
+  return tables.get();
+}
+
 template <uint32_t kCh>
 __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
                                                 const uint8_t* parent_texels,
-                                                uint32_t parent_stride, int32_t* diagonal) {
+                                                uint32_t parent_stride, uint32_t* diagonal) {
   const uint32_t width = g.width, height = g.height;
   const size_t stride = size_t(width) * kCh;
   const uint32_t steps = stepsPerBand(width);
-  const int* family = reinterpret_cast<const int*>(rans::models(kFamily));
-  constexpr int kEntryOffsetWords = int(offsetof(rans::Model, entry) / 4);
-  static_assert(offsetof(rans::Model, entry) % 4 == 0 && sizeof(rans::Model) % 4 == 0);
+  const int* slot_tables = reinterpret_cast<const int*>(slotTables());
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i two_lane = _mm256_slli_epi32(lane, 1);
   // Rotates lane k - 1's value into lane k; lane 0's is replaced after.
@@ -245,6 +266,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const __m256i slot_mask = _mm256_set1_epi32(int(kScale - 1));
   const __m256i low16 = _mm256_set1_epi32(0xffff);
   const __m256i byte_mask = _mm256_set1_epi32(0xff);
+  const __m256i symbol_mask = _mm256_set1_epi32((1 << kSymbolBits) - 1);
   const __m256i one = _mm256_set1_epi32(1);
   const __m256i escape = _mm256_set1_epi32(int(kEscape));
   const __m256i zero = _mm256_setzero_si256();
@@ -290,7 +312,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
     const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
     const bool first_band = y0 == 0;
-    const uint8_t* above = first_band ? nullptr : g.texels + (y0 - 1) * stride;
     // Each lane's texels of the last three steps: left, and (rotated) the row above's.
     __m256i back1[kCh], back2[kCh], back3[kCh];
     for (uint32_t c = 0; c < kCh; ++c) back1[c] = back2[c] = back3[c] = zero;
@@ -301,13 +322,15 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           row_in);
       const __m256i first_column = _mm256_cmpeq_epi32(xs, zero);
       const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
-      // Lane 0's row above comes from the band before (or row 0's substitutes).
+      // Lane 0's row above is the last lane's of the band before, whose steps still lie
+      // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
       int up0[kCh] = {}, up_left0[kCh] = {}, up_right0[kCh] = {};
-      if (above != nullptr && t < width)
+      if (!first_band)
         for (uint32_t c = 0; c < kCh; ++c) {
-          up0[c] = above[size_t(t) * kCh + c];
-          up_left0[c] = t > 0 ? above[size_t(t - 1) * kCh + c] : 0;
-          up_right0[c] = t + 1 < width ? above[size_t(t + 1) * kCh + c] : up0[c];
+          const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
+          up0[c] = int(above[0] >> (8 * c) & 0xff);
+          up_left0[c] = int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff);
+          up_right0[c] = int(above[kLanes] >> (8 * c) & 0xff);
         }
       __m256i left[kCh], up[kCh], up_left[kCh], predicted[kCh];
       __m256i activity = zero;
@@ -370,17 +393,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 derived);
         }
         const __m256i slot = _mm256_and_si256(state[c], slot_mask);
-        const __m256i symbol = _mm256_and_si256(
-            _mm256_i32gather_epi32(family, _mm256_add_epi32(model, slot), 1), byte_mask);
-        const __m256i entry = _mm256_i32gather_epi32(
-            family,
-            _mm256_add_epi32(_mm256_add_epi32(_mm256_srli_epi32(model, 2),
-                                              _mm256_set1_epi32(kEntryOffsetWords)),
-                             symbol),
-            4);
+        const __m256i entry = _mm256_i32gather_epi32(slot_tables, _mm256_add_epi32(model, slot), 4);
+        const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
         __m256i next = _mm256_add_epi32(
-            _mm256_mullo_epi32(_mm256_srli_epi32(entry, 16), _mm256_srli_epi32(state[c], kScaleBits)),
-            _mm256_sub_epi32(slot, _mm256_and_si256(entry, low16)));
+            _mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
+                               _mm256_srli_epi32(state[c], kScaleBits)),
+            _mm256_and_si256(_mm256_srli_epi32(entry, kBiasShift), slot_mask));
         next = _mm256_blendv_epi8(state[c], next, active);
         const __m256i reads =
             _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
@@ -418,6 +436,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         coded[0] = _mm256_add_epi32(coded[0], coded[1]);
         coded[2] = _mm256_add_epi32(coded[2], coded[1]);
       }
+      // The lanes' texels, channel c in byte c.
+      __m256i packed = zero;
       for (uint32_t c = 0; c < kCh; ++c) {
         __m256i value = _mm256_and_si256(_mm256_add_epi32(predicted[c], coded[c]), byte_mask);
         if (derived_mask != 0) {
@@ -440,24 +460,26 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         back3[c] = back2[c];
         back2[c] = back1[c];
         back1[c] = value;
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + (size_t(t) * kCh + c) * kLanes),
-                            value);
+        packed = _mm256_or_si256(packed, _mm256_slli_epi32(value, int(8 * c)));
       }
-      // A corrupt stream may run ahead: stop at the step that passes its end.
-      bool overrun = false;
-      for (uint32_t c = 0; c < kCh; ++c)
-        overrun |= s.words[c] > s.words_end[c] || s.escapes[c] > s.escapes_end[c];
-      if (overrun) return false;
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), packed);
+      // A corrupt stream may run ahead: stop within kCheckSteps of passing its end.
+      if (t % kCheckSteps == kCheckSteps - 1 || t + 1 == steps) {
+        bool overrun = false;
+        for (uint32_t c = 0; c < kCh; ++c)
+          overrun |= s.words[c] > s.words_end[c] || s.escapes[c] > s.escapes_end[c];
+        if (overrun) return false;
+      }
     }
-    // The band's texels from its steps into rows.
+    // The band's texels from its steps into rows: four bytes a texel while they stay in the
+    // row (the next texel overwrites what spills into it), then byte by byte.
     for (uint32_t k = 0; k < rows; ++k) {
       uint8_t* row = g.texels + (y0 + k) * stride;
-      const int32_t* from = diagonal + size_t(stepOf(0, k)) * kCh * kLanes + k;
-      for (uint32_t x = 0; x < width; ++x) {
-        for (uint32_t c = 0; c < kCh; ++c) row[c] = uint8_t(from[c * kLanes]);
-        row += kCh;
-        from += kCh * kLanes;
-      }
+      const uint32_t* from = diagonal + size_t(stepOf(0, k)) * kLanes + k;
+      uint32_t x = 0;
+      for (; x * kCh + 4 <= width * kCh; ++x) std::memcpy(row + x * kCh, from + x * kLanes, 4);
+      for (; x < width; ++x)
+        for (uint32_t c = 0; c < kCh; ++c) row[x * kCh + c] = uint8_t(from[x * kLanes] >> (8 * c));
     }
   }
   for (uint32_t c = 0; c < kCh; ++c)
@@ -549,7 +571,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   // its stride and the band's texels by step.
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i)
-    model_offsets[i] = int32_t(params[i] * sizeof(rans::Model));
+    model_offsets[i] = int32_t(params[i] * kScale);
   constexpr size_t kAlign = 32;
   const size_t streams_bytes = (padded.size() + kAlign - 1) / kAlign * kAlign;
   uint32_t parent_stride = 0;
@@ -559,7 +581,10 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
     // Gathers read four bytes from a texel's first.
     parent_bytes = (size_t(walk.parent->height_px) * parent_stride + 4 + kAlign - 1) / kAlign * kAlign;
   }
-  const size_t diagonal_bytes = size_t(stepsPerBand(walk.width)) * channels * kLanes * 4;
+  // Lane 0 reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the
+  // band's last step.
+  const size_t diagonal_bytes =
+      size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
   // Growing `padded` moves the streams: keep their offsets.
   const uint8_t* old_base = padded.data();
   padded.resize(streams_bytes + parent_bytes + diagonal_bytes + kAlign);
@@ -572,7 +597,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   }
   uint8_t* aligned = padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
   uint8_t* parent_texels = aligned + streams_bytes;
-  int32_t* diagonal = reinterpret_cast<int32_t*>(parent_texels + parent_bytes);
+  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_texels + parent_bytes);
   if (has_parent)
     for (uint32_t y = 0; y < walk.parent->height_px; ++y)
       std::memcpy(parent_texels + size_t(y) * parent_stride, walk.parent->row(y), parent_stride);
