@@ -476,10 +476,18 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     for (uint32_t k = 0; k < rows; ++k) {
       uint8_t* row = g.texels + (y0 + k) * stride;
       const uint32_t* from = diagonal + size_t(stepOf(0, k)) * kLanes + k;
-      uint32_t x = 0;
-      for (; x * kCh + 4 <= width * kCh; ++x) std::memcpy(row + x * kCh, from + x * kLanes, 4);
-      for (; x < width; ++x)
-        for (uint32_t c = 0; c < kCh; ++c) row[x * kCh + c] = uint8_t(from[x * kLanes] >> (8 * c));
+      // Texels whose four bytes end inside the row: x * kCh + 4 <= width * kCh.
+      const uint32_t whole = width * kCh >= 4 ? (width * kCh - 4) / kCh + 1 : 0;
+      for (uint32_t x = 0; x < whole; ++x) {
+        std::memcpy(row, from, 4);
+        row += kCh;
+        from += kLanes;
+      }
+      for (uint32_t x = whole; x < width; ++x) {
+        for (uint32_t c = 0; c < kCh; ++c) row[c] = uint8_t(*from >> (8 * c));
+        row += kCh;
+        from += kLanes;
+      }
     }
   }
   for (uint32_t c = 0; c < kCh; ++c)
