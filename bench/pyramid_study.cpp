@@ -397,6 +397,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm least-squares + zstd", Codec::kPtm, 0, Predictor::kLeastSquares, PtmCoder::kZstd},
     {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansParentErrors},
+    {"ptm effort 2 (nearest parent + zstd or median + rANS lanes)", Codec::kPtm, 2,
+     Predictor::kRoot, PtmCoder::kRansLanes, false, false, true},
     {"ptm effort 3 (the default's rule without least squares)", Codec::kPtm, 3, Predictor::kRoot,
      PtmCoder::kRansMixtureChained, false, false, true},
     {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0, Predictor::kRoot,

@@ -198,9 +198,9 @@ struct PtmRecording {
   PtmCoder coder = PtmCoder::kRans;  ///< the coder it was recorded for
   uint32_t channels = 0;
   uint32_t width = 0, height = 0;  ///< of the tile, in texels
-  uint32_t contexts = 0;         ///< contexts per channel
-  std::vector<uint8_t> header;   ///< predictor, coder, predictor 5's weights
-  std::vector<uint8_t> symbols;  ///< in decoding order
+  uint32_t contexts = 0;           ///< contexts per channel
+  std::vector<uint8_t> header;     ///< predictor, coder, predictor 5's weights
+  std::vector<uint8_t> symbols;    ///< in decoding order
   std::vector<uint8_t> symbol_contexts;
   /// The symbols counted per context, once for every estimate of the coders that walk alike.
   rans::ContextCounts counts;
@@ -231,7 +231,8 @@ Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOption
                                        std::span<const Predictor> predictors, PtmCoder coder,
                                        CodecScratch* scratch, size_t* estimated_bytes);
 /// The codec table's ptm encoder: `options.effort` picks the predictor and coder rule (1:
-/// nearest parent with zstd; 2: the neighbour median with coder 7; 0 and 3 and above: the
+/// nearest parent with zstd; 2: the smaller of that and the neighbour median with coder 7; 0
+/// and 3 and above: the
 /// default, by rANS estimates). docs/codecs.md, "ptm (6)", has the rule and its figures.
 Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const EncodeOptions& options,
                                                 const ParentTexels* parent, CodecScratch* scratch);

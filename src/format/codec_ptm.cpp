@@ -55,8 +55,7 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   const bool has_parent = predictor != Predictor::kRoot;
   if (coder == PtmCoder::kRansLanes && predictor != Predictor::kRoot &&
       predictor != Predictor::kNeighbourMedian)
-    return fail(ErrorCode::kInvalidArgument,
-                "ptm: coder 7 (lanes) codes predictors 0 and 3 only");
+    return fail(ErrorCode::kInvalidArgument, "ptm: coder 7 (lanes) codes predictors 0 and 3 only");
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
   AxisMap columns, rows;
@@ -197,9 +196,8 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
     const rans::Model* family = rans::models(lanes::kFamily);
     std::vector<const rans::Model*> context_models(models->size());
     for (size_t i = 0; i < models->size(); ++i) context_models[i] = &family[(*models)[i]];
-    lanes::encode(recording.symbols, recording.symbol_contexts, recording.width,
-                  recording.height, recording.channels, recording.contexts, context_models,
-                  payload);
+    lanes::encode(recording.symbols, recording.symbol_contexts, recording.width, recording.height,
+                  recording.channels, recording.contexts, context_models, payload);
     return payload;
   }
   rans::Tables tables;

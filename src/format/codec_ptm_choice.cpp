@@ -19,8 +19,10 @@ namespace {
 // `effort` picks ptm's point on its size/decode-speed trade-off, measured on the codec study's
 // three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
-// - 2: per tile the smallest of nearest-parent, neighbour-median and parent-corrected
-//   prediction, with zstd;
+// - 2: per tile the smaller of nearest parent with zstd and the neighbour median with coder 7,
+//   the lane coder (ptm_lanes.h), which decodes eight rows side by side: on the codec study's
+//   inputs 1-30 % smaller than its earlier rule (the smallest of three predictors with zstd)
+//   at about 100 MP/s per core where the median wins;
 // - 3 and the default: the same predictors entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
@@ -110,9 +112,15 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
     case 1:
       return encodePtm(tile, stream_options, parent, Predictor::kParentNearest, PtmCoder::kZstd,
                        scratch);
-    case 2:
-      return encodePtmSmallest(tile, stream_options, parent, kSmallestPtmPredictors,
-                               PtmCoder::kZstd, scratch);
+    case 2: {
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> nearest,
+                               encodePtm(tile, stream_options, parent, Predictor::kParentNearest,
+                                         PtmCoder::kZstd, scratch));
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> lanes,
+                               encodePtm(tile, stream_options, parent, Predictor::kNeighbourMedian,
+                                         PtmCoder::kRansLanes, scratch));
+      return lanes.size() < nearest.size() ? std::move(lanes) : std::move(nearest);
+    }
     default: {
       // The predictor that suits the most elaborate coder (the smallest, as a rule), then the
       // fastest coder within 3 % of it: estimated fastest first, so a tile that a fast coder

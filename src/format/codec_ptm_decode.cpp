@@ -75,8 +75,8 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   const bool with_tables = (payload[1] & kPtmTablesFlag) != 0;
   const uint8_t coder_byte = payload[1] & uint8_t(~kPtmTablesFlag);
   if (coder_byte > uint8_t(PtmCoder::kRansLanes) ||
-      (with_tables && (!isRansCoder(PtmCoder(coder_byte)) ||
-                       PtmCoder(coder_byte) == PtmCoder::kRansLanes)))
+      (with_tables &&
+       (!isRansCoder(PtmCoder(coder_byte)) || PtmCoder(coder_byte) == PtmCoder::kRansLanes)))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);

@@ -26,8 +26,12 @@ constexpr uint32_t kCheckSteps = 16;
 constexpr size_t kPadding = kCheckSteps * 16 + 16;
 
 // The step at which lane `lane` of a band decodes column x, and the band's step count.
-constexpr uint32_t stepOf(uint32_t x, uint32_t lane) { return x + 2 * lane; }
-constexpr uint32_t stepsPerBand(uint32_t width) { return width + 2 * (kLanes - 1); }
+constexpr uint32_t stepOf(uint32_t x, uint32_t lane) {
+  return x + 2 * lane;
+}
+constexpr uint32_t stepsPerBand(uint32_t width) {
+  return width + 2 * (kLanes - 1);
+}
 
 void appendU32(std::vector<uint8_t>& out, uint32_t value) {
   for (int i = 0; i < 4; ++i) out.push_back(uint8_t(value >> (8 * i)));
@@ -184,8 +188,7 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
     }
     return true;
   }
-  const uint32_t position =
-      g.has_parent ? 2u * g.rows->second[y] + g.columns->second[x] : 0u;
+  const uint32_t position = g.has_parent ? 2u * g.rows->second[y] + g.columns->second[x] : 0u;
   const uint32_t context = position * kActivityClasses + activity_class;
   uint8_t symbols[4];
   for (uint32_t c = 0; c < ch; ++c)
@@ -281,16 +284,14 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   __m256i group_models[kCh][kGroups];
   for (uint32_t c = 0; c < kCh; ++c)
     for (uint32_t group = 0; group < kGroups; ++group)
-      group_models[c][group] =
-          group * kActivityClasses < g.contexts
-              ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
-                    model_offsets + c * g.contexts + group * kActivityClasses))
-              : zero;
+      group_models[c][group] = group * kActivityClasses < g.contexts
+                                   ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
+                                         model_offsets + c * g.contexts + group * kActivityClasses))
+                                   : zero;
   // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
   // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
   // columns differ by even numbers, is a first child or every lane a second.
-  const uint32_t column_offset =
-      g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
+  const uint32_t column_offset = g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
   __m256i state[kCh];
   for (uint32_t c = 0; c < kCh; ++c)
     state[c] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.states[c]));
@@ -307,8 +308,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
         row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
       }
-    const __m256i parent_rows =
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
+    const __m256i parent_rows = _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
     const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
     const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
     const bool first_band = y0 == 0;
@@ -318,7 +318,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
       const __m256i active = _mm256_and_si256(
-          _mm256_andnot_si256(_mm256_cmpgt_epi32(zero, xs), _mm256_cmpgt_epi32(_mm256_set1_epi32(int(width)), xs)),
+          _mm256_andnot_si256(_mm256_cmpgt_epi32(zero, xs),
+                              _mm256_cmpgt_epi32(_mm256_set1_epi32(int(width)), xs)),
           row_in);
       const __m256i first_column = _mm256_cmpeq_epi32(xs, zero);
       const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
@@ -369,8 +370,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       const uint32_t second_column = g.has_parent ? (t + column_offset) & 1 : 0;
       __m256i derived = zero;
       if (g.has_parent && second_column != 0)
-        derived = _mm256_and_si256(_mm256_and_si256(derived_row, active),
-                                   _mm256_cmpgt_epi32(xs, zero));
+        derived =
+            _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
       // A derived lane's parent texel, in the parent's copy.
       __m256i parent_at = zero;
@@ -385,7 +386,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
         if (g.has_parent) {
           model = _mm256_blendv_epi8(
-              model, _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
+              model,
+              _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
               second_row);
           if (derived_mask != 0)
             model = _mm256_blendv_epi8(
@@ -395,20 +397,22 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         const __m256i slot = _mm256_and_si256(state[c], slot_mask);
         const __m256i entry = _mm256_i32gather_epi32(slot_tables, _mm256_add_epi32(model, slot), 4);
         const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
-        __m256i next = _mm256_add_epi32(
-            _mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
-                               _mm256_srli_epi32(state[c], kScaleBits)),
-            _mm256_and_si256(_mm256_srli_epi32(entry, kBiasShift), slot_mask));
+        __m256i next =
+            _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
+                                                _mm256_srli_epi32(state[c], kScaleBits)),
+                             _mm256_and_si256(_mm256_srli_epi32(entry, kBiasShift), slot_mask));
         next = _mm256_blendv_epi8(state[c], next, active);
         const __m256i reads =
             _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
         const int read_mask = _mm256_movemask_ps(_mm256_castsi256_ps(reads));
         if (read_mask != 0) {
-          const __m256i words = _mm256_cvtepu16_epi32(
-              _mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
+          const __m256i words =
+              _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
           const __m256i mine = _mm256_permutevar8x32_epi32(
-              words, _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
-          next = _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), mine), reads);
+              words,
+              _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
+          next =
+              _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), mine), reads);
           s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
         }
         state[c] = next;
@@ -416,14 +420,15 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbol, escape), active);
         const int escape_mask = _mm256_movemask_ps(_mm256_castsi256_ps(escaped));
         if (escape_mask != 0) [[unlikely]] {
-          const __m256i bytes = _mm256_cvtepu8_epi32(
-              _mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.escapes[c])));
+          const __m256i bytes =
+              _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.escapes[c])));
           const __m256i mine = _mm256_permutevar8x32_epi32(
               bytes,
               _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[escape_mask])));
           code = _mm256_blendv_epi8(code, mine, escaped);
           // The encoder escapes only what 0..62 cannot say.
-          failed = _mm256_or_si256(failed, _mm256_and_si256(escaped, _mm256_cmpgt_epi32(escape, mine)));
+          failed =
+              _mm256_or_si256(failed, _mm256_and_si256(escaped, _mm256_cmpgt_epi32(escape, mine)));
           s.escapes[c] += __builtin_popcount(unsigned(escape_mask));
         }
         // Zigzag back to a signed residual: 0, 1, 2, 3, ... -> 0, -1, 1, -2, ...
@@ -561,9 +566,8 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
   }
 }
 
-bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            bool has_parent, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
-            Path path) {
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels, bool has_parent,
+            std::span<const uint8_t> params, std::vector<uint8_t>& padded, Path path) {
   Streams streams;
   if (!parse(section, channels, padded, streams)) return false;
   const uint32_t contexts = uint32_t(params.size() / channels);
@@ -578,8 +582,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   // The SIMD decoder's model offsets, and after the streams in `padded` the parent without
   // its stride and the band's texels by step.
   int32_t model_offsets[4 * kParentContexts];
-  for (size_t i = 0; i < params.size(); ++i)
-    model_offsets[i] = int32_t(params[i] * kScale);
+  for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
   constexpr size_t kAlign = 32;
   const size_t streams_bytes = (padded.size() + kAlign - 1) / kAlign * kAlign;
   uint32_t parent_stride = 0;
@@ -587,7 +590,8 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   if (has_parent) {
     parent_stride = walk.parent->width_px * channels;
     // Gathers read four bytes from a texel's first.
-    parent_bytes = (size_t(walk.parent->height_px) * parent_stride + 4 + kAlign - 1) / kAlign * kAlign;
+    parent_bytes =
+        (size_t(walk.parent->height_px) * parent_stride + 4 + kAlign - 1) / kAlign * kAlign;
   }
   // Lane 0 reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the
   // band's last step.
@@ -603,7 +607,8 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
     streams.escapes[c] += moved;
     streams.escapes_end[c] += moved;
   }
-  uint8_t* aligned = padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
+  uint8_t* aligned =
+      padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
   uint8_t* parent_texels = aligned + streams_bytes;
   uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_texels + parent_bytes);
   if (has_parent)

@@ -54,8 +54,8 @@ enum class Path : uint8_t { kFastest, kScalar };
 /// byte in family kFamily; `padded` is scratch. Returns false when the section is truncated or
 /// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
 /// of a residual that needed none).
-bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            bool has_parent, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels, bool has_parent,
+            std::span<const uint8_t> params, std::vector<uint8_t>& padded,
             Path path = Path::kFastest);
 
 /// True when decode() can take its SIMD path on this processor.

@@ -46,6 +46,8 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (PtmCoder coder : kCoders)
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
+  // Coder 7 codes predictor 3 only (ptm_lanes.h).
+  payloads.push_back(makeChildPayload(channels, Predictor::kNeighbourMedian, PtmCoder::kRansLanes));
   // And the default's payload of a comb, which carries explicit tables.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
@@ -88,11 +90,12 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad[0] = uint8_t(Predictor::kLeastSquares) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   bad = tile.payload;
-  bad[1] = uint8_t(PtmCoder::kRansParentErrors) + 1;
+  bad[1] = uint8_t(PtmCoder::kRansLanes) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
-  // The tables flag on zstd, or on a coder past the last.
+  // The tables flag on zstd, on coder 7 (which has none), or on a coder past the last.
   for (const uint8_t coder_byte :
-       {kPtmTablesFlag, uint8_t(kPtmTablesFlag | (uint8_t(PtmCoder::kRansParentErrors) + 1))}) {
+       {kPtmTablesFlag, uint8_t(kPtmTablesFlag | uint8_t(PtmCoder::kRansLanes)),
+        uint8_t(kPtmTablesFlag | (uint8_t(PtmCoder::kRansLanes) + 1))}) {
     bad = tile.payload;
     bad[1] = coder_byte;
     EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value()) << int(coder_byte);

@@ -1,0 +1,169 @@
+// ptm's lane coder (coder 7, ptm_lanes.h): whole pyramids round-trip bit-exactly with both of
+// its decoders, the SIMD one (where the processor has AVX2) and the scalar one every processor
+// runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it exists for
+// predictors 0 and 3 only. Hostile payloads of coder 7 are in codec_ptm_hostile_test.cpp.
+#include <cmath>
+#include <span>
+#include <vector>
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include "format/codec.h"
+#include "format/codec_internal.h"
+#include "format/ptm_lanes.h"
+#include "format/ptm_walk.h"
+#include "ptm_test_fixtures.h"
+#include "support/test_images.h"
+
+namespace tessera::detail {
+namespace {
+
+using test::nextRandom;
+
+// Where a coder-7 payload's lane section starts: header, then one model byte per context.
+size_t laneSectionAt(std::span<const uint8_t> payload, uint32_t channels) {
+  const bool has_parent = payload[0] != uint8_t(Predictor::kRoot);
+  return ptm::kHeaderBytes +
+         size_t(has_parent ? ptm::kParentContexts : ptm::kRootContexts) * channels;
+}
+
+// The payload's escaped residuals, all channels: from the lane section's stream lengths.
+uint32_t escapeBytes(std::span<const uint8_t> payload, uint32_t channels) {
+  const size_t lengths =
+      laneSectionAt(payload, channels) + size_t(channels) * ptm::lanes::kLanes * 4;
+  uint32_t total = 0;
+  for (uint32_t c = 0; c < channels; ++c) {
+    const uint8_t* escape_length = payload.data() + lengths + c * 8 + 4;
+    total += uint32_t(escape_length[0]) | uint32_t(escape_length[1]) << 8 |
+             uint32_t(escape_length[2]) << 16 | uint32_t(escape_length[3]) << 24;
+  }
+  return total;
+}
+
+// Decodes a coder-7 payload with the scalar lanes, as decodePtm would where AVX2 is missing.
+Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
+                            const ParentTexels* parent) {
+  Image out(side, side, channels);
+  const Predictor predictor = Predictor(payload[0]);
+  const bool has_parent = predictor != Predictor::kRoot;
+  CodecScratch scratch;
+  ptm::AxisMap columns, rows;
+  auto walk =
+      ptm::prepareWalk(out.texels.data(), side, side, channels, has_parent ? parent : nullptr,
+                       predictor, PtmCoder::kRansLanes, nullptr, scratch.state(), columns, rows);
+  EXPECT_TRUE(walk.has_value());
+  if (!walk) return out;
+  const size_t section_at = laneSectionAt(payload, channels);
+  std::vector<uint8_t> padded;
+  EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, has_parent,
+                                 payload.subspan(ptm::kHeaderBytes, section_at - ptm::kHeaderBytes),
+                                 padded, ptm::lanes::Path::kScalar));
+  return out;
+}
+
+TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
+  // Odd sizes and borders put blocks across tile edges and bands of fewer than eight rows at
+  // the bottom; a noisy source makes residuals that only an escape can carry.
+  struct Case {
+    uint32_t width, height, border, tile_px;
+    bool noisy;
+  };
+  if (!ptm::lanes::simdAvailable())
+    GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
+  for (const Case& c :
+       {Case{133, 77, 0, 32, false}, Case{97, 130, 1, 32, false}, Case{71, 69, 2, 32, false},
+        Case{101, 99, 3, 32, true}, Case{300, 270, 1, 128, true}}) {
+    for (uint32_t channels = 1; channels <= 4; ++channels) {
+      PyramidTiles pyramid =
+          makePyramid(c.width, c.height, channels, c.tile_px, c.border, channels + 3);
+      if (c.noisy) {
+        uint32_t seed = channels;
+        for (uint8_t& texel : pyramid.levels[0].texels)
+          texel = uint8_t(texel ^ (nextRandom(seed) & 0x7f));
+        // Keep the levels a floor-average pyramid of the noisy base.
+        for (size_t l = 1; l < pyramid.levels.size(); ++l)
+          pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+      }
+      const uint32_t side = c.tile_px + 2 * c.border;
+      uint32_t escapes = 0;
+      expectCoarseToFineRoundTrip(
+          pyramid, channels,
+          [&](const Image& tile, const ParentTexels* parent) {
+            auto payload = encodePtm(tile.view(), {}, parent, Predictor::kNeighbourMedian,
+                                     PtmCoder::kRansLanes, nullptr);
+            if (payload) {
+              EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
+              EXPECT_EQ((*payload)[0],
+                        uint8_t(parent ? Predictor::kNeighbourMedian : Predictor::kRoot));
+              EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels, tile.texels)
+                  << "scalar lanes";
+              escapes += escapeBytes(*payload, channels);
+            }
+            return payload;
+          },
+          fmt::format("{}x{} border {} channels {}", c.width, c.height, c.border, channels));
+      if (c.noisy) {
+        EXPECT_GT(escapes, 0u) << "the noisy case must exercise escapes";
+      }
+    }
+  }
+}
+
+TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 13);
+  const Image child = pyramid.tile(0, 1, 1);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  const ParentTexels* const parents[] = {&parent, nullptr};  // coded against it, and alone
+  for (const ParentTexels* with : parents) {
+    const auto lanes = encodePtm(child.view(), {}, with, Predictor::kNeighbourMedian,
+                                 PtmCoder::kRansLanes, nullptr);
+    const auto estimate = estimatePtmBytes(child.view(), {}, with, Predictor::kNeighbourMedian,
+                                           PtmCoder::kRansLanes, nullptr);
+    ASSERT_TRUE(lanes.has_value() && estimate.has_value());
+    // The estimate is coder 1's model bits plus the lane section's header; the states the
+    // header holds carry up to two bytes each of what the symbols' bits counted.
+    const double states = 3.0 * ptm::lanes::kLanes;
+    EXPECT_LE(std::abs(double(*estimate) - double(lanes->size())), 2 * states + 3 * 2 + 1);
+    // A walk recorded for coder 1 encodes coder 7 as encodePtm does.
+    PtmRecording recording;
+    ASSERT_TRUE(recordPtm(child.view(), with, Predictor::kNeighbourMedian, PtmCoder::kRans, nullptr,
+                          nullptr, recording)
+                    .has_value());
+    EXPECT_TRUE(walksAlike(PtmCoder::kRans, PtmCoder::kRansLanes));
+    EXPECT_EQ(encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr), *lanes);
+  }
+}
+
+TEST(PtmLanes, CodesPredictorsZeroAndThreeOnly) {
+  PyramidTiles pyramid = makePyramid(128, 128, 3, 64, 0, 5);
+  const Image child = pyramid.tile(0, 1, 0);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  ParentTexels parent = parentOf(parent_tile, 1, 0, 64, 0);
+  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear,
+                              Predictor::kParentCorrected, Predictor::kLeastSquares}) {
+    auto refused = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansLanes, nullptr);
+    ASSERT_FALSE(refused.has_value()) << int(predictor);
+    EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
+  }
+  auto payload = encodePtm(child.view(), {}, &parent, Predictor::kNeighbourMedian,
+                           PtmCoder::kRansLanes, nullptr);
+  ASSERT_TRUE(payload.has_value());
+  Image out(64, 64, 3);
+  // Another predictor's byte on a coder-7 payload, or the tables flag, is corrupt.
+  std::vector<uint8_t> bad = *payload;
+  bad[0] = uint8_t(Predictor::kParentNearest);
+  auto decoded = decodeTile(Codec::kPtm, bad, out, &parent);
+  ASSERT_FALSE(decoded.has_value());
+  EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
+  EXPECT_NE(decoded.error().message.find("lanes"), std::string::npos);
+  bad = *payload;
+  bad[1] = uint8_t(bad[1] | kPtmTablesFlag);
+  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
+  ASSERT_TRUE(decodeTile(Codec::kPtm, *payload, out, &parent).has_value());
+  EXPECT_EQ(out.texels, child.texels);
+}
+
+}  // namespace
+}  // namespace tessera::detail
