@@ -535,8 +535,10 @@ void study(const std::string& input, double min_seconds, const std::string& only
                               key.first, key.second & ~int(tessera::detail::kPtmTablesFlag),
                               (key.second & tessera::detail::kPtmTablesFlag) != 0 ? "+tables" : "",
                               100.0 * bytes / total);
-      fmt::print("\n({}'s bytes by predictor and coder: {})\n",
-                 variant.effort == 0 ? "default" : "effort 3", shares);
+      fmt::print(
+          "\n({}'s bytes by predictor and coder: {})\n",
+          variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort),
+          shares);
       if (smallest_peer_bytes > 0 && variant.effort == 0)
         fmt::print("(default: {:.0f} bytes; {}: {:.0f} bytes; the default is {:.2f} % {})\n", total,
                    smallest_peer, smallest_peer_bytes,
