@@ -275,6 +275,20 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const __m256i zero = _mm256_setzero_si256();
   const __m256i three = _mm256_set1_epi32(3);
   const __m256i last_column = _mm256_set1_epi32(int(width) - 1);
+  // The copy into rows: eight texels of a row lie kLanes words apart; within each half of the
+  // vector the shuffle packs four texels' kCh bytes to the front, and the permute joins the
+  // halves.
+  const __m256i octet_at = _mm256_mullo_epi32(lane, _mm256_set1_epi32(int(kLanes)));
+  alignas(32) int8_t pack_bytes[32];
+  for (uint32_t i = 0; i < 16; ++i) {
+    const int8_t byte = i < 4 * kCh ? int8_t(i / kCh * 4 + i % kCh) : int8_t(-1);
+    pack_bytes[i] = byte;
+    pack_bytes[16 + i] = byte;
+  }
+  const __m256i pack = _mm256_load_si256(reinterpret_cast<const __m256i*>(pack_bytes));
+  alignas(32) int32_t halves[8];
+  for (uint32_t i = 0; i < 8; ++i) halves[i] = int32_t(i < kCh ? i : i < 2 * kCh ? i - kCh + 4 : 7);
+  const __m256i pack_halves = _mm256_load_si256(reinterpret_cast<const __m256i*>(halves));
   __m256i bounds[kActivityClasses - 1];
   for (uint32_t i = 0; i < kActivityClasses - 1; ++i)
     bounds[i] = _mm256_set1_epi32(kActivityBounds[i] * int(kCh) - 1);
@@ -476,19 +490,32 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         if (overrun) return false;
       }
     }
-    // The band's texels from its steps into rows: four bytes a texel while they stay in the
-    // row (the next texel overwrites what spills into it), then byte by byte.
+    // The band's texels from its steps into rows: eight at a time (a gather of one row's
+    // texels, kLanes words apart, packed to kCh bytes each) while the 32 bytes stored stay in
+    // the row, then four bytes a texel (the next texel overwrites what spills into it), then
+    // byte by byte.
     for (uint32_t k = 0; k < rows; ++k) {
       uint8_t* row = g.texels + (y0 + k) * stride;
       const uint32_t* from = diagonal + size_t(stepOf(0, k)) * kLanes + k;
+      // Octets whose 32 bytes end inside the row: 8 i kCh + 32 <= width kCh.
+      const uint32_t octets = width * kCh >= 32 ? (width * kCh - 32) / kCh / 8 + 1 : 0;
+      for (uint32_t i = 0; i < octets; ++i) {
+        const __m256i texels = _mm256_permutevar8x32_epi32(
+            _mm256_shuffle_epi8(
+                _mm256_i32gather_epi32(reinterpret_cast<const int*>(from), octet_at, 4), pack),
+            pack_halves);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(row), texels);
+        row += 8 * kCh;
+        from += 8 * kLanes;
+      }
       // Texels whose four bytes end inside the row: x * kCh + 4 <= width * kCh.
       const uint32_t whole = width * kCh >= 4 ? (width * kCh - 4) / kCh + 1 : 0;
-      for (uint32_t x = 0; x < whole; ++x) {
+      for (uint32_t x = 8 * octets; x < whole; ++x) {
         std::memcpy(row, from, 4);
         row += kCh;
         from += kLanes;
       }
-      for (uint32_t x = whole; x < width; ++x) {
+      for (uint32_t x = std::max(whole, 8 * octets); x < width; ++x) {
         for (uint32_t c = 0; c < kCh; ++c) row[c] = uint8_t(*from >> (8 * c));
         row += kCh;
         from += kLanes;
