@@ -43,8 +43,8 @@ uint32_t readU32(const uint8_t* bytes) {
   return value;
 }
 
-// A section's streams copied behind padding, so that a decoder may read a step ahead of its
-// bounds checks.
+// A section's streams copied behind padding, so that a decoder may read up to kCheckSteps steps
+// ahead of its bounds checks.
 struct Streams {
   uint32_t states[4][kLanes];
   const uint8_t* words[4];
@@ -258,6 +258,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
                                                 const uint8_t* parent_texels,
                                                 uint32_t parent_stride, uint32_t* diagonal) {
+  static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   const uint32_t width = g.width, height = g.height;
   const size_t stride = size_t(width) * kCh;
   const uint32_t steps = stepsPerBand(width);
