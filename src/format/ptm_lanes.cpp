@@ -625,15 +625,20 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   // band's last step.
   const size_t diagonal_bytes =
       size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
-  // Growing `padded` moves the streams: keep their offsets.
-  const uint8_t* old_base = padded.data();
-  padded.resize(streams_bytes + parent_bytes + diagonal_bytes + kAlign);
-  const ptrdiff_t moved = padded.data() - old_base;
+  // Growing `padded` may move the streams: they keep their offsets in it.
+  size_t offsets[4][4];
   for (uint32_t c = 0; c < channels; ++c) {
-    streams.words[c] += moved;
-    streams.words_end[c] += moved;
-    streams.escapes[c] += moved;
-    streams.escapes_end[c] += moved;
+    offsets[c][0] = size_t(streams.words[c] - padded.data());
+    offsets[c][1] = size_t(streams.words_end[c] - padded.data());
+    offsets[c][2] = size_t(streams.escapes[c] - padded.data());
+    offsets[c][3] = size_t(streams.escapes_end[c] - padded.data());
+  }
+  padded.resize(streams_bytes + parent_bytes + diagonal_bytes + kAlign);
+  for (uint32_t c = 0; c < channels; ++c) {
+    streams.words[c] = padded.data() + offsets[c][0];
+    streams.words_end[c] = padded.data() + offsets[c][1];
+    streams.escapes[c] = padded.data() + offsets[c][2];
+    streams.escapes_end[c] = padded.data() + offsets[c][3];
   }
   uint8_t* aligned =
       padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
