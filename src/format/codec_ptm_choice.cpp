@@ -23,7 +23,7 @@ namespace {
 //   the lane coder (ptm_lanes.h), which decodes eight rows side by side: on the codec study's
 //   inputs 1-30 % smaller than its earlier rule (the smallest of three predictors with zstd)
 //   at about 100 MP/s per core where the median wins;
-// - 3 and the default: the same predictors entropy-coded by rANS. Of its coders, fastest to
+// - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
 //   activity), each tile takes the fastest whose estimated size is within 3 % of coder 6's.
