@@ -157,6 +157,12 @@ constexpr bool isChainedCoder(PtmCoder coder) {
 constexpr bool isErrorActivityCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansMixtureChainedErrors || coder == PtmCoder::kRansParentErrors;
 }
+/// True when `coder` can code `predictor`'s residuals: every coder can but coder 7, which has
+/// predictors 0 and 3 only.
+constexpr bool codesPredictor(PtmCoder coder, Predictor predictor) {
+  return coder != PtmCoder::kRansLanes || predictor == Predictor::kRoot ||
+         predictor == Predictor::kNeighbourMedian;
+}
 /// True for the coder whose activity reads the parent instead of the decoded neighbours.
 constexpr bool isParentActivityCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansParentErrors;
@@ -232,8 +238,8 @@ Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOption
                                        CodecScratch* scratch, size_t* estimated_bytes);
 /// The codec table's ptm encoder: `options.effort` picks the predictor and coder rule (1:
 /// nearest parent with zstd; 2: the smaller of that and the neighbour median with coder 7; 0
-/// and 3 and above: the
-/// default, by rANS estimates). docs/codecs.md, "ptm (6)", has the rule and its figures.
+/// and 3 and above: the default, by rANS estimates). docs/codecs.md, "ptm (6)", has the rule
+/// and its figures.
 Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const EncodeOptions& options,
                                                 const ParentTexels* parent, CodecScratch* scratch);
 /// Decodes any ptm payload; `parent` is required unless the payload is kRoot.

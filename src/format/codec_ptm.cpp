@@ -53,8 +53,7 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   const uint32_t width = tile.width_px, height = tile.height_px, channels = tile.channels;
   if (parent == nullptr) predictor = Predictor::kRoot;
   const bool has_parent = predictor != Predictor::kRoot;
-  if (coder == PtmCoder::kRansLanes && predictor != Predictor::kRoot &&
-      predictor != Predictor::kNeighbourMedian)
+  if (!codesPredictor(coder, predictor))
     return fail(ErrorCode::kInvalidArgument, "ptm: coder 7 (lanes) codes predictors 0 and 3 only");
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
@@ -187,8 +186,7 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
   }
   if (coder == PtmCoder::kRansLanes) {
     // No tables: the lanes gather every model from the family's array.
-    const Predictor predictor = Predictor(recording.header[0]);
-    TESSERA_CHECK(predictor == Predictor::kRoot || predictor == Predictor::kNeighbourMedian)
+    TESSERA_CHECK(codesPredictor(coder, Predictor(recording.header[0])))
         << "ptm: coder 7 (lanes) codes predictors 0 and 3 only";
     std::vector<uint8_t> payload = recording.header;
     payload[1] = uint8_t(coder);

@@ -17,16 +17,12 @@ using namespace ptm;
 
 namespace {
 
-// Decodes a rANS coder's model bytes and stream into walk.texels.
+// Decodes a rANS coder's model bytes (present: decodePtm checked) and stream into walk.texels.
 template <bool kChained, rans::FamilyId kFamily, bool kErrors = false, bool kParent = false>
 Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predictor predictor,
                         uint32_t channels, uint32_t contexts, bool with_tables,
                         std::vector<rans::Model>& table_models, const Walk& walk) {
   const size_t params_bytes = size_t(contexts) * channels;
-  if (payload.size() - body_at < params_bytes)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
-                            payload.size(), params_bytes));
   RansReader<kChained, kFamily, kErrors, kParent> reader;
   const rans::Model* family = rans::models(kFamily);
   // Every parameter byte names a model, so a corrupt one shows only as a stream that does not
@@ -82,7 +78,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   const Predictor predictor = Predictor(payload[0]);
   const PtmCoder coder = PtmCoder(coder_byte);
   const bool has_parent = predictor != Predictor::kRoot;
-  if (coder == PtmCoder::kRansLanes && has_parent && predictor != Predictor::kNeighbourMedian)
+  if (!codesPredictor(coder, predictor))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: coder 7 (lanes) with predictor {}: it codes 0 and 3 only",
                             payload[0]));
@@ -107,6 +103,11 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
                                    coder, ls_weights, *state, columns, rows));
 
   const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
+  const size_t params_bytes = size_t(contexts) * channels;
+  if (isRansCoder(coder) && payload.size() - body_at < params_bytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
+                            payload.size(), params_bytes));
   using rans::FamilyId;
   switch (coder) {
     case PtmCoder::kZstd: break;
@@ -129,11 +130,6 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
       return decodeRans<true, FamilyId::kMixture15, true, true>(
           payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansLanes: {
-      const size_t params_bytes = size_t(contexts) * channels;
-      if (payload.size() - body_at < params_bytes)
-        return fail(ErrorCode::kCorrupt,
-                    fmt::format("ptm payload: {} bytes, shorter than its {} model parameters",
-                                payload.size(), params_bytes));
       if (!lanes::decode(payload.subspan(body_at + params_bytes), walk, channels, has_parent,
                          payload.subspan(body_at, params_bytes), state->plane))
         return fail(ErrorCode::kCorrupt,

@@ -43,6 +43,15 @@ uint32_t readU32(const uint8_t* bytes) {
   return value;
 }
 
+// The part of the parent tile a child's blocks cover, copied without the tile's stride (the
+// SIMD decoder gathers derived texels' parents from it).
+struct ParentCopy {
+  const uint8_t* texels = nullptr;
+  uint32_t stride = 0;        ///< bytes per row of the copy
+  uint32_t first_row = 0;     ///< the parent row of the copy's first
+  uint32_t first_column = 0;  ///< the parent column of the copy's first
+};
+
 // A section's streams copied behind padding, so that a decoder may read up to kCheckSteps steps
 // ahead of its bounds checks.
 struct Streams {
@@ -53,8 +62,9 @@ struct Streams {
   const uint8_t* escapes_end[4];
 };
 
-bool parse(std::span<const uint8_t> section, uint32_t channels, std::vector<uint8_t>& padded,
-           Streams& streams) {
+// `padded` gets the streams and then `extra_bytes` more, for the caller.
+bool parse(std::span<const uint8_t> section, uint32_t channels, size_t extra_bytes,
+           std::vector<uint8_t>& padded, Streams& streams) {
   const size_t header = headerBytes(channels);
   if (section.size() < header) return false;
   const uint8_t* at = section.data();
@@ -77,7 +87,7 @@ bool parse(std::span<const uint8_t> section, uint32_t channels, std::vector<uint
   if (total != section.size() - header) return false;
   for (uint32_t c = 0; c < channels; ++c)
     if (lengths[c][0] % 2 != 0) return false;
-  padded.assign(total + 2 * channels * kPadding, 0);
+  padded.assign(total + 2 * channels * kPadding + extra_bytes, 0);
   uint8_t* to = padded.data();
   for (uint32_t c = 0; c < channels; ++c)
     for (uint32_t i = 0; i < 2; ++i) {
@@ -101,12 +111,6 @@ bool finished(const Streams& streams, uint32_t channels) {
 }
 
 // --- scalar ---------------------------------------------------------------------------------
-
-uint32_t activityClassOf(int activity, uint32_t channels) {
-  uint32_t q = 0;
-  for (int bound : kActivityBounds) q += activity >= bound * int(channels);
-  return q;
-}
 
 // One symbol of channel `c` in lane `lane`: the residual byte, or false at corrupt input.
 bool decodeSymbol(Streams& s, uint32_t c, uint32_t lane, const rans::Model& model,
@@ -146,20 +150,8 @@ struct Geometry {
 // coder 1 (ptm_walk.h, codeTexels).
 bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t lane) {
   const uint32_t ch = g.channels;
-  const ptrdiff_t c1 = ptrdiff_t(ch), stride = ptrdiff_t(g.width) * c1;
-  uint8_t* texel = g.texels + size_t(y) * size_t(stride) + size_t(x) * ch;
-  ptrdiff_t left, up, up_left, up_right;
-  if (y == 0) {
-    left = up = up_left = up_right = -c1;
-  } else if (x == 0) {
-    left = up = up_left = -stride;
-    up_right = x + 1 < g.width ? -stride + c1 : -stride;
-  } else {
-    left = -c1;
-    up = -stride;
-    up_left = -stride - c1;
-    up_right = x + 1 < g.width ? -stride + c1 : -stride;
-  }
+  uint8_t* texel = g.texels + (size_t(y) * g.width + x) * ch;
+  const auto [left, up, up_left, up_right] = neighbourOffsets(x, y, g.width, ch);
   const bool origin = x == 0 && y == 0;
   int activity = 0;
   if (!origin)
@@ -168,7 +160,7 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
       activity +=
           std::abs(texel[left + c] - nw) + std::abs(n - nw) + std::abs(texel[up_right + c] - n);
     }
-  const uint32_t activity_class = activityClassOf(activity, ch);
+  const uint32_t activity_class = activityClass(activity, ch);
   const rans::Model* const* models = g.models;
   if (g.has_parent && g.rows->derived[y] != 0 && g.columns->derived[x] != 0) {
     // Marvie & Bouatouch eq. 3, with the remainder the median expects (codeTexels).
@@ -256,8 +248,7 @@ const uint32_t* slotTables() {
 template <uint32_t kCh>
 __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
-                                                const uint8_t* parent_texels,
-                                                uint32_t parent_stride, uint32_t* diagonal) {
+                                                const ParentCopy& parent, uint32_t* diagonal) {
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   const uint32_t width = g.width, height = g.height;
   const size_t stride = size_t(width) * kCh;
@@ -319,7 +310,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                         row_derived[kLanes] = {};
     if (g.has_parent)
       for (uint32_t k = 0; k < rows; ++k) {
-        parent_row_at[k] = int32_t(g.rows->parent[y0 + k] * parent_stride);
+        parent_row_at[k] = int32_t((g.rows->parent[y0 + k] - parent.first_row) * parent.stride);
         row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
         row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
       }
@@ -391,8 +382,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       // A derived lane's parent texel, in the parent's copy.
       __m256i parent_at = zero;
       if (derived_mask != 0) {
-        const __m256i column = _mm256_srli_epi32(
-            _mm256_add_epi32(_mm256_max_epi32(xs, zero), _mm256_set1_epi32(int(column_offset))), 1);
+        const __m256i column = _mm256_sub_epi32(
+            _mm256_srli_epi32(
+                _mm256_add_epi32(_mm256_max_epi32(xs, zero), _mm256_set1_epi32(int(column_offset))),
+                1),
+            _mm256_set1_epi32(int(parent.first_column)));
         parent_at =
             _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
       }
@@ -463,12 +457,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         if (derived_mask != 0) {
           // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects
           // plus the decoded symbol.
-          const __m256i parent = _mm256_and_si256(
-              _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent_texels),
+          const __m256i block_parent = _mm256_and_si256(
+              _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels),
                                      _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 1),
               byte_mask);
           const __m256i sum3 = _mm256_add_epi32(_mm256_add_epi32(left[c], up[c]), up_left[c]);
-          const __m256i four_parent = _mm256_slli_epi32(parent, 2);
+          const __m256i four_parent = _mm256_slli_epi32(block_parent, 2);
           const __m256i known = _mm256_sub_epi32(four_parent, sum3);
           const __m256i expected = _mm256_min_epi32(
               three, _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(predicted[c], sum3),
@@ -596,71 +590,56 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels, bool has_parent,
             std::span<const uint8_t> params, std::vector<uint8_t>& padded, Path path) {
+  const bool simd = path == Path::kFastest && simdAvailable();
+  // The SIMD decoder's scratch after the streams in `padded`: the parent's copy, and the
+  // band's texels by step, from which lane 0 reads the band before's last lane up to
+  // stepOf(x + 1, kLanes - 1) for x up to the band's last step.
+  constexpr size_t kAlign = 32;
+  ParentCopy parent;
+  uint32_t parent_rows = 0;
+  size_t parent_bytes = 0, diagonal_bytes = 0;
+  if (simd) {
+    if (has_parent) {
+      parent.first_row = walk.rows->parent.front();
+      parent.first_column = walk.columns->parent.front();
+      parent_rows = walk.rows->parent.back() - parent.first_row + 1;
+      parent.stride = (walk.columns->parent.back() - parent.first_column + 1) * channels;
+      // Gathers read four bytes from a texel's first.
+      parent_bytes = (size_t(parent_rows) * parent.stride + 4 + kAlign - 1) / kAlign * kAlign;
+    }
+    diagonal_bytes = size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
+  }
   Streams streams;
-  if (!parse(section, channels, padded, streams)) return false;
+  if (!parse(section, channels, kAlign + parent_bytes + diagonal_bytes, padded, streams))
+    return false;
   const uint32_t contexts = uint32_t(params.size() / channels);
-  const rans::Model* family = rans::models(kFamily);
-  const rans::Model* models[4 * kParentContexts];
-  for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
-  const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
-                          walk.parent, walk.columns, walk.rows,   models,   contexts};
-  if (path == Path::kScalar || !simdAvailable()) {
+  if (!simd) {
+    const rans::Model* family = rans::models(kFamily);
+    const rans::Model* models[4 * kParentContexts];
+    for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
+    const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
+                            walk.parent, walk.columns, walk.rows,   models,   contexts};
     return decodeScalar(geometry, streams) && finished(streams, channels);
   }
-  // The SIMD decoder's model offsets, and after the streams in `padded` the parent without
-  // its stride and the band's texels by step.
+  const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
+                          walk.parent, walk.columns, walk.rows,   nullptr,  contexts};
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
-  constexpr size_t kAlign = 32;
-  const size_t streams_bytes = (padded.size() + kAlign - 1) / kAlign * kAlign;
-  uint32_t parent_stride = 0;
-  size_t parent_bytes = 0;
-  if (has_parent) {
-    parent_stride = walk.parent->width_px * channels;
-    // Gathers read four bytes from a texel's first.
-    parent_bytes =
-        (size_t(walk.parent->height_px) * parent_stride + 4 + kAlign - 1) / kAlign * kAlign;
-  }
-  // Lane 0 reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the
-  // band's last step.
-  const size_t diagonal_bytes =
-      size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
-  // Growing `padded` may move the streams: they keep their offsets in it.
-  size_t offsets[4][4];
-  for (uint32_t c = 0; c < channels; ++c) {
-    offsets[c][0] = size_t(streams.words[c] - padded.data());
-    offsets[c][1] = size_t(streams.words_end[c] - padded.data());
-    offsets[c][2] = size_t(streams.escapes[c] - padded.data());
-    offsets[c][3] = size_t(streams.escapes_end[c] - padded.data());
-  }
-  padded.resize(streams_bytes + parent_bytes + diagonal_bytes + kAlign);
-  for (uint32_t c = 0; c < channels; ++c) {
-    streams.words[c] = padded.data() + offsets[c][0];
-    streams.words_end[c] = padded.data() + offsets[c][1];
-    streams.escapes[c] = padded.data() + offsets[c][2];
-    streams.escapes_end[c] = padded.data() + offsets[c][3];
-  }
-  uint8_t* aligned =
-      padded.data() + (kAlign - reinterpret_cast<uintptr_t>(padded.data()) % kAlign) % kAlign;
-  uint8_t* parent_texels = aligned + streams_bytes;
-  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_texels + parent_bytes);
-  if (has_parent)
-    for (uint32_t y = 0; y < walk.parent->height_px; ++y)
-      std::memcpy(parent_texels + size_t(y) * parent_stride, walk.parent->row(y), parent_stride);
+  uint8_t* const scratch_end = padded.data() + padded.size();
+  uint8_t* parent_copy = scratch_end - parent_bytes - diagonal_bytes;
+  parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
+  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes);
+  for (uint32_t y = 0; y < parent_rows; ++y)
+    std::memcpy(parent_copy + size_t(y) * parent.stride,
+                walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
+                parent.stride);
+  parent.texels = parent_copy;
   bool ok = false;
   switch (channels) {
-    case 1:
-      ok = decodeAvx2<1>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
-      break;
-    case 2:
-      ok = decodeAvx2<2>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
-      break;
-    case 3:
-      ok = decodeAvx2<3>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
-      break;
-    default:
-      ok = decodeAvx2<4>(geometry, streams, model_offsets, parent_texels, parent_stride, diagonal);
-      break;
+    case 1: ok = decodeAvx2<1>(geometry, streams, model_offsets, parent, diagonal); break;
+    case 2: ok = decodeAvx2<2>(geometry, streams, model_offsets, parent, diagonal); break;
+    case 3: ok = decodeAvx2<3>(geometry, streams, model_offsets, parent, diagonal); break;
+    default: ok = decodeAvx2<4>(geometry, streams, model_offsets, parent, diagonal); break;
   }
   return ok && finished(streams, channels);
 }

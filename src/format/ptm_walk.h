@@ -74,11 +74,30 @@ constexpr int kRemainderErrorWeight = 2;
 constexpr int kParentErrorWeightLeft = 3;
 constexpr int kParentErrorWeightUp = 1;
 
+inline uint32_t activityClass(int activity, uint32_t channels) {
+  uint32_t q = 0;
+  for (int bound : kActivityBounds) q += activity >= bound * int(channels);
+  return q;
+}
 template <uint32_t kChannels>
 inline uint32_t activityClass(int activity) {
-  uint32_t q = 0;
-  for (int bound : kActivityBounds) q += activity >= bound * int(kChannels);
-  return q;
+  return activityClass(activity, kChannels);
+}
+
+// A texel's causal neighbours as offsets from it in a tile of `width` texels of `channels`
+// bytes, with LOCO-I's substitutes: on the first row all four are the left texel (none at texel
+// (0, 0), which no rule reads), on the first column left, up and up-left are the texel above,
+// and on the last column up-right is up.
+struct NeighbourOffsets {
+  ptrdiff_t left, up, up_left, up_right;
+};
+inline NeighbourOffsets neighbourOffsets(uint32_t x, uint32_t y, uint32_t width,
+                                         uint32_t channels) {
+  const ptrdiff_t c1 = ptrdiff_t(channels), s = ptrdiff_t(width) * c1;
+  if (y == 0) return {-c1, -c1, -c1, -c1};
+  const ptrdiff_t up_right = x + 1 < width ? -s + c1 : -s;
+  if (x == 0) return {-s, -s, -s, up_right};
+  return {-c1, -s, -s - c1, up_right};
 }
 
 // The zstd coder's side of the texel walk: symbols go to (or come from) one plane per channel.
@@ -287,18 +306,11 @@ void codeTexels(const Walk& walk, Coder& coder) {
       ptrdiff_t left = 0, up = 0, up_left = 0, up_right = 0;
       const bool origin = x == 0 && y == 0;
       if constexpr (kNeighbours) {
-        const ptrdiff_t c1 = ptrdiff_t(kChannels), s = ptrdiff_t(stride);
-        if (y == 0) {
-          left = up = up_left = up_right = -c1;
-        } else if (x == 0) {
-          left = up = up_left = -s;
-          up_right = x + 1 < width ? -s + c1 : -s;
-        } else {
-          left = -c1;
-          up = -s;
-          up_left = -s - c1;
-          up_right = x + 1 < width ? -s + c1 : -s;
-        }
+        const NeighbourOffsets n = neighbourOffsets(x, y, width, kChannels);
+        left = n.left;
+        up = n.up;
+        up_left = n.up_left;
+        up_right = n.up_right;
       }
       // Coders 5 and 6: the left and upper texels' coded errors, weighted, with the same
       // substitutes as the texels' (in texel units); none at texel (0, 0).
