@@ -351,6 +351,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
     {"ptm neighbour-median + rANS lanes", Codec::kPtm, 0, Predictor::kNeighbourMedian,
      PtmCoder::kRansLanes},
+    {"ptm parent-corrected + rANS lanes", Codec::kPtm, 0, Predictor::kParentCorrected,
+     PtmCoder::kRansLanes},
     {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
     {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
     {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},

@@ -92,12 +92,13 @@ int main(int argc, char** argv) {
   // the encoder at efforts 1 (nearest parent, zstd), 2 (nearest parent with zstd or the median
   // with coder 7) and 3 (smallest, rANS, whichever coder the default picks), and each rANS coder
   // forced ("c1" to "c6"), so all are seeded whatever the default picks for these small tiles;
-  // the neighbour median with coder 7, the lane coder ("m7"); predictor 5 (least squares, whose
+  // the neighbour median and the parent-corrected predictor with coder 7, the lane coder ("m7",
+  // "p7"); predictor 5 (least squares, whose
   // weights follow the header) with zstd and with coder 6 ("l0", "l6"); and the default on
   // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
   // carry explicit tables.
   const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4",
-                               "c5", "c6", "m7", "l0", "l6", "t0"};
+                               "c5", "c6", "m7", "p7", "l0", "l6", "t0"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
@@ -122,9 +123,11 @@ int main(int argc, char** argv) {
             return tessera::detail::encodePtm(tile.view(), options, &parent,
                                               tessera::detail::Predictor::kLeastSquares,
                                               tessera::detail::PtmCoder(mode[1] - '0'), nullptr);
-          if (mode[0] == 'm')
+          if (mode[0] == 'm' || mode[0] == 'p')
             return tessera::detail::encodePtm(tile.view(), options, &parent,
-                                              tessera::detail::Predictor::kNeighbourMedian,
+                                              mode[0] == 'm'
+                                                  ? tessera::detail::Predictor::kNeighbourMedian
+                                                  : tessera::detail::Predictor::kParentCorrected,
                                               tessera::detail::PtmCoder(mode[1] - '0'), nullptr);
           return tessera::detail::encodePtmSmallest(tile.view(), options, &parent, kCandidates,
                                                     tessera::detail::PtmCoder(mode[1] - '0'),

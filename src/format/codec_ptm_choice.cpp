@@ -37,6 +37,9 @@ namespace {
 //   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
 //   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
+// Effort 2: predictor 4 in the lanes decodes at about half the median's speed there, so it
+// takes the tile only where it saves this much.
+constexpr size_t kLanesCorrectedMinSavingPercent = 5;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
@@ -116,9 +119,24 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
       TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> nearest,
                                encodePtm(tile, stream_options, parent, Predictor::kParentNearest,
                                          PtmCoder::kZstd, scratch));
-      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> lanes,
-                               encodePtm(tile, stream_options, parent, Predictor::kNeighbourMedian,
-                                         PtmCoder::kRansLanes, scratch));
+      // The lanes' predictor by estimate, the payload coded once from its recording.
+      PtmRecording median, corrected;
+      std::vector<uint8_t> median_models, corrected_models;
+      TESSERA_TRY(recordPtm(tile, parent, Predictor::kNeighbourMedian, PtmCoder::kRansLanes,
+                            scratch, nullptr, median));
+      const size_t median_bytes = estimateRecordedPtm(median, PtmCoder::kRansLanes, &median_models);
+      bool take_corrected = false;
+      if (parent != nullptr) {
+        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
+                              scratch, nullptr, corrected));
+        take_corrected =
+            estimateRecordedPtm(corrected, PtmCoder::kRansLanes, &corrected_models) * 100 <=
+            median_bytes * (100 - kLanesCorrectedMinSavingPercent);
+      }
+      std::vector<uint8_t> lanes =
+          take_corrected
+              ? encodeRecordedPtm(corrected, PtmCoder::kRansLanes, scratch, &corrected_models)
+              : encodeRecordedPtm(median, PtmCoder::kRansLanes, scratch, &median_models);
       return lanes.size() < nearest.size() ? std::move(lanes) : std::move(nearest);
     }
     default: {

@@ -79,9 +79,10 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   const PtmCoder coder = PtmCoder(coder_byte);
   const bool has_parent = predictor != Predictor::kRoot;
   if (!codesPredictor(coder, predictor))
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("ptm payload: coder 7 (lanes) with predictor {}: it codes 0 and 3 only",
-                            payload[0]));
+    return fail(
+        ErrorCode::kCorrupt,
+        fmt::format("ptm payload: coder 7 (lanes) with predictor {}: it codes 0, 3 and 4 only",
+                    payload[0]));
   if (has_parent && parent == nullptr)
     return fail(ErrorCode::kCorrupt,
                 "ptm payload: coded against a parent tile, but the tile has none (coarsest "
@@ -130,7 +131,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
       return decodeRans<true, FamilyId::kMixture15, true, true>(
           payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansLanes: {
-      if (!lanes::decode(payload.subspan(body_at + params_bytes), walk, channels, has_parent,
+      if (!lanes::decode(payload.subspan(body_at + params_bytes), walk, channels, predictor,
                          payload.subspan(body_at, params_bytes), state->plane))
         return fail(ErrorCode::kCorrupt,
                     "ptm payload: lane streams truncated, corrupt or followed by trailing bytes");

@@ -139,19 +139,32 @@ struct Geometry {
   uint8_t* texels;
   uint32_t width, height, channels;
   bool has_parent;
+  bool corrected;  ///< predictor 4
   const ImageView* parent;
   const AxisMap* columns;
   const AxisMap* rows;
   const rans::Model* const* models;  // [channel * contexts + context]
   uint32_t contexts;
+  const int16_t* upsampled;  ///< predictor 4: the walk's planes
+  int16_t* detail;
 };
 
-// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0 and 3 and
+// Predictor 4: a decoded texel's departure from the upsampled parent, which the texels after it
+// read as neighbours.
+void keepDetail(const Geometry& g, size_t index) {
+  if (!g.corrected) return;
+  for (uint32_t c = 0; c < g.channels; ++c)
+    g.detail[index + c] = int16_t(16 * g.texels[index + c] - g.upsampled[index + c]);
+}
+
+// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0, 3 and 4 and
 // coder 1 (ptm_walk.h, codeTexels).
 bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t lane) {
   const uint32_t ch = g.channels;
-  uint8_t* texel = g.texels + (size_t(y) * g.width + x) * ch;
-  const auto [left, up, up_left, up_right] = neighbourOffsets(x, y, g.width, ch);
+  const size_t index = (size_t(y) * g.width + x) * ch;
+  uint8_t* texel = g.texels + index;
+  const NeighbourOffsets neighbours = neighbourOffsets(x, y, g.width, ch);
+  const auto [left, up, up_left, up_right] = neighbours;
   const bool origin = x == 0 && y == 0;
   int activity = 0;
   if (!origin)
@@ -178,6 +191,7 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
         return false;
       texel[c] = uint8_t(known + expected + symbol);
     }
+    keepDetail(g, index);
     return true;
   }
   const uint32_t position = g.has_parent ? 2u * g.rows->second[y] + g.columns->second[x] : 0u;
@@ -189,11 +203,23 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
     symbols[0] = uint8_t(symbols[0] + symbols[1]);
     symbols[2] = uint8_t(symbols[2] + symbols[1]);
   }
+  const bool full = g.corrected && g.rows->full[y] != 0 && g.columns->full[x] != 0;
   for (uint32_t c = 0; c < ch; ++c) {
-    const int predicted =
-        origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+    int predicted = 0;
+    if (g.corrected)
+      predicted = std::clamp(
+          (parentCorrectedEstimate(g.upsampled + index + c, g.detail + index + c, texel + c,
+                                   neighbours, origin, full, position,
+                                   g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c],
+                                   ch, size_t(g.width) * ch) +
+           8) >>
+              4,
+          0, 255);
+    else if (!origin)
+      predicted = medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
     texel[c] = uint8_t(predicted + symbols[c]);
   }
+  keepDetail(g, index);
   return true;
 }
 
@@ -245,10 +271,24 @@ const uint32_t* slotTables() {
   return tables.get();
 }
 
-template <uint32_t kCh>
+// Sign-extends the low 16 bits of each lane (an int16 read by a 32-bit gather).
+__attribute__((target("avx2"))) inline __m256i low16Signed(__m256i v) {
+  return _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
+}
+
+// LOCO-I's median of each lane's a, b and a + b - c (medPredict).
+__attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m256i c) {
+  const __m256i low = _mm256_min_epi32(a, b), high = _mm256_max_epi32(a, b);
+  return _mm256_min_epi32(high, _mm256_max_epi32(low, _mm256_sub_epi32(_mm256_add_epi32(a, b), c)));
+}
+
+// `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
+// parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
+template <uint32_t kCh, bool kCorrected>
 __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
-                                                const ParentCopy& parent, uint32_t* diagonal) {
+                                                const ParentCopy& parent, uint32_t* diagonal,
+                                                const int16_t* shortfall) {
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   const uint32_t width = g.width, height = g.height;
   const size_t stride = size_t(width) * kCh;
@@ -298,6 +338,14 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
   // columns differ by even numbers, is a first child or every lane a second.
   const uint32_t column_offset = g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
+  // Predictor 4 pulls a texel only where its block lies wholly in the tile: a first column that
+  // is a block's second child, or a last column that is a first, never.
+  const bool first_column_partial = kCorrected && g.columns->full.front() == 0;
+  const bool last_column_partial = kCorrected && g.columns->full.back() == 0;
+  const int* upsampled = reinterpret_cast<const int*>(g.upsampled);
+  const int* shortfalls = reinterpret_cast<const int*>(shortfall);
+  const __m256 twelve = _mm256_set1_ps(12.0f);
+  const __m256i eight = _mm256_set1_epi32(8);
   __m256i state[kCh];
   for (uint32_t c = 0; c < kCh; ++c)
     state[c] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.states[c]));
@@ -306,21 +354,32 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     const uint32_t rows = std::min(kLanes, height - y0);
     const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
     // Per lane: its row's parent row offset, second-row and derived-row flags.
+    // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
+    // row 0) and whether the row's blocks lie in the tile.
     alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
-                        row_derived[kLanes] = {};
+                        row_derived[kLanes] = {}, row_full[kLanes] = {},
+                        upsampled_row_at[kLanes] = {};
     if (g.has_parent)
       for (uint32_t k = 0; k < rows; ++k) {
         parent_row_at[k] = int32_t((g.rows->parent[y0 + k] - parent.first_row) * parent.stride);
         row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
         row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
+        row_full[k] = g.rows->full[y0 + k] != 0 ? -1 : 0;
+        upsampled_row_at[k] = int32_t((y0 + k) * stride);
       }
     const __m256i parent_rows = _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
     const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
     const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
+    const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
+    const __m256i upsampled_rows =
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
     const bool first_band = y0 == 0;
-    // Each lane's texels of the last three steps: left, and (rotated) the row above's.
+    // Each lane's texels of the last three steps: left, and (rotated) the row above's; for
+    // predictor 4 their departures from the upsampled parent likewise.
     __m256i back1[kCh], back2[kCh], back3[kCh];
-    for (uint32_t c = 0; c < kCh; ++c) back1[c] = back2[c] = back3[c] = zero;
+    __m256i detail1[kCh], detail2[kCh], detail3[kCh];
+    for (uint32_t c = 0; c < kCh; ++c)
+      back1[c] = back2[c] = back3[c] = detail1[c] = detail2[c] = detail3[c] = zero;
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
       const __m256i active = _mm256_and_si256(
@@ -332,14 +391,37 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       // Lane 0's row above is the last lane's of the band before, whose steps still lie
       // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
       int up0[kCh] = {}, up_left0[kCh] = {}, up_right0[kCh] = {};
+      int up0_detail[kCh] = {}, up_left0_detail[kCh] = {}, up_right0_detail[kCh] = {};
       if (!first_band)
         for (uint32_t c = 0; c < kCh; ++c) {
           const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
           up0[c] = int(above[0] >> (8 * c) & 0xff);
           up_left0[c] = int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff);
           up_right0[c] = int(above[kLanes] >> (8 * c) & 0xff);
+          if constexpr (kCorrected) {
+            // Columns past the tile's edges belong to lanes that are idle or take substitutes:
+            // any value in the plane will do.
+            const int16_t* above_row = g.upsampled + size_t(y0 - 1) * stride + c;
+            const uint32_t column = std::min(t, width - 1);
+            up0_detail[c] = 16 * up0[c] - above_row[size_t(column) * kCh];
+            up_left0_detail[c] =
+                16 * up_left0[c] - above_row[size_t(t == 0 ? 0 : std::min(t - 1, width - 1)) * kCh];
+            up_right0_detail[c] =
+                16 * up_right0[c] - above_row[size_t(std::min(t + 1, width - 1)) * kCh];
+          }
         }
-      __m256i left[kCh], up[kCh], up_left[kCh], predicted[kCh];
+      // Predictor 4: each lane's column kept inside the tile for its gathers, and where the
+      // block sum pulls.
+      [[maybe_unused]] __m256i column_in = zero, pulled = zero;
+      if constexpr (kCorrected) {
+        column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
+        __m256i column_partial = zero;
+        if (first_column_partial) column_partial = first_column;
+        if (last_column_partial) column_partial = _mm256_or_si256(column_partial, at_last_column);
+        pulled = _mm256_andnot_si256(column_partial, _mm256_and_si256(full_row, active));
+      }
+      __m256i left[kCh], up[kCh], up_left[kCh], medians[kCh], predicted[kCh];
+      [[maybe_unused]] __m256i upsampled_value[kCh];
       __m256i activity = zero;
       for (uint32_t c = 0; c < kCh; ++c) {
         __m256i u = _mm256_permutevar8x32_epi32(back2[c], rotate);
@@ -362,9 +444,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(l, ul)));
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(u, ul)));
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(ur, u)));
-        const __m256i low = _mm256_min_epi32(l, u), high = _mm256_max_epi32(l, u);
-        const __m256i gradient = _mm256_sub_epi32(_mm256_add_epi32(l, u), ul);
-        predicted[c] = _mm256_min_epi32(high, _mm256_max_epi32(low, gradient));
+        medians[c] = median(l, u, ul);
+        predicted[c] = medians[c];
         left[c] = l;
         up[c] = u;
         up_left[c] = ul;
@@ -381,14 +462,69 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
       // A derived lane's parent texel, in the parent's copy.
       __m256i parent_at = zero;
-      if (derived_mask != 0) {
+      if (kCorrected || derived_mask != 0) {
         const __m256i column = _mm256_sub_epi32(
             _mm256_srli_epi32(
-                _mm256_add_epi32(_mm256_max_epi32(xs, zero), _mm256_set1_epi32(int(column_offset))),
+                _mm256_add_epi32(_mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column),
+                                 _mm256_set1_epi32(int(column_offset))),
                 1),
             _mm256_set1_epi32(int(parent.first_column)));
         parent_at =
             _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
+      }
+      if constexpr (kCorrected) {
+        // Predictor 4 (ptm_walk.h, parentCorrectedEstimate), with eq. 3's pull written from
+        // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
+        // (G - 4δ) >> 3, b's (G - D(a) - 3δ) / 12 and c's (G - D(a) - D(b) - 2δ) >> 2, the same
+        // integers as the walk's, since D(t) = 16 t - W(t).
+        const __m256i upsampled_at = _mm256_add_epi32(
+            upsampled_rows, _mm256_mullo_epi32(column_in, _mm256_set1_epi32(int(kCh))));
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const __m256i w = low16Signed(_mm256_i32gather_epi32(
+              upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2));
+          __m256i dl = detail1[c];
+          __m256i du = _mm256_permutevar8x32_epi32(detail2[c], rotate);
+          __m256i dul = _mm256_permutevar8x32_epi32(detail3[c], rotate);
+          __m256i dur = _mm256_permutevar8x32_epi32(detail1[c], rotate);
+          if (first_band) {
+            du = _mm256_blend_epi32(du, dl, 1);
+            dul = _mm256_blend_epi32(dul, dl, 1);
+            dur = _mm256_blend_epi32(dur, dl, 1);
+          } else {
+            du = _mm256_blend_epi32(du, _mm256_set1_epi32(up0_detail[c]), 1);
+            dul = _mm256_blend_epi32(dul, _mm256_set1_epi32(up_left0_detail[c]), 1);
+            dur = _mm256_blend_epi32(dur, _mm256_set1_epi32(up_right0_detail[c]), 1);
+          }
+          dur = _mm256_blendv_epi8(dur, du, at_last_column);
+          dl = _mm256_blendv_epi8(dl, du, first_column);
+          dul = _mm256_blendv_epi8(dul, du, first_column);
+          const __m256i departure = median(dl, du, dul);
+          const __m256i block_shortfall = low16Signed(_mm256_i32gather_epi32(
+              shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2));
+          __m256i pull;
+          if (second_column == 0) {
+            const __m256i first = _mm256_srai_epi32(
+                _mm256_sub_epi32(block_shortfall, _mm256_slli_epi32(departure, 2)), 3);
+            const __m256i second = _mm256_srai_epi32(
+                _mm256_sub_epi32(_mm256_sub_epi32(_mm256_sub_epi32(block_shortfall, du), dur),
+                                 _mm256_slli_epi32(departure, 1)),
+                2);
+            pull = _mm256_and_si256(_mm256_blendv_epi8(first, second, second_row), pulled);
+          } else {
+            // C's division towards zero, exact in single precision: |n| < 2^17.
+            const __m256i n =
+                _mm256_sub_epi32(_mm256_sub_epi32(block_shortfall, dl),
+                                 _mm256_add_epi32(_mm256_slli_epi32(departure, 1), departure));
+            pull =
+                _mm256_and_si256(_mm256_cvttps_epi32(_mm256_div_ps(_mm256_cvtepi32_ps(n), twelve)),
+                                 _mm256_andnot_si256(second_row, pulled));
+          }
+          const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
+          predicted[c] = _mm256_min_epi32(
+              byte_mask,
+              _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
+          upsampled_value[c] = w;
+        }
       }
       __m256i residual[kCh];
       for (uint32_t c = 0; c < kCh; ++c) {
@@ -465,8 +601,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           const __m256i four_parent = _mm256_slli_epi32(block_parent, 2);
           const __m256i known = _mm256_sub_epi32(four_parent, sum3);
           const __m256i expected = _mm256_min_epi32(
-              three, _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(predicted[c], sum3),
-                                                             four_parent)));
+              three, _mm256_max_epi32(
+                         zero, _mm256_sub_epi32(_mm256_add_epi32(medians[c], sum3), four_parent)));
           const __m256i remainder_value = _mm256_and_si256(
               _mm256_add_epi32(_mm256_add_epi32(known, expected), residual[c]), byte_mask);
           value = _mm256_blendv_epi8(value, remainder_value, derived);
@@ -474,6 +610,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         back3[c] = back2[c];
         back2[c] = back1[c];
         back1[c] = value;
+        if constexpr (kCorrected) {
+          detail3[c] = detail2[c];
+          detail2[c] = detail1[c];
+          detail1[c] = _mm256_sub_epi32(_mm256_slli_epi32(value, 4), upsampled_value[c]);
+        }
         packed = _mm256_or_si256(packed, _mm256_slli_epi32(value, int(8 * c)));
       }
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), packed);
@@ -520,6 +661,31 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   for (uint32_t c = 0; c < kCh; ++c)
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(s.states[c]), state[c]);
   return _mm256_testz_si256(failed, failed) != 0;
+}
+
+// Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
+// place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
+void blockShortfalls(const Walk& walk, uint32_t channels, const ParentCopy& parent,
+                     uint32_t parent_rows, int16_t* shortfall) {
+  std::fill_n(shortfall, size_t(parent_rows) * parent.stride, int16_t(0));
+  const AxisMap& columns = *walk.columns;
+  const AxisMap& rows = *walk.rows;
+  const size_t stride = size_t(walk.width) * channels;
+  for (uint32_t y = 0; y + 1 < walk.height; ++y) {
+    if (rows.full[y] == 0 || rows.second[y] != 0) continue;
+    const uint8_t* parent_row = walk.parent->row(rows.parent[y]);
+    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride;
+    const int16_t* upper = walk.upsampled + size_t(y) * stride;
+    const int16_t* lower = upper + stride;
+    for (uint32_t x = 0; x + 1 < walk.width; ++x) {
+      if (columns.full[x] == 0 || columns.second[x] != 0) continue;
+      const size_t at = size_t(x) * channels, parent_at = size_t(columns.parent[x]) * channels;
+      for (uint32_t c = 0; c < channels; ++c)
+        out[parent_at - size_t(parent.first_column) * channels + c] =
+            int16_t(64 * parent_row[parent_at + c] + 24 - upper[at + c] - upper[at + channels + c] -
+                    lower[at + c] - lower[at + channels + c]);
+    }
+  }
 }
 
 }  // namespace
@@ -588,58 +754,89 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
   }
 }
 
-bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels, bool has_parent,
-            std::span<const uint8_t> params, std::vector<uint8_t>& padded, Path path) {
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+            Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
+            Path path) {
   const bool simd = path == Path::kFastest && simdAvailable();
-  // The SIMD decoder's scratch after the streams in `padded`: the parent's copy, and the
-  // band's texels by step, from which lane 0 reads the band before's last lane up to
-  // stepOf(x + 1, kLanes - 1) for x up to the band's last step.
+  const bool has_parent = predictor != Predictor::kRoot;
+  const bool corrected = predictor == Predictor::kParentCorrected;
+  // The SIMD decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
+  // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0
+  // reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's
+  // last step.
   constexpr size_t kAlign = 32;
   ParentCopy parent;
   uint32_t parent_rows = 0;
-  size_t parent_bytes = 0, diagonal_bytes = 0;
+  size_t parent_bytes = 0, shortfall_bytes = 0, diagonal_bytes = 0;
+  auto aligned = [](size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; };
   if (simd) {
     if (has_parent) {
       parent.first_row = walk.rows->parent.front();
       parent.first_column = walk.columns->parent.front();
       parent_rows = walk.rows->parent.back() - parent.first_row + 1;
       parent.stride = (walk.columns->parent.back() - parent.first_column + 1) * channels;
-      // Gathers read four bytes from a texel's first.
-      parent_bytes = (size_t(parent_rows) * parent.stride + 4 + kAlign - 1) / kAlign * kAlign;
+      // Gathers read four bytes from a texel's first (two past a shortfall's).
+      parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
+      if (corrected) shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
     }
     diagonal_bytes = size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
   }
   Streams streams;
-  if (!parse(section, channels, kAlign + parent_bytes + diagonal_bytes, padded, streams))
+  if (!parse(section, channels, kAlign + parent_bytes + shortfall_bytes + diagonal_bytes, padded,
+             streams))
     return false;
   const uint32_t contexts = uint32_t(params.size() / channels);
   if (!simd) {
     const rans::Model* family = rans::models(kFamily);
     const rans::Model* models[4 * kParentContexts];
     for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
-    const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
-                            walk.parent, walk.columns, walk.rows,   models,   contexts};
+    const Geometry geometry{walk.texels, walk.width,     walk.height,  channels,  has_parent,
+                            corrected,   walk.parent,    walk.columns, walk.rows, models,
+                            contexts,    walk.upsampled, walk.detail};
     return decodeScalar(geometry, streams) && finished(streams, channels);
   }
-  const Geometry geometry{walk.texels, walk.width,   walk.height, channels, has_parent,
-                          walk.parent, walk.columns, walk.rows,   nullptr,  contexts};
+  const Geometry geometry{walk.texels, walk.width,     walk.height,  channels,  has_parent,
+                          corrected,   walk.parent,    walk.columns, walk.rows, nullptr,
+                          contexts,    walk.upsampled, nullptr};
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
   uint8_t* const scratch_end = padded.data() + padded.size();
-  uint8_t* parent_copy = scratch_end - parent_bytes - diagonal_bytes;
+  uint8_t* parent_copy = scratch_end - parent_bytes - shortfall_bytes - diagonal_bytes;
   parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
-  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes);
+  int16_t* shortfall = reinterpret_cast<int16_t*>(parent_copy + parent_bytes);
+  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes + shortfall_bytes);
   for (uint32_t y = 0; y < parent_rows; ++y)
     std::memcpy(parent_copy + size_t(y) * parent.stride,
                 walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
                 parent.stride);
   parent.texels = parent_copy;
+  if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
   bool ok = false;
-  switch (channels) {
-    case 1: ok = decodeAvx2<1>(geometry, streams, model_offsets, parent, diagonal); break;
-    case 2: ok = decodeAvx2<2>(geometry, streams, model_offsets, parent, diagonal); break;
-    case 3: ok = decodeAvx2<3>(geometry, streams, model_offsets, parent, diagonal); break;
-    default: ok = decodeAvx2<4>(geometry, streams, model_offsets, parent, diagonal); break;
+  switch (channels * 2 + (corrected ? 1 : 0)) {
+    case 2:
+      ok = decodeAvx2<1, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 3:
+      ok = decodeAvx2<1, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 4:
+      ok = decodeAvx2<2, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 5:
+      ok = decodeAvx2<2, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 6:
+      ok = decodeAvx2<3, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 7:
+      ok = decodeAvx2<3, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    case 8:
+      ok = decodeAvx2<4, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    default:
+      ok = decodeAvx2<4, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
   }
   return ok && finished(streams, channels);
 }

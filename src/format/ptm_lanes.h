@@ -49,13 +49,13 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 /// that compare the two).
 enum class Path : uint8_t { kFastest, kScalar };
 
-/// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for predictor
-/// 0 (`has_parent` false) or 3 with coder 7; `params` holds each (channel, context)'s model
-/// byte in family kFamily; `padded` is scratch. Returns false when the section is truncated or
+/// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
+/// `predictor` (0, 3 or 4) with coder 7; `params` holds each (channel, context)'s model byte
+/// in family kFamily; `padded` is scratch. Returns false when the section is truncated or
 /// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
 /// of a residual that needed none).
-bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels, bool has_parent,
-            std::span<const uint8_t> params, std::vector<uint8_t>& padded,
+bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+            Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
             Path path = Path::kFastest);
 
 /// True when decode() can take its SIMD path on this processor.

@@ -59,10 +59,11 @@ uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, CodecScrat
 }
 
 // The parent bilinearly upsampled to every child texel into `out`, and `detail` sized to
-// match it.
+// match it. One entry more than the tile's: the lane decoder reads an entry with a 32-bit
+// gather, two bytes past it.
 void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
               const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail) {
-  out.resize(columns.parent.size() * rows.parent.size() * channels);
+  out.resize(columns.parent.size() * rows.parent.size() * channels + 1);
   detail.resize(out.size());
   switch (channels) {
     case 1: return upsampleParent<1>(parent, columns, rows, out.data());

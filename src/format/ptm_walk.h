@@ -100,6 +100,38 @@ inline NeighbourOffsets neighbourOffsets(uint32_t x, uint32_t y, uint32_t width,
   return {-c1, -s, -s - c1, up_right};
 }
 
+// Predictor 4's estimate of a coded texel in sixteenths of a level (docs/codecs.md, "ptm (6)"),
+// before rounding: the upsampled parent `u[0]` plus the median of the neighbours' departures
+// from theirs (`d` the departure plane at the texel, `n` the neighbours' offsets; none at the
+// origin), pulled towards eq. 3's block sum when the texel's block lies wholly in the tile
+// (`full`; `position` 0-2, `t` the texel, whose block's earlier texels are decoded). `channels`
+// and `stride` step to the next texel and row in all three planes.
+inline int parentCorrectedEstimate(const int16_t* u, const int16_t* d, const uint8_t* t,
+                                   const NeighbourOffsets& n, bool origin, bool full,
+                                   uint32_t position, int parent, uint32_t channels,
+                                   size_t stride) {
+  int estimate = *u;
+  // The neighbours' departure from the upsampled parent carries the detail the parent lost.
+  if (!origin) estimate += medPredict(d[n.left], d[n.up], d[n.up_left]);
+  if (!full) return estimate;
+  // Eq. 3 fixes the block's sum; what the texels still to come would need, by the same
+  // estimate, pulls this one. Weights 1/2, 1/4, 1/2 of the shortfall per texel still unknown:
+  // measured on the codec study's inputs.
+  const int sum16 = 64 * parent + 24;
+  const int detail = estimate - *u;
+  const ptrdiff_t cx = ptrdiff_t(channels), sy = ptrdiff_t(stride);
+  if (position == 0) {
+    const int block = u[0] + u[cx] + u[sy] + u[sy + cx] + 4 * detail;
+    return estimate + ((sum16 - block) >> 3);
+  }
+  if (position == 1) {
+    const int block = u[0] + u[sy - cx] + u[sy] + 3 * detail;
+    return estimate + (sum16 - 16 * t[-cx] - block) / 12;
+  }
+  const int block = u[0] + u[cx] + 2 * detail;
+  return estimate + ((sum16 - 16 * (t[-sy] + t[-sy + cx]) - block) >> 2);
+}
+
 // The zstd coder's side of the texel walk: symbols go to (or come from) one plane per channel.
 template <bool kEncode>
 struct PlaneCoder {
@@ -411,33 +443,10 @@ void codeTexels(const Walk& walk, Coder& coder) {
               (9 * parent_row[j] + 3 * parent_row[jn] + 3 * parent_near[j] + parent_near[jn] + 8) >>
               4;
         } else {
-          const int16_t* u = upsampled + index + c;
-          const uint8_t* t = texel + c;
-          const int16_t* d = details + index + c;
-          int estimate = *u;
-          if (!origin) {
-            // The neighbours' departure from the upsampled parent carries the detail the
-            // parent lost.
-            estimate += medPredict(d[left], d[up], d[up_left]);
-          }
-          if (full_row && columns->full[x]) {
-            // Eq. 3 fixes the block's sum; what the texels still to come would need, by the
-            // same estimate, pulls this one. Weights 1/2, 1/4, 1/2 of the shortfall per texel
-            // still unknown: measured on the codec study's inputs.
-            const int sum16 = 64 * parent_row[parent_at + c] + 24;
-            const int detail = estimate - *u;
-            const ptrdiff_t cx = ptrdiff_t(kChannels), sy = ptrdiff_t(stride);
-            if (position == 0) {
-              const int block = u[0] + u[cx] + u[sy] + u[sy + cx] + 4 * detail;
-              estimate += (sum16 - block) >> 3;
-            } else if (position == 1) {
-              const int block = u[0] + u[sy - cx] + u[sy] + 3 * detail;
-              estimate += (sum16 - 16 * t[-cx] - block) / 12;
-            } else {
-              const int block = u[0] + u[cx] + 2 * detail;
-              estimate += (sum16 - 16 * (t[-sy] + t[-sy + cx]) - block) >> 2;
-            }
-          }
+          const int estimate = parentCorrectedEstimate(
+              upsampled + index + c, details + index + c, texel + c, {left, up, up_left, up_right},
+              origin, full_row && columns->full[x], position, parent_row[parent_at + c], kChannels,
+              stride);
           if constexpr (kLeastSquares) {
             const int median =
                 origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);

@@ -1,7 +1,7 @@
 // ptm's lane coder (coder 7, ptm_lanes.h): whole pyramids round-trip bit-exactly with both of
 // its decoders, the SIMD one (where the processor has AVX2) and the scalar one every processor
 // runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it exists for
-// predictors 0 and 3 only. Hostile payloads of coder 7 are in codec_ptm_hostile_test.cpp.
+// predictors 0, 3 and 4 only. Hostile payloads of coder 7 are in codec_ptm_hostile_test.cpp.
 #include <cmath>
 #include <span>
 #include <vector>
@@ -56,7 +56,7 @@ Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uin
   if (!walk) return out;
   const size_t section_at = laneSectionAt(payload, channels);
   std::vector<uint8_t> padded;
-  EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, has_parent,
+  EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
                                  payload.subspan(ptm::kHeaderBytes, section_at - ptm::kHeaderBytes),
                                  padded, ptm::lanes::Path::kScalar));
   return out;
@@ -65,46 +65,53 @@ Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uin
 TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
   // Odd sizes and borders put blocks across tile edges and bands of fewer than eight rows at
   // the bottom; a noisy source makes residuals that only an escape can carry.
+  // Predictor 4's pull and its division by 12 are exercised hardest by a source of extremes:
+  // the noisy case flips bits 0-6 of every texel, the extreme one sets texels to 0 or 255.
   struct Case {
     uint32_t width, height, border, tile_px;
     bool noisy;
+    bool extreme = false;
   };
   if (!ptm::lanes::simdAvailable())
     GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
-  for (const Case& c :
-       {Case{133, 77, 0, 32, false}, Case{97, 130, 1, 32, false}, Case{71, 69, 2, 32, false},
-        Case{101, 99, 3, 32, true}, Case{300, 270, 1, 128, true}}) {
+  for (const Case& c : {Case{133, 77, 0, 32, false}, Case{97, 130, 1, 32, false},
+                        Case{71, 69, 2, 32, false}, Case{101, 99, 3, 32, true},
+                        Case{300, 270, 1, 128, true}, Case{67, 45, 1, 32, true, true}}) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       PyramidTiles pyramid =
           makePyramid(c.width, c.height, channels, c.tile_px, c.border, channels + 3);
       if (c.noisy) {
         uint32_t seed = channels;
         for (uint8_t& texel : pyramid.levels[0].texels)
-          texel = uint8_t(texel ^ (nextRandom(seed) & 0x7f));
+          texel = c.extreme ? uint8_t((nextRandom(seed) & 1) != 0 ? 255 : 0)
+                            : uint8_t(texel ^ (nextRandom(seed) & 0x7f));
         // Keep the levels a floor-average pyramid of the noisy base.
         for (size_t l = 1; l < pyramid.levels.size(); ++l)
           pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
       }
       const uint32_t side = c.tile_px + 2 * c.border;
-      uint32_t escapes = 0;
-      expectCoarseToFineRoundTrip(
-          pyramid, channels,
-          [&](const Image& tile, const ParentTexels* parent) {
-            auto payload = encodePtm(tile.view(), {}, parent, Predictor::kNeighbourMedian,
-                                     PtmCoder::kRansLanes, nullptr);
-            if (payload) {
-              EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
-              EXPECT_EQ((*payload)[0],
-                        uint8_t(parent ? Predictor::kNeighbourMedian : Predictor::kRoot));
-              EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels, tile.texels)
-                  << "scalar lanes";
-              escapes += escapeBytes(*payload, channels);
-            }
-            return payload;
-          },
-          fmt::format("{}x{} border {} channels {}", c.width, c.height, c.border, channels));
-      if (c.noisy) {
-        EXPECT_GT(escapes, 0u) << "the noisy case must exercise escapes";
+      for (Predictor predictor : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+        uint32_t escapes = 0;
+        expectCoarseToFineRoundTrip(
+            pyramid, channels,
+            [&](const Image& tile, const ParentTexels* parent) {
+              auto payload =
+                  encodePtm(tile.view(), {}, parent, predictor, PtmCoder::kRansLanes, nullptr);
+              if (payload) {
+                EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
+                EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
+                EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels,
+                          tile.texels)
+                    << "scalar lanes";
+                escapes += escapeBytes(*payload, channels);
+              }
+              return payload;
+            },
+            fmt::format("{}x{} border {} channels {} predictor {}", c.width, c.height, c.border,
+                        channels, int(predictor)));
+        if (c.noisy) {
+          EXPECT_GT(escapes, 0u) << "the noisy case must exercise escapes";
+        }
       }
     }
   }
@@ -116,33 +123,34 @@ TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
   const Image parent_tile = pyramid.tile(1, 0, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
   const ParentTexels* const parents[] = {&parent, nullptr};  // coded against it, and alone
-  for (const ParentTexels* with : parents) {
-    const auto lanes = encodePtm(child.view(), {}, with, Predictor::kNeighbourMedian,
-                                 PtmCoder::kRansLanes, nullptr);
-    const auto estimate = estimatePtmBytes(child.view(), {}, with, Predictor::kNeighbourMedian,
-                                           PtmCoder::kRansLanes, nullptr);
-    ASSERT_TRUE(lanes.has_value() && estimate.has_value());
-    // The estimate is coder 1's model bits plus the lane section's header; the states the
-    // header holds carry up to two bytes each of what the symbols' bits counted.
-    const double states = 3.0 * ptm::lanes::kLanes;
-    EXPECT_LE(std::abs(double(*estimate) - double(lanes->size())), 2 * states + 3 * 2 + 1);
-    // A walk recorded for coder 1 encodes coder 7 as encodePtm does.
-    PtmRecording recording;
-    ASSERT_TRUE(recordPtm(child.view(), with, Predictor::kNeighbourMedian, PtmCoder::kRans, nullptr,
-                          nullptr, recording)
-                    .has_value());
-    EXPECT_TRUE(walksAlike(PtmCoder::kRans, PtmCoder::kRansLanes));
-    EXPECT_EQ(encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr), *lanes);
-  }
+  for (const ParentTexels* with : parents)
+    for (Predictor predictor : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+      const auto lanes =
+          encodePtm(child.view(), {}, with, predictor, PtmCoder::kRansLanes, nullptr);
+      const auto estimate =
+          estimatePtmBytes(child.view(), {}, with, predictor, PtmCoder::kRansLanes, nullptr);
+      ASSERT_TRUE(lanes.has_value() && estimate.has_value());
+      // The estimate is coder 1's model bits plus the lane section's header; the states the
+      // header holds carry up to two bytes each of what the symbols' bits counted.
+      const double states = 3.0 * ptm::lanes::kLanes;
+      EXPECT_LE(std::abs(double(*estimate) - double(lanes->size())), 2 * states + 3 * 2 + 1);
+      // A walk recorded for coder 1 encodes coder 7 as encodePtm does.
+      PtmRecording recording;
+      ASSERT_TRUE(
+          recordPtm(child.view(), with, predictor, PtmCoder::kRans, nullptr, nullptr, recording)
+              .has_value());
+      EXPECT_TRUE(walksAlike(PtmCoder::kRans, PtmCoder::kRansLanes));
+      EXPECT_EQ(encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr), *lanes);
+    }
 }
 
-TEST(PtmLanes, CodesPredictorsZeroAndThreeOnly) {
+TEST(PtmLanes, CodesPredictorsZeroThreeAndFourOnly) {
   PyramidTiles pyramid = makePyramid(128, 128, 3, 64, 0, 5);
   const Image child = pyramid.tile(0, 1, 0);
   const Image parent_tile = pyramid.tile(1, 0, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 0, 64, 0);
-  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear,
-                              Predictor::kParentCorrected, Predictor::kLeastSquares}) {
+  for (Predictor predictor :
+       {Predictor::kParentNearest, Predictor::kParentBilinear, Predictor::kLeastSquares}) {
     auto refused = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansLanes, nullptr);
     ASSERT_FALSE(refused.has_value()) << int(predictor);
     EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
