@@ -19,10 +19,11 @@ namespace {
 // `effort` picks ptm's point on its size/decode-speed trade-off, measured on the codec study's
 // three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
-// - 2: per tile the smaller of nearest parent with zstd and the neighbour median with coder 7,
-//   the lane coder (ptm_lanes.h), which decodes eight rows side by side: on the codec study's
-//   inputs 1-30 % smaller than its earlier rule (the smallest of three predictors with zstd)
-//   at about 100 MP/s per core where the median wins;
+// - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
+//   (ptm_lanes.h), which decodes eight rows side by side, with the neighbour median, or the
+//   parent-corrected predictor where its estimate is 5 % smaller: about 100 MP/s per core
+//   where the median wins, 50-55 where predictor 4 does; the codec study's map came out 11 %
+//   smaller with predictor 4 than with the median alone;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the

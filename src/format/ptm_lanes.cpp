@@ -479,9 +479,24 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         // integers as the walk's, since D(t) = 16 t - W(t).
         const __m256i upsampled_at = _mm256_add_epi32(
             upsampled_rows, _mm256_mullo_epi32(column_in, _mm256_set1_epi32(int(kCh))));
+        // Two channels' int16 values per 32-bit gather (with an odd channel count the last
+        // gather's high half is the next texel's, or the planes' slack).
+        __m256i block_shortfalls[kCh];
+        for (uint32_t c = 0; c < kCh; c += 2) {
+          const __m256i ws = _mm256_i32gather_epi32(
+              upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2);
+          const __m256i gs = _mm256_i32gather_epi32(
+              shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2);
+          upsampled_value[c] = low16Signed(ws);
+          block_shortfalls[c] = low16Signed(gs);
+          if (c + 1 < kCh) {
+            upsampled_value[c + 1] = _mm256_srai_epi32(ws, 16);
+            block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
+          }
+        }
         for (uint32_t c = 0; c < kCh; ++c) {
-          const __m256i w = low16Signed(_mm256_i32gather_epi32(
-              upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2));
+          const __m256i w = upsampled_value[c];
+          const __m256i block_shortfall = block_shortfalls[c];
           __m256i dl = detail1[c];
           __m256i du = _mm256_permutevar8x32_epi32(detail2[c], rotate);
           __m256i dul = _mm256_permutevar8x32_epi32(detail3[c], rotate);
@@ -499,8 +514,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           dl = _mm256_blendv_epi8(dl, du, first_column);
           dul = _mm256_blendv_epi8(dul, du, first_column);
           const __m256i departure = median(dl, du, dul);
-          const __m256i block_shortfall = low16Signed(_mm256_i32gather_epi32(
-              shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2));
           __m256i pull;
           if (second_column == 0) {
             const __m256i first = _mm256_srai_epi32(
@@ -523,7 +536,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           predicted[c] = _mm256_min_epi32(
               byte_mask,
               _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
-          upsampled_value[c] = w;
         }
       }
       __m256i residual[kCh];

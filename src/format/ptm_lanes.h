@@ -1,6 +1,6 @@
 #pragma once
-// ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors 0
-// and 3 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
+// ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors
+// 0, 3 and 4 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
 // tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at
 // step t, a wavefront in which every texel's left, up-left, up and up-right neighbours were
 // decoded at an earlier step. Each (channel, row of the band) has its own rANS state, with
@@ -13,6 +13,8 @@
 //
 // The symbols and contexts are exactly coder 1's (RansRecorder<false, false>), so the encoder
 // records a tile with the shared walk and only orders and codes the symbols differently.
+// Predictor 4's pull (eq. 3's block sum) reads texels of the block decoded at earlier steps,
+// the left one in the same row and the two above in the row before, so it fits the wavefront.
 
 #include <cstddef>
 #include <cstdint>
