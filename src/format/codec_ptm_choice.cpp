@@ -22,7 +22,7 @@ namespace {
 // - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
 //   (ptm_lanes.h), which decodes eight rows side by side, with the neighbour median, or the
 //   parent-corrected predictor where its estimate is 5 % smaller: about 100 MP/s per core
-//   where the median wins, 50-55 where predictor 4 does; the codec study's map came out 11 %
+//   where the median wins, 49-55 where predictor 4 does; the codec study's map came out 11 %
 //   smaller with predictor 4 than with the median alone;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model

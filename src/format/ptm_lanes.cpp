@@ -524,7 +524,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 2);
             pull = _mm256_and_si256(_mm256_blendv_epi8(first, second, second_row), pulled);
           } else {
-            // C's division towards zero, exact in single precision: |n| < 2^17.
+            // C's division towards zero, exact in single precision: |n| <= 16344 + 4086 + 3 * 4086.
             const __m256i n =
                 _mm256_sub_epi32(_mm256_sub_epi32(block_shortfall, dl),
                                  _mm256_add_epi32(_mm256_slli_epi32(departure, 1), departure));
