@@ -282,6 +282,34 @@ __attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m2
   return _mm256_min_epi32(high, _mm256_max_epi32(low, _mm256_sub_epi32(_mm256_add_epi32(a, b), c)));
 }
 
+// Each lane's left, up, up-left and up-right values from its values of the last three steps
+// (`back1` the latest): the row above's are lane k - 1's, rotated into lane k, and lane 0's
+// come from the band before (`up0`, `up_left0`, `up_right0`), with LOCO-I's substitutes on
+// the first row and column and the last column (neighbourOffsets).
+struct LaneNeighbours {
+  __m256i left, up, up_left, up_right;
+};
+__attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
+    __m256i back1, __m256i back2, __m256i back3, bool first_band, int up0, int up_left0,
+    int up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
+  __m256i u = _mm256_permutevar8x32_epi32(back2, rotate);
+  __m256i ul = _mm256_permutevar8x32_epi32(back3, rotate);
+  __m256i ur = _mm256_permutevar8x32_epi32(back1, rotate);
+  __m256i l = back1;
+  if (first_band) {
+    // Row 0: every neighbour is the left one.
+    u = _mm256_blend_epi32(u, l, 1);
+    ul = _mm256_blend_epi32(ul, l, 1);
+    ur = _mm256_blend_epi32(ur, l, 1);
+  } else {
+    u = _mm256_blend_epi32(u, _mm256_set1_epi32(up0), 1);
+    ul = _mm256_blend_epi32(ul, _mm256_set1_epi32(up_left0), 1);
+    ur = _mm256_blend_epi32(ur, _mm256_set1_epi32(up_right0), 1);
+  }
+  return {_mm256_blendv_epi8(l, u, first_column), u, _mm256_blendv_epi8(ul, u, first_column),
+          _mm256_blendv_epi8(ur, u, at_last_column)};
+}
+
 // `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
 // parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
 template <uint32_t kCh, bool kCorrected>
@@ -424,23 +452,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       [[maybe_unused]] __m256i upsampled_value[kCh];
       __m256i activity = zero;
       for (uint32_t c = 0; c < kCh; ++c) {
-        __m256i u = _mm256_permutevar8x32_epi32(back2[c], rotate);
-        __m256i ul = _mm256_permutevar8x32_epi32(back3[c], rotate);
-        __m256i ur = _mm256_permutevar8x32_epi32(back1[c], rotate);
-        __m256i l = back1[c];
-        if (first_band) {
-          // Row 0: every neighbour is the left one (LOCO-I's substitutes).
-          u = _mm256_blend_epi32(u, l, 1);
-          ul = _mm256_blend_epi32(ul, l, 1);
-          ur = _mm256_blend_epi32(ur, l, 1);
-        } else {
-          u = _mm256_blend_epi32(u, _mm256_set1_epi32(up0[c]), 1);
-          ul = _mm256_blend_epi32(ul, _mm256_set1_epi32(up_left0[c]), 1);
-          ur = _mm256_blend_epi32(ur, _mm256_set1_epi32(up_right0[c]), 1);
-        }
-        ur = _mm256_blendv_epi8(ur, u, at_last_column);
-        l = _mm256_blendv_epi8(l, u, first_column);
-        ul = _mm256_blendv_epi8(ul, u, first_column);
+        const auto [l, u, ul, ur] =
+            laneNeighbours(back1[c], back2[c], back3[c], first_band, up0[c], up_left0[c],
+                           up_right0[c], first_column, at_last_column, rotate);
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(l, ul)));
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(u, ul)));
         activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(ur, u)));
@@ -497,22 +511,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i w = upsampled_value[c];
           const __m256i block_shortfall = block_shortfalls[c];
-          __m256i dl = detail1[c];
-          __m256i du = _mm256_permutevar8x32_epi32(detail2[c], rotate);
-          __m256i dul = _mm256_permutevar8x32_epi32(detail3[c], rotate);
-          __m256i dur = _mm256_permutevar8x32_epi32(detail1[c], rotate);
-          if (first_band) {
-            du = _mm256_blend_epi32(du, dl, 1);
-            dul = _mm256_blend_epi32(dul, dl, 1);
-            dur = _mm256_blend_epi32(dur, dl, 1);
-          } else {
-            du = _mm256_blend_epi32(du, _mm256_set1_epi32(up0_detail[c]), 1);
-            dul = _mm256_blend_epi32(dul, _mm256_set1_epi32(up_left0_detail[c]), 1);
-            dur = _mm256_blend_epi32(dur, _mm256_set1_epi32(up_right0_detail[c]), 1);
-          }
-          dur = _mm256_blendv_epi8(dur, du, at_last_column);
-          dl = _mm256_blendv_epi8(dl, du, first_column);
-          dul = _mm256_blendv_epi8(dul, du, first_column);
+          const auto [dl, du, dul, dur] = laneNeighbours(
+              detail1[c], detail2[c], detail3[c], first_band, up0_detail[c], up_left0_detail[c],
+              up_right0_detail[c], first_column, at_last_column, rotate);
           const __m256i departure = median(dl, du, dul);
           __m256i pull;
           if (second_column == 0) {
@@ -675,6 +676,19 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   return _mm256_testz_si256(failed, failed) != 0;
 }
 
+// decodeAvx2 for the tile's channel count.
+template <bool kCorrected>
+bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
+                        const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
+                        const int16_t* shortfall) {
+  switch (channels) {
+    case 1: return decodeAvx2<1, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 2: return decodeAvx2<2, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 3: return decodeAvx2<3, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    default: return decodeAvx2<4, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+  }
+}
+
 // Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
 // place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
 void blockShortfalls(const Walk& walk, uint32_t channels, const ParentCopy& parent,
@@ -823,33 +837,10 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
                 parent.stride);
   parent.texels = parent_copy;
   if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
-  bool ok = false;
-  switch (channels * 2 + (corrected ? 1 : 0)) {
-    case 2:
-      ok = decodeAvx2<1, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 3:
-      ok = decodeAvx2<1, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 4:
-      ok = decodeAvx2<2, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 5:
-      ok = decodeAvx2<2, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 6:
-      ok = decodeAvx2<3, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 7:
-      ok = decodeAvx2<3, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    case 8:
-      ok = decodeAvx2<4, false>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-    default:
-      ok = decodeAvx2<4, true>(geometry, streams, model_offsets, parent, diagonal, shortfall);
-      break;
-  }
+  const bool ok = corrected ? decodeAvx2Channels<true>(channels, geometry, streams, model_offsets,
+                                                       parent, diagonal, shortfall)
+                            : decodeAvx2Channels<false>(channels, geometry, streams, model_offsets,
+                                                        parent, diagonal, shortfall);
   return ok && finished(streams, channels);
 }
 
