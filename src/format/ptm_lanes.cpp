@@ -207,14 +207,10 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
   for (uint32_t c = 0; c < ch; ++c) {
     int predicted = 0;
     if (g.corrected)
-      predicted = std::clamp(
-          (parentCorrectedEstimate(g.upsampled + index + c, g.detail + index + c, texel + c,
-                                   neighbours, origin, full, position,
-                                   g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c],
-                                   ch, size_t(g.width) * ch) +
-           8) >>
-              4,
-          0, 255);
+      predicted = parentCorrectedPrediction(parentCorrectedEstimate(
+          g.upsampled + index + c, g.detail + index + c, texel + c, neighbours, origin, full,
+          position, g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c], ch,
+          size_t(g.width) * ch));
     else if (!origin)
       predicted = medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
     texel[c] = uint8_t(predicted + symbols[c]);
@@ -438,11 +434,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 16 * up_right0[c] - above_row[size_t(std::min(t + 1, width - 1)) * kCh];
           }
         }
-      // Predictor 4: each lane's column kept inside the tile for its gathers, and where the
-      // block sum pulls.
-      [[maybe_unused]] __m256i column_in = zero, pulled = zero;
+      // Each lane's column kept inside the tile, for the gathers of idle lanes too.
+      const __m256i column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
+      // Predictor 4: where the block sum pulls.
+      [[maybe_unused]] __m256i pulled = zero;
       if constexpr (kCorrected) {
-        column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
         __m256i column_partial = zero;
         if (first_column_partial) column_partial = first_column;
         if (last_column_partial) column_partial = _mm256_or_si256(column_partial, at_last_column);
@@ -478,10 +474,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       __m256i parent_at = zero;
       if (kCorrected || derived_mask != 0) {
         const __m256i column = _mm256_sub_epi32(
-            _mm256_srli_epi32(
-                _mm256_add_epi32(_mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column),
-                                 _mm256_set1_epi32(int(column_offset))),
-                1),
+            _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))),
+                              1),
             _mm256_set1_epi32(int(parent.first_column)));
         parent_at =
             _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
@@ -708,8 +702,8 @@ void blockShortfalls(const Walk& walk, uint32_t channels, const ParentCopy& pare
       const size_t at = size_t(x) * channels, parent_at = size_t(columns.parent[x]) * channels;
       for (uint32_t c = 0; c < channels; ++c)
         out[parent_at - size_t(parent.first_column) * channels + c] =
-            int16_t(64 * parent_row[parent_at + c] + 24 - upper[at + c] - upper[at + channels + c] -
-                    lower[at + c] - lower[at + channels + c]);
+            int16_t(blockSum16(parent_row[parent_at + c]) - upper[at + c] -
+                    upper[at + channels + c] - lower[at + c] - lower[at + channels + c]);
     }
   }
 }

@@ -100,6 +100,17 @@ inline NeighbourOffsets neighbourOffsets(uint32_t x, uint32_t y, uint32_t width,
   return {-c1, -s, -s - c1, up_right};
 }
 
+// Eq. 3's block sum in sixteenths of a level, 16 (4P + 1.5): a floor-average parent sits 0.375
+// below its block's mean.
+inline int blockSum16(int parent) {
+  return 64 * parent + 24;
+}
+
+// Predictor 4's prediction from its estimate in sixteenths.
+inline int parentCorrectedPrediction(int estimate) {
+  return std::clamp((estimate + 8) >> 4, 0, 255);
+}
+
 // Predictor 4's estimate of a coded texel in sixteenths of a level (docs/codecs.md, "ptm (6)"),
 // before rounding: the upsampled parent `u[0]` plus the median of the neighbours' departures
 // from theirs (`d` the departure plane at the texel, `n` the neighbours' offsets; none at the
@@ -117,7 +128,7 @@ inline int parentCorrectedEstimate(const int16_t* u, const int16_t* d, const uin
   // Eq. 3 fixes the block's sum; what the texels still to come would need, by the same
   // estimate, pulls this one. Weights 1/2, 1/4, 1/2 of the shortfall per texel still unknown:
   // measured on the codec study's inputs.
-  const int sum16 = 64 * parent + 24;
+  const int sum16 = blockSum16(parent);
   const int detail = estimate - *u;
   const ptrdiff_t cx = ptrdiff_t(channels), sy = ptrdiff_t(stride);
   if (position == 0) {
@@ -466,7 +477,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
                   parent_near + parent_at + c, parent_near + parent_side_at + c, estimate, median);
             }
           } else {
-            predicted[c] = std::clamp((estimate + 8) >> 4, 0, 255);
+            predicted[c] = parentCorrectedPrediction(estimate);
           }
         }
       }
