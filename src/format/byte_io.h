@@ -29,6 +29,9 @@ inline void storeU32(uint8_t* p, uint32_t v) {
 inline void storeU64(uint8_t* p, uint64_t v) {
   for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
 }
+inline void appendU32(std::vector<uint8_t>& out, uint32_t v) {
+  for (int i = 0; i < 4; ++i) out.push_back(uint8_t(v >> (8 * i)));
+}
 
 /// True when every byte is zero: reserved fields must be zero in v1.
 inline bool allZero(const uint8_t* p, size_t n) {

@@ -7,6 +7,7 @@
 #include <tessera/check.h>
 
 #include "codec_internal.h"
+#include "format/byte_io.h"
 #include "ptm_lanes.h"
 #include "ptm_least_squares.h"
 #include "ptm_rans.h"
@@ -32,10 +33,6 @@ void fitLeastSquares(const Walk& walk, uint32_t channels, int8_t* weights) {
   DiscardingCoder discard;
   code<true>(Predictor::kLeastSquares, channels, fitting, discard);
   solveLeastSquares(*fit, channels, weights);
-}
-
-void appendU32(std::vector<uint8_t>& out, uint32_t value) {
-  for (int i = 0; i < 4; ++i) out.push_back(uint8_t(value >> (8 * i)));
 }
 
 // encodePtm, or with `estimated_bytes` and a rANS coder only the payload's size to within a

@@ -1,0 +1,554 @@
+// ptm's lane coder, the AVX2 decoder (ptm_lanes_internal.h): the eight rows of a band in the
+// lanes of a vector.
+#include <immintrin.h>
+
+#include <algorithm>
+#include <cstddef>
+#include <cstring>
+#include <memory>
+
+#include "ptm_lanes_internal.h"
+
+namespace tessera::detail::ptm::lanes {
+
+namespace {
+
+// For each mask of lanes that read, where each lane finds its item among those read: lane i
+// takes item (number of reading lanes below i).
+struct Compaction {
+  alignas(32) int32_t index[256][kLanes];
+  Compaction() {
+    for (uint32_t mask = 0; mask < 256; ++mask) {
+      int32_t n = 0;
+      for (uint32_t i = 0; i < kLanes; ++i) index[mask][i] = (mask >> i & 1) != 0 ? n++ : 0;
+    }
+  }
+};
+const Compaction kCompaction;
+
+// Per model of the family, per slot: symbol | (slot - start) << 6 | freq << 18, so that a lane
+// finds all it needs for a symbol in one gather instead of two (slot to symbol, symbol to
+// frequency and start). 4 MiB, built on the first SIMD decode.
+constexpr uint32_t kSymbolBits = 6, kBiasShift = 6, kFreqShift = 18;
+static_assert(rans::kAlphabet <= 1u << kSymbolBits && kFreqShift - kBiasShift >= kScaleBits);
+const uint32_t* slotTables() {
+  static const std::unique_ptr<uint32_t[]> tables = [] {
+    auto built = std::make_unique<uint32_t[]>(size_t(rans::kModelCount) * kScale);
+    const rans::Model* family = rans::models(kFamily);
+    for (uint32_t m = 0; m < rans::kModelCount; ++m)
+      for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
+        const uint32_t start = family[m].start[symbol], freq = family[m].freq[symbol];
+        for (uint32_t i = 0; i < freq; ++i)
+          built[size_t(m) * kScale + start + i] = symbol | i << kBiasShift | freq << kFreqShift;
+      }
+    return built;
+  }();
+  return tables.get();
+}
+
+// Sign-extends the low 16 bits of each lane (an int16 read by a 32-bit gather).
+__attribute__((target("avx2"))) inline __m256i low16Signed(__m256i v) {
+  return _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
+}
+
+// LOCO-I's median of each lane's a, b and a + b - c (medPredict).
+__attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m256i c) {
+  const __m256i low = _mm256_min_epi32(a, b), high = _mm256_max_epi32(a, b);
+  return _mm256_min_epi32(high, _mm256_max_epi32(low, _mm256_sub_epi32(_mm256_add_epi32(a, b), c)));
+}
+
+// Each lane's left, up, up-left and up-right values from its values of the last three steps
+// (`back1` the latest): the row above's are lane k - 1's, rotated into lane k, and lane 0's
+// come from the band before (`up0`, `up_left0`, `up_right0`), with LOCO-I's substitutes on
+// the first row and column and the last column (neighbourOffsets).
+struct LaneNeighbours {
+  __m256i left, up, up_left, up_right;
+};
+__attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
+    __m256i back1, __m256i back2, __m256i back3, bool first_band, int up0, int up_left0,
+    int up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
+  __m256i u = _mm256_permutevar8x32_epi32(back2, rotate);
+  __m256i ul = _mm256_permutevar8x32_epi32(back3, rotate);
+  __m256i ur = _mm256_permutevar8x32_epi32(back1, rotate);
+  __m256i l = back1;
+  if (first_band) {
+    // Row 0: every neighbour is the left one.
+    u = _mm256_blend_epi32(u, l, 1);
+    ul = _mm256_blend_epi32(ul, l, 1);
+    ur = _mm256_blend_epi32(ur, l, 1);
+  } else {
+    u = _mm256_blend_epi32(u, _mm256_set1_epi32(up0), 1);
+    ul = _mm256_blend_epi32(ul, _mm256_set1_epi32(up_left0), 1);
+    ur = _mm256_blend_epi32(ur, _mm256_set1_epi32(up_right0), 1);
+  }
+  return {_mm256_blendv_epi8(l, u, first_column), u, _mm256_blendv_epi8(ul, u, first_column),
+          _mm256_blendv_epi8(ur, u, at_last_column)};
+}
+
+// `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
+// parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
+template <uint32_t kCh, bool kCorrected>
+__attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
+                                                const int32_t* model_offsets,
+                                                const ParentCopy& parent, uint32_t* diagonal,
+                                                const int16_t* shortfall) {
+  static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
+  const uint32_t width = g.width, height = g.height;
+  const size_t stride = size_t(width) * kCh;
+  const uint32_t steps = stepsPerBand(width);
+  const int* slot_tables = reinterpret_cast<const int*>(slotTables());
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  const __m256i two_lane = _mm256_slli_epi32(lane, 1);
+  // Rotates lane k - 1's value into lane k; lane 0's is replaced after.
+  const __m256i rotate = _mm256_setr_epi32(7, 0, 1, 2, 3, 4, 5, 6);
+  const __m256i slot_mask = _mm256_set1_epi32(int(kScale - 1));
+  const __m256i low16 = _mm256_set1_epi32(0xffff);
+  const __m256i byte_mask = _mm256_set1_epi32(0xff);
+  const __m256i symbol_mask = _mm256_set1_epi32((1 << kSymbolBits) - 1);
+  const __m256i one = _mm256_set1_epi32(1);
+  const __m256i escape = _mm256_set1_epi32(int(kEscape));
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i three = _mm256_set1_epi32(3);
+  const __m256i last_column = _mm256_set1_epi32(int(width) - 1);
+  // The copy into rows: eight texels of a row lie kLanes words apart; within each half of the
+  // vector the shuffle packs four texels' kCh bytes to the front, and the permute joins the
+  // halves.
+  const __m256i octet_at = _mm256_mullo_epi32(lane, _mm256_set1_epi32(int(kLanes)));
+  alignas(32) int8_t pack_bytes[32];
+  for (uint32_t i = 0; i < 16; ++i) {
+    const int8_t byte = i < 4 * kCh ? int8_t(i / kCh * 4 + i % kCh) : int8_t(-1);
+    pack_bytes[i] = byte;
+    pack_bytes[16 + i] = byte;
+  }
+  const __m256i pack = _mm256_load_si256(reinterpret_cast<const __m256i*>(pack_bytes));
+  alignas(32) int32_t halves[8];
+  for (uint32_t i = 0; i < 8; ++i) halves[i] = int32_t(i < kCh ? i : i < 2 * kCh ? i - kCh + 4 : 7);
+  const __m256i pack_halves = _mm256_load_si256(reinterpret_cast<const __m256i*>(halves));
+  __m256i bounds[kActivityClasses - 1];
+  for (uint32_t i = 0; i < kActivityClasses - 1; ++i)
+    bounds[i] = _mm256_set1_epi32(kActivityBounds[i] * int(kCh) - 1);
+  // Each channel's model offsets by context group (the block positions 0-3, then remainders),
+  // eight activity classes each: a lane picks its model with a permute, not a gather.
+  constexpr uint32_t kGroups = kParentContexts / kActivityClasses;
+  __m256i group_models[kCh][kGroups];
+  for (uint32_t c = 0; c < kCh; ++c)
+    for (uint32_t group = 0; group < kGroups; ++group)
+      group_models[c][group] = group * kActivityClasses < g.contexts
+                                   ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
+                                         model_offsets + c * g.contexts + group * kActivityClasses))
+                                   : zero;
+  // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
+  // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
+  // columns differ by even numbers, is a first child or every lane a second.
+  const uint32_t column_offset = g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
+  // Predictor 4 pulls a texel only where its block lies wholly in the tile: a first column that
+  // is a block's second child, or a last column that is a first, never.
+  const bool first_column_partial = kCorrected && g.columns->full.front() == 0;
+  const bool last_column_partial = kCorrected && g.columns->full.back() == 0;
+  const int* upsampled = reinterpret_cast<const int*>(g.upsampled);
+  const int* shortfalls = reinterpret_cast<const int*>(shortfall);
+  const __m256 twelve = _mm256_set1_ps(12.0f);
+  const __m256i eight = _mm256_set1_epi32(8);
+  __m256i state[kCh];
+  for (uint32_t c = 0; c < kCh; ++c)
+    state[c] = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s.states[c]));
+  __m256i failed = zero;
+  for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
+    const uint32_t rows = std::min(kLanes, height - y0);
+    const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
+    // Per lane: its row's parent row offset, second-row and derived-row flags.
+    // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
+    // row 0) and whether the row's blocks lie in the tile.
+    alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
+                        row_derived[kLanes] = {}, row_full[kLanes] = {},
+                        upsampled_row_at[kLanes] = {};
+    if (g.has_parent)
+      for (uint32_t k = 0; k < rows; ++k) {
+        parent_row_at[k] = int32_t((g.rows->parent[y0 + k] - parent.first_row) * parent.stride);
+        row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
+        row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
+        row_full[k] = g.rows->full[y0 + k] != 0 ? -1 : 0;
+        upsampled_row_at[k] = int32_t((y0 + k) * stride);
+      }
+    const __m256i parent_rows = _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
+    const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
+    const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
+    const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
+    const __m256i upsampled_rows =
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
+    const bool first_band = y0 == 0;
+    // Each lane's texels of the last three steps: left, and (rotated) the row above's; for
+    // predictor 4 their departures from the upsampled parent likewise.
+    __m256i back1[kCh], back2[kCh], back3[kCh];
+    __m256i detail1[kCh], detail2[kCh], detail3[kCh];
+    for (uint32_t c = 0; c < kCh; ++c)
+      back1[c] = back2[c] = back3[c] = detail1[c] = detail2[c] = detail3[c] = zero;
+    for (uint32_t t = 0; t < steps; ++t) {
+      const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
+      const __m256i active = _mm256_and_si256(
+          _mm256_andnot_si256(_mm256_cmpgt_epi32(zero, xs),
+                              _mm256_cmpgt_epi32(_mm256_set1_epi32(int(width)), xs)),
+          row_in);
+      const __m256i first_column = _mm256_cmpeq_epi32(xs, zero);
+      const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
+      // Lane 0's row above is the last lane's of the band before, whose steps still lie
+      // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
+      int up0[kCh] = {}, up_left0[kCh] = {}, up_right0[kCh] = {};
+      int up0_detail[kCh] = {}, up_left0_detail[kCh] = {}, up_right0_detail[kCh] = {};
+      if (!first_band)
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
+          up0[c] = int(above[0] >> (8 * c) & 0xff);
+          up_left0[c] = int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff);
+          up_right0[c] = int(above[kLanes] >> (8 * c) & 0xff);
+          if constexpr (kCorrected) {
+            // Columns past the tile's edges belong to lanes that are idle or take substitutes:
+            // any value in the plane will do.
+            const int16_t* above_row = g.upsampled + size_t(y0 - 1) * stride + c;
+            const uint32_t column = std::min(t, width - 1);
+            up0_detail[c] = 16 * up0[c] - above_row[size_t(column) * kCh];
+            up_left0_detail[c] =
+                16 * up_left0[c] - above_row[size_t(t == 0 ? 0 : std::min(t - 1, width - 1)) * kCh];
+            up_right0_detail[c] =
+                16 * up_right0[c] - above_row[size_t(std::min(t + 1, width - 1)) * kCh];
+          }
+        }
+      // Each lane's column kept inside the tile, for the gathers of idle lanes too.
+      const __m256i column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
+      // Predictor 4: where the block sum pulls.
+      [[maybe_unused]] __m256i pulled = zero;
+      if constexpr (kCorrected) {
+        __m256i column_partial = zero;
+        if (first_column_partial) column_partial = first_column;
+        if (last_column_partial) column_partial = _mm256_or_si256(column_partial, at_last_column);
+        pulled = _mm256_andnot_si256(column_partial, _mm256_and_si256(full_row, active));
+      }
+      __m256i left[kCh], up[kCh], up_left[kCh], medians[kCh], predicted[kCh];
+      [[maybe_unused]] __m256i upsampled_value[kCh];
+      __m256i activity = zero;
+      for (uint32_t c = 0; c < kCh; ++c) {
+        const auto [l, u, ul, ur] =
+            laneNeighbours(back1[c], back2[c], back3[c], first_band, up0[c], up_left0[c],
+                           up_right0[c], first_column, at_last_column, rotate);
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(l, ul)));
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(u, ul)));
+        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(ur, u)));
+        medians[c] = median(l, u, ul);
+        predicted[c] = medians[c];
+        left[c] = l;
+        up[c] = u;
+        up_left[c] = ul;
+      }
+      __m256i activity_class = zero;
+      for (const __m256i& bound : bounds)
+        activity_class = _mm256_sub_epi32(activity_class, _mm256_cmpgt_epi32(activity, bound));
+      // Each lane's model group: its block position, or the remainders for a derived texel.
+      const uint32_t second_column = g.has_parent ? (t + column_offset) & 1 : 0;
+      __m256i derived = zero;
+      if (g.has_parent && second_column != 0)
+        derived =
+            _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
+      const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
+      // A derived lane's parent texel, in the parent's copy.
+      __m256i parent_at = zero;
+      if (kCorrected || derived_mask != 0) {
+        const __m256i column = _mm256_sub_epi32(
+            _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))),
+                              1),
+            _mm256_set1_epi32(int(parent.first_column)));
+        parent_at =
+            _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
+      }
+      if constexpr (kCorrected) {
+        // Predictor 4 (ptm_walk.h, parentCorrectedEstimate), with eq. 3's pull written from
+        // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
+        // (G - 4δ) >> 3, b's (G - D(a) - 3δ) / 12 and c's (G - D(a) - D(b) - 2δ) >> 2, the same
+        // integers as the walk's, since D(t) = 16 t - W(t).
+        const __m256i upsampled_at = _mm256_add_epi32(
+            upsampled_rows, _mm256_mullo_epi32(column_in, _mm256_set1_epi32(int(kCh))));
+        // Two channels' int16 values per 32-bit gather (with an odd channel count the last
+        // gather's high half is the next texel's, or the planes' slack).
+        __m256i block_shortfalls[kCh];
+        for (uint32_t c = 0; c < kCh; c += 2) {
+          const __m256i ws = _mm256_i32gather_epi32(
+              upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2);
+          const __m256i gs = _mm256_i32gather_epi32(
+              shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2);
+          upsampled_value[c] = low16Signed(ws);
+          block_shortfalls[c] = low16Signed(gs);
+          if (c + 1 < kCh) {
+            upsampled_value[c + 1] = _mm256_srai_epi32(ws, 16);
+            block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
+          }
+        }
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const __m256i w = upsampled_value[c];
+          const __m256i block_shortfall = block_shortfalls[c];
+          const auto [dl, du, dul, dur] = laneNeighbours(
+              detail1[c], detail2[c], detail3[c], first_band, up0_detail[c], up_left0_detail[c],
+              up_right0_detail[c], first_column, at_last_column, rotate);
+          const __m256i departure = median(dl, du, dul);
+          __m256i pull;
+          if (second_column == 0) {
+            const __m256i first = _mm256_srai_epi32(
+                _mm256_sub_epi32(block_shortfall, _mm256_slli_epi32(departure, 2)), 3);
+            const __m256i second = _mm256_srai_epi32(
+                _mm256_sub_epi32(_mm256_sub_epi32(_mm256_sub_epi32(block_shortfall, du), dur),
+                                 _mm256_slli_epi32(departure, 1)),
+                2);
+            pull = _mm256_and_si256(_mm256_blendv_epi8(first, second, second_row), pulled);
+          } else {
+            // C's division towards zero, exact in single precision: |n| <= 16344 + 4086 + 3 * 4086.
+            const __m256i n =
+                _mm256_sub_epi32(_mm256_sub_epi32(block_shortfall, dl),
+                                 _mm256_add_epi32(_mm256_slli_epi32(departure, 1), departure));
+            pull =
+                _mm256_and_si256(_mm256_cvttps_epi32(_mm256_div_ps(_mm256_cvtepi32_ps(n), twelve)),
+                                 _mm256_andnot_si256(second_row, pulled));
+          }
+          const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
+          predicted[c] = _mm256_min_epi32(
+              byte_mask,
+              _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
+        }
+      }
+      __m256i residual[kCh];
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
+        if (g.has_parent) {
+          model = _mm256_blendv_epi8(
+              model,
+              _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
+              second_row);
+          if (derived_mask != 0)
+            model = _mm256_blendv_epi8(
+                model, _mm256_permutevar8x32_epi32(group_models[c][kGroups - 1], activity_class),
+                derived);
+        }
+        const __m256i slot = _mm256_and_si256(state[c], slot_mask);
+        const __m256i entry = _mm256_i32gather_epi32(slot_tables, _mm256_add_epi32(model, slot), 4);
+        const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
+        __m256i next =
+            _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
+                                                _mm256_srli_epi32(state[c], kScaleBits)),
+                             _mm256_and_si256(_mm256_srli_epi32(entry, kBiasShift), slot_mask));
+        next = _mm256_blendv_epi8(state[c], next, active);
+        const __m256i reads =
+            _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
+        const int read_mask = _mm256_movemask_ps(_mm256_castsi256_ps(reads));
+        if (read_mask != 0) {
+          const __m256i words =
+              _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
+          const __m256i mine = _mm256_permutevar8x32_epi32(
+              words,
+              _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
+          next =
+              _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), mine), reads);
+          s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
+        }
+        state[c] = next;
+        __m256i code = symbol;
+        const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbol, escape), active);
+        const int escape_mask = _mm256_movemask_ps(_mm256_castsi256_ps(escaped));
+        if (escape_mask != 0) [[unlikely]] {
+          const __m256i bytes =
+              _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.escapes[c])));
+          const __m256i mine = _mm256_permutevar8x32_epi32(
+              bytes,
+              _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[escape_mask])));
+          code = _mm256_blendv_epi8(code, mine, escaped);
+          // The encoder escapes only what 0..62 cannot say.
+          failed =
+              _mm256_or_si256(failed, _mm256_and_si256(escaped, _mm256_cmpgt_epi32(escape, mine)));
+          s.escapes[c] += __builtin_popcount(unsigned(escape_mask));
+        }
+        // Zigzag back to a signed residual: 0, 1, 2, 3, ... -> 0, -1, 1, -2, ...
+        residual[c] = _mm256_xor_si256(_mm256_srli_epi32(code, 1),
+                                       _mm256_sub_epi32(zero, _mm256_and_si256(code, one)));
+      }
+      __m256i coded[kCh];
+      for (uint32_t c = 0; c < kCh; ++c) coded[c] = residual[c];
+      if constexpr (kCh >= 3) {
+        coded[0] = _mm256_add_epi32(coded[0], coded[1]);
+        coded[2] = _mm256_add_epi32(coded[2], coded[1]);
+      }
+      // The lanes' texels, channel c in byte c.
+      __m256i packed = zero;
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i value = _mm256_and_si256(_mm256_add_epi32(predicted[c], coded[c]), byte_mask);
+        if (derived_mask != 0) {
+          // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects
+          // plus the decoded symbol.
+          const __m256i block_parent = _mm256_and_si256(
+              _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels),
+                                     _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 1),
+              byte_mask);
+          const __m256i sum3 = _mm256_add_epi32(_mm256_add_epi32(left[c], up[c]), up_left[c]);
+          const __m256i four_parent = _mm256_slli_epi32(block_parent, 2);
+          const __m256i known = _mm256_sub_epi32(four_parent, sum3);
+          const __m256i expected = _mm256_min_epi32(
+              three, _mm256_max_epi32(
+                         zero, _mm256_sub_epi32(_mm256_add_epi32(medians[c], sum3), four_parent)));
+          const __m256i remainder_value = _mm256_and_si256(
+              _mm256_add_epi32(_mm256_add_epi32(known, expected), residual[c]), byte_mask);
+          value = _mm256_blendv_epi8(value, remainder_value, derived);
+        }
+        back3[c] = back2[c];
+        back2[c] = back1[c];
+        back1[c] = value;
+        if constexpr (kCorrected) {
+          detail3[c] = detail2[c];
+          detail2[c] = detail1[c];
+          detail1[c] = _mm256_sub_epi32(_mm256_slli_epi32(value, 4), upsampled_value[c]);
+        }
+        packed = _mm256_or_si256(packed, _mm256_slli_epi32(value, int(8 * c)));
+      }
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), packed);
+      // A corrupt stream may run ahead: stop within kCheckSteps of passing its end.
+      if (t % kCheckSteps == kCheckSteps - 1 || t + 1 == steps) {
+        bool overrun = false;
+        for (uint32_t c = 0; c < kCh; ++c)
+          overrun |= s.words[c] > s.words_end[c] || s.escapes[c] > s.escapes_end[c];
+        if (overrun) return false;
+      }
+    }
+    // The band's texels from its steps into rows: eight at a time (a gather of one row's
+    // texels, kLanes words apart, packed to kCh bytes each) while the 32 bytes stored stay in
+    // the row, then four bytes a texel (the next texel overwrites what spills into it), then
+    // byte by byte.
+    for (uint32_t k = 0; k < rows; ++k) {
+      uint8_t* row = g.texels + (y0 + k) * stride;
+      const uint32_t* from = diagonal + size_t(stepOf(0, k)) * kLanes + k;
+      // Octets whose 32 bytes end inside the row: 8 i kCh + 32 <= width kCh.
+      const uint32_t octets = width * kCh >= 32 ? (width * kCh - 32) / kCh / 8 + 1 : 0;
+      for (uint32_t i = 0; i < octets; ++i) {
+        const __m256i texels = _mm256_permutevar8x32_epi32(
+            _mm256_shuffle_epi8(
+                _mm256_i32gather_epi32(reinterpret_cast<const int*>(from), octet_at, 4), pack),
+            pack_halves);
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(row), texels);
+        row += 8 * kCh;
+        from += 8 * kLanes;
+      }
+      // Texels whose four bytes end inside the row: x * kCh + 4 <= width * kCh.
+      const uint32_t whole = width * kCh >= 4 ? (width * kCh - 4) / kCh + 1 : 0;
+      for (uint32_t x = 8 * octets; x < whole; ++x) {
+        std::memcpy(row, from, 4);
+        row += kCh;
+        from += kLanes;
+      }
+      for (uint32_t x = std::max(whole, 8 * octets); x < width; ++x) {
+        for (uint32_t c = 0; c < kCh; ++c) row[c] = uint8_t(*from >> (8 * c));
+        row += kCh;
+        from += kLanes;
+      }
+    }
+  }
+  for (uint32_t c = 0; c < kCh; ++c)
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(s.states[c]), state[c]);
+  return _mm256_testz_si256(failed, failed) != 0;
+}
+
+// decodeAvx2 for the tile's channel count.
+template <bool kCorrected>
+bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
+                        const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
+                        const int16_t* shortfall) {
+  switch (channels) {
+    case 1: return decodeAvx2<1, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 2: return decodeAvx2<2, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 3: return decodeAvx2<3, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    default: return decodeAvx2<4, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+  }
+}
+
+// Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
+// place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
+void blockShortfalls(const Walk& walk, uint32_t channels, const ParentCopy& parent,
+                     uint32_t parent_rows, int16_t* shortfall) {
+  std::fill_n(shortfall, size_t(parent_rows) * parent.stride, int16_t(0));
+  const AxisMap& columns = *walk.columns;
+  const AxisMap& rows = *walk.rows;
+  const size_t stride = size_t(walk.width) * channels;
+  for (uint32_t y = 0; y + 1 < walk.height; ++y) {
+    if (rows.full[y] == 0 || rows.second[y] != 0) continue;
+    const uint8_t* parent_row = walk.parent->row(rows.parent[y]);
+    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride;
+    const int16_t* upper = walk.upsampled + size_t(y) * stride;
+    const int16_t* lower = upper + stride;
+    for (uint32_t x = 0; x + 1 < walk.width; ++x) {
+      if (columns.full[x] == 0 || columns.second[x] != 0) continue;
+      const size_t at = size_t(x) * channels, parent_at = size_t(columns.parent[x]) * channels;
+      for (uint32_t c = 0; c < channels; ++c)
+        out[parent_at - size_t(parent.first_column) * channels + c] =
+            int16_t(blockSum16(parent_row[parent_at + c]) - upper[at + c] -
+                    upper[at + channels + c] - lower[at + c] - lower[at + channels + c]);
+    }
+  }
+}
+
+}  // namespace
+
+bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+                Predictor predictor, std::span<const uint8_t> params,
+                std::vector<uint8_t>& padded) {
+  const bool has_parent = predictor != Predictor::kRoot;
+  const bool corrected = predictor == Predictor::kParentCorrected;
+  // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
+  // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0
+  // reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's
+  // last step.
+  constexpr size_t kAlign = 32;
+  auto aligned = [](size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; };
+  ParentCopy parent;
+  uint32_t parent_rows = 0;
+  size_t parent_bytes = 0, shortfall_bytes = 0;
+  if (has_parent) {
+    parent.first_row = walk.rows->parent.front();
+    parent.first_column = walk.columns->parent.front();
+    parent_rows = walk.rows->parent.back() - parent.first_row + 1;
+    parent.stride = (walk.columns->parent.back() - parent.first_column + 1) * channels;
+    // Gathers read four bytes from a texel's first (two past a shortfall's).
+    parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
+    if (corrected) shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
+  }
+  const size_t diagonal_bytes =
+      size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
+  Streams streams;
+  if (!parse(section, channels, kAlign + parent_bytes + shortfall_bytes + diagonal_bytes, padded,
+             streams))
+    return false;
+  const Geometry geometry{walk.texels,
+                          walk.width,
+                          walk.height,
+                          channels,
+                          has_parent,
+                          corrected,
+                          walk.parent,
+                          walk.columns,
+                          walk.rows,
+                          nullptr,
+                          uint32_t(params.size() / channels),
+                          walk.upsampled,
+                          nullptr};
+  int32_t model_offsets[4 * kParentContexts];
+  for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
+  uint8_t* const scratch_end = padded.data() + padded.size();
+  uint8_t* parent_copy = scratch_end - parent_bytes - shortfall_bytes - diagonal_bytes;
+  parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
+  int16_t* shortfall = reinterpret_cast<int16_t*>(parent_copy + parent_bytes);
+  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes + shortfall_bytes);
+  for (uint32_t y = 0; y < parent_rows; ++y)
+    std::memcpy(parent_copy + size_t(y) * parent.stride,
+                walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
+                parent.stride);
+  parent.texels = parent_copy;
+  if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
+  const bool ok = corrected ? decodeAvx2Channels<true>(channels, geometry, streams, model_offsets,
+                                                       parent, diagonal, shortfall)
+                            : decodeAvx2Channels<false>(channels, geometry, streams, model_offsets,
+                                                        parent, diagonal, shortfall);
+  return ok && finished(streams, channels);
+}
+
+}  // namespace tessera::detail::ptm::lanes

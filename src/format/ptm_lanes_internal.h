@@ -1,0 +1,82 @@
+#pragma once
+// What the lane coder's translation units share (ptm_lanes.h): ptm_lanes.cpp holds the encoder,
+// the section's parsing and the scalar decoder every processor runs; ptm_lanes_avx2.cpp the
+// AVX2 decoder, which runs the eight rows of a band in the lanes of a vector. Both decoders
+// read each channel's words in the order of the band's rows at each step, so they consume the
+// same bytes and agree on every texel; the tests hold them to it.
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "ptm_lanes.h"
+
+namespace tessera::detail::ptm::lanes {
+
+inline constexpr uint32_t kScaleBits = rans::scaleBits(kFamily);
+inline constexpr uint32_t kScale = 1u << kScaleBits;
+static_assert(kScaleBits == rans::kBucketBits, "a slot's bucket must name its symbol");
+// An escape's byte is the zigzag code itself (63..255), as the byte-wise coders' uniform 8 bits.
+inline constexpr uint32_t kEscape = rans::kEscape;
+// The SIMD decoder checks its streams' bounds every kCheckSteps steps, and in between reads at
+// most 8 words and 8 escape bytes per channel and step, 16 bytes at a time.
+inline constexpr uint32_t kCheckSteps = 16;
+inline constexpr size_t kPadding = kCheckSteps * 16 + 16;
+
+// The step at which lane `lane` of a band decodes column x, and the band's step count.
+constexpr uint32_t stepOf(uint32_t x, uint32_t lane) {
+  return x + 2 * lane;
+}
+constexpr uint32_t stepsPerBand(uint32_t width) {
+  return width + 2 * (kLanes - 1);
+}
+
+// The part of the parent tile a child's blocks cover, copied without the tile's stride (the
+// SIMD decoder gathers derived texels' parents from it).
+struct ParentCopy {
+  const uint8_t* texels = nullptr;
+  uint32_t stride = 0;        ///< bytes per row of the copy
+  uint32_t first_row = 0;     ///< the parent row of the copy's first
+  uint32_t first_column = 0;  ///< the parent column of the copy's first
+};
+
+// A section's streams copied behind padding, so that a decoder may read up to kCheckSteps steps
+// ahead of its bounds checks.
+struct Streams {
+  uint32_t states[4][kLanes];
+  const uint8_t* words[4];
+  const uint8_t* words_end[4];
+  const uint8_t* escapes[4];
+  const uint8_t* escapes_end[4];
+};
+
+// The walk's geometry and models as the decoders read them.
+struct Geometry {
+  uint8_t* texels;
+  uint32_t width, height, channels;
+  bool has_parent;
+  bool corrected;  ///< predictor 4
+  const ImageView* parent;
+  const AxisMap* columns;
+  const AxisMap* rows;
+  const rans::Model* const* models;  // [channel * contexts + context]
+  uint32_t contexts;
+  const int16_t* upsampled;  ///< predictor 4: the walk's planes
+  int16_t* detail;
+};
+
+/// Parses the lane section `section` into `streams`, copied into `padded` behind kPadding
+/// bytes each, followed by `extra_bytes` of scratch for the caller; false when the section is
+/// truncated or its lengths do not add up.
+bool parse(std::span<const uint8_t> section, uint32_t channels, size_t extra_bytes,
+           std::vector<uint8_t>& padded, Streams& streams);
+
+/// True when every stream was consumed and every state is back at kLower.
+bool finished(const Streams& streams, uint32_t channels);
+
+/// decode() on the AVX2 path: the processor must have AVX2 (simdAvailable()).
+bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+                Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded);
+
+}  // namespace tessera::detail::ptm::lanes
