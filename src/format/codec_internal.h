@@ -46,6 +46,8 @@ struct CodecScratch::State {
   std::vector<uint8_t> compressed;
   /// ptm: the parent bilinearly upsampled to the tile, 16 times the texel scale.
   std::vector<int16_t> upsampled;
+  /// ptm: one row of the two parent rows an upsampled row reads, blended (3 P + Pv).
+  std::vector<int16_t> parent_blend;
   /// ptm: predictor 4's detail of each coded texel (16 texel - upsampled).
   std::vector<int16_t> detail;
   /// ptm, coders 5 and 6: each texel's coded error (sum of its symbols' magnitudes over channels).
