@@ -335,17 +335,17 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         next = _mm256_blendv_epi8(state[c], next, active);
         const __m256i reads =
             _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
+        // Without a branch on whether any lane reads: which steps read is as good as random, and
+        // the mispredicted branch cost more than the load (docs/benchmarks.md, "tenth session").
+        // The load stays in the padding, which allows a read at every step (kPadding).
         const int read_mask = _mm256_movemask_ps(_mm256_castsi256_ps(reads));
-        if (read_mask != 0) {
-          const __m256i words =
-              _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
-          const __m256i mine = _mm256_permutevar8x32_epi32(
-              words,
-              _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
-          next =
-              _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), mine), reads);
-          s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
-        }
+        const __m256i words =
+            _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
+        const __m256i my_words = _mm256_permutevar8x32_epi32(
+            words,
+            _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
+        next = _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), my_words), reads);
+        s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
         state[c] = next;
         __m256i code = symbol;
         const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbol, escape), active);
