@@ -59,14 +59,14 @@ __attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m2
 
 // Each lane's left, up, up-left and up-right values from its values of the last three steps
 // (`back1` the latest): the row above's are lane k - 1's, rotated into lane k, and lane 0's
-// come from the band before (`up0`, `up_left0`, `up_right0`), with LOCO-I's substitutes on
-// the first row and column and the last column (neighbourOffsets).
+// come from the band before (`up0`, `up_left0`, `up_right0`, in every lane), with LOCO-I's
+// substitutes on the first row and column and the last column (neighbourOffsets).
 struct LaneNeighbours {
   __m256i left, up, up_left, up_right;
 };
 __attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
-    __m256i back1, __m256i back2, __m256i back3, bool first_band, int up0, int up_left0,
-    int up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
+    __m256i back1, __m256i back2, __m256i back3, bool first_band, __m256i up0, __m256i up_left0,
+    __m256i up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
   __m256i u = _mm256_permutevar8x32_epi32(back2, rotate);
   __m256i ul = _mm256_permutevar8x32_epi32(back3, rotate);
   __m256i ur = _mm256_permutevar8x32_epi32(back1, rotate);
@@ -77,12 +77,31 @@ __attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
     ul = _mm256_blend_epi32(ul, l, 1);
     ur = _mm256_blend_epi32(ur, l, 1);
   } else {
-    u = _mm256_blend_epi32(u, _mm256_set1_epi32(up0), 1);
-    ul = _mm256_blend_epi32(ul, _mm256_set1_epi32(up_left0), 1);
-    ur = _mm256_blend_epi32(ur, _mm256_set1_epi32(up_right0), 1);
+    u = _mm256_blend_epi32(u, up0, 1);
+    ul = _mm256_blend_epi32(ul, up_left0, 1);
+    ur = _mm256_blend_epi32(ur, up_right0, 1);
   }
   return {_mm256_blendv_epi8(l, u, first_column), u, _mm256_blendv_epi8(ul, u, first_column),
           _mm256_blendv_epi8(ur, u, at_last_column)};
+}
+
+// Channel c of each lane's texel, held a byte per channel.
+__attribute__((target("avx2"))) inline __m256i channelOf(__m256i bytes, uint32_t c) {
+  return _mm256_and_si256(_mm256_srli_epi32(bytes, int(8 * c)), _mm256_set1_epi32(0xff));
+}
+
+// |a - b| of each unsigned byte.
+__attribute__((target("avx2"))) inline __m256i absDifference(__m256i a, __m256i b) {
+  return _mm256_sub_epi8(_mm256_max_epu8(a, b), _mm256_min_epu8(a, b));
+}
+
+// LOCO-I's median of each byte's a, b and a + b - c (medPredict) without leaving bytes: with
+// low = min(a, b) and high = max(a, b) it is low + min(max(high - c, 0), high - low), since
+// a + b - c = low + (high - c) lies between low and high exactly when c does.
+__attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b, __m256i c) {
+  const __m256i low = _mm256_min_epu8(a, b), high = _mm256_max_epu8(a, b);
+  return _mm256_add_epi8(low,
+                         _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
 }
 
 // `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
@@ -93,7 +112,16 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const ParentCopy& parent, uint32_t* diagonal,
                                                 const int16_t* shortfall) {
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
+  // Locals, not the structures' fields: every vector store may alias those, and the compiler
+  // would reload them at every step.
   const uint32_t width = g.width, height = g.height;
+  const bool has_parent = g.has_parent;
+  const uint8_t* words_at[kCh];
+  const uint8_t* escapes_at[kCh];
+  for (uint32_t c = 0; c < kCh; ++c) {
+    words_at[c] = s.words[c];
+    escapes_at[c] = s.escapes[c];
+  }
   const size_t stride = size_t(width) * kCh;
   const uint32_t steps = stepsPerBand(width);
   const int* slot_tables = reinterpret_cast<const int*>(slotTables());
@@ -109,6 +137,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const __m256i escape = _mm256_set1_epi32(int(kEscape));
   const __m256i zero = _mm256_setzero_si256();
   const __m256i three = _mm256_set1_epi32(3);
+  const __m256i ones8 = _mm256_set1_epi8(1), ones16 = _mm256_set1_epi16(1);
+  // Adds each texel's byte 1 (green) to its bytes 0 and 2.
+  const __m256i green_to_red_and_blue =
+      _mm256_setr_epi8(1, -1, 1, -1, 5, -1, 5, -1, 9, -1, 9, -1, 13, -1, 13, -1, 1, -1, 1, -1, 5,
+                       -1, 5, -1, 9, -1, 9, -1, 13, -1, 13, -1);
   const __m256i last_column = _mm256_set1_epi32(int(width) - 1);
   // The copy into rows: eight texels of a row lie kLanes words apart; within each half of the
   // vector the shuffle packs four texels' kCh bytes to the front, and the permute joins the
@@ -124,9 +157,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   alignas(32) int32_t halves[8];
   for (uint32_t i = 0; i < 8; ++i) halves[i] = int32_t(i < kCh ? i : i < 2 * kCh ? i - kCh + 4 : 7);
   const __m256i pack_halves = _mm256_load_si256(reinterpret_cast<const __m256i*>(halves));
-  __m256i bounds[kActivityClasses - 1];
+  // The class bounds from memory at every use: built from the tile's channel count at run time,
+  // so that the compiler cannot rebuild them from immediates at every step, as it did for want
+  // of registers.
+  alignas(32) int32_t bounds[kActivityClasses - 1][kLanes];
   for (uint32_t i = 0; i < kActivityClasses - 1; ++i)
-    bounds[i] = _mm256_set1_epi32(kActivityBounds[i] * int(kCh) - 1);
+    std::fill_n(bounds[i], kLanes, kActivityBounds[i] * int(g.channels) - 1);
   // Each channel's model offsets by context group (the block positions 0-3, then remainders),
   // eight activity classes each: a lane picks its model with a permute, not a gather.
   constexpr uint32_t kGroups = kParentContexts / kActivityClasses;
@@ -140,7 +176,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
   // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
   // columns differ by even numbers, is a first child or every lane a second.
-  const uint32_t column_offset = g.has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
+  const uint32_t column_offset = has_parent ? 2 * g.columns->parent[0] + g.columns->second[0] : 0;
   // Predictor 4 pulls a texel only where its block lies wholly in the tile: a first column that
   // is a block's second child, or a last column that is a first, never.
   const bool first_column_partial = kCorrected && g.columns->full.front() == 0;
@@ -162,7 +198,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
                         row_derived[kLanes] = {}, row_full[kLanes] = {},
                         upsampled_row_at[kLanes] = {};
-    if (g.has_parent)
+    if (has_parent)
       for (uint32_t k = 0; k < rows; ++k) {
         parent_row_at[k] = int32_t((g.rows->parent[y0 + k] - parent.first_row) * parent.stride);
         row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
@@ -177,12 +213,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     const __m256i upsampled_rows =
         _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
     const bool first_band = y0 == 0;
-    // Each lane's texels of the last three steps: left, and (rotated) the row above's; for
-    // predictor 4 their departures from the upsampled parent likewise.
-    __m256i back1[kCh], back2[kCh], back3[kCh];
+    // Each lane's texels of the last three steps, channel c in byte c: left, and (rotated) the
+    // row above's. Predictor 4 keeps their departures from the upsampled parent likewise, per
+    // channel.
+    __m256i back1 = zero, back2 = zero, back3 = zero;
     __m256i detail1[kCh], detail2[kCh], detail3[kCh];
-    for (uint32_t c = 0; c < kCh; ++c)
-      back1[c] = back2[c] = back3[c] = detail1[c] = detail2[c] = detail3[c] = zero;
+    for (uint32_t c = 0; c < kCh; ++c) detail1[c] = detail2[c] = detail3[c] = zero;
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
       const __m256i active = _mm256_and_si256(
@@ -193,26 +229,21 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
       // Lane 0's row above is the last lane's of the band before, whose steps still lie
       // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
-      int up0[kCh] = {}, up_left0[kCh] = {}, up_right0[kCh] = {};
+      const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
       int up0_detail[kCh] = {}, up_left0_detail[kCh] = {}, up_right0_detail[kCh] = {};
-      if (!first_band)
-        for (uint32_t c = 0; c < kCh; ++c) {
-          const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
-          up0[c] = int(above[0] >> (8 * c) & 0xff);
-          up_left0[c] = int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff);
-          up_right0[c] = int(above[kLanes] >> (8 * c) & 0xff);
-          if constexpr (kCorrected) {
+      if constexpr (kCorrected)
+        if (!first_band)
+          for (uint32_t c = 0; c < kCh; ++c) {
             // Columns past the tile's edges belong to lanes that are idle or take substitutes:
             // any value in the plane will do.
             const int16_t* above_row = g.upsampled + size_t(y0 - 1) * stride + c;
             const uint32_t column = std::min(t, width - 1);
-            up0_detail[c] = 16 * up0[c] - above_row[size_t(column) * kCh];
-            up_left0_detail[c] =
-                16 * up_left0[c] - above_row[size_t(t == 0 ? 0 : std::min(t - 1, width - 1)) * kCh];
-            up_right0_detail[c] =
-                16 * up_right0[c] - above_row[size_t(std::min(t + 1, width - 1)) * kCh];
+            up0_detail[c] = 16 * int(above[0] >> (8 * c) & 0xff) - above_row[size_t(column) * kCh];
+            up_left0_detail[c] = 16 * int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff) -
+                                 above_row[size_t(t == 0 ? 0 : std::min(t - 1, width - 1)) * kCh];
+            up_right0_detail[c] = 16 * int(above[kLanes] >> (8 * c) & 0xff) -
+                                  above_row[size_t(std::min(t + 1, width - 1)) * kCh];
           }
-        }
       // Each lane's column kept inside the tile, for the gathers of idle lanes too.
       const __m256i column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
       // Predictor 4: where the block sum pulls.
@@ -223,29 +254,31 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         if (last_column_partial) column_partial = _mm256_or_si256(column_partial, at_last_column);
         pulled = _mm256_andnot_si256(column_partial, _mm256_and_si256(full_row, active));
       }
-      __m256i left[kCh], up[kCh], up_left[kCh], medians[kCh], predicted[kCh];
-      [[maybe_unused]] __m256i upsampled_value[kCh];
-      __m256i activity = zero;
-      for (uint32_t c = 0; c < kCh; ++c) {
-        const auto [l, u, ul, ur] =
-            laneNeighbours(back1[c], back2[c], back3[c], first_band, up0[c], up_left0[c],
-                           up_right0[c], first_column, at_last_column, rotate);
-        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(l, ul)));
-        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(u, ul)));
-        activity = _mm256_add_epi32(activity, _mm256_abs_epi32(_mm256_sub_epi32(ur, u)));
-        medians[c] = median(l, u, ul);
-        predicted[c] = medians[c];
-        left[c] = l;
-        up[c] = u;
-        up_left[c] = ul;
-      }
+      // The neighbours of all channels at once, a byte each: the activity sums their
+      // differences with byte instructions and the median is taken bytewise.
+      const auto [left, up, up_left, up_right] = laneNeighbours(
+          back1, back2, back3, first_band, _mm256_set1_epi32(int(above[0])),
+          _mm256_set1_epi32(int(above[-ptrdiff_t(kLanes)])), _mm256_set1_epi32(int(above[kLanes])),
+          first_column, at_last_column, rotate);
+      const __m256i activity = _mm256_madd_epi16(
+          _mm256_add_epi16(
+              _mm256_add_epi16(_mm256_maddubs_epi16(absDifference(left, up_left), ones8),
+                               _mm256_maddubs_epi16(absDifference(up, up_left), ones8)),
+              _mm256_maddubs_epi16(absDifference(up_right, up), ones8)),
+          ones16);
+      const __m256i medians = medianBytes(left, up, up_left);
       __m256i activity_class = zero;
-      for (const __m256i& bound : bounds)
-        activity_class = _mm256_sub_epi32(activity_class, _mm256_cmpgt_epi32(activity, bound));
+      for (const auto& bound : bounds)
+        activity_class = _mm256_sub_epi32(
+            activity_class,
+            _mm256_cmpgt_epi32(activity,
+                               _mm256_load_si256(reinterpret_cast<const __m256i*>(bound))));
+      [[maybe_unused]] __m256i predicted[kCh];
+      [[maybe_unused]] __m256i upsampled_value[kCh];
       // Each lane's model group: its block position, or the remainders for a derived texel.
-      const uint32_t second_column = g.has_parent ? (t + column_offset) & 1 : 0;
+      const uint32_t second_column = has_parent ? (t + column_offset) & 1 : 0;
       __m256i derived = zero;
-      if (g.has_parent && second_column != 0)
+      if (has_parent && second_column != 0)
         derived =
             _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
@@ -285,8 +318,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           const __m256i w = upsampled_value[c];
           const __m256i block_shortfall = block_shortfalls[c];
           const auto [dl, du, dul, dur] = laneNeighbours(
-              detail1[c], detail2[c], detail3[c], first_band, up0_detail[c], up_left0_detail[c],
-              up_right0_detail[c], first_column, at_last_column, rotate);
+              detail1[c], detail2[c], detail3[c], first_band, _mm256_set1_epi32(up0_detail[c]),
+              _mm256_set1_epi32(up_left0_detail[c]), _mm256_set1_epi32(up_right0_detail[c]),
+              first_column, at_last_column, rotate);
           const __m256i departure = median(dl, du, dul);
           __m256i pull;
           if (second_column == 0) {
@@ -312,10 +346,10 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
               _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
         }
       }
-      __m256i residual[kCh];
+      __m256i symbols[kCh];
       for (uint32_t c = 0; c < kCh; ++c) {
         __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
-        if (g.has_parent) {
+        if (has_parent) {
           model = _mm256_blendv_epi8(
               model,
               _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
@@ -340,75 +374,95 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         // The load stays in the padding, which allows a read at every step (kPadding).
         const int read_mask = _mm256_movemask_ps(_mm256_castsi256_ps(reads));
         const __m256i words =
-            _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(s.words[c])));
+            _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words_at[c])));
         const __m256i my_words = _mm256_permutevar8x32_epi32(
             words,
             _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[read_mask])));
-        next = _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), my_words), reads);
-        s.words[c] += 2 * __builtin_popcount(unsigned(read_mask));
+        next =
+            _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), my_words), reads);
+        words_at[c] += 2 * __builtin_popcount(unsigned(read_mask));
         state[c] = next;
-        __m256i code = symbol;
-        const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbol, escape), active);
-        const int escape_mask = _mm256_movemask_ps(_mm256_castsi256_ps(escaped));
-        if (escape_mask != 0) [[unlikely]] {
-          const __m256i bytes =
-              _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(s.escapes[c])));
+        symbols[c] = symbol;
+      }
+      // One test for escapes in any channel (63 is the largest symbol), then each channel's.
+      __m256i largest = symbols[0];
+      for (uint32_t c = 1; c < kCh; ++c) largest = _mm256_max_epu32(largest, symbols[c]);
+      if (_mm256_movemask_ps(_mm256_castsi256_ps(
+              _mm256_and_si256(_mm256_cmpeq_epi32(largest, escape), active))) != 0) [[unlikely]]
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const __m256i escaped = _mm256_and_si256(_mm256_cmpeq_epi32(symbols[c], escape), active);
+          const int escape_mask = _mm256_movemask_ps(_mm256_castsi256_ps(escaped));
+          if (escape_mask == 0) continue;
+          const __m256i bytes = _mm256_cvtepu8_epi32(
+              _mm_loadl_epi64(reinterpret_cast<const __m128i*>(escapes_at[c])));
           const __m256i mine = _mm256_permutevar8x32_epi32(
               bytes,
               _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompaction.index[escape_mask])));
-          code = _mm256_blendv_epi8(code, mine, escaped);
+          symbols[c] = _mm256_blendv_epi8(symbols[c], mine, escaped);
           // The encoder escapes only what 0..62 cannot say.
           failed =
               _mm256_or_si256(failed, _mm256_and_si256(escaped, _mm256_cmpgt_epi32(escape, mine)));
-          s.escapes[c] += __builtin_popcount(unsigned(escape_mask));
+          escapes_at[c] += __builtin_popcount(unsigned(escape_mask));
         }
+      __m256i residual[kCh];
+      for (uint32_t c = 0; c < kCh; ++c) {
         // Zigzag back to a signed residual: 0, 1, 2, 3, ... -> 0, -1, 1, -2, ...
+        const __m256i code = symbols[c];
         residual[c] = _mm256_xor_si256(_mm256_srli_epi32(code, 1),
                                        _mm256_sub_epi32(zero, _mm256_and_si256(code, one)));
       }
-      __m256i coded[kCh];
-      for (uint32_t c = 0; c < kCh; ++c) coded[c] = residual[c];
-      if constexpr (kCh >= 3) {
-        coded[0] = _mm256_add_epi32(coded[0], coded[1]);
-        coded[2] = _mm256_add_epi32(coded[2], coded[1]);
+      // The residuals into bytes, and subtract-green undone bytewise: texels are sums modulo 256.
+      __m256i coded = zero;
+      for (uint32_t c = 0; c < kCh; ++c)
+        coded = _mm256_or_si256(
+            coded, _mm256_slli_epi32(_mm256_and_si256(residual[c], byte_mask), int(8 * c)));
+      if constexpr (kCh >= 3)
+        coded = _mm256_add_epi8(coded, _mm256_shuffle_epi8(coded, green_to_red_and_blue));
+      __m256i prediction = medians;
+      if constexpr (kCorrected) {
+        prediction = zero;
+        for (uint32_t c = 0; c < kCh; ++c)
+          prediction = _mm256_or_si256(prediction, _mm256_slli_epi32(predicted[c], int(8 * c)));
       }
-      // The lanes' texels, channel c in byte c.
-      __m256i packed = zero;
-      for (uint32_t c = 0; c < kCh; ++c) {
-        __m256i value = _mm256_and_si256(_mm256_add_epi32(predicted[c], coded[c]), byte_mask);
-        if (derived_mask != 0) {
-          // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects
-          // plus the decoded symbol.
-          const __m256i block_parent = _mm256_and_si256(
-              _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels),
-                                     _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 1),
-              byte_mask);
-          const __m256i sum3 = _mm256_add_epi32(_mm256_add_epi32(left[c], up[c]), up_left[c]);
-          const __m256i four_parent = _mm256_slli_epi32(block_parent, 2);
-          const __m256i known = _mm256_sub_epi32(four_parent, sum3);
+      __m256i values = _mm256_add_epi8(prediction, coded);
+      if (derived_mask != 0) {
+        // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects plus
+        // the decoded symbol. One gather reads the parent texel's channels.
+        const __m256i parents =
+            _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1);
+        __m256i remainders = zero;
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const __m256i sum3 = _mm256_add_epi32(
+              _mm256_add_epi32(channelOf(left, c), channelOf(up, c)), channelOf(up_left, c));
+          const __m256i four_parent = _mm256_slli_epi32(channelOf(parents, c), 2);
           const __m256i expected = _mm256_min_epi32(
-              three, _mm256_max_epi32(
-                         zero, _mm256_sub_epi32(_mm256_add_epi32(medians[c], sum3), four_parent)));
+              three,
+              _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(channelOf(medians, c), sum3),
+                                                      four_parent)));
           const __m256i remainder_value = _mm256_and_si256(
-              _mm256_add_epi32(_mm256_add_epi32(known, expected), residual[c]), byte_mask);
-          value = _mm256_blendv_epi8(value, remainder_value, derived);
+              _mm256_add_epi32(_mm256_add_epi32(_mm256_sub_epi32(four_parent, sum3), expected),
+                               residual[c]),
+              byte_mask);
+          remainders = _mm256_or_si256(remainders, _mm256_slli_epi32(remainder_value, int(8 * c)));
         }
-        back3[c] = back2[c];
-        back2[c] = back1[c];
-        back1[c] = value;
-        if constexpr (kCorrected) {
+        values = _mm256_blendv_epi8(values, remainders, derived);
+      }
+      back3 = back2;
+      back2 = back1;
+      back1 = values;
+      if constexpr (kCorrected)
+        for (uint32_t c = 0; c < kCh; ++c) {
           detail3[c] = detail2[c];
           detail2[c] = detail1[c];
-          detail1[c] = _mm256_sub_epi32(_mm256_slli_epi32(value, 4), upsampled_value[c]);
+          detail1[c] =
+              _mm256_sub_epi32(_mm256_slli_epi32(channelOf(values, c), 4), upsampled_value[c]);
         }
-        packed = _mm256_or_si256(packed, _mm256_slli_epi32(value, int(8 * c)));
-      }
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), packed);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), values);
       // A corrupt stream may run ahead: stop within kCheckSteps of passing its end.
       if (t % kCheckSteps == kCheckSteps - 1 || t + 1 == steps) {
         bool overrun = false;
         for (uint32_t c = 0; c < kCh; ++c)
-          overrun |= s.words[c] > s.words_end[c] || s.escapes[c] > s.escapes_end[c];
+          overrun |= words_at[c] > s.words_end[c] || escapes_at[c] > s.escapes_end[c];
         if (overrun) return false;
       }
     }
@@ -444,8 +498,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       }
     }
   }
-  for (uint32_t c = 0; c < kCh; ++c)
+  for (uint32_t c = 0; c < kCh; ++c) {
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(s.states[c]), state[c]);
+    s.words[c] = words_at[c];
+    s.escapes[c] = escapes_at[c];
+  }
   return _mm256_testz_si256(failed, failed) != 0;
 }
 
