@@ -397,6 +397,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm smallest of 1/3/4 + rANS parent errors", Codec::kPtm, 0, Predictor::kRoot,
      PtmCoder::kRansParentErrors, true},
     {"ptm least-squares + zstd", Codec::kPtm, 0, Predictor::kLeastSquares, PtmCoder::kZstd},
+    {"ptm least-squares + rANS lanes", Codec::kPtm, 0, Predictor::kLeastSquares,
+     PtmCoder::kRansLanes},
     {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansParentErrors},
     {"ptm effort 2 (nearest parent + zstd, or rANS lanes with the median or parent corrected)",

@@ -160,10 +160,11 @@ constexpr bool isErrorActivityCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansMixtureChainedErrors || coder == PtmCoder::kRansParentErrors;
 }
 /// True when `coder` can code `predictor`'s residuals: every coder can but coder 7, which has
-/// predictors 0, 3 and 4 only.
+/// predictors 0, 3, 4 and 5 only.
 constexpr bool codesPredictor(PtmCoder coder, Predictor predictor) {
   return coder != PtmCoder::kRansLanes || predictor == Predictor::kRoot ||
-         predictor == Predictor::kNeighbourMedian || predictor == Predictor::kParentCorrected;
+         predictor == Predictor::kNeighbourMedian || predictor == Predictor::kParentCorrected ||
+         predictor == Predictor::kLeastSquares;
 }
 /// True for the coder whose activity reads the parent instead of the decoded neighbours.
 constexpr bool isParentActivityCoder(PtmCoder coder) {

@@ -46,6 +46,16 @@ bool parse(std::span<const uint8_t> section, uint32_t channels, size_t extra_byt
   return true;
 }
 
+void sumLeastSquaresWeights(const int8_t* weights, uint32_t channels, int (&sums)[kLsSets][4]) {
+  for (uint32_t set = 0; set < kLsSets; ++set)
+    for (uint32_t c = 0; c < 4; ++c) {
+      sums[set][c] = 0;
+      if (c < channels)
+        for (uint32_t k = 0; k < kLsTerms; ++k)
+          sums[set][c] += weights[(set * channels + c) * kLsTerms + k];
+    }
+}
+
 bool finished(const Streams& streams, uint32_t channels) {
   for (uint32_t c = 0; c < channels; ++c) {
     if (streams.words[c] != streams.words_end[c] || streams.escapes[c] != streams.escapes_end[c])
@@ -91,7 +101,24 @@ void keepDetail(const Geometry& g, size_t index) {
     g.detail[index + c] = int16_t(16 * g.texels[index + c] - g.upsampled[index + c]);
 }
 
-// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0, 3 and 4 and
+// Predictor 5's prediction of channel c of texel (x, y) at block position `position`, as the
+// walk makes it (leastSquaresPredictFactored): `texel` points at the channel, `estimate16` is
+// predictor 4's estimate and `median` the neighbours' median.
+int leastSquaresPrediction(const Geometry& g, uint32_t x, uint32_t y, uint32_t position, uint32_t c,
+                           const uint8_t* texel, const NeighbourOffsets& n, bool origin,
+                           int estimate16, int median) {
+  const uint32_t ch = g.channels;
+  const uint8_t* parent_row = g.parent->row(g.rows->parent[y]);
+  const uint8_t* parent_near = g.parent->row(g.rows->neighbour[y]);
+  const size_t at = size_t(g.columns->parent[x]) * ch + c;
+  const size_t side_at = size_t(g.columns->neighbour[x]) * ch + c;
+  return leastSquaresPredictFactored(g.ls_weights + (position * ch + c) * kLsTerms,
+                                     g.ls_weight_sums[position][c], texel, n.left, n.up, n.up_left,
+                                     n.up_right, origin, parent_row + at, parent_row + side_at,
+                                     parent_near + at, parent_near + side_at, estimate16, median);
+}
+
+// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0, 3, 4 and 5 and
 // coder 1 (ptm_walk.h, codeTexels).
 bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t lane) {
   const uint32_t ch = g.channels;
@@ -117,7 +144,15 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
     const uint8_t* c3 = texel + left;
     for (uint32_t c = 0; c < ch; ++c) {
       const uint32_t known = 4u * p[c] - a[c] - b[c] - c3[c];
-      const int guess = medPredict(c3[c], b[c], a[c]) + a[c] + b[c] + c3[c] - 4 * p[c];
+      int guess = medPredict(c3[c], b[c], a[c]);
+      if (g.least_squares) {
+        // Predictor 5's guess at d, with predictor 4's estimate without the block's pull.
+        const int16_t* d = g.detail + index + c;
+        guess = leastSquaresPrediction(
+            g, x, y, 3, c, texel + c, neighbours, false,
+            g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]), guess);
+      }
+      guess += a[c] + b[c] + c3[c] - 4 * p[c];
       const uint32_t expected = uint32_t(std::clamp(guess, 0, 3));
       uint8_t symbol;
       if (!decodeSymbol(s, c, lane, *models[c * g.contexts + kCodedContexts + activity_class],
@@ -140,13 +175,18 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
   const bool full = g.corrected && g.rows->full[y] != 0 && g.columns->full[x] != 0;
   for (uint32_t c = 0; c < ch; ++c) {
     int predicted = 0;
-    if (g.corrected)
-      predicted = parentCorrectedPrediction(parentCorrectedEstimate(
+    const int median = origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+    if (g.corrected) {
+      const int estimate = parentCorrectedEstimate(
           g.upsampled + index + c, g.detail + index + c, texel + c, neighbours, origin, full,
           position, g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c], ch,
-          size_t(g.width) * ch));
-    else if (!origin)
-      predicted = medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+          size_t(g.width) * ch);
+      predicted = g.least_squares ? leastSquaresPrediction(g, x, y, position, c, texel + c,
+                                                           neighbours, origin, estimate, median)
+                                  : parentCorrectedPrediction(estimate);
+    } else {
+      predicted = median;
+    }
     texel[c] = uint8_t(predicted + symbols[c]);
   }
   keepDetail(g, index);
@@ -242,19 +282,25 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   const rans::Model* family = rans::models(kFamily);
   const rans::Model* models[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
-  const Geometry geometry{walk.texels,
-                          walk.width,
-                          walk.height,
-                          channels,
-                          predictor != Predictor::kRoot,
-                          predictor == Predictor::kParentCorrected,
-                          walk.parent,
-                          walk.columns,
-                          walk.rows,
-                          models,
-                          uint32_t(params.size() / channels),
-                          walk.upsampled,
-                          walk.detail};
+  Geometry geometry{
+      walk.texels,
+      walk.width,
+      walk.height,
+      channels,
+      predictor != Predictor::kRoot,
+      predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares,
+      predictor == Predictor::kLeastSquares,
+      walk.parent,
+      walk.columns,
+      walk.rows,
+      models,
+      uint32_t(params.size() / channels),
+      walk.upsampled,
+      walk.detail,
+      walk.ls_weights,
+      {}};
+  if (geometry.least_squares)
+    sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
   return decodeScalar(geometry, streams) && finished(streams, channels);
 }
 

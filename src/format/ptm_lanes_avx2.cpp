@@ -106,11 +106,15 @@ __attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b,
 
 // `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
 // parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
-template <uint32_t kCh, bool kCorrected>
+//
+// `kLeastSquares` (with kCorrected): predictor 5, which also reads the parent texels beside
+// each block's (`parent` then covers them).
+template <uint32_t kCh, bool kCorrected, bool kLeastSquares>
 __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
                                                 const ParentCopy& parent, uint32_t* diagonal,
                                                 const int16_t* shortfall) {
+  static_assert(kCorrected || !kLeastSquares, "predictor 5's ninth term is predictor 4's estimate");
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   // Locals, not the structures' fields: every vector store may alias those, and the compiler
   // would reload them at every step.
@@ -184,6 +188,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const int* upsampled = reinterpret_cast<const int*>(g.upsampled);
   const int* shortfalls = reinterpret_cast<const int*>(shortfall);
   const __m256 twelve = _mm256_set1_ps(12.0f);
+  [[maybe_unused]] const __m256i ls_rounding = _mm256_set1_epi32(1 << (kLsProductShift - 1));
+  [[maybe_unused]] const __m256i last_parent_column =
+      _mm256_set1_epi32(has_parent ? int(g.parent->width_px) - 1 : 0);
   const __m256i eight = _mm256_set1_epi32(8);
   __m256i state[kCh];
   for (uint32_t c = 0; c < kCh; ++c)
@@ -195,6 +202,13 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     // Per lane: its row's parent row offset, second-row and derived-row flags.
     // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
     // row 0) and whether the row's blocks lie in the tile.
+    alignas(32) int32_t parent_near_row_at[kLanes] = {};
+    if constexpr (kLeastSquares)
+      for (uint32_t k = 0; k < rows; ++k)
+        parent_near_row_at[k] =
+            int32_t((g.rows->neighbour[y0 + k] - parent.first_row) * parent.stride);
+    const __m256i parent_near_rows =
+        _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_near_row_at));
     alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
                         row_derived[kLanes] = {}, row_full[kLanes] = {},
                         upsampled_row_at[kLanes] = {};
@@ -213,6 +227,21 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     const __m256i upsampled_rows =
         _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
     const bool first_band = y0 == 0;
+    // Predictor 5: per step parity (second column or not), channel and term, each lane's weight
+    // for its block position, and the weights' sum.
+    constexpr uint32_t kLsWeightSum = kLsTerms;
+    [[maybe_unused]] __m256i ls_weights[kLeastSquares ? 2 : 1][kCh][kLsTerms + 1];
+    if constexpr (kLeastSquares)
+      for (uint32_t column = 0; column < 2; ++column)
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const int8_t* first = g.ls_weights + (column * kCh + c) * kLsTerms;
+          const int8_t* second = g.ls_weights + ((2 + column) * kCh + c) * kLsTerms;
+          for (uint32_t k = 0; k <= kLsTerms; ++k)
+            ls_weights[column][c][k] = _mm256_blendv_epi8(
+                _mm256_set1_epi32(k < kLsTerms ? first[k] : g.ls_weight_sums[column][c]),
+                _mm256_set1_epi32(k < kLsTerms ? second[k] : g.ls_weight_sums[2 + column][c]),
+                second_row);
+        }
     // Each lane's texels of the last three steps, channel c in byte c: left, and (rotated) the
     // row above's. Predictor 4 keeps their departures from the upsampled parent likewise, per
     // channel.
@@ -314,6 +343,28 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
           }
         }
+        // Predictor 5: the block's parent texel and those beside it (mapAxis's neighbours),
+        // every channel in one gather each.
+        [[maybe_unused]] __m256i block_parents, side_parents, near_parents, diagonal_parents;
+        if constexpr (kLeastSquares) {
+          const __m256i parent_column = _mm256_srli_epi32(
+              _mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))), 1);
+          const __m256i side_column =
+              second_column != 0
+                  ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), last_parent_column)
+                  : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
+          const __m256i side_at = _mm256_mullo_epi32(
+              _mm256_sub_epi32(side_column, _mm256_set1_epi32(int(parent.first_column))),
+              _mm256_set1_epi32(int(kCh)));
+          const __m256i near_at = _mm256_sub_epi32(parent_at, parent_rows);
+          const int* copy = reinterpret_cast<const int*>(parent.texels);
+          block_parents = _mm256_i32gather_epi32(copy, parent_at, 1);
+          side_parents = _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_rows, side_at), 1);
+          near_parents =
+              _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_near_rows, near_at), 1);
+          diagonal_parents =
+              _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_near_rows, side_at), 1);
+        }
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i w = upsampled_value[c];
           const __m256i block_shortfall = block_shortfalls[c];
@@ -340,10 +391,38 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 _mm256_and_si256(_mm256_cvttps_epi32(_mm256_div_ps(_mm256_cvtepi32_ps(n), twelve)),
                                  _mm256_andnot_si256(second_row, pulled));
           }
-          const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
-          predicted[c] = _mm256_min_epi32(
-              byte_mask,
-              _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
+          if constexpr (kLeastSquares) {
+            // Predictor 5 (leastSquaresPredictFactored): sixteen times the neighbours' and the
+            // parent's terms less the median times the weights' sum, plus predictor 4's
+            // estimate's term and the rounding.
+            const __m256i* weights = ls_weights[second_column][c];
+            const __m256i m = channelOf(medians, c);
+            const __m256i texel_terms = _mm256_add_epi32(
+                _mm256_add_epi32(_mm256_mullo_epi32(weights[0], channelOf(left, c)),
+                                 _mm256_mullo_epi32(weights[1], channelOf(up, c))),
+                _mm256_add_epi32(_mm256_mullo_epi32(weights[2], channelOf(up_left, c)),
+                                 _mm256_mullo_epi32(weights[3], channelOf(up_right, c))));
+            const __m256i parent_terms = _mm256_add_epi32(
+                _mm256_add_epi32(_mm256_mullo_epi32(weights[4], channelOf(block_parents, c)),
+                                 _mm256_mullo_epi32(weights[5], channelOf(side_parents, c))),
+                _mm256_add_epi32(_mm256_mullo_epi32(weights[6], channelOf(near_parents, c)),
+                                 _mm256_mullo_epi32(weights[7], channelOf(diagonal_parents, c))));
+            const __m256i sixteenths =
+                _mm256_sub_epi32(_mm256_add_epi32(texel_terms, parent_terms),
+                                 _mm256_mullo_epi32(weights[kLsWeightSum], m));
+            const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
+            const __m256i sum =
+                _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(sixteenths, 4), ls_rounding),
+                                 _mm256_mullo_epi32(weights[8], estimate));
+            predicted[c] = _mm256_min_epi32(
+                byte_mask, _mm256_max_epi32(
+                               zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
+          } else {
+            const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
+            predicted[c] = _mm256_min_epi32(
+                byte_mask,
+                _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
+          }
         }
       }
       __m256i symbols[kCh];
@@ -435,10 +514,16 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           const __m256i sum3 = _mm256_add_epi32(
               _mm256_add_epi32(channelOf(left, c), channelOf(up, c)), channelOf(up_left, c));
           const __m256i four_parent = _mm256_slli_epi32(channelOf(parents, c), 2);
+          // The guess at d: the median's, or predictor 5's with position 3's weights (the
+          // walk's, since a derived lane is never pulled).
+          __m256i guess;
+          if constexpr (kLeastSquares)
+            guess = predicted[c];
+          else
+            guess = channelOf(medians, c);
           const __m256i expected = _mm256_min_epi32(
               three,
-              _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(channelOf(medians, c), sum3),
-                                                      four_parent)));
+              _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(guess, sum3), four_parent)));
           const __m256i remainder_value = _mm256_and_si256(
               _mm256_add_epi32(_mm256_add_epi32(_mm256_sub_epi32(four_parent, sum3), expected),
                                residual[c]),
@@ -507,15 +592,23 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
 }
 
 // decodeAvx2 for the tile's channel count.
-template <bool kCorrected>
+template <bool kCorrected, bool kLeastSquares>
 bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
                         const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
                         const int16_t* shortfall) {
   switch (channels) {
-    case 1: return decodeAvx2<1, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
-    case 2: return decodeAvx2<2, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
-    case 3: return decodeAvx2<3, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
-    default: return decodeAvx2<4, kCorrected>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 1:
+      return decodeAvx2<1, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
+                                                      shortfall);
+    case 2:
+      return decodeAvx2<2, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
+                                                      shortfall);
+    case 3:
+      return decodeAvx2<3, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
+                                                      shortfall);
+    default:
+      return decodeAvx2<4, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
+                                                      shortfall);
   }
 }
 
@@ -550,21 +643,33 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                 Predictor predictor, std::span<const uint8_t> params,
                 std::vector<uint8_t>& padded) {
   const bool has_parent = predictor != Predictor::kRoot;
-  const bool corrected = predictor == Predictor::kParentCorrected;
+  const bool least_squares = predictor == Predictor::kLeastSquares;
+  const bool corrected = predictor == Predictor::kParentCorrected || least_squares;
   // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
-  // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0
-  // reads the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's
-  // last step.
+  // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0 reads
+  // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step.
   constexpr size_t kAlign = 32;
   auto aligned = [](size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; };
   ParentCopy parent;
   uint32_t parent_rows = 0;
   size_t parent_bytes = 0, shortfall_bytes = 0;
   if (has_parent) {
-    parent.first_row = walk.rows->parent.front();
-    parent.first_column = walk.columns->parent.front();
-    parent_rows = walk.rows->parent.back() - parent.first_row + 1;
-    parent.stride = (walk.columns->parent.back() - parent.first_column + 1) * channels;
+    // The parent texels the blocks read: their own, and for predictor 5 those beside them.
+    auto range = [&](const AxisMap& axis) {
+      uint32_t first = axis.parent.front(), last = axis.parent.back();
+      if (least_squares)
+        for (const uint32_t neighbour : axis.neighbour) {
+          first = std::min(first, neighbour);
+          last = std::max(last, neighbour);
+        }
+      return std::pair{first, last};
+    };
+    const auto [first_row, last_row] = range(*walk.rows);
+    const auto [first_column, last_column] = range(*walk.columns);
+    parent.first_row = first_row;
+    parent.first_column = first_column;
+    parent_rows = last_row - first_row + 1;
+    parent.stride = (last_column - first_column + 1) * channels;
     // Gathers read four bytes from a texel's first (two past a shortfall's).
     parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
     if (corrected) shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
@@ -575,19 +680,11 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   if (!parse(section, channels, kAlign + parent_bytes + shortfall_bytes + diagonal_bytes, padded,
              streams))
     return false;
-  const Geometry geometry{walk.texels,
-                          walk.width,
-                          walk.height,
-                          channels,
-                          has_parent,
-                          corrected,
-                          walk.parent,
-                          walk.columns,
-                          walk.rows,
-                          nullptr,
-                          uint32_t(params.size() / channels),
-                          walk.upsampled,
-                          nullptr};
+  Geometry geometry{walk.texels,    walk.width, walk.height,     channels,
+                    has_parent,     corrected,  least_squares,   walk.parent,
+                    walk.columns,   walk.rows,  nullptr,         uint32_t(params.size() / channels),
+                    walk.upsampled, nullptr,    walk.ls_weights, {}};
+  if (least_squares) sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
   uint8_t* const scratch_end = padded.data() + padded.size();
@@ -601,10 +698,16 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                 parent.stride);
   parent.texels = parent_copy;
   if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
-  const bool ok = corrected ? decodeAvx2Channels<true>(channels, geometry, streams, model_offsets,
-                                                       parent, diagonal, shortfall)
-                            : decodeAvx2Channels<false>(channels, geometry, streams, model_offsets,
-                                                        parent, diagonal, shortfall);
+  bool ok = false;
+  if (least_squares)
+    ok = decodeAvx2Channels<true, true>(channels, geometry, streams, model_offsets, parent,
+                                        diagonal, shortfall);
+  else if (corrected)
+    ok = decodeAvx2Channels<true, false>(channels, geometry, streams, model_offsets, parent,
+                                         diagonal, shortfall);
+  else
+    ok = decodeAvx2Channels<false, false>(channels, geometry, streams, model_offsets, parent,
+                                          diagonal, shortfall);
   return ok && finished(streams, channels);
 }
 

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "ptm_lanes.h"
+#include "ptm_least_squares.h"
 
 namespace tessera::detail::ptm::lanes {
 
@@ -56,15 +57,23 @@ struct Geometry {
   uint8_t* texels;
   uint32_t width, height, channels;
   bool has_parent;
-  bool corrected;  ///< predictor 4
+  bool corrected;      ///< predictor 4 or 5
+  bool least_squares;  ///< predictor 5
   const ImageView* parent;
   const AxisMap* columns;
   const AxisMap* rows;
   const rans::Model* const* models;  // [channel * contexts + context]
   uint32_t contexts;
-  const int16_t* upsampled;  ///< predictor 4: the walk's planes
+  const int16_t* upsampled;  ///< predictors 4 and 5: the walk's planes
   int16_t* detail;
+  /// Predictor 5 (`corrected` is then true as well: its ninth term is predictor 4's
+  /// estimate): the weights, [position][channel][term], and each position's and channel's sum.
+  const int8_t* ls_weights;
+  int ls_weight_sums[kLsSets][4];
 };
+
+/// Each position's and channel's sum of predictor 5's `weights` ([position][channel][term]).
+void sumLeastSquaresWeights(const int8_t* weights, uint32_t channels, int (&sums)[kLsSets][4]);
 
 /// Parses the lane section `section` into `streams`, copied into `padded` behind kPadding
 /// bytes each, followed by `extra_bytes` of scratch for the caller; false when the section is

@@ -1,7 +1,7 @@
 // ptm's lane coder (coder 7, ptm_lanes.h): whole pyramids round-trip bit-exactly with both of
 // its decoders, the SIMD one (where the processor has AVX2) and the scalar one every processor
 // runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it exists for
-// predictors 0, 3 and 4 only. Hostile payloads of coder 7 are in codec_ptm_hostile_test.cpp.
+// predictors 0, 3, 4 and 5 only. Hostile payloads of coder 7 are in codec_ptm_hostile_test.cpp.
 #include <cmath>
 #include <span>
 #include <vector>
@@ -21,10 +21,16 @@ namespace {
 
 using test::nextRandom;
 
-// Where a coder-7 payload's lane section starts: header, then one model byte per context.
+// Where a coder-7 payload's model bytes start: after the header and predictor 5's weights.
+size_t modelsAt(std::span<const uint8_t> payload, uint32_t channels) {
+  return ptm::kHeaderBytes +
+         (payload[0] == uint8_t(Predictor::kLeastSquares) ? lsWeightBytes(channels) : 0);
+}
+
+// Where a coder-7 payload's lane section starts: after one model byte per context.
 size_t laneSectionAt(std::span<const uint8_t> payload, uint32_t channels) {
   const bool has_parent = payload[0] != uint8_t(Predictor::kRoot);
-  return ptm::kHeaderBytes +
+  return modelsAt(payload, channels) +
          size_t(has_parent ? ptm::kParentContexts : ptm::kRootContexts) * channels;
 }
 
@@ -49,16 +55,18 @@ Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uin
   const bool has_parent = predictor != Predictor::kRoot;
   CodecScratch scratch;
   ptm::AxisMap columns, rows;
+  const size_t models_at = modelsAt(payload, channels);
+  const auto* weights = reinterpret_cast<const int8_t*>(payload.data() + ptm::kHeaderBytes);
   auto walk =
       ptm::prepareWalk(out.texels.data(), side, side, channels, has_parent ? parent : nullptr,
-                       predictor, PtmCoder::kRansLanes, nullptr, scratch.state(), columns, rows);
+                       predictor, PtmCoder::kRansLanes, weights, scratch.state(), columns, rows);
   EXPECT_TRUE(walk.has_value());
   if (!walk) return out;
   const size_t section_at = laneSectionAt(payload, channels);
   std::vector<uint8_t> padded;
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
-                                 payload.subspan(ptm::kHeaderBytes, section_at - ptm::kHeaderBytes),
-                                 padded, ptm::lanes::Path::kScalar));
+                                 payload.subspan(models_at, section_at - models_at), padded,
+                                 ptm::lanes::Path::kScalar));
   return out;
 }
 
@@ -90,7 +98,8 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
           pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
       }
       const uint32_t side = c.tile_px + 2 * c.border;
-      for (Predictor predictor : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+      for (Predictor predictor :
+           {Predictor::kNeighbourMedian, Predictor::kParentCorrected, Predictor::kLeastSquares}) {
         uint32_t escapes = 0;
         expectCoarseToFineRoundTrip(
             pyramid, channels,
@@ -117,6 +126,40 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
   }
 }
 
+TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
+  // Predictor 5's weights are any bytes a payload holds: the extremes (-128 and 127) and random
+  // ones push every term of its sum to its bounds, on a source of 0s and 255s.
+  if (!ptm::lanes::simdAvailable())
+    GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
+  for (uint32_t channels = 1; channels <= 4; ++channels) {
+    PyramidTiles pyramid = makePyramid(75, 69, channels, 32, 1, channels + 11);
+    uint32_t seed = 7 * channels;
+    for (uint8_t& texel : pyramid.levels[0].texels) texel = (nextRandom(seed) & 1) != 0 ? 255 : 0;
+    for (size_t l = 1; l < pyramid.levels.size(); ++l)
+      pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+    const uint32_t side = 32 + 2;
+    for (int kind = 0; kind < 3; ++kind) {
+      PtmLeastSquaresFit fit;
+      fit.fitted = true;
+      for (int8_t& weight : fit.weights)
+        weight = kind == 0 ? int8_t(-128) : kind == 1 ? int8_t(127) : int8_t(nextRandom(seed));
+      expectCoarseToFineRoundTrip(
+          pyramid, channels,
+          [&](const Image& tile, const ParentTexels* parent) {
+            auto payload = encodePtm(tile.view(), {}, parent, Predictor::kLeastSquares,
+                                     PtmCoder::kRansLanes, nullptr, &fit);
+            if (payload && parent != nullptr) {
+              EXPECT_EQ((*payload)[0], uint8_t(Predictor::kLeastSquares));
+              EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels, tile.texels)
+                  << "scalar lanes";
+            }
+            return payload;
+          },
+          fmt::format("channels {} weights {}", channels, kind));
+    }
+  }
+}
+
 TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
   PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 13);
   const Image child = pyramid.tile(0, 1, 1);
@@ -124,7 +167,8 @@ TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
   ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
   const ParentTexels* const parents[] = {&parent, nullptr};  // coded against it, and alone
   for (const ParentTexels* with : parents)
-    for (Predictor predictor : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+    for (Predictor predictor :
+         {Predictor::kNeighbourMedian, Predictor::kParentCorrected, Predictor::kLeastSquares}) {
       const auto lanes =
           encodePtm(child.view(), {}, with, predictor, PtmCoder::kRansLanes, nullptr);
       const auto estimate =
@@ -144,13 +188,12 @@ TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
     }
 }
 
-TEST(PtmLanes, CodesPredictorsZeroThreeAndFourOnly) {
+TEST(PtmLanes, CodesPredictorsZeroAndThreeToFiveOnly) {
   PyramidTiles pyramid = makePyramid(128, 128, 3, 64, 0, 5);
   const Image child = pyramid.tile(0, 1, 0);
   const Image parent_tile = pyramid.tile(1, 0, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 0, 64, 0);
-  for (Predictor predictor :
-       {Predictor::kParentNearest, Predictor::kParentBilinear, Predictor::kLeastSquares}) {
+  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kParentBilinear}) {
     auto refused = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansLanes, nullptr);
     ASSERT_FALSE(refused.has_value()) << int(predictor);
     EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
