@@ -401,7 +401,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
      PtmCoder::kRansLanes},
     {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansParentErrors},
-    {"ptm effort 2 (nearest parent + zstd, or rANS lanes with the median or parent corrected)",
+    {"ptm effort 2 (nearest parent + zstd, or rANS lanes with the median, parent corrected or "
+     "least squares)",
      Codec::kPtm, 2, Predictor::kRoot, PtmCoder::kRansLanes, false, false, true},
     {"ptm effort 3 (the default's rule without least squares)", Codec::kPtm, 3, Predictor::kRoot,
      PtmCoder::kRansMixtureChained, false, false, true},

@@ -89,16 +89,16 @@ int main(int argc, char** argv) {
     }
   }
   // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
-  // the encoder at efforts 1 (nearest parent, zstd), 2 (nearest parent with zstd or the median
-  // with coder 7) and 3 (smallest, rANS, whichever coder the default picks), and each rANS coder
+  // the encoder at efforts 1 (nearest parent, zstd), 2 (nearest parent with zstd or coder 7)
+  // and 3 (smallest, rANS, whichever coder the default picks), and each rANS coder
   // forced ("c1" to "c6"), so all are seeded whatever the default picks for these small tiles;
   // the neighbour median and the parent-corrected predictor with coder 7, the lane coder ("m7",
-  // "p7"); predictor 5 (least squares, whose
-  // weights follow the header) with zstd and with coder 6 ("l0", "l6"); and the default on
+  // "p7"); predictor 5 (least squares, whose weights follow the header) with zstd, with coder
+  // 6 and with coder 7 ("l0", "l6", "l7"); and the default on
   // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
   // carry explicit tables.
-  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4",
-                               "c5", "c6", "m7", "p7", "l0", "l6", "t0"};
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5",
+                               "c6", "m7", "p7", "l0", "l6", "l7", "t0"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {

@@ -21,9 +21,11 @@ namespace {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
 //   (ptm_lanes.h), which decodes eight rows side by side, with the neighbour median, or the
-//   parent-corrected predictor where its estimate is 5 % smaller: about 100 MP/s per core
-//   where the median wins, 49-55 where predictor 4 does; the codec study's map came out 11 %
-//   smaller with predictor 4 than with the median alone;
+//   parent-corrected predictor where its estimate is 5 % smaller, or where it is not, least
+//   squares where its estimate is: about 120-130 MP/s per core where the median wins, 55-65
+//   where predictor 4 does and about 50 where predictor 5 does; the codec study's map came
+//   out 11 % smaller with predictor 4 than with the median alone, its photograph 24 % with
+//   predictor 5;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
 //   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
@@ -38,9 +40,9 @@ namespace {
 //   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
 //   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
-// Effort 2: predictor 4 in the lanes decodes at about half the median's speed there, so it
-// takes the tile only where it saves this much.
-constexpr size_t kLanesCorrectedMinSavingPercent = 5;
+// Effort 2: predictors 4 and 5 in the lanes decode at about half the median's speed there, so
+// they take a tile only where they save this much.
+constexpr size_t kLanesSlowerPredictorMinSavingPercent = 5;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
@@ -120,24 +122,28 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
       TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> nearest,
                                encodePtm(tile, stream_options, parent, Predictor::kParentNearest,
                                          PtmCoder::kZstd, scratch));
-      // The lanes' predictor by estimate, the payload coded once from its recording.
-      PtmRecording median, corrected;
-      std::vector<uint8_t> median_models, corrected_models;
+      // The lanes' predictor by estimate, the payload coded once from its recording: the
+      // median, unless predictor 4, or where it is not, predictor 5, saves enough.
+      PtmRecording chosen, candidate;
+      std::vector<uint8_t> chosen_models, candidate_models;
       TESSERA_TRY(recordPtm(tile, parent, Predictor::kNeighbourMedian, PtmCoder::kRansLanes,
-                            scratch, nullptr, median));
-      const size_t median_bytes = estimateRecordedPtm(median, PtmCoder::kRansLanes, &median_models);
-      bool take_corrected = false;
+                            scratch, nullptr, chosen));
+      const size_t median_bytes = estimateRecordedPtm(chosen, PtmCoder::kRansLanes, &chosen_models);
       if (parent != nullptr) {
-        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
-                              scratch, nullptr, corrected));
-        take_corrected =
-            estimateRecordedPtm(corrected, PtmCoder::kRansLanes, &corrected_models) * 100 <=
-            median_bytes * (100 - kLanesCorrectedMinSavingPercent);
+        PtmLeastSquaresFit fit;
+        for (const Predictor slower : {Predictor::kParentCorrected, Predictor::kLeastSquares}) {
+          TESSERA_TRY(
+              recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, &fit, candidate));
+          if (estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models) * 100 <=
+              median_bytes * (100 - kLanesSlowerPredictorMinSavingPercent)) {
+            std::swap(chosen, candidate);
+            std::swap(chosen_models, candidate_models);
+            break;
+          }
+        }
       }
       std::vector<uint8_t> lanes =
-          take_corrected
-              ? encodeRecordedPtm(corrected, PtmCoder::kRansLanes, scratch, &corrected_models)
-              : encodeRecordedPtm(median, PtmCoder::kRansLanes, scratch, &median_models);
+          encodeRecordedPtm(chosen, PtmCoder::kRansLanes, scratch, &chosen_models);
       return lanes.size() < nearest.size() ? std::move(lanes) : std::move(nearest);
     }
     default: {

@@ -46,9 +46,10 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (PtmCoder coder : kCoders)
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
-  // Coder 7 codes predictors 3 and 4 only among those (ptm_lanes.h).
-  payloads.push_back(makeChildPayload(channels, Predictor::kNeighbourMedian, PtmCoder::kRansLanes));
-  payloads.push_back(makeChildPayload(channels, Predictor::kParentCorrected, PtmCoder::kRansLanes));
+  // Coder 7 codes predictors 3, 4 and 5 only among those (ptm_lanes.h).
+  for (Predictor predictor :
+       {Predictor::kNeighbourMedian, Predictor::kParentCorrected, Predictor::kLeastSquares})
+    payloads.push_back(makeChildPayload(channels, predictor, PtmCoder::kRansLanes));
   // And the default's payload of a comb, which carries explicit tables.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";

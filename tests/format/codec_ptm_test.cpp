@@ -151,7 +151,7 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
   EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
   // Effort 2: the smaller of effort 1's payload and coder 7's, whose predictor is 4 where its
-  // estimate is at least 5 % below the median's, else 3.
+  // estimate is at least 5 % below the median's, else 5 where its estimate is, else 3.
   const std::vector<uint8_t> smaller = payloadAt(2);
   auto lanesWith = [&](Predictor predictor) {
     auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansLanes, nullptr);
@@ -162,8 +162,10 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   };
   const auto [median, median_estimate] = lanesWith(Predictor::kNeighbourMedian);
   const auto [corrected, corrected_estimate] = lanesWith(Predictor::kParentCorrected);
-  const bool take_corrected = corrected_estimate * 100 <= median_estimate * 95;
-  const std::vector<uint8_t>& lanes = take_corrected ? corrected : median;
+  const auto [fitted, fitted_estimate] = lanesWith(Predictor::kLeastSquares);
+  const std::vector<uint8_t>& lanes = corrected_estimate * 100 <= median_estimate * 95 ? corrected
+                                      : fitted_estimate * 100 <= median_estimate * 95  ? fitted
+                                                                                       : median;
   EXPECT_EQ(smaller, lanes.size() < fast.size() ? lanes : fast);
   // The default: the predictor that suits coder 6 best, and then the fastest coder within 3 %
   // of coder 6. Effort 3 applies the same rule without predictor 5.
@@ -201,6 +203,45 @@ TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {
                           PtmCoder::kRansLanes, nullptr);
   ASSERT_TRUE(median.has_value());
   EXPECT_LT(payload->size() * 100, median->size() * 95);
+  EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
+}
+
+TEST(PtmCodec, EffortTwoTakesTheLeastSquaresLanesWhereTheyPay) {
+  // A noisy source enlarged twice: its columns by repeating texels, its rows by averaging the
+  // two rows around each new one. The median sees the repeats but not the row below that each
+  // averaged row leans on; the parent knows the block's mean but not the repeats; predictor 5's
+  // fit takes from both, and effort 2 takes it with coder 7.
+  Image noise(128, 128, 3);
+  uint32_t seed = 5;
+  for (uint8_t& texel : noise.texels) texel = uint8_t(nextRandom(seed));
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 7);
+  Image& base = pyramid.levels[0];
+  for (uint32_t y = 0; y < 256; ++y) {
+    const uint8_t* upper = noise.row(std::min(y / 2, 126u));
+    const uint8_t* lower = noise.row(std::min(y / 2, 126u) + 1);
+    const int below = int(y % 2);
+    for (uint32_t x = 0; x < 256; ++x)
+      for (uint32_t c = 0; c < 3; ++c) {
+        const size_t at = (x / 2) * 3 + c;
+        base.row(y)[x * 3 + c] = uint8_t(((2 - below) * upper[at] + below * lower[at] + 1) / 2);
+      }
+  }
+  for (size_t l = 1; l < pyramid.levels.size(); ++l)
+    pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  const Image child = pyramid.tile(0, 1, 1);
+  ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  EncodeOptions options;
+  options.effort = 2;
+  auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
+  ASSERT_TRUE(payload.has_value());
+  EXPECT_EQ((*payload)[0], uint8_t(Predictor::kLeastSquares));
+  EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRansLanes));
+  for (Predictor other : {Predictor::kNeighbourMedian, Predictor::kParentCorrected}) {
+    auto payload_with = encodePtm(child.view(), {}, &parent, other, PtmCoder::kRansLanes, nullptr);
+    ASSERT_TRUE(payload_with.has_value());
+    EXPECT_LT(payload->size() * 100, payload_with->size() * 95) << int(other);
+  }
   EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
 }
 
