@@ -137,7 +137,7 @@ enum class PtmCoder : uint8_t {
   /// decoded neighbours', plus each coded texel's prediction's distance from its parent texel;
   /// at the coarsest level, without a parent, it codes as kRansMixtureChainedErrors
   kRansParentErrors = 6,
-  /// kRans's symbols and contexts (model family 1), with predictor 0, 3 or 4 only, coded in
+  /// kRans's symbols and contexts (model family 1), with predictor 0, 3, 4 or 5 only, coded in
   /// bands of eight rows that decode side by side (ptm_lanes.h): one 32-bit state per channel
   /// and row of the band, a word stream and an escape stream per channel; no tables
   kRansLanes = 7,

@@ -132,6 +132,9 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
       if (parent != nullptr) {
         PtmLeastSquaresFit fit;
         for (const Predictor slower : {Predictor::kParentCorrected, Predictor::kLeastSquares}) {
+          // Predictor 5's fit costs a walk of its own: only where the median beat nearest
+          // parent with zstd, as the default tries it only where the median won.
+          if (slower == Predictor::kLeastSquares && median_bytes >= nearest.size()) break;
           TESSERA_TRY(
               recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, &fit, candidate));
           if (estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models) * 100 <=

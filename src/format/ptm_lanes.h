@@ -1,6 +1,6 @@
 #pragma once
 // ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors
-// 0, 3 and 4 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
+// 0, 3, 4 and 5 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
 // tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at
 // step t, a wavefront in which every texel's left, up-left, up and up-right neighbours were
 // decoded at an earlier step. Each (channel, row of the band) has its own rANS state, with
@@ -14,7 +14,8 @@
 // The symbols and contexts are exactly coder 1's (RansRecorder<false, false>), so the encoder
 // records a tile with the shared walk and only orders and codes the symbols differently.
 // Predictor 4's pull (eq. 3's block sum) reads texels of the block decoded at earlier steps,
-// the left one in the same row and the two above in the row before, so it fits the wavefront.
+// the left one in the same row and the two above in the row before, so it fits the wavefront;
+// predictor 5 adds the neighbours', the parent's and predictor 4's terms, which it does too.
 
 #include <cstddef>
 #include <cstdint>
@@ -52,7 +53,7 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 enum class Path : uint8_t { kFastest, kScalar };
 
 /// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
-/// `predictor` (0, 3 or 4) with coder 7; `params` holds each (channel, context)'s model byte
+/// `predictor` (0, 3, 4 or 5) with coder 7; `params` holds each (channel, context)'s model byte
 /// in family kFamily; `padded` is scratch. Returns false when the section is truncated or
 /// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
 /// of a residual that needed none).

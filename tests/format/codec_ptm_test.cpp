@@ -151,7 +151,8 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_EQ(fast[0], uint8_t(Predictor::kParentNearest));
   EXPECT_EQ(fast[1], uint8_t(PtmCoder::kZstd));
   // Effort 2: the smaller of effort 1's payload and coder 7's, whose predictor is 4 where its
-  // estimate is at least 5 % below the median's, else 5 where its estimate is, else 3.
+  // estimate is at least 5 % below the median's, else 5 where its estimate is and the median's
+  // is below effort 1's size, else 3.
   const std::vector<uint8_t> smaller = payloadAt(2);
   auto lanesWith = [&](Predictor predictor) {
     auto payload = encodePtm(child.view(), {}, &parent, predictor, PtmCoder::kRansLanes, nullptr);
@@ -163,8 +164,10 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   const auto [median, median_estimate] = lanesWith(Predictor::kNeighbourMedian);
   const auto [corrected, corrected_estimate] = lanesWith(Predictor::kParentCorrected);
   const auto [fitted, fitted_estimate] = lanesWith(Predictor::kLeastSquares);
+  const bool fitted_pays =
+      median_estimate < fast.size() && fitted_estimate * 100 <= median_estimate * 95;
   const std::vector<uint8_t>& lanes = corrected_estimate * 100 <= median_estimate * 95 ? corrected
-                                      : fitted_estimate * 100 <= median_estimate * 95  ? fitted
+                                      : fitted_pays                                    ? fitted
                                                                                        : median;
   EXPECT_EQ(smaller, lanes.size() < fast.size() ? lanes : fast);
   // The default: the predictor that suits coder 6 best, and then the fastest coder within 3 %
