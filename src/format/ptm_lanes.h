@@ -1,15 +1,14 @@
 #pragma once
 // ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors
-// 0, 3, 4 and 5 with coder 1's contexts, ordered so that a decoder can work on eight rows at once: the
-// tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at
-// step t, a wavefront in which every texel's left, up-left, up and up-right neighbours were
-// decoded at an earlier step. Each (channel, row of the band) has its own rANS state, with
-// 32-bit states renormalised by 16-bit words, one word stream per channel, and escaped
-// residuals as plain bytes in a stream of their own: so eight texels' symbols of one channel
-// decode with the same instructions (AVX2 gathers where the processor has them). The scalar
-// texel-by-texel walk (ptm_walk.h) decoded the codec study's inputs at 16-40 MP/s per core,
-// bound by its instruction count rather than by latency: running rows side by side is what
-// lets SIMD cut it.
+// 0, 3, 4 and 5 with coder 1's contexts, ordered so that a decoder can work on eight rows at once:
+// the tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at step
+// t, a wavefront in which every texel's left, up-left, up and up-right neighbours were decoded at
+// an earlier step. Each (channel, row of the band) has its own rANS state, with 32-bit states
+// renormalised by 16-bit words, one word stream per channel, and escaped residuals as plain bytes
+// in a stream of their own: so eight texels' symbols of one channel decode with the same
+// instructions (AVX2 gathers where the processor has them). The scalar texel-by-texel walk
+// (ptm_walk.h) decoded the codec study's inputs at 16-40 MP/s per core, bound by its instruction
+// count rather than by latency: running rows side by side is what lets SIMD cut it.
 //
 // The symbols and contexts are exactly coder 1's (RansRecorder<false, false>), so the encoder
 // records a tile with the shared walk and only orders and codes the symbols differently.
