@@ -137,7 +137,7 @@ enum class PtmCoder : uint8_t {
   /// decoded neighbours', plus each coded texel's prediction's distance from its parent texel;
   /// at the coarsest level, without a parent, it codes as kRansMixtureChainedErrors
   kRansParentErrors = 6,
-  /// kRans's symbols and contexts (model family 1), with predictor 0, 3, 4 or 5 only, coded in
+  /// kRans's symbols and contexts (model family 1), with every predictor but 2, coded in
   /// bands of eight rows that decode side by side (ptm_lanes.h): one 32-bit state per channel
   /// and row of the band, a word stream and an escape stream per channel; no tables
   kRansLanes = 7,
@@ -160,11 +160,9 @@ constexpr bool isErrorActivityCoder(PtmCoder coder) {
   return coder == PtmCoder::kRansMixtureChainedErrors || coder == PtmCoder::kRansParentErrors;
 }
 /// True when `coder` can code `predictor`'s residuals: every coder can but coder 7, which has
-/// predictors 0, 3, 4 and 5 only.
+/// every predictor but 2 (bilinear parent).
 constexpr bool codesPredictor(PtmCoder coder, Predictor predictor) {
-  return coder != PtmCoder::kRansLanes || predictor == Predictor::kRoot ||
-         predictor == Predictor::kNeighbourMedian || predictor == Predictor::kParentCorrected ||
-         predictor == Predictor::kLeastSquares;
+  return coder != PtmCoder::kRansLanes || predictor != Predictor::kParentBilinear;
 }
 /// True for the coder whose activity reads the parent instead of the decoded neighbours.
 constexpr bool isParentActivityCoder(PtmCoder coder) {

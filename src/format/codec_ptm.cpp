@@ -52,7 +52,7 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
   const bool has_parent = predictor != Predictor::kRoot;
   if (!codesPredictor(coder, predictor))
     return fail(ErrorCode::kInvalidArgument,
-                "ptm: coder 7 (lanes) codes predictors 0, 3, 4 and 5 only");
+                "ptm: coder 7 (lanes) codes every predictor but 2 (bilinear parent)");
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
   AxisMap columns, rows;
@@ -185,7 +185,7 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
   if (coder == PtmCoder::kRansLanes) {
     // No tables: the lanes gather every model from the family's array.
     TESSERA_CHECK(codesPredictor(coder, Predictor(recording.header[0])))
-        << "ptm: coder 7 (lanes) codes predictors 0, 3, 4 and 5 only";
+        << "ptm: coder 7 (lanes) codes every predictor but 2 (bilinear parent)";
     std::vector<uint8_t> payload = recording.header;
     payload[1] = uint8_t(coder);
     payload.insert(payload.end(), models->begin(), models->end());

@@ -145,7 +145,10 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
     for (uint32_t c = 0; c < ch; ++c) {
       const uint32_t known = 4u * p[c] - a[c] - b[c] - c3[c];
       int guess = medPredict(c3[c], b[c], a[c]);
-      if (g.least_squares) {
+      if (g.nearest) {
+        // Predictor 1 expects no remainder: make the guess give 0.
+        guess = 4 * p[c] - a[c] - b[c] - c3[c];
+      } else if (g.least_squares) {
         // Predictor 5's guess at d, with predictor 4's estimate without the block's pull.
         const int16_t* d = g.detail + index + c;
         guess = leastSquaresPrediction(
@@ -184,6 +187,8 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
       predicted = g.least_squares ? leastSquaresPrediction(g, x, y, position, c, texel + c,
                                                            neighbours, origin, estimate, median)
                                   : parentCorrectedPrediction(estimate);
+    } else if (g.nearest) {
+      predicted = g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c];
     } else {
       predicted = median;
     }
@@ -288,6 +293,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
       walk.height,
       channels,
       predictor != Predictor::kRoot,
+      predictor == Predictor::kParentNearest,
       predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares,
       predictor == Predictor::kLeastSquares,
       walk.parent,

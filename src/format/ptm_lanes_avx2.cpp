@@ -104,17 +104,25 @@ __attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b,
                          _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
 }
 
-// `kCorrected`: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
+// Which predictor a lane decoder runs: 0 and 3 (the median), 1, 4 or 5.
+enum class LanePredictor : uint8_t { kMedian, kNearest, kCorrected, kLeastSquares };
+
+// kNearest: predictor 1, the block's parent texel.
+// kCorrected: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
 // parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
 //
-// `kLeastSquares` (with kCorrected): predictor 5, which also reads the parent texels beside
-// each block's (`parent` then covers them).
-template <uint32_t kCh, bool kCorrected, bool kLeastSquares>
+// kLeastSquares: predictor 5, predictor 4's estimate and more: it also reads the parent texels
+// beside each block's (`parent` then covers them).
+template <uint32_t kCh, LanePredictor kPredictor>
 __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                                 const int32_t* model_offsets,
                                                 const ParentCopy& parent, uint32_t* diagonal,
                                                 const int16_t* shortfall) {
-  static_assert(kCorrected || !kLeastSquares, "predictor 5's ninth term is predictor 4's estimate");
+  constexpr bool kNearest = kPredictor == LanePredictor::kNearest;
+  // Predictor 5's ninth term is predictor 4's estimate.
+  constexpr bool kCorrected =
+      kPredictor == LanePredictor::kCorrected || kPredictor == LanePredictor::kLeastSquares;
+  constexpr bool kLeastSquares = kPredictor == LanePredictor::kLeastSquares;
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   // Locals, not the structures' fields: every vector store may alias those, and the compiler
   // would reload them at every step.
@@ -141,6 +149,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const __m256i escape = _mm256_set1_epi32(int(kEscape));
   const __m256i zero = _mm256_setzero_si256();
   const __m256i three = _mm256_set1_epi32(3);
+  // A texel's kCh bytes in each lane.
+  [[maybe_unused]] const __m256i texel_bytes =
+      _mm256_set1_epi32(kCh == 4 ? -1 : int((1u << (8 * kCh)) - 1));
   const __m256i ones8 = _mm256_set1_epi8(1), ones16 = _mm256_set1_epi16(1);
   // Adds each texel's byte 1 (green) to its bytes 0 and 2.
   const __m256i green_to_red_and_blue =
@@ -313,7 +324,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
       // A derived lane's parent texel, in the parent's copy.
       __m256i parent_at = zero;
-      if (kCorrected || derived_mask != 0) {
+      if (kCorrected || kNearest || derived_mask != 0) {
         const __m256i column = _mm256_sub_epi32(
             _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))),
                               1),
@@ -321,6 +332,13 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         parent_at =
             _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
       }
+      // Predictor 1: the block's parent texel, every channel in one gather (the bytes past the
+      // texel's cleared).
+      [[maybe_unused]] __m256i nearest_parents = zero;
+      if constexpr (kNearest)
+        nearest_parents = _mm256_and_si256(
+            _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1),
+            texel_bytes);
       if constexpr (kCorrected) {
         // Predictor 4 (ptm_walk.h, parentCorrectedEstimate), with eq. 3's pull written from
         // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
@@ -498,6 +516,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       if constexpr (kCh >= 3)
         coded = _mm256_add_epi8(coded, _mm256_shuffle_epi8(coded, green_to_red_and_blue));
       __m256i prediction = medians;
+      if constexpr (kNearest) prediction = nearest_parents;
       if constexpr (kCorrected) {
         prediction = zero;
         for (uint32_t c = 0; c < kCh; ++c)
@@ -506,9 +525,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       __m256i values = _mm256_add_epi8(prediction, coded);
       if (derived_mask != 0) {
         // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects plus
-        // the decoded symbol. One gather reads the parent texel's channels.
+        // the decoded symbol (predictor 1 expects none). One gather reads the parent texel's
+        // channels.
         const __m256i parents =
-            _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1);
+            kNearest
+                ? nearest_parents
+                : _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1);
         __m256i remainders = zero;
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i sum3 = _mm256_add_epi32(
@@ -521,9 +543,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             guess = predicted[c];
           else
             guess = channelOf(medians, c);
-          const __m256i expected = _mm256_min_epi32(
-              three,
-              _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(guess, sum3), four_parent)));
+          const __m256i expected =
+              kNearest ? zero
+                       : _mm256_min_epi32(
+                             three,
+                             _mm256_max_epi32(zero, _mm256_sub_epi32(_mm256_add_epi32(guess, sum3),
+                                                                     four_parent)));
           const __m256i remainder_value = _mm256_and_si256(
               _mm256_add_epi32(_mm256_add_epi32(_mm256_sub_epi32(four_parent, sum3), expected),
                                residual[c]),
@@ -592,23 +617,15 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
 }
 
 // decodeAvx2 for the tile's channel count.
-template <bool kCorrected, bool kLeastSquares>
+template <LanePredictor kPredictor>
 bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
                         const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
                         const int16_t* shortfall) {
   switch (channels) {
-    case 1:
-      return decodeAvx2<1, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
-                                                      shortfall);
-    case 2:
-      return decodeAvx2<2, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
-                                                      shortfall);
-    case 3:
-      return decodeAvx2<3, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
-                                                      shortfall);
-    default:
-      return decodeAvx2<4, kCorrected, kLeastSquares>(g, s, model_offsets, parent, diagonal,
-                                                      shortfall);
+    case 1: return decodeAvx2<1, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 2: return decodeAvx2<2, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 3: return decodeAvx2<3, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
+    default: return decodeAvx2<4, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
   }
 }
 
@@ -680,10 +697,23 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   if (!parse(section, channels, kAlign + parent_bytes + shortfall_bytes + diagonal_bytes, padded,
              streams))
     return false;
-  Geometry geometry{walk.texels,    walk.width, walk.height,     channels,
-                    has_parent,     corrected,  least_squares,   walk.parent,
-                    walk.columns,   walk.rows,  nullptr,         uint32_t(params.size() / channels),
-                    walk.upsampled, nullptr,    walk.ls_weights, {}};
+  Geometry geometry{walk.texels,
+                    walk.width,
+                    walk.height,
+                    channels,
+                    has_parent,
+                    predictor == Predictor::kParentNearest,
+                    corrected,
+                    least_squares,
+                    walk.parent,
+                    walk.columns,
+                    walk.rows,
+                    nullptr,
+                    uint32_t(params.size() / channels),
+                    walk.upsampled,
+                    nullptr,
+                    walk.ls_weights,
+                    {}};
   if (least_squares) sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
@@ -699,15 +729,23 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   parent.texels = parent_copy;
   if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
   bool ok = false;
-  if (least_squares)
-    ok = decodeAvx2Channels<true, true>(channels, geometry, streams, model_offsets, parent,
-                                        diagonal, shortfall);
-  else if (corrected)
-    ok = decodeAvx2Channels<true, false>(channels, geometry, streams, model_offsets, parent,
-                                         diagonal, shortfall);
-  else
-    ok = decodeAvx2Channels<false, false>(channels, geometry, streams, model_offsets, parent,
-                                          diagonal, shortfall);
+  switch (predictor) {
+    case Predictor::kParentNearest:
+      ok = decodeAvx2Channels<LanePredictor::kNearest>(channels, geometry, streams, model_offsets,
+                                                       parent, diagonal, shortfall);
+      break;
+    case Predictor::kParentCorrected:
+      ok = decodeAvx2Channels<LanePredictor::kCorrected>(channels, geometry, streams, model_offsets,
+                                                         parent, diagonal, shortfall);
+      break;
+    case Predictor::kLeastSquares:
+      ok = decodeAvx2Channels<LanePredictor::kLeastSquares>(
+          channels, geometry, streams, model_offsets, parent, diagonal, shortfall);
+      break;
+    default:
+      ok = decodeAvx2Channels<LanePredictor::kMedian>(channels, geometry, streams, model_offsets,
+                                                      parent, diagonal, shortfall);
+  }
   return ok && finished(streams, channels);
 }
 

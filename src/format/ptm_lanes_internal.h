@@ -57,6 +57,7 @@ struct Geometry {
   uint8_t* texels;
   uint32_t width, height, channels;
   bool has_parent;
+  bool nearest;        ///< predictor 1
   bool corrected;      ///< predictor 4 or 5
   bool least_squares;  ///< predictor 5
   const ImageView* parent;

@@ -46,9 +46,9 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (PtmCoder coder : kCoders)
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
-  // Coder 7 codes predictors 3, 4 and 5 only among those (ptm_lanes.h).
-  for (Predictor predictor :
-       {Predictor::kNeighbourMedian, Predictor::kParentCorrected, Predictor::kLeastSquares})
+  // Coder 7 codes every predictor but 2 (ptm_lanes.h).
+  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                              Predictor::kParentCorrected, Predictor::kLeastSquares})
     payloads.push_back(makeChildPayload(channels, predictor, PtmCoder::kRansLanes));
   // And the default's payload of a comb, which carries explicit tables.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
