@@ -81,8 +81,9 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   if (!codesPredictor(coder, predictor))
     return fail(
         ErrorCode::kCorrupt,
-        fmt::format("ptm payload: coder 7 (lanes) with predictor {}: it codes every predictor but 2",
-                    payload[0]));
+        fmt::format(
+            "ptm payload: coder 7 (lanes) with predictor {}: it codes every predictor but 2",
+            payload[0]));
   if (has_parent && parent == nullptr)
     return fail(ErrorCode::kCorrupt,
                 "ptm payload: coded against a parent tile, but the tile has none (coarsest "
