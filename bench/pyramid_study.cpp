@@ -349,6 +349,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
     {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
     {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
+    {"ptm nearest-parent + rANS lanes", Codec::kPtm, 0, Predictor::kParentNearest,
+     PtmCoder::kRansLanes},
     {"ptm neighbour-median + rANS lanes", Codec::kPtm, 0, Predictor::kNeighbourMedian,
      PtmCoder::kRansLanes},
     {"ptm parent-corrected + rANS lanes", Codec::kPtm, 0, Predictor::kParentCorrected,
@@ -401,8 +403,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
      PtmCoder::kRansLanes},
     {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansParentErrors},
-    {"ptm effort 2 (nearest parent + zstd, or rANS lanes with the median, parent corrected or "
-     "least squares)",
+    {"ptm effort 2 (nearest parent + zstd, or rANS lanes with nearest parent, the median, "
+     "parent corrected or least squares)",
      Codec::kPtm, 2, Predictor::kRoot, PtmCoder::kRansLanes, false, false, true},
     {"ptm effort 3 (the default's rule without least squares)", Codec::kPtm, 3, Predictor::kRoot,
      PtmCoder::kRansMixtureChained, false, false, true},

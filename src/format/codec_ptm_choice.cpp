@@ -45,8 +45,9 @@ constexpr size_t kSlowerCoderMinSavingPercent = 3;
 constexpr size_t kLanesSlowerPredictorMinSavingPercent = 5;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
-    PtmCoder::kRans, PtmCoder::kRansChained, PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
-    PtmCoder::kRansParentErrors};
+    PtmCoder::kRansLanes,          PtmCoder::kRans,
+    PtmCoder::kRansChained,        PtmCoder::kRansMixture,
+    PtmCoder::kRansMixtureChained, PtmCoder::kRansParentErrors};
 constexpr Predictor kSmallestPtmPredictors[] = {
     Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected};
 // Predictor 5 decodes at about half the others' speed (its fitted sum of nine terms on top of
@@ -123,22 +124,35 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
                                encodePtm(tile, stream_options, parent, Predictor::kParentNearest,
                                          PtmCoder::kZstd, scratch));
       // The lanes' predictor by estimate, the payload coded once from its recording: the
-      // median, unless predictor 4, or where it is not, predictor 5, saves enough.
+      // smaller of the median and nearest parent, which decode fastest, unless predictor 4, or
+      // where it is not, predictor 5, saves enough.
       PtmRecording chosen, candidate;
       std::vector<uint8_t> chosen_models, candidate_models;
       TESSERA_TRY(recordPtm(tile, parent, Predictor::kNeighbourMedian, PtmCoder::kRansLanes,
                             scratch, nullptr, chosen));
-      const size_t median_bytes = estimateRecordedPtm(chosen, PtmCoder::kRansLanes, &chosen_models);
+      size_t fast_bytes = estimateRecordedPtm(chosen, PtmCoder::kRansLanes, &chosen_models);
       if (parent != nullptr) {
+        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentNearest, PtmCoder::kRansLanes,
+                              scratch, nullptr, candidate));
+        const size_t nearest_bytes =
+            estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models);
+        if (nearest_bytes < fast_bytes) {
+          std::swap(chosen, candidate);
+          std::swap(chosen_models, candidate_models);
+          fast_bytes = nearest_bytes;
+        }
         PtmLeastSquaresFit fit;
         for (const Predictor slower : {Predictor::kParentCorrected, Predictor::kLeastSquares}) {
-          // Predictor 5's fit costs a walk of its own: only where the median beat nearest
-          // parent with zstd, as the default tries it only where the median won.
-          if (slower == Predictor::kLeastSquares && median_bytes >= nearest.size()) break;
+          // Predictor 5's fit costs a walk of its own: only where the median's lanes won, as
+          // the default tries it only where the median won.
+          if (slower == Predictor::kLeastSquares &&
+              (Predictor(chosen.header[0]) != Predictor::kNeighbourMedian ||
+               fast_bytes >= nearest.size()))
+            break;
           TESSERA_TRY(
               recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, &fit, candidate));
           if (estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models) * 100 <=
-              median_bytes * (100 - kLanesSlowerPredictorMinSavingPercent)) {
+              fast_bytes * (100 - kLanesSlowerPredictorMinSavingPercent)) {
             std::swap(chosen, candidate);
             std::swap(chosen_models, candidate_models);
             break;
@@ -193,6 +207,7 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
       std::vector<PtmRecording> walks;  // of the faster coders, one per kind of walk
       for (size_t chosen = 0; chosen < kSlowest; ++chosen) {
         const PtmCoder coder = kRansCodersByDecodeSpeed[chosen];
+        if (!codesPredictor(coder, predictor)) continue;
         auto walk = std::find_if(walks.begin(), walks.end(), [&](const PtmRecording& recorded) {
           return walksAlike(recorded.coder, coder);
         });
