@@ -20,16 +20,18 @@ namespace {
 // three inputs (docs/codecs.md, "ptm (6)"; docs/benchmarks.md):
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
-//   (ptm_lanes.h), which decodes eight rows side by side, with the neighbour median, or the
-//   parent-corrected predictor where its estimate is 5 % smaller, or where it is not, least
-//   squares where its estimate is: about 120-130 MP/s per core where the median wins, 55-65
-//   where predictor 4 does and about 50 where predictor 5 does; the codec study's map came
-//   out 11 % smaller with predictor 4 than with the median alone, its photograph 24 % with
-//   predictor 5;
+//   (ptm_lanes.h), which decodes eight rows side by side, with the smaller of nearest parent
+//   and the neighbour median, or the parent-corrected predictor where its estimate is 5 %
+//   smaller, or where it is not and the median won, least squares where its estimate is:
+//   about 125-145 MP/s per core where nearest parent or the median wins, 55-65 where
+//   predictor 4 does and about 50 where predictor 5 does; the codec study's map came out 11 %
+//   smaller with predictor 4 than with the median alone, its photograph 24 % with predictor
+//   5, its synthetic source 3.6 % smaller with nearest parent in the lanes than with zstd;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
-//   decode first: 1 (per-channel contexts, model family 1), 2 (chained contexts), 3 (model
-//   family 2), 4 (both), 6 (4 with the parent's gradients and the neighbours' errors in the
-//   activity), each tile takes the fastest whose estimated size is within 3 % of coder 6's.
+//   decode first: 7 (the lanes, coder 1's contexts without tables), 1 (per-channel contexts,
+//   model family 1), 2 (chained contexts), 3 (model family 2), 4 (both), 6 (4 with the
+//   parent's gradients and the neighbours' errors in the activity), each tile takes the
+//   fastest whose estimated size is within 3 % of coder 6's.
 //   Coder 5 (4 with the neighbours' gradients and errors) is left out: coder 6 coded the
 //   study's photograph 2.8 % smaller and its other inputs within 0.4 %, 0-8 % slower to
 //   decode. Smaller than effort 1 but a fifth to a ninth of its decode speed.
