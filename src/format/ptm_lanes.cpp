@@ -118,7 +118,7 @@ int leastSquaresPrediction(const Geometry& g, uint32_t x, uint32_t y, uint32_t p
                                      parent_near + at, parent_near + side_at, estimate16, median);
 }
 
-// Texel (x, y) decoded by `lane`, with the shared walk's rules for predictors 0, 3, 4 and 5 and
+// Texel (x, y) decoded by `lane`, with the shared walk's rules for its predictor (any but 2) and
 // coder 1 (ptm_walk.h, codeTexels).
 bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t lane) {
   const uint32_t ch = g.channels;

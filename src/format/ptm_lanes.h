@@ -1,20 +1,21 @@
 #pragma once
-// ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of predictors
-// 0, 3, 4 and 5 with coder 1's contexts, ordered so that a decoder can work on eight rows at once:
-// the tile is cut into bands of eight rows, and in each band row k decodes texel x = t - 2k at step
-// t, a wavefront in which every texel's left, up-left, up and up-right neighbours were decoded at
-// an earlier step. Each (channel, row of the band) has its own rANS state, with 32-bit states
-// renormalised by 16-bit words, one word stream per channel, and escaped residuals as plain bytes
-// in a stream of their own: so eight texels' symbols of one channel decode with the same
-// instructions (AVX2 gathers where the processor has them). The scalar texel-by-texel walk
-// (ptm_walk.h) decoded the codec study's inputs at 16-40 MP/s per core, bound by its instruction
-// count rather than by latency: running rows side by side is what lets SIMD cut it.
+// ptm's lane coder (coder 7; docs/codecs.md, "ptm (6)", "Lanes"). The texel walk of every
+// predictor but 2 (bilinear parent) with coder 1's contexts, ordered so that a decoder can work on
+// eight rows at once: the tile is cut into bands of eight rows, and in each band row k decodes
+// texel x = t - 2k at step t, a wavefront in which every texel's left, up-left, up and up-right
+// neighbours were decoded at an earlier step. Each (channel, row of the band) has its own rANS
+// state, with 32-bit states renormalised by 16-bit words, one word stream per channel, and escaped
+// residuals as plain bytes in a stream of their own: so eight texels' symbols of one channel decode
+// with the same instructions (AVX2 gathers where the processor has them). The scalar texel-by-texel
+// walk (ptm_walk.h) decoded the codec study's inputs at 16-40 MP/s per core, bound by its
+// instruction count rather than by latency: running rows side by side is what lets SIMD cut it.
 //
 // The symbols and contexts are exactly coder 1's (RansRecorder<false, false>), so the encoder
 // records a tile with the shared walk and only orders and codes the symbols differently.
 // Predictor 4's pull (eq. 3's block sum) reads texels of the block decoded at earlier steps,
 // the left one in the same row and the two above in the row before, so it fits the wavefront;
-// predictor 5 adds the neighbours', the parent's and predictor 4's terms, which it does too.
+// predictor 5 adds the neighbours', the parent's and predictor 4's terms, which do too, and
+// predictor 1 reads the parent alone.
 
 #include <cstddef>
 #include <cstdint>
@@ -52,7 +53,7 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 enum class Path : uint8_t { kFastest, kScalar };
 
 /// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
-/// `predictor` (0, 3, 4 or 5) with coder 7; `params` holds each (channel, context)'s model byte
+/// `predictor` (any but 2) with coder 7; `params` holds each (channel, context)'s model byte
 /// in family kFamily; `padded` is scratch. Returns false when the section is truncated or
 /// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
 /// of a residual that needed none).
