@@ -144,19 +144,19 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
     const uint8_t* c3 = texel + left;
     for (uint32_t c = 0; c < ch; ++c) {
       const uint32_t known = 4u * p[c] - a[c] - b[c] - c3[c];
-      int guess = medPredict(c3[c], b[c], a[c]);
-      if (g.nearest) {
-        // Predictor 1 expects no remainder: make the guess give 0.
-        guess = 4 * p[c] - a[c] - b[c] - c3[c];
-      } else if (g.least_squares) {
-        // Predictor 5's guess at d, with predictor 4's estimate without the block's pull.
-        const int16_t* d = g.detail + index + c;
-        guess = leastSquaresPrediction(
-            g, x, y, 3, c, texel + c, neighbours, false,
-            g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]), guess);
+      // The remainder the guess at d implies; predictor 1 expects none.
+      uint32_t expected = 0;
+      if (!g.nearest) {
+        int guess = medPredict(c3[c], b[c], a[c]);
+        if (g.least_squares) {
+          // Predictor 5's guess, with predictor 4's estimate without the block's pull.
+          const int16_t* d = g.detail + index + c;
+          guess = leastSquaresPrediction(
+              g, x, y, 3, c, texel + c, neighbours, false,
+              g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]), guess);
+        }
+        expected = uint32_t(std::clamp(guess + a[c] + b[c] + c3[c] - 4 * p[c], 0, 3));
       }
-      guess += a[c] + b[c] + c3[c] - 4 * p[c];
-      const uint32_t expected = uint32_t(std::clamp(guess, 0, 3));
       uint8_t symbol;
       if (!decodeSymbol(s, c, lane, *models[c * g.contexts + kCodedContexts + activity_class],
                         symbol))
@@ -177,20 +177,22 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
   }
   const bool full = g.corrected && g.rows->full[y] != 0 && g.columns->full[x] != 0;
   for (uint32_t c = 0; c < ch; ++c) {
+    auto median = [&] {
+      return origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+    };
     int predicted = 0;
-    const int median = origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
     if (g.corrected) {
       const int estimate = parentCorrectedEstimate(
           g.upsampled + index + c, g.detail + index + c, texel + c, neighbours, origin, full,
           position, g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c], ch,
           size_t(g.width) * ch);
       predicted = g.least_squares ? leastSquaresPrediction(g, x, y, position, c, texel + c,
-                                                           neighbours, origin, estimate, median)
+                                                           neighbours, origin, estimate, median())
                                   : parentCorrectedPrediction(estimate);
     } else if (g.nearest) {
       predicted = g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c];
     } else {
-      predicted = median;
+      predicted = median();
     }
     texel[c] = uint8_t(predicted + symbols[c]);
   }

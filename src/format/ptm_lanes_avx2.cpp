@@ -210,9 +210,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
     const uint32_t rows = std::min(kLanes, height - y0);
     const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
-    // Per lane: its row's parent row offset, second-row and derived-row flags.
-    // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
-    // row 0) and whether the row's blocks lie in the tile.
+    // Predictor 5: the offset of each lane's parent row beside its block's, in the parent's copy.
     alignas(32) int32_t parent_near_row_at[kLanes] = {};
     if constexpr (kLeastSquares)
       for (uint32_t k = 0; k < rows; ++k)
@@ -220,6 +218,9 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             int32_t((g.rows->neighbour[y0 + k] - parent.first_row) * parent.stride);
     const __m256i parent_near_rows =
         _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_near_row_at));
+    // Per lane: its row's parent row offset, second-row and derived-row flags.
+    // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
+    // row 0) and whether the row's blocks lie in the tile.
     alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
                         row_derived[kLanes] = {}, row_full[kLanes] = {},
                         upsampled_row_at[kLanes] = {};
@@ -322,21 +323,23 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         derived =
             _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
-      // A derived lane's parent texel, in the parent's copy.
-      __m256i parent_at = zero;
-      if (kCorrected || kNearest || derived_mask != 0) {
-        const __m256i column = _mm256_sub_epi32(
-            _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))),
-                              1),
-            _mm256_set1_epi32(int(parent.first_column)));
-        parent_at =
-            _mm256_add_epi32(parent_rows, _mm256_mullo_epi32(column, _mm256_set1_epi32(int(kCh))));
+      // Each lane's block's parent column, and the parent texel's place in the parent's copy.
+      const bool reads_parent = kCorrected || kNearest || derived_mask != 0;
+      __m256i parent_column = zero, parent_at = zero;
+      if (reads_parent) {
+        parent_column = _mm256_srli_epi32(
+            _mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))), 1);
+        parent_at = _mm256_add_epi32(
+            parent_rows,
+            _mm256_mullo_epi32(
+                _mm256_sub_epi32(parent_column, _mm256_set1_epi32(int(parent.first_column))),
+                _mm256_set1_epi32(int(kCh))));
       }
-      // Predictor 1: the block's parent texel, every channel in one gather (the bytes past the
-      // texel's cleared).
-      [[maybe_unused]] __m256i nearest_parents = zero;
-      if constexpr (kNearest)
-        nearest_parents = _mm256_and_si256(
+      // The block's parent texel, every channel in one gather (bytes past the texel's cleared):
+      // predictors 1 and 5 read it at every step, the others for derived texels only.
+      __m256i block_parents = zero;
+      if (kNearest || kLeastSquares || derived_mask != 0)
+        block_parents = _mm256_and_si256(
             _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1),
             texel_bytes);
       if constexpr (kCorrected) {
@@ -361,12 +364,10 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
           }
         }
-        // Predictor 5: the block's parent texel and those beside it (mapAxis's neighbours),
-        // every channel in one gather each.
-        [[maybe_unused]] __m256i block_parents, side_parents, near_parents, diagonal_parents;
+        // Predictor 5: the parent texels beside the block's (mapAxis's neighbours), every
+        // channel in one gather each.
+        [[maybe_unused]] __m256i side_parents, near_parents, diagonal_parents;
         if constexpr (kLeastSquares) {
-          const __m256i parent_column = _mm256_srli_epi32(
-              _mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))), 1);
           const __m256i side_column =
               second_column != 0
                   ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), last_parent_column)
@@ -376,7 +377,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
               _mm256_set1_epi32(int(kCh)));
           const __m256i near_at = _mm256_sub_epi32(parent_at, parent_rows);
           const int* copy = reinterpret_cast<const int*>(parent.texels);
-          block_parents = _mm256_i32gather_epi32(copy, parent_at, 1);
           side_parents = _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_rows, side_at), 1);
           near_parents =
               _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_near_rows, near_at), 1);
@@ -516,7 +516,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       if constexpr (kCh >= 3)
         coded = _mm256_add_epi8(coded, _mm256_shuffle_epi8(coded, green_to_red_and_blue));
       __m256i prediction = medians;
-      if constexpr (kNearest) prediction = nearest_parents;
+      if constexpr (kNearest) prediction = block_parents;
       if constexpr (kCorrected) {
         prediction = zero;
         for (uint32_t c = 0; c < kCh; ++c)
@@ -525,12 +525,8 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       __m256i values = _mm256_add_epi8(prediction, coded);
       if (derived_mask != 0) {
         // Eq. 3: d = 4 * parent + remainder - a - b - c, the remainder the median expects plus
-        // the decoded symbol (predictor 1 expects none). One gather reads the parent texel's
-        // channels.
-        const __m256i parents =
-            kNearest
-                ? nearest_parents
-                : _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1);
+        // the decoded symbol (predictor 1 expects none).
+        const __m256i& parents = block_parents;
         __m256i remainders = zero;
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i sum3 = _mm256_add_epi32(
