@@ -143,7 +143,6 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
           std::swap(chosen_models, candidate_models);
           fast_bytes = nearest_bytes;
         }
-        PtmLeastSquaresFit fit;
         for (const Predictor slower : {Predictor::kParentCorrected, Predictor::kLeastSquares}) {
           // Predictor 5's fit costs a walk of its own: only where the median's lanes won, as
           // the default tries it only where the median won.
@@ -152,7 +151,7 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
                fast_bytes >= nearest.size()))
             break;
           TESSERA_TRY(
-              recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, &fit, candidate));
+              recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, nullptr, candidate));
           if (estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models) * 100 <=
               fast_bytes * (100 - kLanesSlowerPredictorMinSavingPercent)) {
             std::swap(chosen, candidate);
