@@ -94,11 +94,12 @@ int main(int argc, char** argv) {
   // forced ("c1" to "c6"), so all are seeded whatever the default picks for these small tiles;
   // the neighbour median and the parent-corrected predictor with coder 7, the lane coder ("m7",
   // "p7"); predictor 5 (least squares, whose weights follow the header) with zstd, with coder
-  // 6 and with coder 7 ("l0", "l6", "l7"); and the default on
+  // 6 and with coder 7 ("l0", "l6", "l7"), and with coder 7 fitted without predictor 4's
+  // estimate ("w7"); and the default on
   // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
   // carry explicit tables.
   const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5",
-                               "c6", "m7", "p7", "l0", "l6", "l7", "t0"};
+                               "c6", "m7", "p7", "l0", "l6", "l7", "w7", "t0"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
@@ -119,10 +120,13 @@ int main(int argc, char** argv) {
             options.effort = mode[1] - '0';
             return tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
           }
-          if (mode[0] == 'l')
-            return tessera::detail::encodePtm(tile.view(), options, &parent,
-                                              tessera::detail::Predictor::kLeastSquares,
-                                              tessera::detail::PtmCoder(mode[1] - '0'), nullptr);
+          if (mode[0] == 'l' || mode[0] == 'w') {
+            tessera::detail::PtmLeastSquaresFit fit;
+            fit.without_estimate = mode[0] == 'w';
+            return tessera::detail::encodePtm(
+                tile.view(), options, &parent, tessera::detail::Predictor::kLeastSquares,
+                tessera::detail::PtmCoder(mode[1] - '0'), nullptr, &fit);
+          }
           if (mode[0] == 'm' || mode[0] == 'p')
             return tessera::detail::encodePtm(tile.view(), options, &parent,
                                               mode[0] == 'm'

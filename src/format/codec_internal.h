@@ -173,7 +173,11 @@ constexpr bool isParentActivityCoder(PtmCoder coder) {
 /// a caller that estimates a tile with several coders passes one of these to fit it once.
 struct PtmLeastSquaresFit {
   bool fitted = false;
+  /// Which of the fit's two weight sets a payload takes: the one without predictor 4's estimate
+  /// decodes faster (its decoders skip predictor 4's work) and codes a little larger.
+  bool without_estimate = false;
   int8_t weights[4 * 4 * 9] = {};  ///< [position][channel][term], the payload's layout
+  int8_t weights_without_estimate[4 * 4 * 9] = {};  ///< the same, the estimate's weights 0
 };
 
 /// Encodes a ptm payload with `predictor` (kRoot when `parent` is null) and `coder`. The codec

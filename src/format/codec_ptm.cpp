@@ -23,16 +23,21 @@ namespace {
 // with few matches), so the cheapest level wins: the builder encodes every tile.
 constexpr int kDefaultZstdLevel = 1;
 
-// Fits predictor 5's weights to the tile `walk` covers (its ls_weights, zero, are read but
-// do not matter: the fit uses the texels, not the predictions) into `weights`.
-void fitLeastSquares(const Walk& walk, uint32_t channels, int8_t* weights) {
+// Fits predictor 5's weights to the tile `walk` covers into `weights`, and without predictor
+// 4's estimate into `without_estimate`. `walk` has no weights yet (prepareWalk's null): the fit
+// uses the texels, not the predictions.
+void fitLeastSquares(const Walk& walk, uint32_t channels, int8_t* weights,
+                     int8_t* without_estimate) {
   auto fit = std::make_unique<LsFit>();
+  static const int8_t kNoWeights[lsWeightBytes(4)] = {};
   Walk fitting = walk;
+  fitting.ls_weights = kNoWeights;
   fitting.ls_fit = fit.get();
   fitting.errors = nullptr;
   DiscardingCoder discard;
   code<true>(Predictor::kLeastSquares, channels, fitting, discard);
-  solveLeastSquares(*fit, channels, weights);
+  solveLeastSquares(*fit, channels, true, weights);
+  solveLeastSquares(*fit, channels, false, without_estimate);
 }
 
 // encodePtm, or with `estimated_bytes` and a rANS coder only the payload's size to within a
@@ -55,23 +60,35 @@ Result<std::vector<uint8_t>> encodePtmOrEstimate(const ImageView& tile,
                 "ptm: coder 7 (lanes) codes every predictor but 2 (bilinear parent)");
   std::span<const uint8_t> packed = packedTexels(tile, *state);
   int8_t ls_weights[lsWeightBytes(4)] = {};
+  const bool least_squares = predictor == Predictor::kLeastSquares;
+  const bool fits = least_squares && (fit == nullptr || !fit->fitted);
+  const bool without_estimate = fit != nullptr && fit->without_estimate;
+  if (least_squares && !fits) {
+    static_assert(sizeof fit->weights == sizeof ls_weights &&
+                  sizeof fit->weights_without_estimate == sizeof ls_weights);
+    std::memcpy(ls_weights, without_estimate ? fit->weights_without_estimate : fit->weights,
+                sizeof ls_weights);
+  }
   AxisMap columns, rows;
   // Encoding only reads the texels; the shared routine takes a mutable pointer for decoding.
   TESSERA_ASSIGN_OR_RETURN(
-      const Walk walk, prepareWalk(const_cast<uint8_t*>(packed.data()), width, height, channels,
-                                   parent, predictor, coder, ls_weights, *state, columns, rows));
+      Walk walk, prepareWalk(const_cast<uint8_t*>(packed.data()), width, height, channels, parent,
+                             predictor, coder, fits ? nullptr : ls_weights, *state, columns, rows));
   std::vector<uint8_t> payload = {uint8_t(predictor), uint8_t(coder)};
-  if (predictor == Predictor::kLeastSquares) {
-    static_assert(sizeof fit->weights == sizeof ls_weights);
-    if (fit != nullptr && fit->fitted) {
-      std::memcpy(ls_weights, fit->weights, sizeof ls_weights);
-    } else {
-      fitLeastSquares(walk, channels, ls_weights);
+  if (least_squares) {
+    if (fits) {
+      int8_t weights[lsWeightBytes(4)] = {}, weights_without_estimate[lsWeightBytes(4)] = {};
+      fitLeastSquares(walk, channels, weights, weights_without_estimate);
+      std::memcpy(ls_weights, without_estimate ? weights_without_estimate : weights,
+                  sizeof ls_weights);
       if (fit != nullptr) {
-        std::memcpy(fit->weights, ls_weights, sizeof ls_weights);
+        std::memcpy(fit->weights, weights, sizeof weights);
+        std::memcpy(fit->weights_without_estimate, weights_without_estimate,
+                    sizeof weights_without_estimate);
         fit->fitted = true;
       }
     }
+    walk.ls_weights = ls_weights;
     for (size_t i = 0; i < lsWeightBytes(channels); ++i) payload.push_back(uint8_t(ls_weights[i]));
   }
 

@@ -42,9 +42,13 @@ namespace {
 //   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
 //   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
-// Effort 2: predictors 4 and 5 in the lanes decode at about half the median's speed there, so
-// they take a tile only where they save this much.
+// Effort 2: predictors 4 and 5 decode at a half to two thirds of the median's speed in the
+// lanes, so they take a tile only where they save this much.
 constexpr size_t kLanesSlowerPredictorMinSavingPercent = 5;
+// Effort 2: predictor 5 with predictor 4's estimate decodes at about half the speed of
+// predictor 5 without it in the lanes (docs/codecs.md, "ptm (6)"), so the estimate keeps a
+// weight only where it saves this much.
+constexpr size_t kLanesEstimateMinSavingPercent = 3;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRansLanes,          PtmCoder::kRans,
@@ -127,36 +131,49 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
                                          PtmCoder::kZstd, scratch));
       // The lanes' predictor by estimate, the payload coded once from its recording: the
       // smaller of the median and nearest parent, which decode fastest, unless predictor 4, or
-      // where it is not, predictor 5, saves enough.
+      // where it is not, predictor 5 without predictor 4's estimate saves enough, and then
+      // with the estimate where that saves enough again.
       PtmRecording chosen, candidate;
       std::vector<uint8_t> chosen_models, candidate_models;
       TESSERA_TRY(recordPtm(tile, parent, Predictor::kNeighbourMedian, PtmCoder::kRansLanes,
                             scratch, nullptr, chosen));
-      size_t fast_bytes = estimateRecordedPtm(chosen, PtmCoder::kRansLanes, &chosen_models);
+      size_t chosen_bytes = estimateRecordedPtm(chosen, PtmCoder::kRansLanes, &chosen_models);
+      auto takeIfItSaves = [&](size_t percent) {
+        const size_t bytes =
+            estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models);
+        if (bytes * 100 > chosen_bytes * (100 - percent)) return false;
+        std::swap(chosen, candidate);
+        std::swap(chosen_models, candidate_models);
+        chosen_bytes = bytes;
+        return true;
+      };
       if (parent != nullptr) {
         TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentNearest, PtmCoder::kRansLanes,
                               scratch, nullptr, candidate));
         const size_t nearest_bytes =
             estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models);
-        if (nearest_bytes < fast_bytes) {
+        if (nearest_bytes < chosen_bytes) {
           std::swap(chosen, candidate);
           std::swap(chosen_models, candidate_models);
-          fast_bytes = nearest_bytes;
+          chosen_bytes = nearest_bytes;
         }
-        for (const Predictor slower : {Predictor::kParentCorrected, Predictor::kLeastSquares}) {
-          // Predictor 5's fit costs a walk of its own: only where the median's lanes won, as
-          // the default tries it only where the median won.
-          if (slower == Predictor::kLeastSquares &&
-              (Predictor(chosen.header[0]) != Predictor::kNeighbourMedian ||
-               fast_bytes >= nearest.size()))
-            break;
-          TESSERA_TRY(
-              recordPtm(tile, parent, slower, PtmCoder::kRansLanes, scratch, nullptr, candidate));
-          if (estimateRecordedPtm(candidate, PtmCoder::kRansLanes, &candidate_models) * 100 <=
-              fast_bytes * (100 - kLanesSlowerPredictorMinSavingPercent)) {
-            std::swap(chosen, candidate);
-            std::swap(chosen_models, candidate_models);
-            break;
+        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
+                              scratch, nullptr, candidate));
+        // Predictor 5's fit costs a walk of its own: only where the median's lanes won and
+        // predictor 4 did not save enough, as the default tries it only where the median won.
+        // One fit gives both weight sets.
+        if (!takeIfItSaves(kLanesSlowerPredictorMinSavingPercent) &&
+            Predictor(chosen.header[0]) == Predictor::kNeighbourMedian &&
+            chosen_bytes < nearest.size()) {
+          PtmLeastSquaresFit fit;
+          fit.without_estimate = true;
+          TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, PtmCoder::kRansLanes,
+                                scratch, &fit, candidate));
+          if (takeIfItSaves(kLanesSlowerPredictorMinSavingPercent)) {
+            fit.without_estimate = false;
+            TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, PtmCoder::kRansLanes,
+                                  scratch, &fit, candidate));
+            takeIfItSaves(kLanesEstimateMinSavingPercent);
           }
         }
       }

@@ -151,9 +151,10 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
         if (g.least_squares) {
           // Predictor 5's guess, with predictor 4's estimate without the block's pull.
           const int16_t* d = g.detail + index + c;
-          guess = leastSquaresPrediction(
-              g, x, y, 3, c, texel + c, neighbours, false,
-              g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]), guess);
+          const int estimate16 =
+              g.corrected ? g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]) : 0;
+          guess = leastSquaresPrediction(g, x, y, 3, c, texel + c, neighbours, false, estimate16,
+                                         guess);
         }
         expected = uint32_t(std::clamp(guess + a[c] + b[c] + c3[c] - 4 * p[c], 0, 3));
       }
@@ -181,11 +182,14 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
       return origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
     };
     int predicted = 0;
-    if (g.corrected) {
-      const int estimate = parentCorrectedEstimate(
-          g.upsampled + index + c, g.detail + index + c, texel + c, neighbours, origin, full,
-          position, g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c], ch,
-          size_t(g.width) * ch);
+    if (g.corrected || g.least_squares) {
+      const int estimate =
+          g.corrected
+              ? parentCorrectedEstimate(
+                    g.upsampled + index + c, g.detail + index + c, texel + c, neighbours, origin,
+                    full, position, g.parent->row(g.rows->parent[y])[g.columns->parent[x] * ch + c],
+                    ch, size_t(g.width) * ch)
+              : 0;
       predicted = g.least_squares ? leastSquaresPrediction(g, x, y, position, c, texel + c,
                                                            neighbours, origin, estimate, median())
                                   : parentCorrectedPrediction(estimate);
@@ -289,24 +293,24 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   const rans::Model* family = rans::models(kFamily);
   const rans::Model* models[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
-  Geometry geometry{
-      walk.texels,
-      walk.width,
-      walk.height,
-      channels,
-      predictor != Predictor::kRoot,
-      predictor == Predictor::kParentNearest,
-      predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares,
-      predictor == Predictor::kLeastSquares,
-      walk.parent,
-      walk.columns,
-      walk.rows,
-      models,
-      uint32_t(params.size() / channels),
-      walk.upsampled,
-      walk.detail,
-      walk.ls_weights,
-      {}};
+  Geometry geometry{walk.texels,
+                    walk.width,
+                    walk.height,
+                    channels,
+                    predictor != Predictor::kRoot,
+                    predictor == Predictor::kParentNearest,
+                    predictor == Predictor::kParentCorrected ||
+                        (predictor == Predictor::kLeastSquares && walk.upsampled != nullptr),
+                    predictor == Predictor::kLeastSquares,
+                    walk.parent,
+                    walk.columns,
+                    walk.rows,
+                    models,
+                    uint32_t(params.size() / channels),
+                    walk.upsampled,
+                    walk.detail,
+                    walk.ls_weights,
+                    {}};
   if (geometry.least_squares)
     sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
   return decodeScalar(geometry, streams) && finished(streams, channels);

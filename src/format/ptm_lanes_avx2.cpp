@@ -104,8 +104,87 @@ __attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b,
                          _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
 }
 
+// Where a band's lanes find their blocks' parent texels in the decoder's copy of the parent.
+struct ParentPlaces {
+  const int* copy;
+  __m256i rows;       ///< each lane's parent row's offset in the copy
+  __m256i near_rows;  ///< predictor 5: the offset of the parent row beside the block's
+  __m256i two_lane, last_column, last_parent_column, texel_bytes;
+  uint32_t column_offset;  ///< see decodeAvx2's column_offset
+  uint32_t first_column;   ///< the copy's first parent column
+};
+
+// Each lane's block's parent texel at step t: its place in the copy, and with kBlock its
+// bytes (every channel in one gather, bytes past the texel cleared); with kSides (predictor 5)
+// also the parent texels beside it (mapAxis's neighbours, clamped to the parent), one gather
+// each.
+struct BlockParents {
+  __m256i at, block, side, near, diagonal;
+};
+__attribute__((target("avx2"))) inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
+  return _mm256_and_si256(_mm256_i32gather_epi32(p.copy, at, 1), p.texel_bytes);
+}
+template <uint32_t kCh, bool kBlock, bool kSides>
+__attribute__((target("avx2"))) inline BlockParents gatherBlockParents(uint32_t t,
+                                                                       const ParentPlaces& p) {
+  const __m256i zero = _mm256_setzero_si256();
+  const __m256i column_in = _mm256_min_epi32(
+      _mm256_max_epi32(_mm256_sub_epi32(_mm256_set1_epi32(int(t)), p.two_lane), zero),
+      p.last_column);
+  const __m256i parent_column =
+      _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(p.column_offset))), 1);
+  const __m256i first_column = _mm256_set1_epi32(int(p.first_column));
+  const __m256i texel_size = _mm256_set1_epi32(int(kCh));
+  BlockParents out{};
+  out.at = _mm256_add_epi32(
+      p.rows, _mm256_mullo_epi32(_mm256_sub_epi32(parent_column, first_column), texel_size));
+  if constexpr (kBlock) out.block = gatherBlock(out.at, p);
+  if constexpr (kSides) {
+    const __m256i one = _mm256_set1_epi32(1);
+    const __m256i side_column =
+        ((t + p.column_offset) & 1) != 0
+            ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), p.last_parent_column)
+            : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
+    const __m256i side_at =
+        _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
+    const __m256i near_at = _mm256_sub_epi32(out.at, p.rows);
+    out.side = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.rows, side_at), 1);
+    out.near = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, near_at), 1);
+    out.diagonal = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, side_at), 1);
+  }
+  return out;
+}
+
+// Predictor 5's sum without its ninth term (leastSquaresPredictFactored) for channel c, each
+// lane's weights `weights` ([term], the weights' sum last): sixteen times the neighbours' and
+// the parent's terms less the median `m` times the weights' sum, plus the rounding.
+__attribute__((target("avx2"))) inline __m256i leastSquaresSum(
+    const __m256i* weights, uint32_t c, __m256i m, __m256i left, __m256i up, __m256i up_left,
+    __m256i up_right, __m256i parents, __m256i side_parents, __m256i near_parents,
+    __m256i diagonal_parents, __m256i rounding) {
+  const __m256i texel_terms =
+      _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(weights[0], channelOf(left, c)),
+                                        _mm256_mullo_epi32(weights[1], channelOf(up, c))),
+                       _mm256_add_epi32(_mm256_mullo_epi32(weights[2], channelOf(up_left, c)),
+                                        _mm256_mullo_epi32(weights[3], channelOf(up_right, c))));
+  const __m256i parent_terms = _mm256_add_epi32(
+      _mm256_add_epi32(_mm256_mullo_epi32(weights[4], channelOf(parents, c)),
+                       _mm256_mullo_epi32(weights[5], channelOf(side_parents, c))),
+      _mm256_add_epi32(_mm256_mullo_epi32(weights[6], channelOf(near_parents, c)),
+                       _mm256_mullo_epi32(weights[7], channelOf(diagonal_parents, c))));
+  const __m256i sixteenths = _mm256_sub_epi32(_mm256_add_epi32(texel_terms, parent_terms),
+                                              _mm256_mullo_epi32(weights[kLsTerms], m));
+  return _mm256_add_epi32(_mm256_slli_epi32(sixteenths, 4), rounding);
+}
+
 // Which predictor a lane decoder runs: 0 and 3 (the median), 1, 4 or 5.
-enum class LanePredictor : uint8_t { kMedian, kNearest, kCorrected, kLeastSquares };
+enum class LanePredictor : uint8_t {
+  kMedian,
+  kNearest,
+  kCorrected,
+  kLeastSquares,
+  kLeastSquaresPlain
+};
 
 // kNearest: predictor 1, the block's parent texel.
 // kCorrected: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
@@ -122,7 +201,11 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   // Predictor 5's ninth term is predictor 4's estimate.
   constexpr bool kCorrected =
       kPredictor == LanePredictor::kCorrected || kPredictor == LanePredictor::kLeastSquares;
-  constexpr bool kLeastSquares = kPredictor == LanePredictor::kLeastSquares;
+  constexpr bool kLeastSquares =
+      kPredictor == LanePredictor::kLeastSquares || kPredictor == LanePredictor::kLeastSquaresPlain;
+  // Predictors 1 and 5 read the block's parent texel at every step, the others for derived
+  // texels only.
+  constexpr bool kEveryStep = kNearest || kLeastSquares;
   static_assert(kLanes == 8, "a band's rows are the eight 32-bit lanes of one AVX2 vector");
   // Locals, not the structures' fields: every vector store may alias those, and the compiler
   // would reload them at every step.
@@ -238,10 +321,18 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
     const __m256i upsampled_rows =
         _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
+    const ParentPlaces places{reinterpret_cast<const int*>(parent.texels),
+                              parent_rows,
+                              parent_near_rows,
+                              two_lane,
+                              last_column,
+                              last_parent_column,
+                              texel_bytes,
+                              column_offset,
+                              parent.first_column};
     const bool first_band = y0 == 0;
     // Predictor 5: per step parity (second column or not), channel and term, each lane's weight
     // for its block position, and the weights' sum.
-    constexpr uint32_t kLsWeightSum = kLsTerms;
     [[maybe_unused]] __m256i ls_weights[kLeastSquares ? 2 : 1][kCh][kLsTerms + 1];
     if constexpr (kLeastSquares)
       for (uint32_t column = 0; column < 2; ++column)
@@ -323,25 +414,17 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         derived =
             _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
-      // Each lane's block's parent column, and the parent texel's place in the parent's copy.
-      const bool reads_parent = kCorrected || kNearest || derived_mask != 0;
-      __m256i parent_column = zero, parent_at = zero;
-      if (reads_parent) {
-        parent_column = _mm256_srli_epi32(
-            _mm256_add_epi32(column_in, _mm256_set1_epi32(int(column_offset))), 1);
-        parent_at = _mm256_add_epi32(
-            parent_rows,
-            _mm256_mullo_epi32(
-                _mm256_sub_epi32(parent_column, _mm256_set1_epi32(int(parent.first_column))),
-                _mm256_set1_epi32(int(kCh))));
+      BlockParents step_parents{};
+      if (kCorrected || kEveryStep || derived_mask != 0) {
+        step_parents = gatherBlockParents<kCh, kEveryStep, kLeastSquares>(t, places);
+        if (!kEveryStep && derived_mask != 0)
+          step_parents.block = gatherBlock(step_parents.at, places);
       }
-      // The block's parent texel, every channel in one gather (bytes past the texel's cleared):
-      // predictors 1 and 5 read it at every step, the others for derived texels only.
-      __m256i block_parents = zero;
-      if (kNearest || kLeastSquares || derived_mask != 0)
-        block_parents = _mm256_and_si256(
-            _mm256_i32gather_epi32(reinterpret_cast<const int*>(parent.texels), parent_at, 1),
-            texel_bytes);
+      const __m256i block_parents = step_parents.block;
+      const __m256i parent_at = step_parents.at;
+      [[maybe_unused]] const __m256i side_parents = step_parents.side,
+                                     near_parents = step_parents.near,
+                                     diagonal_parents = step_parents.diagonal;
       if constexpr (kCorrected) {
         // Predictor 4 (ptm_walk.h, parentCorrectedEstimate), with eq. 3's pull written from
         // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
@@ -363,25 +446,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             upsampled_value[c + 1] = _mm256_srai_epi32(ws, 16);
             block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
           }
-        }
-        // Predictor 5: the parent texels beside the block's (mapAxis's neighbours), every
-        // channel in one gather each.
-        [[maybe_unused]] __m256i side_parents, near_parents, diagonal_parents;
-        if constexpr (kLeastSquares) {
-          const __m256i side_column =
-              second_column != 0
-                  ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), last_parent_column)
-                  : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
-          const __m256i side_at = _mm256_mullo_epi32(
-              _mm256_sub_epi32(side_column, _mm256_set1_epi32(int(parent.first_column))),
-              _mm256_set1_epi32(int(kCh)));
-          const __m256i near_at = _mm256_sub_epi32(parent_at, parent_rows);
-          const int* copy = reinterpret_cast<const int*>(parent.texels);
-          side_parents = _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_rows, side_at), 1);
-          near_parents =
-              _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_near_rows, near_at), 1);
-          diagonal_parents =
-              _mm256_i32gather_epi32(copy, _mm256_add_epi32(parent_near_rows, side_at), 1);
         }
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i w = upsampled_value[c];
@@ -413,25 +477,13 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             // Predictor 5 (leastSquaresPredictFactored): sixteen times the neighbours' and the
             // parent's terms less the median times the weights' sum, plus predictor 4's
             // estimate's term and the rounding.
-            const __m256i* weights = ls_weights[second_column][c];
             const __m256i m = channelOf(medians, c);
-            const __m256i texel_terms = _mm256_add_epi32(
-                _mm256_add_epi32(_mm256_mullo_epi32(weights[0], channelOf(left, c)),
-                                 _mm256_mullo_epi32(weights[1], channelOf(up, c))),
-                _mm256_add_epi32(_mm256_mullo_epi32(weights[2], channelOf(up_left, c)),
-                                 _mm256_mullo_epi32(weights[3], channelOf(up_right, c))));
-            const __m256i parent_terms = _mm256_add_epi32(
-                _mm256_add_epi32(_mm256_mullo_epi32(weights[4], channelOf(block_parents, c)),
-                                 _mm256_mullo_epi32(weights[5], channelOf(side_parents, c))),
-                _mm256_add_epi32(_mm256_mullo_epi32(weights[6], channelOf(near_parents, c)),
-                                 _mm256_mullo_epi32(weights[7], channelOf(diagonal_parents, c))));
-            const __m256i sixteenths =
-                _mm256_sub_epi32(_mm256_add_epi32(texel_terms, parent_terms),
-                                 _mm256_mullo_epi32(weights[kLsWeightSum], m));
             const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
             const __m256i sum =
-                _mm256_add_epi32(_mm256_add_epi32(_mm256_slli_epi32(sixteenths, 4), ls_rounding),
-                                 _mm256_mullo_epi32(weights[8], estimate));
+                _mm256_add_epi32(leastSquaresSum(ls_weights[second_column][c], c, m, left, up,
+                                                 up_left, up_right, block_parents, side_parents,
+                                                 near_parents, diagonal_parents, ls_rounding),
+                                 _mm256_mullo_epi32(ls_weights[second_column][c][8], estimate));
             predicted[c] = _mm256_min_epi32(
                 byte_mask, _mm256_max_epi32(
                                zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
@@ -443,6 +495,16 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           }
         }
       }
+      if constexpr (kLeastSquares && !kCorrected)
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const __m256i m = channelOf(medians, c);
+          const __m256i sum = leastSquaresSum(ls_weights[second_column][c], c, m, left, up, up_left,
+                                              up_right, block_parents, side_parents, near_parents,
+                                              diagonal_parents, ls_rounding);
+          predicted[c] = _mm256_min_epi32(
+              byte_mask,
+              _mm256_max_epi32(zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
+        }
       __m256i symbols[kCh];
       for (uint32_t c = 0; c < kCh; ++c) {
         __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
@@ -517,7 +579,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         coded = _mm256_add_epi8(coded, _mm256_shuffle_epi8(coded, green_to_red_and_blue));
       __m256i prediction = medians;
       if constexpr (kNearest) prediction = block_parents;
-      if constexpr (kCorrected) {
+      if constexpr (kCorrected || kLeastSquares) {
         prediction = zero;
         for (uint32_t c = 0; c < kCh; ++c)
           prediction = _mm256_or_si256(prediction, _mm256_slli_epi32(predicted[c], int(8 * c)));
@@ -657,7 +719,10 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                 std::vector<uint8_t>& padded) {
   const bool has_parent = predictor != Predictor::kRoot;
   const bool least_squares = predictor == Predictor::kLeastSquares;
-  const bool corrected = predictor == Predictor::kParentCorrected || least_squares;
+  // Predictor 5 whose weights give predictor 4's estimate none (prepareWalk then upsampled
+  // nothing) needs nothing of predictor 4's.
+  const bool plain = least_squares && walk.upsampled == nullptr;
+  const bool corrected = predictor == Predictor::kParentCorrected || (least_squares && !plain);
   // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
   // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0 reads
   // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step.
@@ -735,6 +800,11 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                                                          parent, diagonal, shortfall);
       break;
     case Predictor::kLeastSquares:
+      if (plain) {
+        ok = decodeAvx2Channels<LanePredictor::kLeastSquaresPlain>(
+            channels, geometry, streams, model_offsets, parent, diagonal, shortfall);
+        break;
+      }
       ok = decodeAvx2Channels<LanePredictor::kLeastSquares>(
           channels, geometry, streams, model_offsets, parent, diagonal, shortfall);
       break;

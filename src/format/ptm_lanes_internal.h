@@ -58,17 +58,17 @@ struct Geometry {
   uint32_t width, height, channels;
   bool has_parent;
   bool nearest;        ///< predictor 1
-  bool corrected;      ///< predictor 4 or 5
+  bool corrected;      ///< predictor 4, or 5 with predictor 4's estimate (usesEstimate)
   bool least_squares;  ///< predictor 5
   const ImageView* parent;
   const AxisMap* columns;
   const AxisMap* rows;
   const rans::Model* const* models;  // [channel * contexts + context]
   uint32_t contexts;
-  const int16_t* upsampled;  ///< predictors 4 and 5: the walk's planes
+  const int16_t* upsampled;  ///< where `corrected`: the walk's planes
   int16_t* detail;
-  /// Predictor 5 (`corrected` is then true as well: its ninth term is predictor 4's
-  /// estimate): the weights, [position][channel][term], and each position's and channel's sum.
+  /// Predictor 5 (with `corrected` where its ninth term, predictor 4's estimate, has a
+  /// weight): the weights, [position][channel][term], and each position's and channel's sum.
   const int8_t* ls_weights;
   int ls_weight_sums[kLsSets][4];
 };

@@ -10,14 +10,22 @@ namespace {
 
 // One position's and channel's weights: least squares with a light ridge, so that a position
 // or channel the tile barely uses gets small weights rather than wild ones, rounded to signed
-// bytes. Gaussian elimination with partial pivoting on the 9x9 system.
+// bytes. Gaussian elimination with partial pivoting on the 9x9 system; without the estimate,
+// its row and column are the identity's and its moment 0, which solves the other eight terms'
+// system and gives the estimate the weight 0.
 void solveOne(const double (&gram)[kLsTerms][kLsTerms], const double (&moment)[kLsTerms],
-              int8_t* weights) {
+              bool with_estimate, int8_t* weights) {
   double a[kLsTerms][kLsTerms + 1];
   for (uint32_t i = 0; i < kLsTerms; ++i) {
     for (uint32_t j = 0; j < kLsTerms; ++j) a[i][j] = i <= j ? gram[i][j] : gram[j][i];
     a[i][i] += 1e-3 * a[i][i] + 1;
     a[i][kLsTerms] = moment[i];
+  }
+  if (!with_estimate) {
+    constexpr uint32_t kEstimate = kLsTerms - 1;
+    for (uint32_t i = 0; i <= kLsTerms; ++i) a[kEstimate][i] = 0;
+    for (uint32_t i = 0; i < kLsTerms; ++i) a[i][kEstimate] = 0;
+    a[kEstimate][kEstimate] = 1;
   }
   for (uint32_t i = 0; i < kLsTerms; ++i) {
     uint32_t pivot = i;
@@ -38,10 +46,11 @@ void solveOne(const double (&gram)[kLsTerms][kLsTerms], const double (&moment)[k
 
 }  // namespace
 
-void solveLeastSquares(const LsFit& fit, uint32_t channels, int8_t* weights) {
+void solveLeastSquares(const LsFit& fit, uint32_t channels, bool with_estimate, int8_t* weights) {
   for (uint32_t set = 0; set < kLsSets; ++set)
     for (uint32_t c = 0; c < channels; ++c)
-      solveOne(fit.gram[set][c], fit.moment[set][c], weights + (set * channels + c) * kLsTerms);
+      solveOne(fit.gram[set][c], fit.moment[set][c], with_estimate,
+               weights + (set * channels + c) * kLsTerms);
 }
 
 }  // namespace tessera::detail

@@ -111,8 +111,18 @@ inline int leastSquaresPredictFactored(const int8_t* weights, int weight_sum, co
   return std::clamp(median + ((sum + (1 << (kLsProductShift - 1))) >> kLsProductShift), 0, 255);
 }
 
+/// Whether any of `weights` ([position][channel][term], `channels` channels) gives predictor 4's
+/// estimate, the ninth term, a weight. Without one, predictor 5 needs nothing of predictor 4's
+/// (the upsampled parent, the departures, the block's pull), and the decoders skip it.
+inline bool usesEstimate(const int8_t* weights, uint32_t channels) {
+  for (size_t i = kLsTerms - 1; i < lsWeightBytes(channels); i += kLsTerms)
+    if (weights[i] != 0) return true;
+  return false;
+}
+
 /// Solves `fit`'s normal equations for each position and each of `channels` channels into
-/// `weights`, [position][channel][term], the payload's layout.
-void solveLeastSquares(const LsFit& fit, uint32_t channels, int8_t* weights);
+/// `weights`, [position][channel][term], the payload's layout. Without `with_estimate`, the
+/// fit leaves out predictor 4's estimate, whose weight is then 0 (usesEstimate).
+void solveLeastSquares(const LsFit& fit, uint32_t channels, bool with_estimate, int8_t* weights);
 
 }  // namespace tessera::detail

@@ -129,7 +129,10 @@ Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint3
   const bool has_parent = predictor != Predictor::kRoot;
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
-  if (predictor == Predictor::kParentCorrected || predictor == Predictor::kLeastSquares)
+  const bool upsampled = predictor == Predictor::kParentCorrected ||
+                         (predictor == Predictor::kLeastSquares &&
+                          (ls_weights == nullptr || usesEstimate(ls_weights, channels)));
+  if (upsampled)
     upsample(channels, parent->texels, columns, rows, state.upsampled, state.detail,
              state.parent_blend);
   return Walk{texels,
@@ -138,8 +141,8 @@ Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint3
               has_parent ? &parent->texels : nullptr,
               &columns,
               &rows,
-              state.upsampled.data(),
-              state.detail.data(),
+              upsampled ? state.upsampled.data() : nullptr,
+              upsampled ? state.detail.data() : nullptr,
               errorPlane(coder, width, height, state),
               ls_weights,
               nullptr};

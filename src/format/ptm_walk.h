@@ -262,6 +262,8 @@ struct Walk {
   const ImageView* parent;
   const AxisMap* columns;
   const AxisMap* rows;
+  /// Predictors 4 and 5: the parent upsampled to every texel (null where predictor 5's
+  /// weights give predictor 4's estimate none).
   const int16_t* upsampled;
   /// Predictor 4: each decoded texel's departure from the upsampled parent, 16 t - upsampled,
   /// kept for the texels after it instead of recomputed from both planes.
@@ -291,12 +293,17 @@ void codeTexels(const Walk& walk, Coder& coder) {
   const int8_t* const ls_weights = walk.ls_weights;
   LsFit* const ls_fit = walk.ls_fit;
   constexpr bool kErrors = Coder::kErrorActivity;
+  // Predictor 5 without the upsampled parent: its weights give predictor 4's estimate none,
+  // which then reads 0.
+  const bool estimates = kPredictor == Predictor::kParentCorrected ||
+                         (kPredictor == Predictor::kLeastSquares && upsampled != nullptr);
   // Predictor 4 reads each texel's detail three times, as the left, up and up-left neighbour.
   auto keepDetail = [&](const uint8_t* texel, size_t index) {
     if constexpr (kPredictor == Predictor::kParentCorrected ||
                   kPredictor == Predictor::kLeastSquares)
-      for (uint32_t c = 0; c < kChannels; ++c)
-        details[index + c] = int16_t(16 * texel[c] - upsampled[index + c]);
+      if (estimates)
+        for (uint32_t c = 0; c < kChannels; ++c)
+          details[index + c] = int16_t(16 * texel[c] - upsampled[index + c]);
   };
   constexpr bool kColourTransform = kChannels >= 3;
   constexpr bool kHasParent = kPredictor != Predictor::kRoot;
@@ -405,7 +412,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
                 // Predictor 4's estimate without the block's pull, which fixes no derived texel.
                 const int16_t* d = details + index + c;
                 const int estimate16 =
-                    upsampled[index + c] + medPredict(d[left], d[up], d[up_left]);
+                    estimates ? upsampled[index + c] + medPredict(d[left], d[up], d[up_left]) : 0;
                 const int8_t* weights = ls_weights + (3 * kChannels + c) * kLsTerms;
                 if (kEncode && ls_fit != nullptr) {
                   int terms[kLsTerms];
@@ -454,10 +461,12 @@ void codeTexels(const Walk& walk, Coder& coder) {
               (9 * parent_row[j] + 3 * parent_row[jn] + 3 * parent_near[j] + parent_near[jn] + 8) >>
               4;
         } else {
-          const int estimate = parentCorrectedEstimate(
-              upsampled + index + c, details + index + c, texel + c, {left, up, up_left, up_right},
-              origin, full_row && columns->full[x], position, parent_row[parent_at + c], kChannels,
-              stride);
+          const int estimate =
+              estimates ? parentCorrectedEstimate(upsampled + index + c, details + index + c,
+                                                  texel + c, {left, up, up_left, up_right}, origin,
+                                                  full_row && columns->full[x], position,
+                                                  parent_row[parent_at + c], kChannels, stride)
+                        : 0;
           if constexpr (kLeastSquares) {
             const int median =
                 origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
@@ -542,8 +551,11 @@ void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder
 
 // The walk of `texels` (width x height x channels) with `predictor` and `coder`: the
 // parent's axes mapped into `columns` and `rows` (none for predictor 0, whose `parent` may be
-// null), the parent upsampled for predictors 4 and 5 and coders 5 and 6's error plane, both in
-// `state`; or why the parent does not fit. `ls_weights` may be filled in afterwards.
+// null), the parent upsampled for predictor 4 and for predictor 5 where its weights use
+// predictor 4's estimate (usesEstimate), and coders 5 and 6's error plane, all in `state`; or
+// why the parent does not fit. `ls_weights` is predictor 5's weights, or null while they are
+// still to be fitted: the fit needs every term, and the caller sets Walk::ls_weights after.
+// Without the upsampled parent, Walk::upsampled and Walk::detail are null.
 Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
                          const ParentTexels* parent, Predictor predictor, PtmCoder coder,
                          const int8_t* ls_weights, CodecScratch::State& state, AxisMap& columns,

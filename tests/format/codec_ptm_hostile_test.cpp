@@ -25,16 +25,20 @@ struct ChildPayload {
   std::vector<uint8_t> payload;
 };
 
-// The default encoder's payload, or one with `predictor` and `coder`.
+// The default encoder's payload, or one with `predictor` and `coder` (predictor 5's weights
+// fitted without predictor 4's estimate where `without_estimate`).
 ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predictor = {},
-                              PtmCoder coder = PtmCoder::kRans, uint32_t step = 1) {
+                              PtmCoder coder = PtmCoder::kRans, uint32_t step = 1,
+                              bool without_estimate = false) {
   // The child, tile (1, 1) of level 0, is cut by the image's right and bottom edges.
   PyramidTiles pyramid = makePyramid(56, 51, channels, kSweepTilePx, 1, 11, step);
   ChildPayload result{pyramid.tile(1, 0, 0), pyramid.tile(0, 1, 1), {}};
   ParentTexels parent = parentOf(result.parent, 1, 1, kSweepTilePx, 1);
-  result.payload = predictor
-                       ? *encodePtm(result.child.view(), {}, &parent, *predictor, coder, nullptr)
-                       : *encodeTile(Codec::kPtm, result.child.view(), {}, &parent);
+  PtmLeastSquaresFit fit;
+  fit.without_estimate = without_estimate;
+  result.payload =
+      predictor ? *encodePtm(result.child.view(), {}, &parent, *predictor, coder, nullptr, &fit)
+                : *encodeTile(Codec::kPtm, result.child.view(), {}, &parent);
   return result;
 }
 
@@ -50,6 +54,9 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
                               Predictor::kParentCorrected, Predictor::kLeastSquares})
     payloads.push_back(makeChildPayload(channels, predictor, PtmCoder::kRansLanes));
+  // Predictor 5 without predictor 4's estimate, which its decoders then skip.
+  for (PtmCoder coder : {PtmCoder::kRans, PtmCoder::kRansLanes})
+    payloads.push_back(makeChildPayload(channels, Predictor::kLeastSquares, coder, 1, true));
   // And the default's payload of a comb, which carries explicit tables.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";

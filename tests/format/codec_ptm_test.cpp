@@ -186,7 +186,8 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
 }
 
 // Rebuilds `pyramid`'s levels from its base, and expects effort 2 to code tile (1, 1) of level
-// 0 with coder 7 and `expected`, at least 5 % smaller than coder 7 with each of `others`.
+// 0 with coder 7 and `expected`, at least 5 % smaller than coder 7 with each of `others`;
+// with predictor 5, with predictor 4's estimate exactly where it saves 3 %.
 void expectEffortTwoTakesTheLanesWith(PyramidTiles& pyramid, Predictor expected,
                                       std::initializer_list<Predictor> others) {
   for (size_t l = 1; l < pyramid.levels.size(); ++l)
@@ -206,11 +207,24 @@ void expectEffortTwoTakesTheLanesWith(PyramidTiles& pyramid, Predictor expected,
     EXPECT_LT(payload->size() * 100, payload_with->size() * 95) << int(other);
   }
   EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
+  if (expected != Predictor::kLeastSquares) return;
+  // Predictor 4's estimate keeps a weight only where it saves 3 %: otherwise the payload's
+  // weights are those of the fit without it, which decodes faster.
+  PtmLeastSquaresFit with_estimate, without_estimate;
+  without_estimate.without_estimate = true;
+  auto payload_with = encodePtm(child.view(), {}, &parent, Predictor::kLeastSquares,
+                                PtmCoder::kRansLanes, nullptr, &with_estimate);
+  auto payload_without = encodePtm(child.view(), {}, &parent, Predictor::kLeastSquares,
+                                   PtmCoder::kRansLanes, nullptr, &without_estimate);
+  ASSERT_TRUE(payload_with.has_value() && payload_without.has_value());
+  const bool estimate_pays = payload_with->size() * 100 <= payload_without->size() * 97;
+  EXPECT_EQ(*payload, estimate_pays ? *payload_with : *payload_without);
+  EXPECT_EQ(usesEstimate(reinterpret_cast<const int8_t*>(payload->data() + ptm::kHeaderBytes), 3),
+            estimate_pays);
 }
 
-TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {
-  // A smooth source with faint noise, which the upsampled parent predicts better than the
-  // neighbours do: effort 2 takes predictor 4 with coder 7 over the median with it.
+// Smooth waves of `period` texels with noise of 0..noise-1 levels.
+PyramidTiles makeWavesWithNoise(double period, uint32_t noise) {
   PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 7);
   uint32_t seed = 11;
   Image& base = pyramid.levels[0];
@@ -218,7 +232,15 @@ TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {
     for (uint32_t x = 0; x < base.width_px; ++x)
       for (uint32_t c = 0; c < 3; ++c)
         base.row(y)[x * 3 + c] =
-            uint8_t(120 + 90 * std::sin(x / (7.0 + c)) * std::cos(y / 9.0) + nextRandom(seed) % 3);
+            uint8_t(120 + 90 * std::sin(x / (period + c)) * std::cos(y / (period + 2)) +
+                    nextRandom(seed) % noise);
+  return pyramid;
+}
+
+TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {
+  // Short waves with faint noise, which the upsampled parent predicts better than the
+  // neighbours do: effort 2 takes predictor 4 with coder 7 over the median with it.
+  PyramidTiles pyramid = makeWavesWithNoise(3, 5);
   expectEffortTwoTakesTheLanesWith(pyramid, Predictor::kParentCorrected,
                                    {Predictor::kNeighbourMedian});
 }
@@ -227,7 +249,8 @@ TEST(PtmCodec, EffortTwoTakesTheLeastSquaresLanesWhereTheyPay) {
   // A noisy source enlarged twice: its columns by repeating texels, its rows by averaging the
   // two rows around each new one. The median sees the repeats but not the row below that each
   // averaged row leans on; the parent knows the block's mean but not the repeats; predictor 5's
-  // fit takes from both, and effort 2 takes it with coder 7.
+  // fit takes from both, and effort 2 takes it with coder 7, without predictor 4's estimate,
+  // which does not pay here.
   Image noise(128, 128, 3);
   uint32_t seed = 5;
   for (uint8_t& texel : noise.texels) texel = uint8_t(nextRandom(seed));

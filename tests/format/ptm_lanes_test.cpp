@@ -63,6 +63,10 @@ Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uin
                        predictor, PtmCoder::kRansLanes, weights, scratch.state(), columns, rows);
   EXPECT_TRUE(walk.has_value());
   if (!walk) return out;
+  // Predictor 4's planes exactly where the weights need them.
+  EXPECT_EQ(walk->upsampled != nullptr,
+            predictor == Predictor::kParentCorrected ||
+                (predictor == Predictor::kLeastSquares && usesEstimate(weights, channels)));
   const size_t section_at = laneSectionAt(payload, channels);
   std::vector<uint8_t> padded;
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
@@ -129,7 +133,9 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
 
 TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
   // Predictor 5's weights are any bytes a payload holds: the extremes (-128 and 127) and random
-  // ones push every term of its sum to its bounds, on a source of 0s and 255s.
+  // ones push every term of its sum to its bounds, on a source of 0s and 255s. Random weights
+  // that give predictor 4's estimate none take the decoders' paths without predictor 4's work,
+  // and so does a fit without the estimate, recorded by an encoder that walked with it.
   if (!ptm::lanes::simdAvailable())
     GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
   for (uint32_t channels = 1; channels <= 4; ++channels) {
@@ -139,24 +145,37 @@ TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
     for (size_t l = 1; l < pyramid.levels.size(); ++l)
       pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
     const uint32_t side = 32 + 2;
-    for (int kind = 0; kind < 3; ++kind) {
+    enum Kind { kLowest, kHighest, kRandom, kRandomWithoutEstimate, kFittedWithoutEstimate };
+    for (const Kind kind :
+         {kLowest, kHighest, kRandom, kRandomWithoutEstimate, kFittedWithoutEstimate}) {
       PtmLeastSquaresFit fit;
-      fit.fitted = true;
+      fit.fitted = kind != kFittedWithoutEstimate;
+      fit.without_estimate = kind == kRandomWithoutEstimate || kind == kFittedWithoutEstimate;
       for (int8_t& weight : fit.weights)
-        weight = kind == 0 ? int8_t(-128) : kind == 1 ? int8_t(127) : int8_t(nextRandom(seed));
+        weight = kind == kLowest    ? int8_t(-128)
+                 : kind == kHighest ? int8_t(127)
+                                    : int8_t(nextRandom(seed));
+      for (size_t i = 0; i < std::size(fit.weights); ++i)
+        fit.weights_without_estimate[i] = i % kLsTerms == kLsTerms - 1 ? 0 : fit.weights[i];
       expectCoarseToFineRoundTrip(
           pyramid, channels,
           [&](const Image& tile, const ParentTexels* parent) {
+            const bool fitted = fit.fitted;
             auto payload = encodePtm(tile.view(), {}, parent, Predictor::kLeastSquares,
                                      PtmCoder::kRansLanes, nullptr, &fit);
+            // Each tile fits its own weights.
+            if (kind == kFittedWithoutEstimate) fit.fitted = fitted;
             if (payload && parent != nullptr) {
               EXPECT_EQ((*payload)[0], uint8_t(Predictor::kLeastSquares));
+              const auto* weights =
+                  reinterpret_cast<const int8_t*>(payload->data() + ptm::kHeaderBytes);
+              EXPECT_EQ(usesEstimate(weights, channels), !fit.without_estimate);
               EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels, tile.texels)
                   << "scalar lanes";
             }
             return payload;
           },
-          fmt::format("channels {} weights {}", channels, kind));
+          fmt::format("channels {} weights {}", channels, int(kind)));
     }
   }
 }
