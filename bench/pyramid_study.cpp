@@ -199,6 +199,8 @@ struct Variant {
   bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
   bool jxl = false;       ///< libjxl lossless at `effort` instead of `codec`
   bool as_built = false;  ///< ptm only: the codec's own encoder at `effort`, as `tessera build`
+  /// ptm predictor 5 only: the weights fitted without predictor 4's estimate.
+  bool without_estimate = false;
 };
 
 constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
@@ -401,6 +403,8 @@ void study(const std::string& input, double min_seconds, const std::string& only
     {"ptm least-squares + zstd", Codec::kPtm, 0, Predictor::kLeastSquares, PtmCoder::kZstd},
     {"ptm least-squares + rANS lanes", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansLanes},
+    {"ptm least-squares without predictor 4's estimate + rANS lanes", Codec::kPtm, 0,
+     Predictor::kLeastSquares, PtmCoder::kRansLanes, false, false, false, true},
     {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
      PtmCoder::kRansParentErrors},
     {"ptm effort 2 (nearest parent + zstd, or rANS lanes with nearest parent, the median, "
@@ -437,9 +441,12 @@ void study(const std::string& input, double min_seconds, const std::string& only
     if (variant.smallest)
       return encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr, kTriedPredictors,
                                variant.coder, &scratch);
-    if (variant.codec == Codec::kPtm)
+    if (variant.codec == Codec::kPtm) {
+      PtmLeastSquaresFit fit;
+      fit.without_estimate = variant.without_estimate;
       return encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
-                       variant.coder, &scratch);
+                       variant.coder, &scratch, &fit);
+    }
     return encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
   };
   // A level coded on its own: for ptm its parentless mode with the variant's entropy coder

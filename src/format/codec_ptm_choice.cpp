@@ -22,11 +22,13 @@ namespace {
 // - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
 //   (ptm_lanes.h), which decodes eight rows side by side, with the smaller of nearest parent
 //   and the neighbour median, or the parent-corrected predictor where its estimate is 5 %
-//   smaller, or where it is not and the median won, least squares where its estimate is:
+//   smaller, or where it is not and the median won, least squares where its estimate is,
+//   with the weights fitted without predictor 4's estimate unless those with it save 3 %:
 //   about 125-145 MP/s per core where nearest parent or the median wins, 55-65 where
-//   predictor 4 does and about 50 where predictor 5 does; the codec study's map came out 11 %
-//   smaller with predictor 4 than with the median alone, its photograph 24 % with predictor
-//   5, its synthetic source 3.6 % smaller with nearest parent in the lanes than with zstd;
+//   predictor 4 does, about 95-105 where predictor 5 without the estimate does and about 50
+//   where predictor 5 with it does; the codec study's map came out 11 % smaller with
+//   predictor 4 than with the median alone, its photograph 23 % with predictor 5, its
+//   synthetic source 3.6 % smaller with nearest parent in the lanes than with zstd;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 7 (the lanes, coder 1's contexts without tables), 1 (per-channel contexts,
 //   model family 1), 2 (chained contexts), 3 (model family 2), 4 (both), 6 (4 with the
@@ -36,9 +38,11 @@ namespace {
 //   study's photograph 2.8 % smaller and its other inputs within 0.4 %, 0-8 % slower to
 //   decode. Smaller than effort 1 but a fifth to a ninth of its decode speed.
 // - the default and 4 and above: as 3, and where the neighbour median is the best of the
-//   three, predictor 5 (least squares) if coder 6 codes it at least 3 % smaller. The codec
-//   study's photograph came out 20 % smaller than at effort 3, at about half its decode and
-//   a third of its encode speed; its map and synthetic source came out the same.
+//   three, predictor 5 (least squares) if coder 6 codes it at least 3 % smaller, with the
+//   weights fitted without predictor 4's estimate where coder 6 codes those no larger (the
+//   decoders then skip predictor 4's work). The codec study's photograph came out 20 %
+//   smaller than at effort 3, at about half its decode and a third of its encode speed; its
+//   map and synthetic source came out the same.
 //   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
 //   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
@@ -220,6 +224,19 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
           std::swap(reference_models, candidate_models);
           predictor = Predictor::kLeastSquares;
           slowest_bytes = fitted_bytes;
+          // The weights without predictor 4's estimate where they code no larger: the decoders
+          // then skip predictor 4's work.
+          fit.without_estimate = true;
+          TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, kReference, scratch, &fit,
+                                candidate));
+          const size_t plain_bytes = estimateRecordedPtm(candidate, kReference, &candidate_models);
+          if (plain_bytes <= slowest_bytes) {
+            std::swap(reference, candidate);
+            std::swap(reference_models, candidate_models);
+            slowest_bytes = plain_bytes;
+          } else {
+            fit.without_estimate = false;
+          }
         }
       }
       std::vector<PtmRecording> walks;  // of the faster coders, one per kind of walk

@@ -64,24 +64,33 @@ std::vector<uint8_t> expectedDefaultPayload(const Image& tile, const ParentTexel
                                               PtmCoder::kRansParentErrors, nullptr, nullptr);
   size_t reference =
       *estimatePtmBytes(tile.view(), {}, parent, predictor, PtmCoder::kRansParentErrors, nullptr);
+  // Predictor 5's weights: without predictor 4's estimate where they code no larger.
+  PtmLeastSquaresFit fit;
   if (predictor == Predictor::kNeighbourMedian && least_squares) {
     const size_t fitted = *estimatePtmBytes(tile.view(), {}, parent, Predictor::kLeastSquares,
                                             PtmCoder::kRansParentErrors, nullptr);
     if (fitted * 100 <= reference * 97) {
       predictor = Predictor::kLeastSquares;
       reference = fitted;
+      fit.without_estimate = true;
+      const size_t without = *estimatePtmBytes(tile.view(), {}, parent, Predictor::kLeastSquares,
+                                               PtmCoder::kRansParentErrors, nullptr, &fit);
+      if (without <= reference)
+        reference = without;
+      else
+        fit.without_estimate = false;
     }
   }
   const PtmCoder by_speed[] = {PtmCoder::kRansLanes, PtmCoder::kRans, PtmCoder::kRansChained,
                                PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained};
   PtmCoder chosen = PtmCoder::kRansParentErrors;
   for (PtmCoder coder : by_speed)
-    if (*estimatePtmBytes(tile.view(), {}, parent, predictor, coder, nullptr) * 100 <=
+    if (*estimatePtmBytes(tile.view(), {}, parent, predictor, coder, nullptr, &fit) * 100 <=
         reference * 103) {
       chosen = coder;
       break;
     }
-  return *encodePtm(tile.view(), {}, parent, predictor, chosen, nullptr);
+  return *encodePtm(tile.view(), {}, parent, predictor, chosen, nullptr, &fit);
 }
 
 TEST(PtmCodec, EveryPredictorWithEveryCoderRoundTripsWholePyramidsBitExactly) {
@@ -245,12 +254,11 @@ TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {
                                    {Predictor::kNeighbourMedian});
 }
 
-TEST(PtmCodec, EffortTwoTakesTheLeastSquaresLanesWhereTheyPay) {
-  // A noisy source enlarged twice: its columns by repeating texels, its rows by averaging the
-  // two rows around each new one. The median sees the repeats but not the row below that each
-  // averaged row leans on; the parent knows the block's mean but not the repeats; predictor 5's
-  // fit takes from both, and effort 2 takes it with coder 7, without predictor 4's estimate,
-  // which does not pay here.
+// A noisy source enlarged twice: its columns by repeating texels, its rows by averaging the
+// two rows around each new one. The median sees the repeats but not the row below that each
+// averaged row leans on; the parent knows the block's mean but not the repeats; predictor 5's
+// fit takes from both.
+PyramidTiles makeEnlargedNoise() {
   Image noise(128, 128, 3);
   uint32_t seed = 5;
   for (uint8_t& texel : noise.texels) texel = uint8_t(nextRandom(seed));
@@ -266,8 +274,31 @@ TEST(PtmCodec, EffortTwoTakesTheLeastSquaresLanesWhereTheyPay) {
         base.row(y)[x * 3 + c] = uint8_t(((2 - below) * upper[at] + below * lower[at] + 1) / 2);
       }
   }
+  return pyramid;
+}
+
+TEST(PtmCodec, EffortTwoTakesTheLeastSquaresLanesWhereTheyPay) {
+  // Effort 2 takes predictor 5 with coder 7, without predictor 4's estimate, which does not pay
+  // here.
+  PyramidTiles pyramid = makeEnlargedNoise();
   expectEffortTwoTakesTheLanesWith(pyramid, Predictor::kLeastSquares,
                                    {Predictor::kNeighbourMedian, Predictor::kParentCorrected});
+}
+
+TEST(PtmCodec, TheDefaultTakesLeastSquaresWithoutTheEstimateWhereItCodesNoLarger) {
+  PyramidTiles pyramid = makeEnlargedNoise();
+  for (size_t l = 1; l < pyramid.levels.size(); ++l)
+    pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+  const Image parent_tile = pyramid.tile(1, 0, 0);
+  const Image child = pyramid.tile(0, 1, 1);
+  ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  auto payload = encodeTile(Codec::kPtm, child.view(), {}, &parent);
+  ASSERT_TRUE(payload.has_value());
+  EXPECT_EQ(*payload, expectedDefaultPayload(child, &parent));
+  ASSERT_EQ((*payload)[0], uint8_t(Predictor::kLeastSquares));
+  EXPECT_FALSE(
+      usesEstimate(reinterpret_cast<const int8_t*>(payload->data() + ptm::kHeaderBytes), 3));
+  EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
 }
 
 TEST(PtmCodec, EveryPredictorRoundTripsAndTheParentMakesTilesSmaller) {
