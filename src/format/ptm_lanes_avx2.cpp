@@ -117,7 +117,10 @@ struct ParentPlaces {
 // Each lane's block's parent texel at step t: its place in the copy, and with kBlock its
 // bytes (every channel in one gather, bytes past the texel cleared); with kSides (predictor 5)
 // also the parent texels beside it (mapAxis's neighbours, clamped to the parent), one gather
-// each.
+// each. Given `previous`, the same at step t - 1, it gathers half as much: a block's second
+// column has the same P and Pv as its first, and a first column's side texels Ph and Pd are the
+// P and Pv of the block before. That holds once every lane is at column 2 or beyond: at column
+// 0 there is no block before, and the side is clamped to the parent's column 0.
 struct BlockParents {
   __m256i at, block, side, near, diagonal;
 };
@@ -125,8 +128,8 @@ __attribute__((target("avx2"))) inline __m256i gatherBlock(__m256i at, const Par
   return _mm256_and_si256(_mm256_i32gather_epi32(p.copy, at, 1), p.texel_bytes);
 }
 template <uint32_t kCh, bool kBlock, bool kSides>
-__attribute__((target("avx2"))) inline BlockParents gatherBlockParents(uint32_t t,
-                                                                       const ParentPlaces& p) {
+__attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
+    uint32_t t, const ParentPlaces& p, const BlockParents* previous = nullptr) {
   const __m256i zero = _mm256_setzero_si256();
   const __m256i column_in = _mm256_min_epi32(
       _mm256_max_epi32(_mm256_sub_epi32(_mm256_set1_epi32(int(t)), p.two_lane), zero),
@@ -138,44 +141,62 @@ __attribute__((target("avx2"))) inline BlockParents gatherBlockParents(uint32_t 
   BlockParents out{};
   out.at = _mm256_add_epi32(
       p.rows, _mm256_mullo_epi32(_mm256_sub_epi32(parent_column, first_column), texel_size));
-  if constexpr (kBlock) out.block = gatherBlock(out.at, p);
+  const bool second = ((t + p.column_offset) & 1) != 0;
+  const bool same_block = previous != nullptr && second;
+  const bool block_before = previous != nullptr && !second;
+  if constexpr (kBlock) out.block = same_block ? previous->block : gatherBlock(out.at, p);
   if constexpr (kSides) {
     const __m256i one = _mm256_set1_epi32(1);
-    const __m256i side_column =
-        ((t + p.column_offset) & 1) != 0
-            ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), p.last_parent_column)
-            : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
-    const __m256i side_at =
-        _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
     const __m256i near_at = _mm256_sub_epi32(out.at, p.rows);
-    out.side = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.rows, side_at), 1);
-    out.near = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, near_at), 1);
-    out.diagonal = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, side_at), 1);
+    out.near = same_block
+                   ? previous->near
+                   : _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, near_at), 1);
+    if (block_before) {
+      out.side = previous->block;
+      out.diagonal = previous->near;
+    } else {
+      const __m256i side_column =
+          second ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), p.last_parent_column)
+                 : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
+      const __m256i side_at =
+          _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
+      out.side = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.rows, side_at), 1);
+      out.diagonal = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, side_at), 1);
+    }
   }
   return out;
 }
 
-// Predictor 5's sum without its ninth term (leastSquaresPredictFactored) for channel c, each
-// lane's weights `weights` ([term], the weights' sum last): sixteen times the neighbours' and
-// the parent's terms less the median `m` times the weights' sum, plus the rounding.
-__attribute__((target("avx2"))) inline __m256i leastSquaresSum(
-    const __m256i* weights, uint32_t c, __m256i m, __m256i left, __m256i up, __m256i up_left,
-    __m256i up_right, __m256i parents, __m256i side_parents, __m256i near_parents,
-    __m256i diagonal_parents, __m256i rounding) {
-  const __m256i texel_terms =
-      _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(weights[0], channelOf(left, c)),
-                                        _mm256_mullo_epi32(weights[1], channelOf(up, c))),
-                       _mm256_add_epi32(_mm256_mullo_epi32(weights[2], channelOf(up_left, c)),
-                                        _mm256_mullo_epi32(weights[3], channelOf(up_right, c))));
-  const __m256i parent_terms = _mm256_add_epi32(
-      _mm256_add_epi32(_mm256_mullo_epi32(weights[4], channelOf(parents, c)),
-                       _mm256_mullo_epi32(weights[5], channelOf(side_parents, c))),
-      _mm256_add_epi32(_mm256_mullo_epi32(weights[6], channelOf(near_parents, c)),
-                       _mm256_mullo_epi32(weights[7], channelOf(diagonal_parents, c))));
-  const __m256i sixteenths = _mm256_sub_epi32(_mm256_add_epi32(texel_terms, parent_terms),
-                                              _mm256_mullo_epi32(weights[kLsTerms], m));
-  return _mm256_add_epi32(_mm256_slli_epi32(sixteenths, 4), rounding);
+// Channel c of each lane's texels `low` and `high` (a byte per channel) as the low and high
+// 16 bits of the lane, by the byte shuffles `low_mask` and `high_mask` (decodeAvx2 builds them
+// per channel).
+__attribute__((target("avx2"))) inline __m256i channelPair(__m256i low, __m256i high,
+                                                           __m256i low_mask, __m256i high_mask) {
+  return _mm256_or_si256(_mm256_shuffle_epi8(low, low_mask), _mm256_shuffle_epi8(high, high_mask));
 }
+
+// Predictor 5's sum without its ninth term (leastSquaresPredictFactored) for channel c, over 16
+// and without the rounding's low bits: Σ w v - m Σw + 64, which is the factored sum's
+// (16 (Σ w v - m Σw) + 1024) / 16. Each multiply-add takes two terms: `pairs` holds each
+// lane's weights of (L, U), (UL, UR), (P, Ph), (Pv, Pd) and (m, 1), the last -Σw and 64, as
+// 16-bit pairs; `median_and_one` is (m, 1) in the same layout.
+__attribute__((target("avx2"))) inline __m256i leastSquaresSixteenths(
+    const __m256i* pairs, __m256i low_mask, __m256i high_mask, __m256i median_and_one, __m256i left,
+    __m256i up, __m256i up_left, __m256i up_right, __m256i parents, __m256i side_parents,
+    __m256i near_parents, __m256i diagonal_parents) {
+  const __m256i neighbours = _mm256_add_epi32(
+      _mm256_madd_epi16(channelPair(left, up, low_mask, high_mask), pairs[0]),
+      _mm256_madd_epi16(channelPair(up_left, up_right, low_mask, high_mask), pairs[1]));
+  const __m256i parent_terms = _mm256_add_epi32(
+      _mm256_madd_epi16(channelPair(parents, side_parents, low_mask, high_mask), pairs[2]),
+      _mm256_madd_epi16(channelPair(near_parents, diagonal_parents, low_mask, high_mask),
+                        pairs[3]));
+  return _mm256_add_epi32(_mm256_add_epi32(neighbours, parent_terms),
+                          _mm256_madd_epi16(median_and_one, pairs[4]));
+}
+
+// leastSquaresSixteenths' pairs of terms: four of the eight terms' weights, and the weights' sum.
+constexpr uint32_t kLsPairs = 5;
 
 // Which predictor a lane decoder runs: 0 and 3 (the median), 1, 4 or 5.
 enum class LanePredictor : uint8_t {
@@ -282,7 +303,20 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const int* upsampled = reinterpret_cast<const int*>(g.upsampled);
   const int* shortfalls = reinterpret_cast<const int*>(shortfall);
   const __m256 twelve = _mm256_set1_ps(12.0f);
-  [[maybe_unused]] const __m256i ls_rounding = _mm256_set1_epi32(1 << (kLsProductShift - 1));
+  // Predictor 5: the byte shuffles that put channel c of each lane in its low and its high 16
+  // bits (leastSquaresSixteenths), and the 1 paired with the median.
+  [[maybe_unused]] __m256i low_masks[kCh], high_masks[kCh];
+  for (uint32_t c = 0; c < kCh; ++c) {
+    alignas(32) int8_t low[32], high[32];
+    for (uint32_t i = 0; i < 32; ++i) {
+      const auto byte = int8_t(i / 4 % 4 * 4 + c);
+      low[i] = i % 4 == 0 ? byte : int8_t(-1);
+      high[i] = i % 4 == 2 ? byte : int8_t(-1);
+    }
+    low_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(low));
+    high_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(high));
+  }
+  [[maybe_unused]] const __m256i one_high = _mm256_set1_epi32(1 << 16);
   [[maybe_unused]] const __m256i last_parent_column =
       _mm256_set1_epi32(has_parent ? int(g.parent->width_px) - 1 : 0);
   const __m256i eight = _mm256_set1_epi32(8);
@@ -331,19 +365,29 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                               column_offset,
                               parent.first_column};
     const bool first_band = y0 == 0;
-    // Predictor 5: per step parity (second column or not), channel and term, each lane's weight
-    // for its block position, and the weights' sum.
-    [[maybe_unused]] __m256i ls_weights[kLeastSquares ? 2 : 1][kCh][kLsTerms + 1];
+    // Predictor 5: per step parity (second column or not) and channel, each lane's weights for
+    // its block position as leastSquaresSixteenths' pairs, and the weight of predictor 4's
+    // estimate.
+    [[maybe_unused]] __m256i ls_pairs[kLeastSquares ? 2 : 1][kCh][kLsPairs];
+    [[maybe_unused]] __m256i ls_estimate_weights[kLeastSquares ? 2 : 1][kCh];
     if constexpr (kLeastSquares)
       for (uint32_t column = 0; column < 2; ++column)
         for (uint32_t c = 0; c < kCh; ++c) {
           const int8_t* first = g.ls_weights + (column * kCh + c) * kLsTerms;
           const int8_t* second = g.ls_weights + ((2 + column) * kCh + c) * kLsTerms;
-          for (uint32_t k = 0; k <= kLsTerms; ++k)
-            ls_weights[column][c][k] = _mm256_blendv_epi8(
-                _mm256_set1_epi32(k < kLsTerms ? first[k] : g.ls_weight_sums[column][c]),
-                _mm256_set1_epi32(k < kLsTerms ? second[k] : g.ls_weight_sums[2 + column][c]),
+          auto pair = [](int low, int high) { return int(uint16_t(low)) | high << 16; };
+          for (uint32_t k = 0; k < kLsPairs; ++k) {
+            const bool sum = k == kLsPairs - 1;
+            ls_pairs[column][c][k] = _mm256_blendv_epi8(
+                _mm256_set1_epi32(sum ? pair(-g.ls_weight_sums[column][c], 64)
+                                      : pair(first[2 * k], first[2 * k + 1])),
+                _mm256_set1_epi32(sum ? pair(-g.ls_weight_sums[2 + column][c], 64)
+                                      : pair(second[2 * k], second[2 * k + 1])),
                 second_row);
+          }
+          ls_estimate_weights[column][c] =
+              _mm256_blendv_epi8(_mm256_set1_epi32(first[kLsTerms - 1]),
+                                 _mm256_set1_epi32(second[kLsTerms - 1]), second_row);
         }
     // Each lane's texels of the last three steps, channel c in byte c: left, and (rotated) the
     // row above's. Predictor 4 keeps their departures from the upsampled parent likewise, per
@@ -351,6 +395,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     __m256i back1 = zero, back2 = zero, back3 = zero;
     __m256i detail1[kCh], detail2[kCh], detail3[kCh];
     for (uint32_t c = 0; c < kCh; ++c) detail1[c] = detail2[c] = detail3[c] = zero;
+    [[maybe_unused]] BlockParents previous_parents{};
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
       const __m256i active = _mm256_and_si256(
@@ -415,10 +460,14 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
             _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
       BlockParents step_parents{};
-      if (kCorrected || kEveryStep || derived_mask != 0) {
-        step_parents = gatherBlockParents<kCh, kEveryStep, kLeastSquares>(t, places);
-        if (!kEveryStep && derived_mask != 0)
-          step_parents.block = gatherBlock(step_parents.at, places);
+      if constexpr (kEveryStep) {
+        // From step 2 kLanes on every lane is at column 2 or beyond (gatherBlockParents).
+        step_parents = gatherBlockParents<kCh, true, kLeastSquares>(
+            t, places, t >= 2 * kLanes ? &previous_parents : nullptr);
+        previous_parents = step_parents;
+      } else if (kCorrected || derived_mask != 0) {
+        step_parents = gatherBlockParents<kCh, false, false>(t, places);
+        if (derived_mask != 0) step_parents.block = gatherBlock(step_parents.at, places);
       }
       const __m256i block_parents = step_parents.block;
       const __m256i parent_at = step_parents.at;
@@ -475,15 +524,19 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
           }
           if constexpr (kLeastSquares) {
             // Predictor 5 (leastSquaresPredictFactored): sixteen times the neighbours' and the
-            // parent's terms less the median times the weights' sum, plus predictor 4's
-            // estimate's term and the rounding.
+            // parent's terms less the median times the weights' sum, with the rounding, plus
+            // predictor 4's estimate's term.
             const __m256i m = channelOf(medians, c);
             const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
-            const __m256i sum =
-                _mm256_add_epi32(leastSquaresSum(ls_weights[second_column][c], c, m, left, up,
-                                                 up_left, up_right, block_parents, side_parents,
-                                                 near_parents, diagonal_parents, ls_rounding),
-                                 _mm256_mullo_epi32(ls_weights[second_column][c][8], estimate));
+            const __m256i sum = _mm256_add_epi32(
+                _mm256_slli_epi32(
+                    leastSquaresSixteenths(
+                        ls_pairs[second_column][c], low_masks[c], high_masks[c],
+                        _mm256_or_si256(_mm256_shuffle_epi8(medians, low_masks[c]), one_high), left,
+                        up, up_left, up_right, block_parents, side_parents, near_parents,
+                        diagonal_parents),
+                    4),
+                _mm256_mullo_epi32(ls_estimate_weights[second_column][c], estimate));
             predicted[c] = _mm256_min_epi32(
                 byte_mask, _mm256_max_epi32(
                                zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
@@ -497,13 +550,16 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       }
       if constexpr (kLeastSquares && !kCorrected)
         for (uint32_t c = 0; c < kCh; ++c) {
-          const __m256i m = channelOf(medians, c);
-          const __m256i sum = leastSquaresSum(ls_weights[second_column][c], c, m, left, up, up_left,
-                                              up_right, block_parents, side_parents, near_parents,
-                                              diagonal_parents, ls_rounding);
+          // The factored sum over 16, so shifted by 4 bits less.
+          const __m256i sixteenths = leastSquaresSixteenths(
+              ls_pairs[second_column][c], low_masks[c], high_masks[c],
+              _mm256_or_si256(_mm256_shuffle_epi8(medians, low_masks[c]), one_high), left, up,
+              up_left, up_right, block_parents, side_parents, near_parents, diagonal_parents);
           predicted[c] = _mm256_min_epi32(
               byte_mask,
-              _mm256_max_epi32(zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
+              _mm256_max_epi32(
+                  zero, _mm256_add_epi32(channelOf(medians, c),
+                                         _mm256_srai_epi32(sixteenths, kLsProductShift - 4))));
         }
       __m256i symbols[kCh];
       for (uint32_t c = 0; c < kCh; ++c) {
