@@ -178,8 +178,12 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
   }
   const bool full = g.corrected && g.rows->full[y] != 0 && g.columns->full[x] != 0;
   for (uint32_t c = 0; c < ch; ++c) {
+    // Through `neighbours`: a lambda may not capture structured bindings before C++20, and
+    // clang 14 (the fuzz build's) does not yet allow it.
     auto median = [&] {
-      return origin ? 0 : medPredict(texel[left + c], texel[up + c], texel[up_left + c]);
+      return origin ? 0
+                    : medPredict(texel[neighbours.left + c], texel[neighbours.up + c],
+                                 texel[neighbours.up_left + c]);
     };
     int predicted = 0;
     if (g.corrected || g.least_squares) {
