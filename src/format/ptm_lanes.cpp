@@ -150,9 +150,11 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
         int guess = medPredict(c3[c], b[c], a[c]);
         if (g.least_squares) {
           // Predictor 5's guess, with predictor 4's estimate without the block's pull.
-          const int16_t* d = g.detail + index + c;
-          const int estimate16 =
-              g.corrected ? g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]) : 0;
+          int estimate16 = 0;
+          if (g.corrected) {
+            const int16_t* d = g.detail + index + c;
+            estimate16 = g.upsampled[index + c] + medPredict(d[left], d[up], d[up_left]);
+          }
           guess = leastSquaresPrediction(g, x, y, 3, c, texel + c, neighbours, false, estimate16,
                                          guess);
         }

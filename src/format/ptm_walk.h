@@ -410,9 +410,13 @@ void codeTexels(const Walk& walk, Coder& coder) {
               int guess = medPredict(c3[c], b[c], a[c]);
               if constexpr (kLeastSquares) {
                 // Predictor 4's estimate without the block's pull, which fixes no derived texel.
-                const int16_t* d = details + index + c;
-                const int estimate16 =
-                    estimates ? upsampled[index + c] + medPredict(d[left], d[up], d[up_left]) : 0;
+                // (No pointer into the planes where there are none: an offset from null is
+                // undefined.)
+                int estimate16 = 0;
+                if (estimates) {
+                  const int16_t* d = details + index + c;
+                  estimate16 = upsampled[index + c] + medPredict(d[left], d[up], d[up_left]);
+                }
                 const int8_t* weights = ls_weights + (3 * kChannels + c) * kLsTerms;
                 if (kEncode && ls_fit != nullptr) {
                   int terms[kLsTerms];
