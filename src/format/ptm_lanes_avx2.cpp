@@ -396,6 +396,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     __m256i detail1[kCh], detail2[kCh], detail3[kCh];
     for (uint32_t c = 0; c < kCh; ++c) detail1[c] = detail2[c] = detail3[c] = zero;
     [[maybe_unused]] BlockParents previous_parents{};
+    [[maybe_unused]] __m256i previous_shortfalls[(kCh + 1) / 2] = {};
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
       const __m256i active = _mm256_and_si256(
@@ -482,13 +483,19 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         const __m256i upsampled_at = _mm256_add_epi32(
             upsampled_rows, _mm256_mullo_epi32(column_in, _mm256_set1_epi32(int(kCh))));
         // Two channels' int16 values per 32-bit gather (with an odd channel count the last
-        // gather's high half is the next texel's, or the planes' slack).
+        // gather's high half is the next texel's, or the planes' slack). A block's second
+        // column has its first's shortfall (at column 0 too: the step before read column 0's).
         __m256i block_shortfalls[kCh];
+        const bool same_block = second_column != 0 && t > 0;
         for (uint32_t c = 0; c < kCh; c += 2) {
           const __m256i ws = _mm256_i32gather_epi32(
               upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2);
-          const __m256i gs = _mm256_i32gather_epi32(
-              shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2);
+          const __m256i gs =
+              same_block
+                  ? previous_shortfalls[c / 2]
+                  : _mm256_i32gather_epi32(
+                        shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2);
+          previous_shortfalls[c / 2] = gs;
           upsampled_value[c] = low16Signed(ws);
           block_shortfalls[c] = low16Signed(gs);
           if (c + 1 < kCh) {
