@@ -305,8 +305,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
                     channels,
                     predictor != Predictor::kRoot,
                     predictor == Predictor::kParentNearest,
-                    predictor == Predictor::kParentCorrected ||
-                        (predictor == Predictor::kLeastSquares && walk.upsampled != nullptr),
+                    computesParentCorrectedEstimate(predictor, walk),
                     predictor == Predictor::kLeastSquares,
                     walk.parent,
                     walk.columns,

@@ -179,11 +179,13 @@ __attribute__((target("avx2"))) inline __m256i channelPair(__m256i low, __m256i 
 // and without the rounding's low bits: Σ w v - m Σw + 64, which is the factored sum's
 // (16 (Σ w v - m Σw) + 1024) / 16. Each multiply-add takes two terms: `pairs` holds each
 // lane's weights of (L, U), (UL, UR), (P, Ph), (Pv, Pd) and (m, 1), the last -Σw and 64, as
-// 16-bit pairs; `median_and_one` is (m, 1) in the same layout.
+// 16-bit pairs. `low_mask` and `high_mask` pick channel c (channelPair).
 __attribute__((target("avx2"))) inline __m256i leastSquaresSixteenths(
-    const __m256i* pairs, __m256i low_mask, __m256i high_mask, __m256i median_and_one, __m256i left,
+    const __m256i* pairs, __m256i low_mask, __m256i high_mask, __m256i medians, __m256i left,
     __m256i up, __m256i up_left, __m256i up_right, __m256i parents, __m256i side_parents,
     __m256i near_parents, __m256i diagonal_parents) {
+  const __m256i median_and_one =
+      _mm256_or_si256(_mm256_shuffle_epi8(medians, low_mask), _mm256_set1_epi32(1 << 16));
   const __m256i neighbours = _mm256_add_epi32(
       _mm256_madd_epi16(channelPair(left, up, low_mask, high_mask), pairs[0]),
       _mm256_madd_epi16(channelPair(up_left, up_right, low_mask, high_mask), pairs[1]));
@@ -304,7 +306,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
   const int* shortfalls = reinterpret_cast<const int*>(shortfall);
   const __m256 twelve = _mm256_set1_ps(12.0f);
   // Predictor 5: the byte shuffles that put channel c of each lane in its low and its high 16
-  // bits (leastSquaresSixteenths), and the 1 paired with the median.
+  // bits (leastSquaresSixteenths).
   [[maybe_unused]] __m256i low_masks[kCh], high_masks[kCh];
   for (uint32_t c = 0; c < kCh; ++c) {
     alignas(32) int8_t low[32], high[32];
@@ -316,7 +318,6 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
     low_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(low));
     high_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(high));
   }
-  [[maybe_unused]] const __m256i one_high = _mm256_set1_epi32(1 << 16);
   [[maybe_unused]] const __m256i last_parent_column =
       _mm256_set1_epi32(has_parent ? int(g.parent->width_px) - 1 : 0);
   const __m256i eight = _mm256_set1_epi32(8);
@@ -453,6 +454,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                                _mm256_load_si256(reinterpret_cast<const __m256i*>(bound))));
       [[maybe_unused]] __m256i predicted[kCh];
       [[maybe_unused]] __m256i upsampled_value[kCh];
+      [[maybe_unused]] __m256i estimate_terms[kCh];
       // Each lane's model group: its block position, or the remainders for a derived texel.
       const uint32_t second_column = has_parent ? (t + column_offset) & 1 : 0;
       __m256i derived = zero;
@@ -529,44 +531,35 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 _mm256_and_si256(_mm256_cvttps_epi32(_mm256_div_ps(_mm256_cvtepi32_ps(n), twelve)),
                                  _mm256_andnot_si256(second_row, pulled));
           }
+          const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
           if constexpr (kLeastSquares) {
-            // Predictor 5 (leastSquaresPredictFactored): sixteen times the neighbours' and the
-            // parent's terms less the median times the weights' sum, with the rounding, plus
-            // predictor 4's estimate's term.
-            const __m256i m = channelOf(medians, c);
-            const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
-            const __m256i sum = _mm256_add_epi32(
-                _mm256_slli_epi32(
-                    leastSquaresSixteenths(
-                        ls_pairs[second_column][c], low_masks[c], high_masks[c],
-                        _mm256_or_si256(_mm256_shuffle_epi8(medians, low_masks[c]), one_high), left,
-                        up, up_left, up_right, block_parents, side_parents, near_parents,
-                        diagonal_parents),
-                    4),
-                _mm256_mullo_epi32(ls_estimate_weights[second_column][c], estimate));
-            predicted[c] = _mm256_min_epi32(
-                byte_mask, _mm256_max_epi32(
-                               zero, _mm256_add_epi32(m, _mm256_srai_epi32(sum, kLsProductShift))));
+            // Predictor 5's ninth term, added to its sum below.
+            estimate_terms[c] = _mm256_mullo_epi32(ls_estimate_weights[second_column][c], estimate);
           } else {
-            const __m256i estimate = _mm256_add_epi32(_mm256_add_epi32(w, departure), pull);
             predicted[c] = _mm256_min_epi32(
                 byte_mask,
                 _mm256_max_epi32(zero, _mm256_srai_epi32(_mm256_add_epi32(estimate, eight), 4)));
           }
         }
       }
-      if constexpr (kLeastSquares && !kCorrected)
+      if constexpr (kLeastSquares)
         for (uint32_t c = 0; c < kCh; ++c) {
-          // The factored sum over 16, so shifted by 4 bits less.
+          // Predictor 5 (leastSquaresPredictFactored): the factored sum over 16, shifted by 4
+          // bits less; with predictor 4's estimate, whose term is no multiple of 16, the whole
+          // sum.
           const __m256i sixteenths = leastSquaresSixteenths(
-              ls_pairs[second_column][c], low_masks[c], high_masks[c],
-              _mm256_or_si256(_mm256_shuffle_epi8(medians, low_masks[c]), one_high), left, up,
-              up_left, up_right, block_parents, side_parents, near_parents, diagonal_parents);
+              ls_pairs[second_column][c], low_masks[c], high_masks[c], medians, left, up, up_left,
+              up_right, block_parents, side_parents, near_parents, diagonal_parents);
+          __m256i correction;
+          if constexpr (kCorrected)
+            correction = _mm256_srai_epi32(
+                _mm256_add_epi32(_mm256_slli_epi32(sixteenths, 4), estimate_terms[c]),
+                kLsProductShift);
+          else
+            correction = _mm256_srai_epi32(sixteenths, kLsProductShift - 4);
           predicted[c] = _mm256_min_epi32(
               byte_mask,
-              _mm256_max_epi32(
-                  zero, _mm256_add_epi32(channelOf(medians, c),
-                                         _mm256_srai_epi32(sixteenths, kLsProductShift - 4))));
+              _mm256_max_epi32(zero, _mm256_add_epi32(channelOf(medians, c), correction)));
         }
       __m256i symbols[kCh];
       for (uint32_t c = 0; c < kCh; ++c) {
@@ -782,10 +775,9 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                 std::vector<uint8_t>& padded) {
   const bool has_parent = predictor != Predictor::kRoot;
   const bool least_squares = predictor == Predictor::kLeastSquares;
-  // Predictor 5 whose weights give predictor 4's estimate none (prepareWalk then upsampled
-  // nothing) needs nothing of predictor 4's.
-  const bool plain = least_squares && walk.upsampled == nullptr;
-  const bool corrected = predictor == Predictor::kParentCorrected || (least_squares && !plain);
+  // Predictor 5 whose weights give predictor 4's estimate none needs nothing of predictor 4's.
+  const bool corrected = computesParentCorrectedEstimate(predictor, walk);
+  const bool plain = least_squares && !corrected;
   // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
   // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0 reads
   // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step.

@@ -276,6 +276,14 @@ struct Walk {
   LsFit* ls_fit;
 };
 
+// Whether the walk computes predictor 4's estimate: predictor 4 always, predictor 5 where
+// prepareWalk upsampled the parent for it (its weights give the estimate a weight). Every
+// decoder decides by this, so none reads planes that are not there.
+inline bool computesParentCorrectedEstimate(Predictor predictor, const Walk& walk) {
+  return predictor == Predictor::kParentCorrected ||
+         (predictor == Predictor::kLeastSquares && walk.upsampled != nullptr);
+}
+
 // One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
 // `texels` and hands symbols to `coder`; decoding takes them from `coder` and writes `texels`.
 // Arithmetic is modulo 256: bit-exact for any input, and for a floor-average pyramid every
@@ -295,8 +303,7 @@ void codeTexels(const Walk& walk, Coder& coder) {
   constexpr bool kErrors = Coder::kErrorActivity;
   // Predictor 5 without the upsampled parent: its weights give predictor 4's estimate none,
   // which then reads 0.
-  const bool estimates = kPredictor == Predictor::kParentCorrected ||
-                         (kPredictor == Predictor::kLeastSquares && upsampled != nullptr);
+  const bool estimates = computesParentCorrectedEstimate(kPredictor, walk);
   // Predictor 4 reads each texel's detail three times, as the left, up and up-left neighbour.
   auto keepDetail = [&](const uint8_t* texel, size_t index) {
     if constexpr (kPredictor == Predictor::kParentCorrected ||
