@@ -7,11 +7,14 @@
 #include <cstring>
 #include <memory>
 
+#include "ptm_lanes_avx2_ops.h"
 #include "ptm_lanes_internal.h"
 
 namespace tessera::detail::ptm::lanes {
 
 namespace {
+
+using namespace avx2;
 
 // For each mask of lanes that read, where each lane finds its item among those read: lane i
 // takes item (number of reading lanes below i).
@@ -45,160 +48,6 @@ const uint32_t* slotTables() {
   }();
   return tables.get();
 }
-
-// Sign-extends the low 16 bits of each lane (an int16 read by a 32-bit gather).
-__attribute__((target("avx2"))) inline __m256i low16Signed(__m256i v) {
-  return _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
-}
-
-// LOCO-I's median of each lane's a, b and a + b - c (medPredict).
-__attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m256i c) {
-  const __m256i low = _mm256_min_epi32(a, b), high = _mm256_max_epi32(a, b);
-  return _mm256_min_epi32(high, _mm256_max_epi32(low, _mm256_sub_epi32(_mm256_add_epi32(a, b), c)));
-}
-
-// Each lane's left, up, up-left and up-right values from its values of the last three steps
-// (`back1` the latest): the row above's are lane k - 1's, rotated into lane k, and lane 0's
-// come from the band before (`up0`, `up_left0`, `up_right0`, in every lane), with LOCO-I's
-// substitutes on the first row and column and the last column (neighbourOffsets).
-struct LaneNeighbours {
-  __m256i left, up, up_left, up_right;
-};
-__attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
-    __m256i back1, __m256i back2, __m256i back3, bool first_band, __m256i up0, __m256i up_left0,
-    __m256i up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
-  __m256i u = _mm256_permutevar8x32_epi32(back2, rotate);
-  __m256i ul = _mm256_permutevar8x32_epi32(back3, rotate);
-  __m256i ur = _mm256_permutevar8x32_epi32(back1, rotate);
-  __m256i l = back1;
-  if (first_band) {
-    // Row 0: every neighbour is the left one.
-    u = _mm256_blend_epi32(u, l, 1);
-    ul = _mm256_blend_epi32(ul, l, 1);
-    ur = _mm256_blend_epi32(ur, l, 1);
-  } else {
-    u = _mm256_blend_epi32(u, up0, 1);
-    ul = _mm256_blend_epi32(ul, up_left0, 1);
-    ur = _mm256_blend_epi32(ur, up_right0, 1);
-  }
-  return {_mm256_blendv_epi8(l, u, first_column), u, _mm256_blendv_epi8(ul, u, first_column),
-          _mm256_blendv_epi8(ur, u, at_last_column)};
-}
-
-// Channel c of each lane's texel, held a byte per channel.
-__attribute__((target("avx2"))) inline __m256i channelOf(__m256i bytes, uint32_t c) {
-  return _mm256_and_si256(_mm256_srli_epi32(bytes, int(8 * c)), _mm256_set1_epi32(0xff));
-}
-
-// |a - b| of each unsigned byte.
-__attribute__((target("avx2"))) inline __m256i absDifference(__m256i a, __m256i b) {
-  return _mm256_sub_epi8(_mm256_max_epu8(a, b), _mm256_min_epu8(a, b));
-}
-
-// LOCO-I's median of each byte's a, b and a + b - c (medPredict) without leaving bytes: with
-// low = min(a, b) and high = max(a, b) it is low + min(max(high - c, 0), high - low), since
-// a + b - c = low + (high - c) lies between low and high exactly when c does.
-__attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b, __m256i c) {
-  const __m256i low = _mm256_min_epu8(a, b), high = _mm256_max_epu8(a, b);
-  return _mm256_add_epi8(low,
-                         _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
-}
-
-// Where a band's lanes find their blocks' parent texels in the decoder's copy of the parent.
-struct ParentPlaces {
-  const int* copy;
-  __m256i rows;       ///< each lane's parent row's offset in the copy
-  __m256i near_rows;  ///< predictor 5: the offset of the parent row beside the block's
-  __m256i two_lane, last_column, last_parent_column, texel_bytes;
-  uint32_t column_offset;  ///< see decodeAvx2's column_offset
-  uint32_t first_column;   ///< the copy's first parent column
-};
-
-// Each lane's block's parent texel at step t: its place in the copy, and with kBlock its
-// bytes (every channel in one gather, bytes past the texel cleared); with kSides (predictor 5)
-// also the parent texels beside it (mapAxis's neighbours, clamped to the parent), one gather
-// each. Given `previous`, the same at step t - 1, it gathers half as much: a block's second
-// column has the same P and Pv as its first, and a first column's side texels Ph and Pd are the
-// P and Pv of the block before. That holds once every lane is at column 2 or beyond: at column
-// 0 there is no block before, and the side is clamped to the parent's column 0.
-struct BlockParents {
-  __m256i at, block, side, near, diagonal;
-};
-__attribute__((target("avx2"))) inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
-  return _mm256_and_si256(_mm256_i32gather_epi32(p.copy, at, 1), p.texel_bytes);
-}
-template <uint32_t kCh, bool kBlock, bool kSides>
-__attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
-    uint32_t t, const ParentPlaces& p, const BlockParents* previous = nullptr) {
-  const __m256i zero = _mm256_setzero_si256();
-  const __m256i column_in = _mm256_min_epi32(
-      _mm256_max_epi32(_mm256_sub_epi32(_mm256_set1_epi32(int(t)), p.two_lane), zero),
-      p.last_column);
-  const __m256i parent_column =
-      _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(p.column_offset))), 1);
-  const __m256i first_column = _mm256_set1_epi32(int(p.first_column));
-  const __m256i texel_size = _mm256_set1_epi32(int(kCh));
-  BlockParents out{};
-  out.at = _mm256_add_epi32(
-      p.rows, _mm256_mullo_epi32(_mm256_sub_epi32(parent_column, first_column), texel_size));
-  const bool second = ((t + p.column_offset) & 1) != 0;
-  const bool same_block = previous != nullptr && second;
-  const bool block_before = previous != nullptr && !second;
-  if constexpr (kBlock) out.block = same_block ? previous->block : gatherBlock(out.at, p);
-  if constexpr (kSides) {
-    const __m256i one = _mm256_set1_epi32(1);
-    const __m256i near_at = _mm256_sub_epi32(out.at, p.rows);
-    out.near = same_block
-                   ? previous->near
-                   : _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, near_at), 1);
-    if (block_before) {
-      out.side = previous->block;
-      out.diagonal = previous->near;
-    } else {
-      const __m256i side_column =
-          second ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), p.last_parent_column)
-                 : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
-      const __m256i side_at =
-          _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
-      out.side = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.rows, side_at), 1);
-      out.diagonal = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, side_at), 1);
-    }
-  }
-  return out;
-}
-
-// Channel c of each lane's texels `low` and `high` (a byte per channel) as the low and high
-// 16 bits of the lane, by the byte shuffles `low_mask` and `high_mask` (decodeAvx2 builds them
-// per channel).
-__attribute__((target("avx2"))) inline __m256i channelPair(__m256i low, __m256i high,
-                                                           __m256i low_mask, __m256i high_mask) {
-  return _mm256_or_si256(_mm256_shuffle_epi8(low, low_mask), _mm256_shuffle_epi8(high, high_mask));
-}
-
-// Predictor 5's sum without its ninth term (leastSquaresPredictFactored) for channel c, over 16
-// and without the rounding's low bits: Σ w v - m Σw + 64, which is the factored sum's
-// (16 (Σ w v - m Σw) + 1024) / 16. Each multiply-add takes two terms: `pairs` holds each
-// lane's weights of (L, U), (UL, UR), (P, Ph), (Pv, Pd) and (m, 1), the last -Σw and 64, as
-// 16-bit pairs. `low_mask` and `high_mask` pick channel c (channelPair).
-__attribute__((target("avx2"))) inline __m256i leastSquaresSixteenths(
-    const __m256i* pairs, __m256i low_mask, __m256i high_mask, __m256i medians, __m256i left,
-    __m256i up, __m256i up_left, __m256i up_right, __m256i parents, __m256i side_parents,
-    __m256i near_parents, __m256i diagonal_parents) {
-  const __m256i median_and_one =
-      _mm256_or_si256(_mm256_shuffle_epi8(medians, low_mask), _mm256_set1_epi32(1 << 16));
-  const __m256i neighbours = _mm256_add_epi32(
-      _mm256_madd_epi16(channelPair(left, up, low_mask, high_mask), pairs[0]),
-      _mm256_madd_epi16(channelPair(up_left, up_right, low_mask, high_mask), pairs[1]));
-  const __m256i parent_terms = _mm256_add_epi32(
-      _mm256_madd_epi16(channelPair(parents, side_parents, low_mask, high_mask), pairs[2]),
-      _mm256_madd_epi16(channelPair(near_parents, diagonal_parents, low_mask, high_mask),
-                        pairs[3]));
-  return _mm256_add_epi32(_mm256_add_epi32(neighbours, parent_terms),
-                          _mm256_madd_epi16(median_and_one, pairs[4]));
-}
-
-// leastSquaresSixteenths' pairs of terms: four of the eight terms' weights, and the weights' sum.
-constexpr uint32_t kLsPairs = 5;
 
 // Which predictor a lane decoder runs: 0 and 3 (the median), 1, 4 or 5.
 enum class LanePredictor : uint8_t {
