@@ -339,13 +339,12 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
         __m256i block_shortfalls[kCh];
         const bool same_block = second_column != 0 && t > 0;
         for (uint32_t c = 0; c < kCh; c += 2) {
-          const __m256i ws = _mm256_i32gather_epi32(
-              upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))), 2);
+          const __m256i ws =
+              gather32<2>(upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))));
           const __m256i gs =
               same_block
                   ? previous_shortfalls[c / 2]
-                  : _mm256_i32gather_epi32(
-                        shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))), 2);
+                  : gather32<2>(shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))));
           previous_shortfalls[c / 2] = gs;
           upsampled_value[c] = low16Signed(ws);
           block_shortfalls[c] = low16Signed(gs);
@@ -424,7 +423,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
                 derived);
         }
         const __m256i slot = _mm256_and_si256(state[c], slot_mask);
-        const __m256i entry = _mm256_i32gather_epi32(slot_tables, _mm256_add_epi32(model, slot), 4);
+        const __m256i entry = gather32<4>(slot_tables, _mm256_add_epi32(model, slot));
         const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
         __m256i next =
             _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
@@ -550,9 +549,7 @@ __attribute__((target("avx2"))) bool decodeAvx2(const Geometry& g, Streams& s,
       const uint32_t octets = width * kCh >= 32 ? (width * kCh - 32) / kCh / 8 + 1 : 0;
       for (uint32_t i = 0; i < octets; ++i) {
         const __m256i texels = _mm256_permutevar8x32_epi32(
-            _mm256_shuffle_epi8(
-                _mm256_i32gather_epi32(reinterpret_cast<const int*>(from), octet_at, 4), pack),
-            pack_halves);
+            _mm256_shuffle_epi8(gather32<4>(from, octet_at), pack), pack_halves);
         _mm256_storeu_si256(reinterpret_cast<__m256i*>(row), texels);
         row += 8 * kCh;
         from += 8 * kLanes;

@@ -7,8 +7,40 @@
 #include <immintrin.h>
 
 #include <cstdint>
+#include <cstring>
 
 namespace tessera::detail::ptm::lanes::avx2 {
+
+// What _mm256_i32gather_epi32(base, offsets, kScale) returns, from eight scalar loads: each
+// lane's 32 bits at base + offset * kScale (offsets signed, addresses unaligned allowed). On the
+// machines the codec study ran on (AMD EPYC, Zen 4) the gather instruction is microcoded: in a
+// loop of other vector work it cost 11-12 cycles, the scalar loads about 5 (docs/benchmarks.md,
+// "twelfth session"). Every table and plane read this way must hold four bytes at each offset.
+template <int kScale>
+__attribute__((target("avx2"))) inline __m256i gather32(const void* base, __m256i offsets) {
+  const auto* bytes = static_cast<const uint8_t*>(base);
+  auto load = [bytes](uint64_t pair, int high) {
+    const auto offset = int32_t(uint32_t(pair >> (32 * high)));
+    int32_t value;
+    std::memcpy(&value, bytes + ptrdiff_t(offset) * kScale, sizeof value);
+    return value;
+  };
+  const __m128i low_half = _mm256_castsi256_si128(offsets);
+  const __m128i high_half = _mm256_extracti128_si256(offsets, 1);
+  const auto l01 = uint64_t(_mm_cvtsi128_si64(low_half));
+  const auto l23 = uint64_t(_mm_extract_epi64(low_half, 1));
+  const auto h01 = uint64_t(_mm_cvtsi128_si64(high_half));
+  const auto h23 = uint64_t(_mm_extract_epi64(high_half, 1));
+  __m128i low = _mm_cvtsi32_si128(load(l01, 0));
+  low = _mm_insert_epi32(low, load(l01, 1), 1);
+  low = _mm_insert_epi32(low, load(l23, 0), 2);
+  low = _mm_insert_epi32(low, load(l23, 1), 3);
+  __m128i high = _mm_cvtsi32_si128(load(h01, 0));
+  high = _mm_insert_epi32(high, load(h01, 1), 1);
+  high = _mm_insert_epi32(high, load(h23, 0), 2);
+  high = _mm_insert_epi32(high, load(h23, 1), 3);
+  return _mm256_inserti128_si256(_mm256_castsi128_si256(low), high, 1);
+}
 
 // Sign-extends the low 16 bits of each lane (an int16 read by a 32-bit gather).
 __attribute__((target("avx2"))) inline __m256i low16Signed(__m256i v) {
@@ -89,7 +121,7 @@ struct BlockParents {
   __m256i at, block, side, near, diagonal;
 };
 __attribute__((target("avx2"))) inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
-  return _mm256_and_si256(_mm256_i32gather_epi32(p.copy, at, 1), p.texel_bytes);
+  return _mm256_and_si256(gather32<1>(p.copy, at), p.texel_bytes);
 }
 template <uint32_t kCh, bool kBlock, bool kSides>
 __attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
@@ -112,9 +144,8 @@ __attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
   if constexpr (kSides) {
     const __m256i one = _mm256_set1_epi32(1);
     const __m256i near_at = _mm256_sub_epi32(out.at, p.rows);
-    out.near = same_block
-                   ? previous->near
-                   : _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, near_at), 1);
+    out.near =
+        same_block ? previous->near : gather32<1>(p.copy, _mm256_add_epi32(p.near_rows, near_at));
     if (block_before) {
       out.side = previous->block;
       out.diagonal = previous->near;
@@ -124,8 +155,8 @@ __attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
                  : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
       const __m256i side_at =
           _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
-      out.side = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.rows, side_at), 1);
-      out.diagonal = _mm256_i32gather_epi32(p.copy, _mm256_add_epi32(p.near_rows, side_at), 1);
+      out.side = gather32<1>(p.copy, _mm256_add_epi32(p.rows, side_at));
+      out.diagonal = gather32<1>(p.copy, _mm256_add_epi32(p.near_rows, side_at));
     }
   }
   return out;
