@@ -1,8 +1,9 @@
 // ptm's lane coder (ptm_lanes.h, ptm_lanes_internal.h): the encoder, the section's parsing and
-// the scalar decoder every processor runs. The AVX2 decoder is in ptm_lanes_avx2.cpp.
+// the scalar decoder every processor runs. The SIMD decoder is in ptm_lanes_simd.h.
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
+#include <memory>
 
 #include "format/byte_io.h"
 #include "ptm_lanes_internal.h"
@@ -230,6 +231,29 @@ bool simdAvailable() {
   return available;
 }
 
+bool avx512Available() {
+  static const bool available = simdAvailable() && __builtin_cpu_supports("avx512f") != 0 &&
+                                __builtin_cpu_supports("avx512vl") != 0 &&
+                                __builtin_cpu_supports("avx512bw") != 0 &&
+                                __builtin_cpu_supports("avx512dq") != 0;
+  return available;
+}
+
+const uint32_t* slotTables() {
+  static const std::unique_ptr<uint32_t[]> tables = [] {
+    auto built = std::make_unique<uint32_t[]>(size_t(rans::kModelCount) * kScale);
+    const rans::Model* family = rans::models(kFamily);
+    for (uint32_t m = 0; m < rans::kModelCount; ++m)
+      for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
+        const uint32_t start = family[m].start[symbol], freq = family[m].freq[symbol];
+        for (uint32_t i = 0; i < freq; ++i)
+          built[size_t(m) * kScale + start + i] = symbol | i << kBiasShift | freq << kFreqShift;
+      }
+    return built;
+  }();
+  return tables.get();
+}
+
 void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts, uint32_t width,
             uint32_t height, uint32_t channels, uint32_t contexts_per_channel,
             std::span<const rans::Model* const> context_models, std::vector<uint8_t>& out) {
@@ -292,8 +316,10 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
             Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
             Path path) {
-  if (path == Path::kFastest && simdAvailable())
-    return decodeSimd(section, walk, channels, predictor, params, padded);
+  if (path == Path::kFastest && avx512Available())
+    return avx512::decodeSimd(section, walk, channels, predictor, params, padded);
+  if ((path == Path::kFastest || path == Path::kAvx2) && simdAvailable())
+    return avx2::decodeSimd(section, walk, channels, predictor, params, padded);
   Streams streams;
   if (!parse(section, channels, 0, padded, streams)) return false;
   const rans::Model* family = rans::models(kFamily);

@@ -48,9 +48,10 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
             uint32_t height, uint32_t channels, uint32_t contexts_per_channel,
             std::span<const rans::Model* const> context_models, std::vector<uint8_t>& out);
 
-/// How decode() may run: the fastest the processor allows, or the scalar lanes only (for tests
-/// that compare the two).
-enum class Path : uint8_t { kFastest, kScalar };
+/// How decode() may run: the fastest the processor allows; the AVX2 build of the SIMD decoder
+/// even where the AVX-512 one would run (else the scalar lanes); or the scalar lanes only. The
+/// last two are for tests that compare the decoders.
+enum class Path : uint8_t { kFastest, kScalar, kAvx2 };
 
 /// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
 /// `predictor` (any but 2) with coder 7; `params` holds each (channel, context)'s model byte
@@ -61,7 +62,11 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
             Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
             Path path = Path::kFastest);
 
-/// True when decode() can take its SIMD path on this processor.
+/// True when decode() can take its SIMD path on this processor (AVX2).
 bool simdAvailable();
+
+/// True when decode()'s fastest path is the SIMD decoder's AVX-512 build (AVX-512 F, VL, BW
+/// and DQ on top of AVX2): the same instructions on 256-bit vectors, with 32 vector registers.
+bool avx512Available();
 
 }  // namespace tessera::detail::ptm::lanes

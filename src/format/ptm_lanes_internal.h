@@ -1,9 +1,10 @@
 #pragma once
 // What the lane coder's translation units share (ptm_lanes.h): ptm_lanes.cpp holds the encoder,
-// the section's parsing and the scalar decoder every processor runs; ptm_lanes_avx2.cpp the
-// AVX2 decoder, which runs the eight rows of a band in the lanes of a vector. Both decoders
-// read each channel's words in the order of the band's rows at each step, so they consume the
-// same bytes and agree on every texel; the tests hold them to it.
+// the section's parsing and the scalar decoder every processor runs; ptm_lanes_simd.h the
+// SIMD decoder (compiled for AVX2 and for AVX-512 by ptm_lanes_avx2.cpp and ptm_lanes_avx512.cpp),
+// which runs the eight rows of a band in the lanes of a vector. Both decoders read each channel's
+// words in the order of the band's rows at each step, so they consume the same bytes and agree on
+// every texel; the tests hold them to it.
 
 #include <cstddef>
 #include <cstdint>
@@ -85,8 +86,24 @@ bool parse(std::span<const uint8_t> section, uint32_t channels, size_t extra_byt
 /// True when every stream was consumed and every state is back at kLower.
 bool finished(const Streams& streams, uint32_t channels);
 
-/// decode() on the AVX2 path: the processor must have AVX2 (simdAvailable()).
+/// The SIMD decoders' symbol table: per model of the family, per slot,
+/// `symbol | (slot - start) << kBiasShift | freq << kFreqShift`, so that a lane finds all it
+/// needs for a symbol in one lookup instead of two (slot to symbol, symbol to frequency and
+/// start). 4 MiB, built on the first call (thread-safe), shared by both instruction sets.
+inline constexpr uint32_t kSymbolBits = 6, kBiasShift = 6, kFreqShift = 18;
+static_assert(rans::kAlphabet <= 1u << kSymbolBits && kFreqShift - kBiasShift >= kScaleBits);
+const uint32_t* slotTables();
+
+/// decode() on a SIMD path, one per instruction set, from the same source (ptm_lanes_simd.h):
+/// the processor must have AVX2 (simdAvailable()), and for avx512::decodeSimd AVX-512 F, VL,
+/// BW and DQ (avx512Available()), whose 32 vector registers spare the AVX2 build's spills.
+namespace avx2 {
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
                 Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded);
+}  // namespace avx2
+namespace avx512 {
+bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
+                Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded);
+}  // namespace avx512
 
 }  // namespace tessera::detail::ptm::lanes

@@ -48,9 +48,10 @@ uint32_t escapeBytes(std::span<const uint8_t> payload, uint32_t channels) {
   return total;
 }
 
-// Decodes a coder-7 payload with the scalar lanes, as decodePtm would where AVX2 is missing.
-Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
-                            const ParentTexels* parent) {
+// Decodes a coder-7 payload by `path`: with the scalar lanes, as decodePtm would where AVX2 is
+// missing, or with the AVX2 build of the SIMD decoder, as it would where AVX-512 is.
+Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
+                      const ParentTexels* parent, ptm::lanes::Path path) {
   Image out(side, side, channels);
   const Predictor predictor = Predictor(payload[0]);
   const bool has_parent = predictor != Predictor::kRoot;
@@ -70,12 +71,25 @@ Image decodeWithScalarLanes(std::span<const uint8_t> payload, uint32_t side, uin
   const size_t section_at = laneSectionAt(payload, channels);
   std::vector<uint8_t> padded;
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
-                                 payload.subspan(models_at, section_at - models_at), padded,
-                                 ptm::lanes::Path::kScalar));
+                                 payload.subspan(models_at, section_at - models_at), padded, path));
   return out;
 }
 
-TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
+// The round trip checked the fastest decoder; the scalar lanes, and the AVX2 build where the
+// fastest is the AVX-512 one, must give the same texels.
+void expectEveryDecoderAgrees(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
+                              const ParentTexels* parent, const Image& tile) {
+  EXPECT_EQ(decodeWithLanes(payload, side, channels, parent, ptm::lanes::Path::kScalar).texels,
+            tile.texels)
+      << "scalar lanes";
+  if (ptm::lanes::avx512Available()) {
+    EXPECT_EQ(decodeWithLanes(payload, side, channels, parent, ptm::lanes::Path::kAvx2).texels,
+              tile.texels)
+        << "the AVX2 build";
+  }
+}
+
+TEST(PtmLanes, PyramidsRoundTripBitExactlyWithEveryDecoder) {
   // Odd sizes and borders put blocks across tile edges and bands of fewer than eight rows at
   // the bottom; a noisy source makes residuals that only an escape can carry.
   // Predictor 4's pull and its division by 12 are exercised hardest by a source of extremes:
@@ -87,6 +101,8 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
   };
   if (!ptm::lanes::simdAvailable())
     GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
+  else if (!ptm::lanes::avx512Available())
+    GTEST_LOG_(INFO) << "no AVX-512 here: the fastest path is the AVX2 build";
   for (const Case& c : {Case{133, 77, 0, 32, false}, Case{97, 130, 1, 32, false},
                         Case{71, 69, 2, 32, false}, Case{101, 99, 3, 32, true},
                         Case{300, 270, 1, 128, true}, Case{67, 45, 1, 32, true, true}}) {
@@ -114,9 +130,7 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithBothDecoders) {
               if (payload) {
                 EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
                 EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
-                EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels,
-                          tile.texels)
-                    << "scalar lanes";
+                expectEveryDecoderAgrees(*payload, side, channels, parent, tile);
                 escapes += escapeBytes(*payload, channels);
               }
               return payload;
@@ -170,8 +184,7 @@ TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
               const auto* weights =
                   reinterpret_cast<const int8_t*>(payload->data() + ptm::kHeaderBytes);
               EXPECT_EQ(usesEstimate(weights, channels), !fit.without_estimate);
-              EXPECT_EQ(decodeWithScalarLanes(*payload, side, channels, parent).texels, tile.texels)
-                  << "scalar lanes";
+              expectEveryDecoderAgrees(*payload, side, channels, parent, tile);
             }
             return payload;
           },

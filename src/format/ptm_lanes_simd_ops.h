@@ -1,15 +1,21 @@
 #pragma once
-// The AVX2 lane decoder's vector operations (ptm_lanes_avx2.cpp, its only user): a band's eight
-// rows in the 32-bit lanes of a vector, texels held a byte per channel in each lane. Every
-// function is compiled for AVX2 (target attribute), so only code that checked
-// simdAvailable() may call it.
+// The lane decoder's vector operations (ptm_lanes_simd.h, their only user): a band's eight rows
+// in the 32-bit lanes of an AVX2 vector, texels held a byte per channel in each lane. The
+// translation unit that includes them names the instruction set: TESSERA_LANES_ISA, the
+// namespace they go in, and TESSERA_LANES_TARGET, the target attribute every function is
+// compiled with (ptm_lanes_avx2.cpp, ptm_lanes_avx512.cpp). Only code that checked the
+// processor (simdAvailable(), avx512Available()) may call them.
 
 #include <immintrin.h>
 
 #include <cstdint>
 #include <cstring>
 
-namespace tessera::detail::ptm::lanes::avx2 {
+#if !defined(TESSERA_LANES_ISA) || !defined(TESSERA_LANES_TARGET)
+#error "ptm_lanes_simd_ops.h needs TESSERA_LANES_ISA and TESSERA_LANES_TARGET"
+#endif
+
+namespace tessera::detail::ptm::lanes::TESSERA_LANES_ISA {
 
 // What _mm256_i32gather_epi32(base, offsets, kScale) returns, from eight scalar loads: each
 // lane's 32 bits at base + offset * kScale (offsets signed, addresses unaligned allowed). On the
@@ -17,7 +23,7 @@ namespace tessera::detail::ptm::lanes::avx2 {
 // loop of other vector work it cost 11-12 cycles, the scalar loads about 5 (docs/benchmarks.md,
 // "twelfth session"). Every table and plane read this way must hold four bytes at each offset.
 template <int kScale>
-__attribute__((target("avx2"))) inline __m256i gather32(const void* base, __m256i offsets) {
+TESSERA_LANES_TARGET inline __m256i gather32(const void* base, __m256i offsets) {
   const auto* bytes = static_cast<const uint8_t*>(base);
   auto load = [bytes](uint64_t pair, int high) {
     const auto offset = int32_t(uint32_t(pair >> (32 * high)));
@@ -43,12 +49,12 @@ __attribute__((target("avx2"))) inline __m256i gather32(const void* base, __m256
 }
 
 // Sign-extends the low 16 bits of each lane (an int16 read by a 32-bit gather).
-__attribute__((target("avx2"))) inline __m256i low16Signed(__m256i v) {
+TESSERA_LANES_TARGET inline __m256i low16Signed(__m256i v) {
   return _mm256_srai_epi32(_mm256_slli_epi32(v, 16), 16);
 }
 
 // LOCO-I's median of each lane's a, b and a + b - c (medPredict).
-__attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m256i c) {
+TESSERA_LANES_TARGET inline __m256i median(__m256i a, __m256i b, __m256i c) {
   const __m256i low = _mm256_min_epi32(a, b), high = _mm256_max_epi32(a, b);
   return _mm256_min_epi32(high, _mm256_max_epi32(low, _mm256_sub_epi32(_mm256_add_epi32(a, b), c)));
 }
@@ -60,9 +66,11 @@ __attribute__((target("avx2"))) inline __m256i median(__m256i a, __m256i b, __m2
 struct LaneNeighbours {
   __m256i left, up, up_left, up_right;
 };
-__attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
-    __m256i back1, __m256i back2, __m256i back3, bool first_band, __m256i up0, __m256i up_left0,
-    __m256i up_right0, __m256i first_column, __m256i at_last_column, __m256i rotate) {
+TESSERA_LANES_TARGET inline LaneNeighbours laneNeighbours(__m256i back1, __m256i back2,
+                                                          __m256i back3, bool first_band,
+                                                          __m256i up0, __m256i up_left0,
+                                                          __m256i up_right0, __m256i first_column,
+                                                          __m256i at_last_column, __m256i rotate) {
   __m256i u = _mm256_permutevar8x32_epi32(back2, rotate);
   __m256i ul = _mm256_permutevar8x32_epi32(back3, rotate);
   __m256i ur = _mm256_permutevar8x32_epi32(back1, rotate);
@@ -82,19 +90,19 @@ __attribute__((target("avx2"))) inline LaneNeighbours laneNeighbours(
 }
 
 // Channel c of each lane's texel, held a byte per channel.
-__attribute__((target("avx2"))) inline __m256i channelOf(__m256i bytes, uint32_t c) {
+TESSERA_LANES_TARGET inline __m256i channelOf(__m256i bytes, uint32_t c) {
   return _mm256_and_si256(_mm256_srli_epi32(bytes, int(8 * c)), _mm256_set1_epi32(0xff));
 }
 
 // |a - b| of each unsigned byte.
-__attribute__((target("avx2"))) inline __m256i absDifference(__m256i a, __m256i b) {
+TESSERA_LANES_TARGET inline __m256i absDifference(__m256i a, __m256i b) {
   return _mm256_sub_epi8(_mm256_max_epu8(a, b), _mm256_min_epu8(a, b));
 }
 
 // LOCO-I's median of each byte's a, b and a + b - c (medPredict) without leaving bytes: with
 // low = min(a, b) and high = max(a, b) it is low + min(max(high - c, 0), high - low), since
 // a + b - c = low + (high - c) lies between low and high exactly when c does.
-__attribute__((target("avx2"))) inline __m256i medianBytes(__m256i a, __m256i b, __m256i c) {
+TESSERA_LANES_TARGET inline __m256i medianBytes(__m256i a, __m256i b, __m256i c) {
   const __m256i low = _mm256_min_epu8(a, b), high = _mm256_max_epu8(a, b);
   return _mm256_add_epi8(low,
                          _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
@@ -120,11 +128,11 @@ struct ParentPlaces {
 struct BlockParents {
   __m256i at, block, side, near, diagonal;
 };
-__attribute__((target("avx2"))) inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
+TESSERA_LANES_TARGET inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
   return _mm256_and_si256(gather32<1>(p.copy, at), p.texel_bytes);
 }
 template <uint32_t kCh, bool kBlock, bool kSides>
-__attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
+TESSERA_LANES_TARGET inline BlockParents gatherBlockParents(
     uint32_t t, const ParentPlaces& p, const BlockParents* previous = nullptr) {
   const __m256i zero = _mm256_setzero_si256();
   const __m256i column_in = _mm256_min_epi32(
@@ -165,8 +173,8 @@ __attribute__((target("avx2"))) inline BlockParents gatherBlockParents(
 // Channel c of each lane's texels `low` and `high` (a byte per channel) as the low and high
 // 16 bits of the lane, by the byte shuffles `low_mask` and `high_mask` (decodeAvx2 builds them
 // per channel).
-__attribute__((target("avx2"))) inline __m256i channelPair(__m256i low, __m256i high,
-                                                           __m256i low_mask, __m256i high_mask) {
+TESSERA_LANES_TARGET inline __m256i channelPair(__m256i low, __m256i high, __m256i low_mask,
+                                                __m256i high_mask) {
   return _mm256_or_si256(_mm256_shuffle_epi8(low, low_mask), _mm256_shuffle_epi8(high, high_mask));
 }
 
@@ -175,7 +183,7 @@ __attribute__((target("avx2"))) inline __m256i channelPair(__m256i low, __m256i 
 // (16 (Σ w v - m Σw) + 1024) / 16. Each multiply-add takes two terms: `pairs` holds each
 // lane's weights of (L, U), (UL, UR), (P, Ph), (Pv, Pd) and (m, 1), the last -Σw and 64, as
 // 16-bit pairs. `low_mask` and `high_mask` pick channel c (channelPair).
-__attribute__((target("avx2"))) inline __m256i leastSquaresSixteenths(
+TESSERA_LANES_TARGET inline __m256i leastSquaresSixteenths(
     const __m256i* pairs, __m256i low_mask, __m256i high_mask, __m256i medians, __m256i left,
     __m256i up, __m256i up_left, __m256i up_right, __m256i parents, __m256i side_parents,
     __m256i near_parents, __m256i diagonal_parents) {
@@ -195,4 +203,4 @@ __attribute__((target("avx2"))) inline __m256i leastSquaresSixteenths(
 // leastSquaresSixteenths' pairs of terms: four of the eight terms' weights, and the weights' sum.
 inline constexpr uint32_t kLsPairs = 5;
 
-}  // namespace tessera::detail::ptm::lanes::avx2
+}  // namespace tessera::detail::ptm::lanes::TESSERA_LANES_ISA
