@@ -34,13 +34,35 @@ constexpr uint32_t stepsPerBand(uint32_t width) {
   return width + 2 * (kLanes - 1);
 }
 
-// The part of the parent tile a child's blocks cover, copied without the tile's stride (the
-// SIMD decoder gathers derived texels' parents from it).
+// A band's parent table entry at step t (skewedParents), for a tile whose column_offset
+// (decodeAvx2) is `column_offset`: lane k's block then lies in parent column
+// column_offset / 2 + e - 1 - k. Entry 0 is the side texel of the first block's.
+constexpr uint32_t bandParentEntry(uint32_t t, uint32_t column_offset) {
+  return ((t + (column_offset & 1)) >> 1) + 1;
+}
+// The entries of a band's parent table, the last step's side texel's included, rounded up to
+// whole transposes of eight.
+constexpr uint32_t bandParentEntries(uint32_t width) {
+  return (bandParentEntry(stepsPerBand(width) - 1, 1) + 2 + 7) / 8 * 8;
+}
+
+// The part of the parent tile a child's blocks cover, copied without the tile's stride (for
+// predictor 4, whose block shortfalls the SIMD decoder lays out as the copy), and the SIMD
+// decoder's wider forms of it, from which every predictor reads its blocks' parent texels.
 struct ParentCopy {
   const uint8_t* texels = nullptr;
   uint32_t stride = 0;        ///< bytes per row of the copy
   uint32_t first_row = 0;     ///< the parent row of the copy's first
   uint32_t first_column = 0;  ///< the parent column of the copy's first
+  /// The copy's rows a 32-bit word per texel (bytes past the texel cleared), word j of a row
+  /// being the texel at parent column column_offset / 2 - 8 + j, that is the copy's column
+  /// clamped into the copy: skewedParents reads every lane's entries from it.
+  const uint32_t* wide = nullptr;
+  uint32_t wide_stride = 0;  ///< words per row of `wide`: bandParentEntries + 7
+  /// Scratch for a band's parent tables, bandParentEntries x 8 words each: the blocks' rows',
+  /// and predictor 5's rows beside them.
+  uint32_t* band_block = nullptr;
+  uint32_t* band_near = nullptr;
 };
 
 // A section's streams copied behind padding, so that a decoder may read up to kCheckSteps steps

@@ -84,8 +84,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   const __m256i zero = _mm256_setzero_si256();
   const __m256i three = _mm256_set1_epi32(3);
   // A texel's kCh bytes in each lane.
-  [[maybe_unused]] const __m256i texel_bytes =
-      _mm256_set1_epi32(kCh == 4 ? -1 : int((1u << (8 * kCh)) - 1));
   const __m256i ones8 = _mm256_set1_epi8(1), ones16 = _mm256_set1_epi16(1);
   // Adds each texel's byte 1 (green) to its bytes 0 and 2.
   const __m256i green_to_red_and_blue =
@@ -146,8 +144,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
     low_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(low));
     high_masks[c] = _mm256_load_si256(reinterpret_cast<const __m256i*>(high));
   }
-  [[maybe_unused]] const __m256i last_parent_column =
-      _mm256_set1_epi32(has_parent ? int(g.parent->width_px) - 1 : 0);
   const __m256i eight = _mm256_set1_epi32(8);
   __m256i state[kCh];
   for (uint32_t c = 0; c < kCh; ++c)
@@ -156,14 +152,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
     const uint32_t rows = std::min(kLanes, height - y0);
     const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
-    // Predictor 5: the offset of each lane's parent row beside its block's, in the parent's copy.
-    alignas(32) int32_t parent_near_row_at[kLanes] = {};
-    if constexpr (kLeastSquares)
-      for (uint32_t k = 0; k < rows; ++k)
-        parent_near_row_at[k] =
-            int32_t((g.rows->neighbour[y0 + k] - parent.first_row) * parent.stride);
-    const __m256i parent_near_rows =
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_near_row_at));
     // Per lane: its row's parent row offset, second-row and derived-row flags.
     // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
     // row 0) and whether the row's blocks lie in the tile.
@@ -184,15 +172,22 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
     const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
     const __m256i upsampled_rows =
         _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
-    const ParentPlaces places{reinterpret_cast<const int*>(parent.texels),
-                              parent_rows,
-                              parent_near_rows,
-                              two_lane,
-                              last_column,
-                              last_parent_column,
-                              texel_bytes,
-                              column_offset,
-                              parent.first_column};
+    [[maybe_unused]] const ParentPlaces places{parent_rows, two_lane, last_column, column_offset,
+                                               parent.first_column};
+    // Each step's parent texels for the lanes, from the wide copy's rows: the blocks' (lanes
+    // past the tile's last row read row 0), and for predictor 5 the rows beside them.
+    if (has_parent) {
+      alignas(32) int32_t wide_rows[kLanes] = {}, wide_near_rows[kLanes] = {};
+      for (uint32_t k = 0; k < rows; ++k) {
+        wide_rows[k] = int32_t(g.rows->parent[y0 + k] - parent.first_row);
+        if constexpr (kLeastSquares)
+          wide_near_rows[k] = int32_t(g.rows->neighbour[y0 + k] - parent.first_row);
+      }
+      const uint32_t entries = bandParentEntries(width);
+      skewedParents(parent.wide, parent.wide_stride, wide_rows, entries, parent.band_block);
+      if constexpr (kLeastSquares)
+        skewedParents(parent.wide, parent.wide_stride, wide_near_rows, entries, parent.band_near);
+    }
     const bool first_band = y0 == 0;
     // Predictor 5: per step parity (second column or not) and channel, each lane's weights for
     // its block position as leastSquaresSixteenths' pairs, and the weight of predictor 4's
@@ -224,7 +219,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
     __m256i back1 = zero, back2 = zero, back3 = zero;
     __m256i detail1[kCh], detail2[kCh], detail3[kCh];
     for (uint32_t c = 0; c < kCh; ++c) detail1[c] = detail2[c] = detail3[c] = zero;
-    [[maybe_unused]] BlockParents previous_parents{};
     [[maybe_unused]] __m256i previous_shortfalls[(kCh + 1) / 2] = {};
     for (uint32_t t = 0; t < steps; ++t) {
       const __m256i xs = _mm256_sub_epi32(_mm256_set1_epi32(int(t)), two_lane);
@@ -290,21 +284,21 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
         derived =
             _mm256_and_si256(_mm256_and_si256(derived_row, active), _mm256_cmpgt_epi32(xs, zero));
       const int derived_mask = _mm256_movemask_ps(_mm256_castsi256_ps(derived));
-      BlockParents step_parents{};
-      if constexpr (kEveryStep) {
-        // From step 2 kLanes on every lane is at column 2 or beyond (gatherBlockParents).
-        step_parents = gatherBlockParents<kCh, true, kLeastSquares>(
-            t, places, t >= 2 * kLanes ? &previous_parents : nullptr);
-        previous_parents = step_parents;
-      } else if (kCorrected || derived_mask != 0) {
-        step_parents = gatherBlockParents<kCh, false, false>(t, places);
-        if (derived_mask != 0) step_parents.block = gatherBlock(step_parents.at, places);
+      // The blocks' parent texels P, and for predictor 5 Ph, Pv and Pd beside them (mapAxis's
+      // neighbours, clamped to the parent), from the band's tables (skewedParents).
+      const uint32_t parent_entry = bandParentEntry(t, column_offset);
+      const uint32_t side_entry = second_column != 0 ? parent_entry + 1 : parent_entry - 1;
+      __m256i block_parents = zero;
+      if (kEveryStep || derived_mask != 0)
+        block_parents = bandParents(parent.band_block, parent_entry);
+      [[maybe_unused]] __m256i side_parents = zero, near_parents = zero, diagonal_parents = zero;
+      if constexpr (kLeastSquares) {
+        side_parents = bandParents(parent.band_block, side_entry);
+        near_parents = bandParents(parent.band_near, parent_entry);
+        diagonal_parents = bandParents(parent.band_near, side_entry);
       }
-      const __m256i block_parents = step_parents.block;
-      const __m256i parent_at = step_parents.at;
-      [[maybe_unused]] const __m256i side_parents = step_parents.side,
-                                     near_parents = step_parents.near,
-                                     diagonal_parents = step_parents.diagonal;
+      [[maybe_unused]] __m256i parent_at = zero;
+      if constexpr (kCorrected) parent_at = blockAt<kCh>(t, places);
       if constexpr (kCorrected) {
         // Predictor 4 (ptm_walk.h, parentCorrectedEstimate), with eq. 3's pull written from
         // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
@@ -604,13 +598,14 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   const bool corrected = computesParentCorrectedEstimate(predictor, walk);
   const bool plain = least_squares && !corrected;
   // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
-  // block shortfalls in the copy's layout, and the band's texels by step, from which lane 0 reads
-  // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step.
+  // block shortfalls in the copy's layout, the band's texels by step, from which lane 0 reads
+  // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step,
+  // and the copy's wide rows and the band's parent tables (ParentCopy).
   constexpr size_t kAlign = 32;
   auto aligned = [](size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; };
   ParentCopy parent;
   uint32_t parent_rows = 0;
-  size_t parent_bytes = 0, shortfall_bytes = 0;
+  size_t parent_bytes = 0, shortfall_bytes = 0, wide_bytes = 0, band_table_bytes = 0;
   if (has_parent) {
     // The parent texels the blocks read: their own, and for predictor 5 those beside them.
     auto range = [&](const AxisMap& axis) {
@@ -628,16 +623,22 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
     parent.first_column = first_column;
     parent_rows = last_row - first_row + 1;
     parent.stride = (last_column - first_column + 1) * channels;
-    // Gathers read four bytes from a texel's first (two past a shortfall's).
-    parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
-    if (corrected) shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
+    // Predictor 4's shortfalls lie in the copy's layout, and its gathers read four bytes from a
+    // texel's first (two past a shortfall's). The others read the wide rows only.
+    if (corrected) {
+      parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
+      shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
+    }
+    parent.wide_stride = bandParentEntries(walk.width) + kLanes - 1;
+    wide_bytes = aligned(size_t(parent_rows) * parent.wide_stride * 4);
+    band_table_bytes = size_t(bandParentEntries(walk.width)) * kLanes * 4;
   }
   const size_t diagonal_bytes =
       size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
   Streams streams;
-  if (!parse(section, channels, kAlign + parent_bytes + shortfall_bytes + diagonal_bytes, padded,
-             streams))
-    return false;
+  const size_t scratch_bytes = parent_bytes + shortfall_bytes + diagonal_bytes + wide_bytes +
+                               band_table_bytes * (least_squares ? 2 : 1);
+  if (!parse(section, channels, kAlign + scratch_bytes, padded, streams)) return false;
   Geometry geometry{walk.texels,
                     walk.width,
                     walk.height,
@@ -659,15 +660,35 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
   uint8_t* const scratch_end = padded.data() + padded.size();
-  uint8_t* parent_copy = scratch_end - parent_bytes - shortfall_bytes - diagonal_bytes;
+  uint8_t* parent_copy = scratch_end - scratch_bytes;
   parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
   int16_t* shortfall = reinterpret_cast<int16_t*>(parent_copy + parent_bytes);
   uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes + shortfall_bytes);
-  for (uint32_t y = 0; y < parent_rows; ++y)
-    std::memcpy(parent_copy + size_t(y) * parent.stride,
-                walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
-                parent.stride);
-  parent.texels = parent_copy;
+  if (corrected) {
+    for (uint32_t y = 0; y < parent_rows; ++y)
+      std::memcpy(parent_copy + size_t(y) * parent.stride,
+                  walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
+                  parent.stride);
+    parent.texels = parent_copy;
+  }
+  if (has_parent) {
+    // Word j of a wide row is parent column columns.parent[0] - 8 + j, clamped into the copy's
+    // columns: the copy's own from the parent's rows, then its edge texels' copies.
+    auto* wide = reinterpret_cast<uint32_t*>(diagonal_bytes + reinterpret_cast<uint8_t*>(diagonal));
+    // The copy's first column is at least columns.parent[0] - 1 (a neighbour), word 7 or later.
+    const auto inside_from = uint32_t(int64_t(parent.first_column) - walk.columns->parent[0] + 8);
+    const uint32_t inside = std::min(parent.stride / channels, parent.wide_stride - inside_from);
+    for (uint32_t y = 0; y < parent_rows; ++y) {
+      uint32_t* to = wide + size_t(y) * parent.wide_stride;
+      widenTexels(walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
+                  channels, inside, to + inside_from);
+      std::fill(to, to + inside_from, to[inside_from]);
+      std::fill(to + inside_from + inside, to + parent.wide_stride, to[inside_from + inside - 1]);
+    }
+    parent.wide = wide;
+    parent.band_block = wide + wide_bytes / 4;
+    if (least_squares) parent.band_near = parent.band_block + band_table_bytes / 4;
+  }
   if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
   bool ok = false;
   switch (predictor) {

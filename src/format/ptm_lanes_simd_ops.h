@@ -108,66 +108,102 @@ TESSERA_LANES_TARGET inline __m256i medianBytes(__m256i a, __m256i b, __m256i c)
                          _mm256_min_epu8(_mm256_subs_epu8(high, c), _mm256_sub_epi8(high, low)));
 }
 
-// Where a band's lanes find their blocks' parent texels in the decoder's copy of the parent.
+// Where a band's lanes find their blocks' parent texels in the decoder's copy of the parent
+// (blockAt), for predictor 4's block shortfalls, which lie in the copy's layout.
 struct ParentPlaces {
-  const int* copy;
-  __m256i rows;       ///< each lane's parent row's offset in the copy
-  __m256i near_rows;  ///< predictor 5: the offset of the parent row beside the block's
-  __m256i two_lane, last_column, last_parent_column, texel_bytes;
+  __m256i rows;  ///< each lane's parent row's offset in the copy
+  __m256i two_lane, last_column;
   uint32_t column_offset;  ///< see decodeAvx2's column_offset
   uint32_t first_column;   ///< the copy's first parent column
 };
 
-// Each lane's block's parent texel at step t: its place in the copy, and with kBlock its
-// bytes (every channel in one gather, bytes past the texel cleared); with kSides (predictor 5)
-// also the parent texels beside it (mapAxis's neighbours, clamped to the parent), one gather
-// each. Given `previous`, the same at step t - 1, it gathers half as much: a block's second
-// column has the same P and Pv as its first, and a first column's side texels Ph and Pd are the
-// P and Pv of the block before. That holds once every lane is at column 2 or beyond: at column
-// 0 there is no block before, and the side is clamped to the parent's column 0.
-struct BlockParents {
-  __m256i at, block, side, near, diagonal;
-};
-TESSERA_LANES_TARGET inline __m256i gatherBlock(__m256i at, const ParentPlaces& p) {
-  return _mm256_and_si256(gather32<1>(p.copy, at), p.texel_bytes);
-}
-template <uint32_t kCh, bool kBlock, bool kSides>
-TESSERA_LANES_TARGET inline BlockParents gatherBlockParents(
-    uint32_t t, const ParentPlaces& p, const BlockParents* previous = nullptr) {
+// Each lane's block's parent texel at step t: its place in the copy (idle lanes' columns kept
+// in the tile).
+template <uint32_t kCh>
+TESSERA_LANES_TARGET inline __m256i blockAt(uint32_t t, const ParentPlaces& p) {
   const __m256i zero = _mm256_setzero_si256();
   const __m256i column_in = _mm256_min_epi32(
       _mm256_max_epi32(_mm256_sub_epi32(_mm256_set1_epi32(int(t)), p.two_lane), zero),
       p.last_column);
   const __m256i parent_column =
       _mm256_srli_epi32(_mm256_add_epi32(column_in, _mm256_set1_epi32(int(p.column_offset))), 1);
-  const __m256i first_column = _mm256_set1_epi32(int(p.first_column));
-  const __m256i texel_size = _mm256_set1_epi32(int(kCh));
-  BlockParents out{};
-  out.at = _mm256_add_epi32(
-      p.rows, _mm256_mullo_epi32(_mm256_sub_epi32(parent_column, first_column), texel_size));
-  const bool second = ((t + p.column_offset) & 1) != 0;
-  const bool same_block = previous != nullptr && second;
-  const bool block_before = previous != nullptr && !second;
-  if constexpr (kBlock) out.block = same_block ? previous->block : gatherBlock(out.at, p);
-  if constexpr (kSides) {
-    const __m256i one = _mm256_set1_epi32(1);
-    const __m256i near_at = _mm256_sub_epi32(out.at, p.rows);
-    out.near =
-        same_block ? previous->near : gather32<1>(p.copy, _mm256_add_epi32(p.near_rows, near_at));
-    if (block_before) {
-      out.side = previous->block;
-      out.diagonal = previous->near;
-    } else {
-      const __m256i side_column =
-          second ? _mm256_min_epi32(_mm256_add_epi32(parent_column, one), p.last_parent_column)
-                 : _mm256_max_epi32(_mm256_sub_epi32(parent_column, one), zero);
-      const __m256i side_at =
-          _mm256_mullo_epi32(_mm256_sub_epi32(side_column, first_column), texel_size);
-      out.side = gather32<1>(p.copy, _mm256_add_epi32(p.rows, side_at));
-      out.diagonal = gather32<1>(p.copy, _mm256_add_epi32(p.near_rows, side_at));
+  return _mm256_add_epi32(
+      p.rows,
+      _mm256_mullo_epi32(_mm256_sub_epi32(parent_column, _mm256_set1_epi32(int(p.first_column))),
+                         _mm256_set1_epi32(int(kCh))));
+}
+
+// A band's parent texels by step, so that a step reads its lanes' with one aligned load
+// instead of a gather: lane k of `entries` words' entry e is word e + 7 - k of the wide copy's
+// row `wide_rows[k]` (ParentCopy::wide), which is lane k's parent texel at step t where
+// e = bandParentEntry(t, column_offset) (and at the texel's block's side, e -+ 1). Eight
+// entries at a time: each lane's eight words, skewed by one per lane, transposed.
+TESSERA_LANES_TARGET inline void skewedParents(const uint32_t* wide, uint32_t wide_stride,
+                                               const int32_t* wide_rows, uint32_t entries,
+                                               uint32_t* out) {
+  for (uint32_t e0 = 0; e0 < entries; e0 += 8) {
+    __m256i r[8];
+    for (uint32_t k = 0; k < 8; ++k)
+      r[k] = _mm256_loadu_si256(
+          reinterpret_cast<const __m256i*>(wide + size_t(wide_rows[k]) * wide_stride + e0 + 7 - k));
+    __m256i pairs[8], quads[8];
+    for (uint32_t k = 0; k < 8; k += 2) {
+      pairs[k] = _mm256_unpacklo_epi32(r[k], r[k + 1]);
+      pairs[k + 1] = _mm256_unpackhi_epi32(r[k], r[k + 1]);
+    }
+    for (uint32_t k = 0; k < 8; k += 4) {
+      quads[k] = _mm256_unpacklo_epi64(pairs[k], pairs[k + 2]);
+      quads[k + 1] = _mm256_unpackhi_epi64(pairs[k], pairs[k + 2]);
+      quads[k + 2] = _mm256_unpacklo_epi64(pairs[k + 1], pairs[k + 3]);
+      quads[k + 3] = _mm256_unpackhi_epi64(pairs[k + 1], pairs[k + 3]);
+    }
+    auto* to = reinterpret_cast<__m256i*>(out + size_t(e0) * 8);
+    for (uint32_t j = 0; j < 4; ++j) {
+      _mm256_store_si256(to + j, _mm256_permute2x128_si256(quads[j], quads[4 + j], 0x20));
+      _mm256_store_si256(to + 4 + j, _mm256_permute2x128_si256(quads[j], quads[4 + j], 0x31));
     }
   }
-  return out;
+}
+
+// `count` texels of `channels` bytes as 32-bit words, the bytes past a texel's cleared (the
+// wide copy's rows, ParentCopy::wide): four texels per instruction, reading no byte past the
+// last texel's.
+TESSERA_LANES_TARGET inline void widenTexels(const uint8_t* texels, uint32_t channels,
+                                             uint32_t count, uint32_t* out) {
+  uint32_t i = 0;
+  auto* to = reinterpret_cast<__m128i*>(out);
+  if (channels == 4) {
+    std::memcpy(out, texels, size_t(count) * 4);
+    return;
+  }
+  if (channels == 3) {
+    const __m128i spread = _mm_setr_epi8(0, 1, 2, -1, 3, 4, 5, -1, 6, 7, 8, -1, 9, 10, 11, -1);
+    for (; 3 * i + 16 <= 3 * count; i += 4)
+      _mm_storeu_si128(
+          to + i / 4,
+          _mm_shuffle_epi8(
+              _mm_loadu_si128(reinterpret_cast<const __m128i*>(texels + 3 * size_t(i))), spread));
+  } else if (channels == 2) {
+    for (; i + 4 <= count; i += 4)
+      _mm_storeu_si128(to + i / 4, _mm_cvtepu16_epi32(_mm_loadl_epi64(
+                                       reinterpret_cast<const __m128i*>(texels + 2 * size_t(i)))));
+  } else {
+    for (; i + 4 <= count; i += 4) {
+      int32_t four;
+      std::memcpy(&four, texels + i, sizeof four);
+      _mm_storeu_si128(to + i / 4, _mm_cvtepu8_epi32(_mm_cvtsi32_si128(four)));
+    }
+  }
+  for (; i < count; ++i) {
+    uint32_t word = 0;
+    std::memcpy(&word, texels + size_t(i) * channels, channels);
+    out[i] = word;
+  }
+}
+
+// Entry `entry` of a band's parent table (skewedParents).
+TESSERA_LANES_TARGET inline __m256i bandParents(const uint32_t* table, uint32_t entry) {
+  return _mm256_load_si256(reinterpret_cast<const __m256i*>(table + size_t(entry) * 8));
 }
 
 // Channel c of each lane's texels `low` and `high` (a byte per channel) as the low and high
