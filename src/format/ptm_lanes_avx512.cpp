@@ -4,5 +4,6 @@
 // loop's instructions to the stack for want of registers; on the codec study's inputs this
 // build decoded 3-10 % faster (docs/benchmarks.md, "twelfth session").
 #define TESSERA_LANES_ISA avx512
+#define TESSERA_LANES_AVX512 1
 #define TESSERA_LANES_TARGET __attribute__((target("avx2,avx512f,avx512vl,avx512bw,avx512dq")))
 #include "ptm_lanes_simd.h"

@@ -76,7 +76,8 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   // Rotates lane k - 1's value into lane k; lane 0's is replaced after.
   const __m256i rotate = _mm256_setr_epi32(7, 0, 1, 2, 3, 4, 5, 6);
   const __m256i slot_mask = _mm256_set1_epi32(int(kScale - 1));
-  const __m256i low16 = _mm256_set1_epi32(0xffff);
+  [[maybe_unused]] const __m256i low16 = _mm256_set1_epi32(0xffff);
+  [[maybe_unused]] const __m256i above16 = _mm256_set1_epi32(0x10000);
   const __m256i byte_mask = _mm256_set1_epi32(0xff);
   const __m256i symbol_mask = _mm256_set1_epi32((1 << kSymbolBits) - 1);
   const __m256i one = _mm256_set1_epi32(1);
@@ -168,6 +169,10 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
       }
     const __m256i parent_rows = _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
     const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
+#ifdef TESSERA_LANES_AVX512
+    // The second table's bit in a two-table permute's index, in the lanes of second rows.
+    const __m256i second_row_table = _mm256_and_si256(second_row, _mm256_set1_epi32(8));
+#endif
     const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
     const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
     const __m256i upsampled_rows =
@@ -383,7 +388,22 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
               _mm256_max_epi32(zero, _mm256_add_epi32(channelOf(medians, c), correction)));
         }
       __m256i symbols[kCh];
+#ifdef TESSERA_LANES_AVX512
+      const auto active_lanes = __mmask8(_mm256_movemask_ps(_mm256_castsi256_ps(active)));
+#endif
       for (uint32_t c = 0; c < kCh; ++c) {
+#ifdef TESSERA_LANES_AVX512
+        // One permute of two tables: the class picks the model, the row's parity the table.
+        __m256i model =
+            has_parent
+                ? _mm256_permutex2var_epi32(group_models[c][second_column],
+                                            _mm256_or_si256(activity_class, second_row_table),
+                                            group_models[c][2 + second_column])
+                : _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
+        if (derived_mask != 0)
+          model = _mm256_mask_permutexvar_epi32(model, __mmask8(derived_mask), activity_class,
+                                                group_models[c][kGroups - 1]);
+#else
         __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
         if (has_parent) {
           model = _mm256_blendv_epi8(
@@ -395,6 +415,7 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
                 model, _mm256_permutevar8x32_epi32(group_models[c][kGroups - 1], activity_class),
                 derived);
         }
+#endif
         const __m256i slot = _mm256_and_si256(state[c], slot_mask);
         const __m256i entry = gather32<4>(slot_tables, _mm256_add_epi32(model, slot));
         const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
@@ -402,6 +423,16 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
             _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(entry, kFreqShift),
                                                 _mm256_srli_epi32(state[c], kScaleBits)),
                              _mm256_and_si256(_mm256_srli_epi32(entry, kBiasShift), slot_mask));
+#ifdef TESSERA_LANES_AVX512
+        // The reading lanes as a mask, and each one's word by an expand of the step's words.
+        next = _mm256_mask_blend_epi32(active_lanes, state[c], next);
+        const __mmask8 reads = _mm256_mask_cmplt_epu32_mask(active_lanes, next, above16);
+        const __m256i words =
+            _mm256_cvtepu16_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words_at[c])));
+        next = _mm256_mask_or_epi32(next, reads, _mm256_slli_epi32(next, 16),
+                                    _mm256_maskz_expand_epi32(reads, words));
+        words_at[c] += 2 * __builtin_popcount(unsigned(reads));
+#else
         next = _mm256_blendv_epi8(state[c], next, active);
         const __m256i reads =
             _mm256_and_si256(_mm256_cmpeq_epi32(_mm256_min_epu32(next, low16), next), active);
@@ -417,6 +448,7 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
         next =
             _mm256_blendv_epi8(next, _mm256_or_si256(_mm256_slli_epi32(next, 16), my_words), reads);
         words_at[c] += 2 * __builtin_popcount(unsigned(read_mask));
+#endif
         state[c] = next;
         symbols[c] = symbol;
       }
