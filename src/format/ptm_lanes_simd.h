@@ -47,7 +47,7 @@ enum class LanePredictor : uint8_t {
 template <uint32_t kCh, LanePredictor kPredictor>
 TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_t* model_offsets,
                                      const ParentCopy& parent, uint32_t* diagonal,
-                                     const int16_t* shortfall) {
+                                     int32_t* detail_diagonal, const int16_t* shortfall) {
   constexpr bool kNearest = kPredictor == LanePredictor::kNearest;
   // Predictor 5's ninth term is predictor 4's estimate.
   constexpr bool kCorrected =
@@ -70,6 +70,8 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   }
   const size_t stride = size_t(width) * kCh;
   const uint32_t steps = stepsPerBand(width);
+  // Words per channel of `detail_diagonal`, as of `diagonal`.
+  [[maybe_unused]] const size_t diagonal_words = size_t(steps + stepOf(1, kLanes - 1)) * kLanes;
   const int* slot_tables = reinterpret_cast<const int*>(slotTables());
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i two_lane = _mm256_slli_epi32(lane, 1);
@@ -236,20 +238,18 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
       // Lane 0's row above is the last lane's of the band before, whose steps still lie
       // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
       const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
-      int up0_detail[kCh] = {}, up_left0_detail[kCh] = {}, up_right0_detail[kCh] = {};
+      // Predictor 4: its departures likewise, from `detail_diagonal`, per channel (idle lanes'
+      // and substituted places' are any values).
+      const size_t above_at = size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
+      [[maybe_unused]] __m256i up0_detail[kCh], up_left0_detail[kCh], up_right0_detail[kCh];
       if constexpr (kCorrected)
-        if (!first_band)
-          for (uint32_t c = 0; c < kCh; ++c) {
-            // Columns past the tile's edges belong to lanes that are idle or take substitutes:
-            // any value in the plane will do.
-            const int16_t* above_row = g.upsampled + size_t(y0 - 1) * stride + c;
-            const uint32_t column = std::min(t, width - 1);
-            up0_detail[c] = 16 * int(above[0] >> (8 * c) & 0xff) - above_row[size_t(column) * kCh];
-            up_left0_detail[c] = 16 * int(above[-ptrdiff_t(kLanes)] >> (8 * c) & 0xff) -
-                                 above_row[size_t(t == 0 ? 0 : std::min(t - 1, width - 1)) * kCh];
-            up_right0_detail[c] = 16 * int(above[kLanes] >> (8 * c) & 0xff) -
-                                  above_row[size_t(std::min(t + 1, width - 1)) * kCh];
-          }
+        for (uint32_t c = 0; c < kCh; ++c) {
+          const int32_t* above_detail = detail_diagonal + c * diagonal_words + above_at;
+          up0_detail[c] = first_band ? zero : _mm256_set1_epi32(above_detail[0]);
+          up_left0_detail[c] =
+              first_band ? zero : _mm256_set1_epi32(above_detail[-ptrdiff_t(kLanes)]);
+          up_right0_detail[c] = first_band ? zero : _mm256_set1_epi32(above_detail[kLanes]);
+        }
       // Each lane's column kept inside the tile, for the gathers of idle lanes too.
       const __m256i column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
       // Predictor 4: where the block sum pulls.
@@ -335,9 +335,8 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
           const __m256i w = upsampled_value[c];
           const __m256i block_shortfall = block_shortfalls[c];
           const auto [dl, du, dul, dur] = laneNeighbours(
-              detail1[c], detail2[c], detail3[c], first_band, _mm256_set1_epi32(up0_detail[c]),
-              _mm256_set1_epi32(up_left0_detail[c]), _mm256_set1_epi32(up_right0_detail[c]),
-              first_column, at_last_column, rotate);
+              detail1[c], detail2[c], detail3[c], first_band, up0_detail[c], up_left0_detail[c],
+              up_right0_detail[c], first_column, at_last_column, rotate);
           const __m256i departure = median(dl, du, dul);
           __m256i pull;
           if (second_column == 0) {
@@ -533,6 +532,9 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
           detail2[c] = detail1[c];
           detail1[c] =
               _mm256_sub_epi32(_mm256_slli_epi32(channelOf(values, c), 4), upsampled_value[c]);
+          _mm256_storeu_si256(
+              reinterpret_cast<__m256i*>(detail_diagonal + c * diagonal_words + size_t(t) * kLanes),
+              detail1[c]);
         }
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), values);
       // A corrupt stream may run ahead: stop within kCheckSteps of passing its end.
@@ -585,12 +587,20 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
 template <LanePredictor kPredictor>
 bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
                         const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
-                        const int16_t* shortfall) {
+                        int32_t* detail_diagonal, const int16_t* shortfall) {
   switch (channels) {
-    case 1: return decodeAvx2<1, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
-    case 2: return decodeAvx2<2, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
-    case 3: return decodeAvx2<3, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
-    default: return decodeAvx2<4, kPredictor>(g, s, model_offsets, parent, diagonal, shortfall);
+    case 1:
+      return decodeAvx2<1, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
+                                       shortfall);
+    case 2:
+      return decodeAvx2<2, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
+                                       shortfall);
+    case 3:
+      return decodeAvx2<3, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
+                                       shortfall);
+    default:
+      return decodeAvx2<4, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
+                                       shortfall);
   }
 }
 
@@ -667,9 +677,11 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   }
   const size_t diagonal_bytes =
       size_t(stepsPerBand(walk.width) + stepOf(1, kLanes - 1)) * kLanes * 4;
+  // Predictor 4's departures by step, as the band's texels, per channel.
+  const size_t detail_bytes = corrected ? diagonal_bytes * channels : 0;
   Streams streams;
   const size_t scratch_bytes = parent_bytes + shortfall_bytes + diagonal_bytes + wide_bytes +
-                               band_table_bytes * (least_squares ? 2 : 1);
+                               band_table_bytes * (least_squares ? 2 : 1) + detail_bytes;
   if (!parse(section, channels, kAlign + scratch_bytes, padded, streams)) return false;
   Geometry geometry{walk.texels,
                     walk.width,
@@ -696,6 +708,7 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
   int16_t* shortfall = reinterpret_cast<int16_t*>(parent_copy + parent_bytes);
   uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes + shortfall_bytes);
+  auto* detail_diagonal = reinterpret_cast<int32_t*>(parent_copy + scratch_bytes - detail_bytes);
   if (corrected) {
     for (uint32_t y = 0; y < parent_rows; ++y)
       std::memcpy(parent_copy + size_t(y) * parent.stride,
@@ -725,25 +738,26 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   bool ok = false;
   switch (predictor) {
     case Predictor::kParentNearest:
-      ok = decodeAvx2Channels<LanePredictor::kNearest>(channels, geometry, streams, model_offsets,
-                                                       parent, diagonal, shortfall);
+      ok = decodeAvx2Channels<LanePredictor::kNearest>(
+          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
       break;
     case Predictor::kParentCorrected:
-      ok = decodeAvx2Channels<LanePredictor::kCorrected>(channels, geometry, streams, model_offsets,
-                                                         parent, diagonal, shortfall);
+      ok = decodeAvx2Channels<LanePredictor::kCorrected>(
+          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
       break;
     case Predictor::kLeastSquares:
       if (plain) {
-        ok = decodeAvx2Channels<LanePredictor::kLeastSquaresPlain>(
-            channels, geometry, streams, model_offsets, parent, diagonal, shortfall);
+        ok = decodeAvx2Channels<LanePredictor::kLeastSquaresPlain>(channels, geometry, streams,
+                                                                   model_offsets, parent, diagonal,
+                                                                   detail_diagonal, shortfall);
         break;
       }
       ok = decodeAvx2Channels<LanePredictor::kLeastSquares>(
-          channels, geometry, streams, model_offsets, parent, diagonal, shortfall);
+          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
       break;
     default:
       ok = decodeAvx2Channels<LanePredictor::kMedian>(channels, geometry, streams, model_offsets,
-                                                      parent, diagonal, shortfall);
+                                                      parent, diagonal, detail_diagonal, shortfall);
   }
   return ok && finished(streams, channels);
 }
