@@ -39,11 +39,11 @@ enum class LanePredictor : uint8_t {
 };
 
 // kNearest: predictor 1, the block's parent texel.
-// kCorrected: predictor 4, which also reads the walk's upsampled parent and `shortfall`, the
+// kCorrected: predictor 4, which also reads the parent texels beside each block's (`parent`
+// then covers them), from which it computes the walk's upsampled parent, and `shortfall`, the
 // parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
 //
-// kLeastSquares: predictor 5, predictor 4's estimate and more: it also reads the parent texels
-// beside each block's (`parent` then covers them).
+// kLeastSquares: predictor 5, predictor 4's estimate and more.
 template <uint32_t kCh, LanePredictor kPredictor>
 TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_t* model_offsets,
                                      const ParentCopy& parent, uint32_t* diagonal,
@@ -131,7 +131,10 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   // is a block's second child, or a last column that is a first, never.
   const bool first_column_partial = kCorrected && g.columns->full.front() == 0;
   const bool last_column_partial = kCorrected && g.columns->full.back() == 0;
-  const int* upsampled = reinterpret_cast<const int*>(g.upsampled);
+  // Predictor 4's W in two multiply-adds of channel pairs: (P, Ph) by (9, 3), (Pv, Pd) by (3, 1).
+  [[maybe_unused]] const __m256i nine_three = _mm256_set1_epi32(9 | 3 << 16);
+  [[maybe_unused]] const __m256i three_one = _mm256_set1_epi32(3 | 1 << 16);
+  [[maybe_unused]] const __m256i six = _mm256_set1_epi32(6);
   const int* shortfalls = reinterpret_cast<const int*>(shortfall);
   const __m256 twelve = _mm256_set1_ps(12.0f);
   // Predictor 5: the byte shuffles that put channel c of each lane in its low and its high 16
@@ -155,19 +158,16 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   for (uint32_t y0 = 0; y0 < height; y0 += kLanes) {
     const uint32_t rows = std::min(kLanes, height - y0);
     const __m256i row_in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(rows)), lane);
-    // Per lane: its row's parent row offset, second-row and derived-row flags.
-    // Predictor 4: its row's offset in the upsampled plane (lanes past the tile's last row read
-    // row 0) and whether the row's blocks lie in the tile.
+    // Per lane: its row's parent row offset, second-row and derived-row flags, and (predictor
+    // 4) whether the row's blocks lie in the tile.
     alignas(32) int32_t parent_row_at[kLanes] = {}, row_second[kLanes] = {},
-                        row_derived[kLanes] = {}, row_full[kLanes] = {},
-                        upsampled_row_at[kLanes] = {};
+                        row_derived[kLanes] = {}, row_full[kLanes] = {};
     if (has_parent)
       for (uint32_t k = 0; k < rows; ++k) {
         parent_row_at[k] = int32_t((g.rows->parent[y0 + k] - parent.first_row) * parent.stride);
         row_second[k] = g.rows->second[y0 + k] != 0 ? -1 : 0;
         row_derived[k] = g.rows->derived[y0 + k] != 0 ? -1 : 0;
         row_full[k] = g.rows->full[y0 + k] != 0 ? -1 : 0;
-        upsampled_row_at[k] = int32_t((y0 + k) * stride);
       }
     const __m256i parent_rows = _mm256_load_si256(reinterpret_cast<const __m256i*>(parent_row_at));
     const __m256i second_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_second));
@@ -177,8 +177,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
 #endif
     const __m256i derived_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_derived));
     const __m256i full_row = _mm256_load_si256(reinterpret_cast<const __m256i*>(row_full));
-    const __m256i upsampled_rows =
-        _mm256_load_si256(reinterpret_cast<const __m256i*>(upsampled_row_at));
     [[maybe_unused]] const ParentPlaces places{parent_rows, two_lane, last_column, column_offset,
                                                parent.first_column};
     // Each step's parent texels for the lanes, from the wide copy's rows: the blocks' (lanes
@@ -187,12 +185,12 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
       alignas(32) int32_t wide_rows[kLanes] = {}, wide_near_rows[kLanes] = {};
       for (uint32_t k = 0; k < rows; ++k) {
         wide_rows[k] = int32_t(g.rows->parent[y0 + k] - parent.first_row);
-        if constexpr (kLeastSquares)
+        if constexpr (kLeastSquares || kCorrected)
           wide_near_rows[k] = int32_t(g.rows->neighbour[y0 + k] - parent.first_row);
       }
       const uint32_t entries = bandParentEntries(width);
       skewedParents(parent.wide, parent.wide_stride, wide_rows, entries, parent.band_block);
-      if constexpr (kLeastSquares)
+      if constexpr (kLeastSquares || kCorrected)
         skewedParents(parent.wide, parent.wide_stride, wide_near_rows, entries, parent.band_near);
     }
     const bool first_band = y0 == 0;
@@ -250,8 +248,6 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
               first_band ? zero : _mm256_set1_epi32(above_detail[-ptrdiff_t(kLanes)]);
           up_right0_detail[c] = first_band ? zero : _mm256_set1_epi32(above_detail[kLanes]);
         }
-      // Each lane's column kept inside the tile, for the gathers of idle lanes too.
-      const __m256i column_in = _mm256_min_epi32(_mm256_max_epi32(xs, zero), last_column);
       // Predictor 4: where the block sum pulls.
       [[maybe_unused]] __m256i pulled = zero;
       if constexpr (kCorrected) {
@@ -294,10 +290,10 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
       const uint32_t parent_entry = bandParentEntry(t, column_offset);
       const uint32_t side_entry = second_column != 0 ? parent_entry + 1 : parent_entry - 1;
       __m256i block_parents = zero;
-      if (kEveryStep || derived_mask != 0)
+      if (kEveryStep || kCorrected || derived_mask != 0)
         block_parents = bandParents(parent.band_block, parent_entry);
       [[maybe_unused]] __m256i side_parents = zero, near_parents = zero, diagonal_parents = zero;
-      if constexpr (kLeastSquares) {
+      if constexpr (kLeastSquares || kCorrected) {
         side_parents = bandParents(parent.band_block, side_entry);
         near_parents = bandParents(parent.band_near, parent_entry);
         diagonal_parents = bandParents(parent.band_near, side_entry);
@@ -309,27 +305,30 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
         // the block's shortfall G = 16 (4P + 1.5) - (Wa + Wb + Wc + Wd): a's pull is
         // (G - 4δ) >> 3, b's (G - D(a) - 3δ) / 12 and c's (G - D(a) - D(b) - 2δ) >> 2, the same
         // integers as the walk's, since D(t) = 16 t - W(t).
-        const __m256i upsampled_at = _mm256_add_epi32(
-            upsampled_rows, _mm256_mullo_epi32(column_in, _mm256_set1_epi32(int(kCh))));
-        // Two channels' int16 values per 32-bit gather (with an odd channel count the last
+        // W, the upsampled parent (upsampleParent, ptm_walk.cpp): 9 P + 3 Ph + 3 Pv + Pd + 6, in
+        // two multiply-adds of channel pairs.
+        for (uint32_t c = 0; c < kCh; ++c)
+          upsampled_value[c] = _mm256_add_epi32(
+              _mm256_add_epi32(_mm256_madd_epi16(channelPair(block_parents, side_parents,
+                                                             low_masks[c], high_masks[c]),
+                                                 nine_three),
+                               _mm256_madd_epi16(channelPair(near_parents, diagonal_parents,
+                                                             low_masks[c], high_masks[c]),
+                                                 three_one)),
+              six);
+        // Two channels' int16 shortfalls per 32-bit gather (with an odd channel count the last
         // gather's high half is the next texel's, or the planes' slack). A block's second
         // column has its first's shortfall (at column 0 too: the step before read column 0's).
         __m256i block_shortfalls[kCh];
         const bool same_block = second_column != 0 && t > 0;
         for (uint32_t c = 0; c < kCh; c += 2) {
-          const __m256i ws =
-              gather32<2>(upsampled, _mm256_add_epi32(upsampled_at, _mm256_set1_epi32(int(c))));
           const __m256i gs =
               same_block
                   ? previous_shortfalls[c / 2]
                   : gather32<2>(shortfalls, _mm256_add_epi32(parent_at, _mm256_set1_epi32(int(c))));
           previous_shortfalls[c / 2] = gs;
-          upsampled_value[c] = low16Signed(ws);
           block_shortfalls[c] = low16Signed(gs);
-          if (c + 1 < kCh) {
-            upsampled_value[c + 1] = _mm256_srai_epi32(ws, 16);
-            block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
-          }
+          if (c + 1 < kCh) block_shortfalls[c + 1] = _mm256_srai_epi32(gs, 16);
         }
         for (uint32_t c = 0; c < kCh; ++c) {
           const __m256i w = upsampled_value[c];
@@ -649,10 +648,11 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   uint32_t parent_rows = 0;
   size_t parent_bytes = 0, shortfall_bytes = 0, wide_bytes = 0, band_table_bytes = 0;
   if (has_parent) {
-    // The parent texels the blocks read: their own, and for predictor 5 those beside them.
+    // The parent texels the blocks read: their own, and for predictors 4 and 5 those beside
+    // them.
     auto range = [&](const AxisMap& axis) {
       uint32_t first = axis.parent.front(), last = axis.parent.back();
-      if (least_squares)
+      if (least_squares || corrected)
         for (const uint32_t neighbour : axis.neighbour) {
           first = std::min(first, neighbour);
           last = std::max(last, neighbour);
@@ -681,7 +681,8 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   const size_t detail_bytes = corrected ? diagonal_bytes * channels : 0;
   Streams streams;
   const size_t scratch_bytes = parent_bytes + shortfall_bytes + diagonal_bytes + wide_bytes +
-                               band_table_bytes * (least_squares ? 2 : 1) + detail_bytes;
+                               band_table_bytes * (least_squares || corrected ? 2 : 1) +
+                               detail_bytes;
   if (!parse(section, channels, kAlign + scratch_bytes, padded, streams)) return false;
   Geometry geometry{walk.texels,
                     walk.width,
@@ -732,7 +733,7 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
     }
     parent.wide = wide;
     parent.band_block = wide + wide_bytes / 4;
-    if (least_squares) parent.band_near = parent.band_block + band_table_bytes / 4;
+    if (least_squares || corrected) parent.band_near = parent.band_block + band_table_bytes / 4;
   }
   if (corrected) blockShortfalls(walk, channels, parent, parent_rows, shortfall);
   bool ok = false;
