@@ -605,25 +605,73 @@ bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
 
 // Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
 // place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
-void blockShortfalls(const Walk& walk, uint32_t channels, const ParentCopy& parent,
-                     uint32_t parent_rows, int16_t* shortfall) {
+// From the parent's wide rows rather than the walk's upsampled plane, which this decoder does
+// without: with each child's W = 9 P + 3 Ph + 3 Pv + Pd + 6 (upsampleParent), a block whose
+// children's side texels are Pl and Pr and whose rows' are Pu and Pd sums to
+// 36 P + 6 (Pl + Pr + Pu + Pd) + (the four diagonal texels) + 24, so its shortfall is
+// 28 P - 6 (Pl + Pr + Pu + Pd) - (Pul + Pur + Pdl + Pdr), four blocks and every channel at once
+// in 16-bit lanes. mapAxis makes the side texels P's neighbours, clamped to the parent, which
+// is what the wide rows' padding holds.
+TESSERA_LANES_TARGET void blockShortfalls(const Walk& walk, uint32_t channels,
+                                          const ParentCopy& parent, uint32_t parent_rows,
+                                          int16_t* shortfall) {
   std::fill_n(shortfall, size_t(parent_rows) * parent.stride, int16_t(0));
   const AxisMap& columns = *walk.columns;
   const AxisMap& rows = *walk.rows;
-  const size_t stride = size_t(walk.width) * channels;
+  // The blocks wholly in the tile have first children from column `first` to `last`, every
+  // other column.
+  uint32_t first = walk.width, last = 0;
+  for (uint32_t x = 0; x + 1 < walk.width; ++x)
+    if (columns.full[x] != 0 && columns.second[x] == 0) {
+      first = std::min(first, x);
+      last = x;
+    }
+  if (first > last) return;
+  const uint32_t first_block = columns.parent[first], blocks = (last - first) / 2 + 1;
+  // Word j of a wide row is parent column columns.parent[0] - 8 + j.
+  const uint32_t at = first_block - columns.parent[0] + 8;
+  const __m256i six = _mm256_set1_epi16(6), twenty_eight = _mm256_set1_epi16(28);
   for (uint32_t y = 0; y + 1 < walk.height; ++y) {
     if (rows.full[y] == 0 || rows.second[y] != 0) continue;
-    const uint8_t* parent_row = walk.parent->row(rows.parent[y]);
-    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride;
-    const int16_t* upper = walk.upsampled + size_t(y) * stride;
-    const int16_t* lower = upper + stride;
-    for (uint32_t x = 0; x + 1 < walk.width; ++x) {
-      if (columns.full[x] == 0 || columns.second[x] != 0) continue;
-      const size_t at = size_t(x) * channels, parent_at = size_t(columns.parent[x]) * channels;
-      for (uint32_t c = 0; c < channels; ++c)
-        out[parent_at - size_t(parent.first_column) * channels + c] =
-            int16_t(blockSum16(parent_row[parent_at + c]) - upper[at + c] -
-                    upper[at + channels + c] - lower[at + c] - lower[at + channels + c]);
+    const uint32_t* middle =
+        parent.wide + size_t(rows.parent[y] - parent.first_row) * parent.wide_stride + at;
+    const uint32_t* above =
+        parent.wide + size_t(rows.neighbour[y] - parent.first_row) * parent.wide_stride + at;
+    const uint32_t* below =
+        parent.wide + size_t(rows.neighbour[y + 1] - parent.first_row) * parent.wide_stride + at;
+    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride +
+                   size_t(first_block - parent.first_column) * channels;
+    for (uint32_t i = 0; i < blocks; i += 4) {
+      // Four texels' bytes as 16-bit lanes, from word offset `d`.
+      auto words = [&](const uint32_t* row, ptrdiff_t d) { return row + i + d; };
+      const __m256i p =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, 0))));
+      const __m256i pl = _mm256_cvtepu8_epi16(
+          _mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, -1))));
+      const __m256i pr =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, 1))));
+      const __m256i pu =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, 0))));
+      const __m256i pul =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, -1))));
+      const __m256i pur =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, 1))));
+      const __m256i pd =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, 0))));
+      const __m256i pdl =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, -1))));
+      const __m256i pdr =
+          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, 1))));
+      const __m256i sides = _mm256_add_epi16(_mm256_add_epi16(pl, pr), _mm256_add_epi16(pu, pd));
+      const __m256i corners =
+          _mm256_add_epi16(_mm256_add_epi16(pul, pur), _mm256_add_epi16(pdl, pdr));
+      const __m256i g = _mm256_sub_epi16(
+          _mm256_sub_epi16(_mm256_mullo_epi16(p, twenty_eight), _mm256_mullo_epi16(sides, six)),
+          corners);
+      alignas(32) int16_t g4[16];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(g4), g);
+      for (uint32_t b = 0; b < 4 && i + b < blocks; ++b)
+        std::memcpy(out + size_t(i + b) * channels, g4 + 4 * b, channels * sizeof(int16_t));
     }
   }
 }

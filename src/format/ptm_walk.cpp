@@ -125,13 +125,14 @@ SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* column
 Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
                          const ParentTexels* parent, Predictor predictor, PtmCoder coder,
                          const int8_t* ls_weights, CodecScratch::State& state, AxisMap& columns,
-                         AxisMap& rows) {
+                         AxisMap& rows, bool planes) {
   const bool has_parent = predictor != Predictor::kRoot;
   if (has_parent)
     TESSERA_TRY(mapParent(parent->texels, *parent, width, height, channels, columns, rows));
-  const bool upsampled = predictor == Predictor::kParentCorrected ||
+  const bool estimates = predictor == Predictor::kParentCorrected ||
                          (predictor == Predictor::kLeastSquares &&
                           (ls_weights == nullptr || usesEstimate(ls_weights, channels)));
+  const bool upsampled = estimates && planes;
   if (upsampled)
     upsample(channels, parent->texels, columns, rows, state.upsampled, state.detail,
              state.parent_blend);
@@ -145,7 +146,8 @@ Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint3
               upsampled ? state.detail.data() : nullptr,
               errorPlane(coder, width, height, state),
               ls_weights,
-              nullptr};
+              nullptr,
+              estimates};
 }
 
 }  // namespace tessera::detail::ptm

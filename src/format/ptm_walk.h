@@ -274,14 +274,17 @@ struct Walk {
   const int8_t* ls_weights;
   /// Predictor 5's fitting walk (encoder only): where each coded texel's terms go.
   LsFit* ls_fit;
+  /// Whether the walk computes predictor 4's estimate: predictor 4 always, predictor 5 where
+  /// its weights give the estimate a weight (usesEstimate). `upsampled` and `detail` are then
+  /// there, unless prepareWalk was told that the decoder computes its own (`planes`).
+  bool estimates;
 };
 
-// Whether the walk computes predictor 4's estimate: predictor 4 always, predictor 5 where
-// prepareWalk upsampled the parent for it (its weights give the estimate a weight). Every
-// decoder decides by this, so none reads planes that are not there.
+// Whether the walk computes predictor 4's estimate: predictor 4 always, predictor 5 where its
+// weights give the estimate a weight (Walk::estimates). Every decoder decides by this.
 inline bool computesParentCorrectedEstimate(Predictor predictor, const Walk& walk) {
   return predictor == Predictor::kParentCorrected ||
-         (predictor == Predictor::kLeastSquares && walk.upsampled != nullptr);
+         (predictor == Predictor::kLeastSquares && walk.estimates);
 }
 
 // One routine codes and decodes, so the two can never disagree on a prediction. Encoding reads
@@ -566,11 +569,13 @@ void code(Predictor predictor, uint32_t channels, const Walk& walk, Coder& coder
 // predictor 4's estimate (usesEstimate), and coders 5 and 6's error plane, all in `state`; or
 // why the parent does not fit. `ls_weights` is predictor 5's weights, or null while they are
 // still to be fitted: the fit needs every term, and the caller sets Walk::ls_weights after.
-// Without the upsampled parent, Walk::upsampled and Walk::detail are null.
+// Without the upsampled parent, Walk::upsampled and Walk::detail are null: where the estimate
+// is not computed, or where `planes` is false (the SIMD lane decoder, which computes the
+// upsampled parent and the departures it needs itself).
 Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
                          const ParentTexels* parent, Predictor predictor, PtmCoder coder,
                          const int8_t* ls_weights, CodecScratch::State& state, AxisMap& columns,
-                         AxisMap& rows);
+                         AxisMap& rows, bool planes = true);
 
 // Symbol counts of one tile: `coded` residuals and `derived` remainders per channel.
 struct SymbolCounts {

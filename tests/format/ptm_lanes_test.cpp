@@ -49,7 +49,9 @@ uint32_t escapeBytes(std::span<const uint8_t> payload, uint32_t channels) {
 }
 
 // Decodes a coder-7 payload by `path`: with the scalar lanes, as decodePtm would where AVX2 is
-// missing, or with the AVX2 build of the SIMD decoder, as it would where AVX-512 is.
+// missing, or with the AVX2 build of the SIMD decoder, as it would where AVX-512 is. The SIMD
+// builds get a walk without predictor 4's planes, as decodePtm gives them; the scalar lanes
+// one with them, and they must refuse one without.
 Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
                       const ParentTexels* parent, ptm::lanes::Path path) {
   Image out(side, side, channels);
@@ -59,17 +61,34 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
   ptm::AxisMap columns, rows;
   const size_t models_at = modelsAt(payload, channels);
   const auto* weights = reinterpret_cast<const int8_t*>(payload.data() + ptm::kHeaderBytes);
-  auto walk =
-      ptm::prepareWalk(out.texels.data(), side, side, channels, has_parent ? parent : nullptr,
-                       predictor, PtmCoder::kRansLanes, weights, scratch.state(), columns, rows);
+  const bool planes = path == ptm::lanes::Path::kScalar;
+  auto walk = ptm::prepareWalk(out.texels.data(), side, side, channels,
+                               has_parent ? parent : nullptr, predictor, PtmCoder::kRansLanes,
+                               weights, scratch.state(), columns, rows, planes);
   EXPECT_TRUE(walk.has_value());
   if (!walk) return out;
-  // Predictor 4's planes exactly where the weights need them.
-  EXPECT_EQ(walk->upsampled != nullptr,
-            predictor == Predictor::kParentCorrected ||
-                (predictor == Predictor::kLeastSquares && usesEstimate(weights, channels)));
+  // Predictor 4's estimate exactly where the weights need it, and its planes where asked for.
+  const bool estimates = predictor == Predictor::kParentCorrected ||
+                         (predictor == Predictor::kLeastSquares && usesEstimate(weights, channels));
+  EXPECT_EQ(walk->estimates, estimates);
+  EXPECT_EQ(walk->upsampled != nullptr, estimates && planes);
   const size_t section_at = laneSectionAt(payload, channels);
   std::vector<uint8_t> padded;
+  if (estimates && planes) {
+    Image scratch_out(side, side, channels);
+    CodecScratch other;
+    ptm::AxisMap other_columns, other_rows;
+    auto without = ptm::prepareWalk(scratch_out.texels.data(), side, side, channels, parent,
+                                    predictor, PtmCoder::kRansLanes, weights, other.state(),
+                                    other_columns, other_rows, false);
+    EXPECT_TRUE(without.has_value());
+    if (without) {
+      EXPECT_FALSE(ptm::lanes::decode(payload.subspan(section_at), *without, channels, predictor,
+                                      payload.subspan(models_at, section_at - models_at), padded,
+                                      path))
+          << "the scalar lanes without predictor 4's planes";
+    }
+  }
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
                                  payload.subspan(models_at, section_at - models_at), padded, path));
   return out;
