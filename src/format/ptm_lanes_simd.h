@@ -642,26 +642,12 @@ TESSERA_LANES_TARGET void blockShortfalls(const Walk& walk, uint32_t channels,
     int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride +
                    size_t(first_block - parent.first_column) * channels;
     for (uint32_t i = 0; i < blocks; i += 4) {
-      // Four texels' bytes as 16-bit lanes, from word offset `d`.
-      auto words = [&](const uint32_t* row, ptrdiff_t d) { return row + i + d; };
-      const __m256i p =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, 0))));
-      const __m256i pl = _mm256_cvtepu8_epi16(
-          _mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, -1))));
-      const __m256i pr =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(middle, 1))));
-      const __m256i pu =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, 0))));
-      const __m256i pul =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, -1))));
-      const __m256i pur =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(above, 1))));
-      const __m256i pd =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, 0))));
-      const __m256i pdl =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, -1))));
-      const __m256i pdr =
-          _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words(below, 1))));
+      const __m256i p = bytesAs16(middle + i), pl = bytesAs16(middle + i - 1),
+                    pr = bytesAs16(middle + i + 1);
+      const __m256i pu = bytesAs16(above + i), pul = bytesAs16(above + i - 1),
+                    pur = bytesAs16(above + i + 1);
+      const __m256i pd = bytesAs16(below + i), pdl = bytesAs16(below + i - 1),
+                    pdr = bytesAs16(below + i + 1);
       const __m256i sides = _mm256_add_epi16(_mm256_add_epi16(pl, pr), _mm256_add_epi16(pu, pd));
       const __m256i corners =
           _mm256_add_epi16(_mm256_add_epi16(pul, pur), _mm256_add_epi16(pdl, pdr));

@@ -201,6 +201,12 @@ TESSERA_LANES_TARGET inline void widenTexels(const uint8_t* texels, uint32_t cha
   }
 }
 
+// The 16 bytes of four words from `words` as 16-bit lanes (four texels of a wide row, every
+// channel).
+TESSERA_LANES_TARGET inline __m256i bytesAs16(const uint32_t* words) {
+  return _mm256_cvtepu8_epi16(_mm_loadu_si128(reinterpret_cast<const __m128i*>(words)));
+}
+
 // Entry `entry` of a band's parent table (skewedParents).
 TESSERA_LANES_TARGET inline __m256i bandParents(const uint32_t* table, uint32_t entry) {
   return _mm256_load_si256(reinterpret_cast<const __m256i*>(table + size_t(entry) * 8));
