@@ -104,8 +104,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
       const Walk walk,
       prepareWalk(out.texels.data(), width, height, channels, parent, predictor, coder, ls_weights,
                   *state, columns, rows,
-                  // The SIMD lane decoder computes the upsampled parent it needs itself.
-                  !(coder == PtmCoder::kRansLanes && lanes::simdAvailable())));
+                  !(coder == PtmCoder::kRansLanes && lanes::decodesWithoutPlanes())));
 
   const uint32_t contexts = has_parent ? kParentContexts : kRootContexts;
   const size_t params_bytes = size_t(contexts) * channels;

@@ -321,7 +321,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
   if ((path == Path::kFastest || path == Path::kAvx2) && simdAvailable())
     return avx2::decodeSimd(section, walk, channels, predictor, params, padded);
   // The scalar lanes read predictor 4's planes, which prepareWalk leaves out where the SIMD
-  // decoder was to run.
+  // decoder was to run (decodesWithoutPlanes).
   if (computesParentCorrectedEstimate(predictor, walk) && walk.upsampled == nullptr) return false;
   Streams streams;
   if (!parse(section, channels, 0, padded, streams)) return false;

@@ -65,6 +65,13 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
 /// True when decode() can take its SIMD path on this processor (AVX2).
 bool simdAvailable();
 
+/// True when decode(Path::kFastest) needs none of the walk's planes of predictor 4 (it takes
+/// the SIMD path, which computes the upsampled parent itself): prepareWalk's `planes` may then
+/// be false. The scalar lanes refuse a walk without them.
+inline bool decodesWithoutPlanes() {
+  return simdAvailable();
+}
+
 /// True when decode()'s fastest path is the SIMD decoder's AVX-512 build (AVX-512 F, VL, BW
 /// and DQ on top of AVX2): the same instructions on 256-bit vectors, with 32 vector registers.
 bool avx512Available();

@@ -46,11 +46,10 @@ constexpr uint32_t bandParentEntries(uint32_t width) {
   return (bandParentEntry(stepsPerBand(width) - 1, 1) + 2 + 7) / 8 * 8;
 }
 
-// The part of the parent tile a child's blocks cover, copied without the tile's stride (for
-// predictor 4, whose block shortfalls the SIMD decoder lays out as the copy), and the SIMD
-// decoder's wider forms of it, from which every predictor reads its blocks' parent texels.
+// The part of the parent tile a child's blocks cover, as the SIMD decoder lays it out: a copy
+// without the tile's stride (the layout of predictor 4's block shortfalls; its texels are never
+// copied), and the wider forms from which every predictor reads its blocks' parent texels.
 struct ParentCopy {
-  const uint8_t* texels = nullptr;
   uint32_t stride = 0;        ///< bytes per row of the copy
   uint32_t first_row = 0;     ///< the parent row of the copy's first
   uint32_t first_column = 0;  ///< the parent column of the copy's first

@@ -235,10 +235,10 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
       const __m256i at_last_column = _mm256_cmpeq_epi32(xs, last_column);
       // Lane 0's row above is the last lane's of the band before, whose steps still lie
       // ahead of this one's in `diagonal` (row 0 takes substitutes instead).
-      const uint32_t* above = diagonal + size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
+      const size_t above_at = size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
+      const uint32_t* above = diagonal + above_at;
       // Predictor 4: its departures likewise, from `detail_diagonal`, per channel (idle lanes'
       // and substituted places' are any values).
-      const size_t above_at = size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
       [[maybe_unused]] __m256i up0_detail[kCh], up_left0_detail[kCh], up_right0_detail[kCh];
       if constexpr (kCorrected)
         for (uint32_t c = 0; c < kCh; ++c) {
@@ -673,14 +673,15 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   const bool corrected = computesParentCorrectedEstimate(predictor, walk);
   const bool plain = least_squares && !corrected;
   // The decoder's scratch after the streams in `padded`: the parent's copy, predictor 4's
-  // block shortfalls in the copy's layout, the band's texels by step, from which lane 0 reads
+  // block shortfalls in the copy's layout (the copy's texels are read only through its wide
+  // rows, so they are not copied), the band's texels by step, from which lane 0 reads
   // the band before's last lane up to stepOf(x + 1, kLanes - 1) for x up to the band's last step,
   // and the copy's wide rows and the band's parent tables (ParentCopy).
   constexpr size_t kAlign = 32;
   auto aligned = [](size_t bytes) { return (bytes + kAlign - 1) / kAlign * kAlign; };
   ParentCopy parent;
   uint32_t parent_rows = 0;
-  size_t parent_bytes = 0, shortfall_bytes = 0, wide_bytes = 0, band_table_bytes = 0;
+  size_t shortfall_bytes = 0, wide_bytes = 0, band_table_bytes = 0;
   if (has_parent) {
     // The parent texels the blocks read: their own, and for predictors 4 and 5 those beside
     // them.
@@ -699,12 +700,9 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
     parent.first_column = first_column;
     parent_rows = last_row - first_row + 1;
     parent.stride = (last_column - first_column + 1) * channels;
-    // Predictor 4's shortfalls lie in the copy's layout, and its gathers read four bytes from a
-    // texel's first (two past a shortfall's). The others read the wide rows only.
-    if (corrected) {
-      parent_bytes = aligned(size_t(parent_rows) * parent.stride + 4);
-      shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
-    }
+    // Predictor 4's shortfalls lie in the copy's layout, and its lookups read four bytes from
+    // a shortfall's first.
+    if (corrected) shortfall_bytes = aligned(size_t(parent_rows) * parent.stride * 2 + 2);
     parent.wide_stride = bandParentEntries(walk.width) + kLanes - 1;
     wide_bytes = aligned(size_t(parent_rows) * parent.wide_stride * 4);
     band_table_bytes = size_t(bandParentEntries(walk.width)) * kLanes * 4;
@@ -714,7 +712,7 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   // Predictor 4's departures by step, as the band's texels, per channel.
   const size_t detail_bytes = corrected ? diagonal_bytes * channels : 0;
   Streams streams;
-  const size_t scratch_bytes = parent_bytes + shortfall_bytes + diagonal_bytes + wide_bytes +
+  const size_t scratch_bytes = shortfall_bytes + diagonal_bytes + wide_bytes +
                                band_table_bytes * (least_squares || corrected ? 2 : 1) +
                                detail_bytes;
   if (!parse(section, channels, kAlign + scratch_bytes, padded, streams)) return false;
@@ -739,18 +737,11 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   int32_t model_offsets[4 * kParentContexts];
   for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
   uint8_t* const scratch_end = padded.data() + padded.size();
-  uint8_t* parent_copy = scratch_end - scratch_bytes;
-  parent_copy -= reinterpret_cast<uintptr_t>(parent_copy) % kAlign;
-  int16_t* shortfall = reinterpret_cast<int16_t*>(parent_copy + parent_bytes);
-  uint32_t* diagonal = reinterpret_cast<uint32_t*>(parent_copy + parent_bytes + shortfall_bytes);
-  auto* detail_diagonal = reinterpret_cast<int32_t*>(parent_copy + scratch_bytes - detail_bytes);
-  if (corrected) {
-    for (uint32_t y = 0; y < parent_rows; ++y)
-      std::memcpy(parent_copy + size_t(y) * parent.stride,
-                  walk.parent->row(parent.first_row + y) + size_t(parent.first_column) * channels,
-                  parent.stride);
-    parent.texels = parent_copy;
-  }
+  uint8_t* scratch = scratch_end - scratch_bytes;
+  scratch -= reinterpret_cast<uintptr_t>(scratch) % kAlign;
+  int16_t* shortfall = reinterpret_cast<int16_t*>(scratch);
+  uint32_t* diagonal = reinterpret_cast<uint32_t*>(scratch + shortfall_bytes);
+  auto* detail_diagonal = reinterpret_cast<int32_t*>(scratch + scratch_bytes - detail_bytes);
   if (has_parent) {
     // Word j of a wide row is parent column columns.parent[0] - 8 + j, clamped into the copy's
     // columns: the copy's own from the parent's rows, then its edge texels' copies.
