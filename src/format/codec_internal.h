@@ -139,7 +139,8 @@ enum class PtmCoder : uint8_t {
   kRansParentErrors = 6,
   /// kRans's symbols and contexts (model family 1), with every predictor but 2, coded in
   /// bands of eight rows that decode side by side (ptm_lanes.h): one 32-bit state per channel
-  /// and row of the band, a word stream and an escape stream per channel; no tables
+  /// and row of the band, a word stream and an escape stream per channel; explicit tables
+  /// as coders 1-6
   kRansLanes = 7,
 };
 

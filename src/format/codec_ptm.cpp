@@ -23,6 +23,11 @@ namespace {
 // with few matches), so the cheapest level wins: the builder encodes every tile.
 constexpr int kDefaultZstdLevel = 1;
 
+// What a table must save beyond its bytes: the lanes' SIMD decoder pays for each in time.
+double tableMinGainBytes(PtmCoder coder) {
+  return coder == PtmCoder::kRansLanes ? lanes::kTableMinGainBytes : 0;
+}
+
 // Fits predictor 5's weights to the tile `walk` covers into `weights`, and without predictor
 // 4's estimate into `without_estimate`. `walk` has no weights yet (prepareWalk's null): the fit
 // uses the texels, not the predictions.
@@ -179,14 +184,14 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
-  const double bits = rans::chooseModels(familyOf(coder), recording.counts, params);
-  if (coder == PtmCoder::kRansLanes)
-    return recording.header.size() + params.size() + size_t(bits / 8) +
-           lanes::headerBytes(recording.channels);
+  rans::chooseModels(familyOf(coder), recording.counts, params);
   rans::Tables tables;
-  rans::chooseTables(familyOf(coder), recording.counts, params, tables);
+  rans::chooseTables(familyOf(coder), recording.counts, params, tables, tableMinGainBytes(coder));
+  // The states: the lanes' header holds them with the streams' lengths.
+  const size_t states = coder == PtmCoder::kRansLanes ? lanes::headerBytes(recording.channels)
+                                                      : 4 * recording.channels;
   return recording.header.size() + params.size() + tables.section.size() + size_t(tables.bits / 8) +
-         4 * recording.channels;
+         states;
 }
 
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
@@ -199,26 +204,20 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
     rans::chooseModels(familyOf(coder), recording.counts, chosen);
     models = &chosen;
   }
-  if (coder == PtmCoder::kRansLanes) {
-    // No tables: the lanes gather every model from the family's array.
-    TESSERA_CHECK(codesPredictor(coder, Predictor(recording.header[0])))
-        << "ptm: coder 7 (lanes) codes every predictor but 2 (bilinear parent)";
-    std::vector<uint8_t> payload = recording.header;
-    payload[1] = uint8_t(coder);
-    payload.insert(payload.end(), models->begin(), models->end());
-    const rans::Model* family = rans::models(lanes::kFamily);
-    std::vector<const rans::Model*> context_models(models->size());
-    for (size_t i = 0; i < models->size(); ++i) context_models[i] = &family[(*models)[i]];
-    lanes::encode(recording.symbols, recording.symbol_contexts, recording.width, recording.height,
-                  recording.channels, recording.contexts, context_models, payload);
-    return payload;
-  }
   rans::Tables tables;
-  const bool with_tables = rans::chooseTables(familyOf(coder), recording.counts, *models, tables);
+  const bool with_tables = rans::chooseTables(familyOf(coder), recording.counts, *models, tables,
+                                              tableMinGainBytes(coder));
   std::vector<uint8_t> payload = recording.header;
   payload[1] = uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0);
   payload.insert(payload.end(), models->begin(), models->end());
   payload.insert(payload.end(), tables.section.begin(), tables.section.end());
+  if (coder == PtmCoder::kRansLanes) {
+    TESSERA_CHECK(codesPredictor(coder, Predictor(recording.header[0])))
+        << "ptm: coder 7 (lanes) codes every predictor but 2 (bilinear parent)";
+    lanes::encode(recording.symbols, recording.symbol_contexts, recording.width, recording.height,
+                  recording.channels, recording.contexts, tables.context_models, payload);
+    return payload;
+  }
   rans::encode(familyOf(coder), recording.symbols, recording.symbol_contexts, recording.channels,
                recording.contexts, tables.context_models, state->compressed, payload);
   return payload;

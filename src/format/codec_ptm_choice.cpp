@@ -30,7 +30,7 @@ namespace {
 //   predictor 4 than with the median alone, its photograph 23 % with predictor 5, its
 //   synthetic source 3.6 % smaller with nearest parent in the lanes than with zstd;
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
-//   decode first: 7 (the lanes, coder 1's contexts without tables), 1 (per-channel contexts,
+//   decode first: 7 (the lanes, coder 1's contexts), 1 (per-channel contexts,
 //   model family 1), 2 (chained contexts), 3 (model family 2), 4 (both), 6 (4 with the
 //   parent's gradients and the neighbours' errors in the activity), each tile takes the
 //   fastest whose estimated size is within 3 % of coder 6's.

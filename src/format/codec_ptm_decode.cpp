@@ -71,8 +71,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
   const bool with_tables = (payload[1] & kPtmTablesFlag) != 0;
   const uint8_t coder_byte = payload[1] & uint8_t(~kPtmTablesFlag);
   if (coder_byte > uint8_t(PtmCoder::kRansLanes) ||
-      (with_tables &&
-       (!isRansCoder(PtmCoder(coder_byte)) || PtmCoder(coder_byte) == PtmCoder::kRansLanes)))
+      (with_tables && !isRansCoder(PtmCoder(coder_byte))))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
   const Predictor predictor = Predictor(payload[0]);
@@ -134,8 +133,22 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
       return decodeRans<true, FamilyId::kMixture15, true, true>(
           payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansLanes: {
-      if (!lanes::decode(payload.subspan(body_at + params_bytes), walk, channels, predictor,
-                         payload.subspan(body_at, params_bytes), state->plane))
+      const rans::Model* family = rans::models(lanes::kFamily);
+      const rans::Model* context_models[4 * kParentContexts];
+      for (size_t i = 0; i < params_bytes; ++i) context_models[i] = &family[payload[body_at + i]];
+      size_t section_at = body_at + params_bytes;
+      if (with_tables) {
+        const size_t section = rans::readTables(payload.subspan(section_at), uint32_t(params_bytes),
+                                                rans::scaleBits(lanes::kFamily), state->ptm_tables,
+                                                std::span(context_models, params_bytes));
+        if (section == 0)
+          return fail(ErrorCode::kCorrupt,
+                      "ptm payload: explicit tables truncated, empty, or with a count outside "
+                      "1..64 or padding bits set");
+        section_at += section;
+      }
+      if (!lanes::decode(payload.subspan(section_at), walk, channels, predictor,
+                         std::span(context_models, params_bytes), state->plane))
         return fail(ErrorCode::kCorrupt,
                     "ptm payload: lane streams truncated, corrupt or followed by trailing bytes");
       return {};

@@ -239,19 +239,59 @@ bool avx512Available() {
   return available;
 }
 
+namespace {
+
+// A model's kScale entries of the SIMD decoders' symbol table (slotTables()).
+void fillSlots(const rans::Model& model, uint32_t* slots) {
+  for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
+    const uint32_t freq = model.freq[symbol], first = symbol | freq << kFreqShift;
+    // A sum rather than an or, so that the compiler fills a run a vector at a time.
+    uint32_t* run = slots + model.start[symbol];
+    for (uint32_t i = 0; i < freq; ++i) run[i] = first + (i << kBiasShift);
+  }
+}
+
+}  // namespace
+
 const uint32_t* slotTables() {
   static const std::unique_ptr<uint32_t[]> tables = [] {
     auto built = std::make_unique<uint32_t[]>(size_t(rans::kModelCount) * kScale);
     const rans::Model* family = rans::models(kFamily);
     for (uint32_t m = 0; m < rans::kModelCount; ++m)
-      for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
-        const uint32_t start = family[m].start[symbol], freq = family[m].freq[symbol];
-        for (uint32_t i = 0; i < freq; ++i)
-          built[size_t(m) * kScale + start + i] = symbol | i << kBiasShift | freq << kFreqShift;
-      }
+      fillSlots(family[m], built.get() + size_t(m) * kScale);
     return built;
   }();
   return tables.get();
+}
+
+void slotModels(std::span<const rans::Model* const> context_models, SlotModels& out) {
+  const rans::Model* family = rans::models(kFamily);
+  const auto family_from = reinterpret_cast<uintptr_t>(family);
+  const auto family_to = reinterpret_cast<uintptr_t>(family + rans::kModelCount);
+  uint32_t tables = 0;
+  for (size_t i = 0; i < context_models.size(); ++i) {
+    const auto at = reinterpret_cast<uintptr_t>(context_models[i]);
+    if (at >= family_from && at < family_to)
+      out.offsets[i] = int32_t((context_models[i] - family) * kScale);
+    else
+      out.offsets[i] = int32_t((rans::kModelCount + tables++) * kScale);
+  }
+  if (tables == 0) {
+    out.tables = slotTables();
+    return;
+  }
+  // Each thread writes its tiles' tables behind its own copy of the family's entries: 4 MiB
+  // copied once per decoding thread, against a copy of the tile's family models at every tile.
+  thread_local std::unique_ptr<uint32_t[]> with_room;
+  if (with_room == nullptr) {
+    with_room = std::make_unique_for_overwrite<uint32_t[]>(
+        size_t(rans::kModelCount + 4 * kParentContexts) * kScale);
+    std::memcpy(with_room.get(), slotTables(), size_t(rans::kModelCount) * kScale * 4);
+  }
+  for (size_t i = 0; i < context_models.size(); ++i)
+    if (out.offsets[i] >= int32_t(rans::kModelCount * kScale))
+      fillSlots(*context_models[i], with_room.get() + out.offsets[i]);
+  out.tables = with_room.get();
 }
 
 void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts, uint32_t width,
@@ -314,20 +354,17 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 }
 
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
-            Path path) {
+            Predictor predictor, std::span<const rans::Model* const> context_models,
+            std::vector<uint8_t>& padded, Path path) {
   if (path == Path::kFastest && avx512Available())
-    return avx512::decodeSimd(section, walk, channels, predictor, params, padded);
+    return avx512::decodeSimd(section, walk, channels, predictor, context_models, padded);
   if ((path == Path::kFastest || path == Path::kAvx2) && simdAvailable())
-    return avx2::decodeSimd(section, walk, channels, predictor, params, padded);
+    return avx2::decodeSimd(section, walk, channels, predictor, context_models, padded);
   // The scalar lanes read predictor 4's planes, which prepareWalk leaves out where the SIMD
   // decoder was to run (decodesWithoutPlanes).
   if (computesParentCorrectedEstimate(predictor, walk) && walk.upsampled == nullptr) return false;
   Streams streams;
   if (!parse(section, channels, 0, padded, streams)) return false;
-  const rans::Model* family = rans::models(kFamily);
-  const rans::Model* models[4 * kParentContexts];
-  for (size_t i = 0; i < params.size(); ++i) models[i] = &family[params[i]];
   Geometry geometry{walk.texels,
                     walk.width,
                     walk.height,
@@ -339,8 +376,8 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
                     walk.parent,
                     walk.columns,
                     walk.rows,
-                    models,
-                    uint32_t(params.size() / channels),
+                    context_models.data(),
+                    uint32_t(context_models.size() / channels),
                     walk.upsampled,
                     walk.detail,
                     walk.ls_weights,

@@ -35,6 +35,12 @@ inline constexpr uint32_t kLower = 1u << 16;
 /// The models come from family 1, whose 12-bit tables name a slot's symbol in one lookup.
 inline constexpr rans::FamilyId kFamily = rans::FamilyId::kGeometric12;
 
+/// What an explicit table must save beyond its own bytes for coder 7 to send it. The SIMD
+/// decoder builds each table into kScale entries of its symbol table (16 KiB) before the
+/// tile: on the codec study's synthetic source a table cost about 2.5 us of a 256-px tile's
+/// 290-360 us, whatever it saved (docs/benchmarks.md, "thirteenth session").
+inline constexpr double kTableMinGainBytes = 256;
+
 /// Bytes of the section's header: each (channel, lane) state as u32, then per channel the
 /// lengths of its word stream and its escape stream as u32.
 constexpr size_t headerBytes(uint32_t channels) {
@@ -43,7 +49,8 @@ constexpr size_t headerBytes(uint32_t channels) {
 
 /// Appends the lane section of a tile of `width` x `height` texels whose symbols and contexts
 /// RansRecorder<false, false> recorded in raster order (`channels` per texel), each coded
-/// under `context_models[channel * contexts_per_channel + context]` (family kFamily).
+/// under `context_models[channel * contexts_per_channel + context]` (family kFamily, or an
+/// explicit table at its scale).
 void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts, uint32_t width,
             uint32_t height, uint32_t channels, uint32_t contexts_per_channel,
             std::span<const rans::Model* const> context_models, std::vector<uint8_t>& out);
@@ -54,13 +61,14 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 enum class Path : uint8_t { kFastest, kScalar, kAvx2 };
 
 /// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
-/// `predictor` (any but 2) with coder 7; `params` holds each (channel, context)'s model byte
-/// in family kFamily; `padded` is scratch. Returns false when the section is truncated or
-/// corrupt (a state out of range, a stream that does not end where its symbols do, an escape
-/// of a residual that needed none).
+/// `predictor` (any but 2) with coder 7; `context_models` holds each (channel, context)'s
+/// model, channel-major: the model of family kFamily its model byte names, or the explicit
+/// table the payload sends for it (rans::readTables, at kFamily's scale); `padded` is scratch.
+/// Returns false when the section is truncated or corrupt (a state out of range, a stream that
+/// does not end where its symbols do, an escape of a residual that needed none).
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded,
-            Path path = Path::kFastest);
+            Predictor predictor, std::span<const rans::Model* const> context_models,
+            std::vector<uint8_t>& padded, Path path = Path::kFastest);
 
 /// True when decode() can take its SIMD path on this processor (AVX2).
 bool simdAvailable();

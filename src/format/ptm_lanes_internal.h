@@ -115,16 +115,31 @@ inline constexpr uint32_t kSymbolBits = 6, kBiasShift = 6, kFreqShift = 18;
 static_assert(rans::kAlphabet <= 1u << kSymbolBits && kFreqShift - kBiasShift >= kScaleBits);
 const uint32_t* slotTables();
 
+/// Where the SIMD decoders look up each context's model: `tables` holds kScale entries per
+/// model as slotTables() does, and context i's model starts at entry `offsets[i]`. Without
+/// explicit tables `tables` is slotTables() itself; with them, this thread's copy of it
+/// followed by the tile's tables, so that one base and 32-bit offsets reach every model.
+struct SlotModels {
+  const uint32_t* tables = nullptr;
+  int32_t offsets[4 * kParentContexts];
+};
+
+/// Lays out `context_models` (decode()'s) as SlotModels: a family model by its index, an
+/// explicit table by the entries it is built into.
+void slotModels(std::span<const rans::Model* const> context_models, SlotModels& out);
+
 /// decode() on a SIMD path, one per instruction set, from the same source (ptm_lanes_simd.h):
 /// the processor must have AVX2 (simdAvailable()), and for avx512::decodeSimd AVX-512 F, VL,
 /// BW and DQ (avx512Available()), whose 32 vector registers spare the AVX2 build's spills.
 namespace avx2 {
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-                Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded);
+                Predictor predictor, std::span<const rans::Model* const> context_models,
+                std::vector<uint8_t>& padded);
 }  // namespace avx2
 namespace avx512 {
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-                Predictor predictor, std::span<const uint8_t> params, std::vector<uint8_t>& padded);
+                Predictor predictor, std::span<const rans::Model* const> context_models,
+                std::vector<uint8_t>& padded);
 }  // namespace avx512
 
 }  // namespace tessera::detail::ptm::lanes

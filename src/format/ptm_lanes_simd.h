@@ -45,7 +45,7 @@ enum class LanePredictor : uint8_t {
 //
 // kLeastSquares: predictor 5, predictor 4's estimate and more.
 template <uint32_t kCh, LanePredictor kPredictor>
-TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_t* model_offsets,
+TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const SlotModels& models,
                                      const ParentCopy& parent, uint32_t* diagonal,
                                      int32_t* detail_diagonal, const int16_t* shortfall) {
   constexpr bool kNearest = kPredictor == LanePredictor::kNearest;
@@ -72,7 +72,7 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   const uint32_t steps = stepsPerBand(width);
   // Words per channel of `detail_diagonal`, as of `diagonal`.
   [[maybe_unused]] const size_t diagonal_words = size_t(steps + stepOf(1, kLanes - 1)) * kLanes;
-  const int* slot_tables = reinterpret_cast<const int*>(slotTables());
+  const int* slot_tables = reinterpret_cast<const int*>(models.tables);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   const __m256i two_lane = _mm256_slli_epi32(lane, 1);
   // Rotates lane k - 1's value into lane k; lane 0's is replaced after.
@@ -119,10 +119,11 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
   __m256i group_models[kCh][kGroups];
   for (uint32_t c = 0; c < kCh; ++c)
     for (uint32_t group = 0; group < kGroups; ++group)
-      group_models[c][group] = group * kActivityClasses < g.contexts
-                                   ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
-                                         model_offsets + c * g.contexts + group * kActivityClasses))
-                                   : zero;
+      group_models[c][group] =
+          group * kActivityClasses < g.contexts
+              ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
+                    models.offsets + c * g.contexts + group * kActivityClasses))
+              : zero;
   // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
   // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
   // columns differ by even numbers, is a first child or every lane a second.
@@ -584,22 +585,18 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const int32_
 
 // decodeAvx2 for the tile's channel count.
 template <LanePredictor kPredictor>
-bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s,
-                        const int32_t* model_offsets, const ParentCopy& parent, uint32_t* diagonal,
-                        int32_t* detail_diagonal, const int16_t* shortfall) {
+bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s, const SlotModels& models,
+                        const ParentCopy& parent, uint32_t* diagonal, int32_t* detail_diagonal,
+                        const int16_t* shortfall) {
   switch (channels) {
     case 1:
-      return decodeAvx2<1, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
-                                       shortfall);
+      return decodeAvx2<1, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
     case 2:
-      return decodeAvx2<2, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
-                                       shortfall);
+      return decodeAvx2<2, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
     case 3:
-      return decodeAvx2<3, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
-                                       shortfall);
+      return decodeAvx2<3, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
     default:
-      return decodeAvx2<4, kPredictor>(g, s, model_offsets, parent, diagonal, detail_diagonal,
-                                       shortfall);
+      return decodeAvx2<4, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
   }
 }
 
@@ -665,7 +662,7 @@ TESSERA_LANES_TARGET void blockShortfalls(const Walk& walk, uint32_t channels,
 }  // namespace
 
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-                Predictor predictor, std::span<const uint8_t> params,
+                Predictor predictor, std::span<const rans::Model* const> context_models,
                 std::vector<uint8_t>& padded) {
   const bool has_parent = predictor != Predictor::kRoot;
   const bool least_squares = predictor == Predictor::kLeastSquares;
@@ -728,14 +725,14 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                     walk.columns,
                     walk.rows,
                     nullptr,
-                    uint32_t(params.size() / channels),
+                    uint32_t(context_models.size() / channels),
                     walk.upsampled,
                     nullptr,
                     walk.ls_weights,
                     {}};
   if (least_squares) sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
-  int32_t model_offsets[4 * kParentContexts];
-  for (size_t i = 0; i < params.size(); ++i) model_offsets[i] = int32_t(params[i] * kScale);
+  SlotModels models;
+  slotModels(context_models, models);
   uint8_t* const scratch_end = padded.data() + padded.size();
   uint8_t* scratch = scratch_end - scratch_bytes;
   scratch -= reinterpret_cast<uintptr_t>(scratch) % kAlign;
@@ -764,26 +761,25 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
   bool ok = false;
   switch (predictor) {
     case Predictor::kParentNearest:
-      ok = decodeAvx2Channels<LanePredictor::kNearest>(
-          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
+      ok = decodeAvx2Channels<LanePredictor::kNearest>(channels, geometry, streams, models, parent,
+                                                       diagonal, detail_diagonal, shortfall);
       break;
     case Predictor::kParentCorrected:
       ok = decodeAvx2Channels<LanePredictor::kCorrected>(
-          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
+          channels, geometry, streams, models, parent, diagonal, detail_diagonal, shortfall);
       break;
     case Predictor::kLeastSquares:
       if (plain) {
-        ok = decodeAvx2Channels<LanePredictor::kLeastSquaresPlain>(channels, geometry, streams,
-                                                                   model_offsets, parent, diagonal,
-                                                                   detail_diagonal, shortfall);
+        ok = decodeAvx2Channels<LanePredictor::kLeastSquaresPlain>(
+            channels, geometry, streams, models, parent, diagonal, detail_diagonal, shortfall);
         break;
       }
       ok = decodeAvx2Channels<LanePredictor::kLeastSquares>(
-          channels, geometry, streams, model_offsets, parent, diagonal, detail_diagonal, shortfall);
+          channels, geometry, streams, models, parent, diagonal, detail_diagonal, shortfall);
       break;
     default:
-      ok = decodeAvx2Channels<LanePredictor::kMedian>(channels, geometry, streams, model_offsets,
-                                                      parent, diagonal, detail_diagonal, shortfall);
+      ok = decodeAvx2Channels<LanePredictor::kMedian>(channels, geometry, streams, models, parent,
+                                                      diagonal, detail_diagonal, shortfall);
   }
   return ok && finished(streams, channels);
 }

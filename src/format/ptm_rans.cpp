@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <iterator>
 #include <memory>
 
@@ -73,8 +74,10 @@ double symbolBits(uint32_t scale_bits, uint16_t freq, uint32_t symbol) {
   return double(scale_bits) - std::log2(double(freq)) + (symbol == kEscape ? 8.0 : 0.0);
 }
 
-// frequencies(), and the decoder's tables.
-void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& model) {
+// frequencies(), the decoder's tables, and with `costs` the encoder's cost_bits (64 logarithms,
+// which decoders building a payload's tables skip).
+void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& model,
+              bool costs = true) {
   const uint32_t scale = 1u << scale_bits;
   frequencies(weight, scale_bits, model.freq);
   const uint32_t bucket_slots = scale >> kBucketBits;
@@ -82,14 +85,17 @@ void quantise(const uint64_t (&weight)[kAlphabet], uint32_t scale_bits, Model& m
   for (uint32_t s = 0; s < kAlphabet; ++s) {
     model.start[s] = uint16_t(start);
     model.entry[s] = start | uint32_t(model.freq[s]) << 16;
-    // The buckets whose first slot lies in this symbol's range, shared where the symbol ends
-    // inside them.
+    // The buckets whose first slot lies in this symbol's range; the last is shared where the
+    // symbol ends inside it. One fill per symbol: decoders build a payload's tables per tile.
     const uint32_t end = start + model.freq[s];
-    for (uint32_t b = (start + bucket_slots - 1) / bucket_slots;
-         b < kBuckets && b * bucket_slots < end; ++b)
-      model.bucket_symbol[b] = uint8_t(s | ((b + 1) * bucket_slots > end ? kSharedBucket : 0));
+    const uint32_t first = (start + bucket_slots - 1) / bucket_slots;
+    const uint32_t last = std::min((end + bucket_slots - 1) / bucket_slots, kBuckets);
+    if (first < last) {
+      std::memset(model.bucket_symbol + first, int(s), last - first);
+      if (last * bucket_slots > end) model.bucket_symbol[last - 1] |= kSharedBucket;
+    }
     start = end;
-    model.cost_bits[s] = float(symbolBits(scale_bits, model.freq[s], s));
+    if (costs) model.cost_bits[s] = float(symbolBits(scale_bits, model.freq[s], s));
   }
   model.entry[kAlphabet] = scale;
 }
@@ -326,14 +332,15 @@ void tableWeights(const uint8_t* levels, uint32_t count, uint64_t (&weight)[kAlp
 
 }  // namespace
 
-void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model) {
+void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model,
+                     bool costs) {
   uint64_t weight[kAlphabet];
   tableWeights(levels, count, weight);
-  quantise(weight, scale_bits, model);
+  quantise(weight, scale_bits, model, costs);
 }
 
 bool chooseTables(FamilyId family_id, const ContextCounts& context_counts,
-                  std::span<const uint8_t> params, Tables& tables) {
+                  std::span<const uint8_t> params, Tables& tables, double min_gain_bytes) {
   const uint32_t context_count = context_counts.context_count;
   const std::vector<uint32_t>& counts = context_counts.counts;
   const uint32_t scale_bits = scaleBits(family_id);
@@ -370,7 +377,7 @@ bool chooseTables(FamilyId family_id, const ContextCounts& context_counts,
     for (uint32_t s = 0; s < symbols; ++s)
       if (count[s] != 0) table_bits += count[s] * symbolBits(scale_bits, freq[s], s);
     const double gain = bits - table_bits - 8.0 * double(tableBytes(symbols));
-    if (gain <= 0) continue;
+    if (gain <= 8.0 * min_gain_bytes) continue;
     saved_bits += gain;
     table_count[context] = symbols;
     flagged.push_back(context);
@@ -447,7 +454,7 @@ size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32
     // Padding bits are zero, and some symbol has a weight (a model needs one).
     if (acc != 0 || any == 0) return 0;
     position += tableBytes(symbols);
-    buildTableModel(levels, symbols, scale_bits, models[table]);
+    buildTableModel(levels, symbols, scale_bits, models[table], false);
     context_models[context] = &models[table];
     ++table;
   }

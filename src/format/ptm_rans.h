@@ -198,7 +198,9 @@ constexpr size_t tableBytes(uint32_t count) {
 }
 
 /// The model of a table: `levels[s]` for s < count, 0 after; `scale_bits` as the family's.
-void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model);
+/// Without `costs`, cost_bits is left as it was: only encoders read it.
+void buildTableModel(const uint8_t* levels, uint32_t count, uint32_t scale_bits, Model& model,
+                     bool costs = true);
 
 /// The tables a payload sends, and every context's model with them.
 struct Tables {
@@ -213,14 +215,16 @@ struct Tables {
 };
 
 /// Chooses the tables for symbols whose family models are `params` (chooseModels'): a context
-/// takes one where its bits fall by more than the table's bytes. Returns false, and `tables`
-/// empty but for context_models, when no context gains enough to pay for the bitmap too.
+/// takes one where its bits fall by more than the table's bytes plus `min_gain_bytes` (the
+/// price a coder sets on a table's decoding). Returns false, and `tables` empty but for
+/// context_models, when no context gains enough to pay for the bitmap too.
 bool chooseTables(FamilyId family, const ContextCounts& counts, std::span<const uint8_t> params,
-                  Tables& tables);
+                  Tables& tables, double min_gain_bytes = 0);
 
 /// Reads a tables section of `context_count` contexts at the start of `bytes` into `models` and
 /// `context_models` (whose family entries the caller set): the section's length, or 0 when it
-/// is truncated, a count is outside 1..64, or padding bits are set.
+/// is truncated, a count is outside 1..64, or padding bits are set. The models are for
+/// decoding: their cost_bits are not computed.
 size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32_t scale_bits,
                   std::vector<Model>& models, std::span<const Model*> context_models);
 

@@ -42,6 +42,20 @@ ChildPayload makeChildPayload(uint32_t channels, std::optional<Predictor> predic
   return result;
 }
 
+// Coder 7 with explicit tables: the nearest parent's payload of a comb, with a table wherever
+// one saves any bytes (lanesPayloadWithAnyTables).
+ChildPayload makeLanesPayloadWithTables(uint32_t channels) {
+  ChildPayload result =
+      makeChildPayload(channels, Predictor::kParentNearest, PtmCoder::kRansLanes, 8);
+  ParentTexels parent = parentOf(result.parent, 1, 1, kSweepTilePx, 1);
+  PtmRecording recording;
+  EXPECT_TRUE(recordPtm(result.child.view(), &parent, Predictor::kParentNearest, PtmCoder::kRans,
+                        nullptr, nullptr, recording)
+                  .has_value());
+  result.payload = lanesPayloadWithAnyTables(recording);
+  return result;
+}
+
 // Every predictor that reads the parent with every coder: what the truncation and corruption
 // tests sweep. (On 64-px tiles the sweeps had to leave out the coders whose walks others share;
 // on kSweepTilePx tiles every combination costs less under ASan than that subset did.)
@@ -57,9 +71,11 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   // Predictor 5 without predictor 4's estimate, which its decoders then skip.
   for (PtmCoder coder : {PtmCoder::kRans, PtmCoder::kRansLanes})
     payloads.push_back(makeChildPayload(channels, Predictor::kLeastSquares, coder, 1, true));
-  // And the default's payload of a comb, which carries explicit tables.
+  // And payloads that carry explicit tables: the default's of a comb, and coder 7's.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
+  payloads.push_back(makeLanesPayloadWithTables(channels));
+  EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels, coder 7";
   return payloads;
 }
 
@@ -101,7 +117,8 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   bad = tile.payload;
   bad[1] = uint8_t(PtmCoder::kRansLanes) + 1;
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
-  // The tables flag on zstd, on coder 7 (which has none), or on a coder past the last.
+  // The tables flag on zstd, on coder 7 over another coder's payload (no tables section, no
+  // lane section), or on a coder past the last.
   for (const uint8_t coder_byte :
        {kPtmTablesFlag, uint8_t(kPtmTablesFlag | uint8_t(PtmCoder::kRansLanes)),
         uint8_t(kPtmTablesFlag | (uint8_t(PtmCoder::kRansLanes) + 1))}) {

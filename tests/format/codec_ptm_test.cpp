@@ -209,7 +209,7 @@ void expectEffortTwoTakesTheLanesWith(PyramidTiles& pyramid, Predictor expected,
   auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
   ASSERT_TRUE(payload.has_value());
   EXPECT_EQ((*payload)[0], uint8_t(expected));
-  EXPECT_EQ((*payload)[1], uint8_t(PtmCoder::kRansLanes));
+  EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
   for (Predictor other : others) {
     auto payload_with = encodePtm(child.view(), {}, &parent, other, PtmCoder::kRansLanes, nullptr);
     ASSERT_TRUE(payload_with.has_value());

@@ -28,17 +28,36 @@ size_t modelsAt(std::span<const uint8_t> payload, uint32_t channels) {
          (payload[0] == uint8_t(Predictor::kLeastSquares) ? lsWeightBytes(channels) : 0);
 }
 
-// Where a coder-7 payload's lane section starts: after one model byte per context.
-size_t laneSectionAt(std::span<const uint8_t> payload, uint32_t channels) {
+// A coder-7 payload's context models, its explicit tables' included, and where its lane
+// section starts: after one model byte per context and the tables.
+struct LaneModels {
+  std::vector<rans::Model> tables;
+  std::vector<const rans::Model*> context_models;
+  size_t section_at = 0;
+};
+
+LaneModels laneModels(std::span<const uint8_t> payload, uint32_t channels) {
+  LaneModels out;
   const bool has_parent = payload[0] != uint8_t(Predictor::kRoot);
-  return modelsAt(payload, channels) +
-         size_t(has_parent ? ptm::kParentContexts : ptm::kRootContexts) * channels;
+  const size_t count = size_t(has_parent ? ptm::kParentContexts : ptm::kRootContexts) * channels;
+  const size_t models_at = modelsAt(payload, channels);
+  const rans::Model* family = rans::models(ptm::lanes::kFamily);
+  for (size_t i = 0; i < count; ++i) out.context_models.push_back(&family[payload[models_at + i]]);
+  out.section_at = models_at + count;
+  if ((payload[1] & kPtmTablesFlag) != 0) {
+    const size_t section =
+        rans::readTables(payload.subspan(out.section_at), uint32_t(count),
+                         rans::scaleBits(ptm::lanes::kFamily), out.tables, out.context_models);
+    EXPECT_NE(section, 0u) << "the payload's tables";
+    out.section_at += section;
+  }
+  return out;
 }
 
 // The payload's escaped residuals, all channels: from the lane section's stream lengths.
 uint32_t escapeBytes(std::span<const uint8_t> payload, uint32_t channels) {
   const size_t lengths =
-      laneSectionAt(payload, channels) + size_t(channels) * ptm::lanes::kLanes * 4;
+      laneModels(payload, channels).section_at + size_t(channels) * ptm::lanes::kLanes * 4;
   uint32_t total = 0;
   for (uint32_t c = 0; c < channels; ++c) {
     const uint8_t* escape_length = payload.data() + lengths + c * 8 + 4;
@@ -59,7 +78,6 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
   const bool has_parent = predictor != Predictor::kRoot;
   CodecScratch scratch;
   ptm::AxisMap columns, rows;
-  const size_t models_at = modelsAt(payload, channels);
   const auto* weights = reinterpret_cast<const int8_t*>(payload.data() + ptm::kHeaderBytes);
   const bool planes = path == ptm::lanes::Path::kScalar;
   auto walk = ptm::prepareWalk(out.texels.data(), side, side, channels,
@@ -72,7 +90,7 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
                          (predictor == Predictor::kLeastSquares && usesEstimate(weights, channels));
   EXPECT_EQ(walk->estimates, estimates);
   EXPECT_EQ(walk->upsampled != nullptr, estimates && planes);
-  const size_t section_at = laneSectionAt(payload, channels);
+  const LaneModels models = laneModels(payload, channels);
   std::vector<uint8_t> padded;
   if (estimates && planes) {
     Image scratch_out(side, side, channels);
@@ -83,14 +101,13 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
                                     other_columns, other_rows, false);
     EXPECT_TRUE(without.has_value());
     if (without) {
-      EXPECT_FALSE(ptm::lanes::decode(payload.subspan(section_at), *without, channels, predictor,
-                                      payload.subspan(models_at, section_at - models_at), padded,
-                                      path))
+      EXPECT_FALSE(ptm::lanes::decode(payload.subspan(models.section_at), *without, channels,
+                                      predictor, models.context_models, padded, path))
           << "the scalar lanes without predictor 4's planes";
     }
   }
-  EXPECT_TRUE(ptm::lanes::decode(payload.subspan(section_at), *walk, channels, predictor,
-                                 payload.subspan(models_at, section_at - models_at), padded, path));
+  EXPECT_TRUE(ptm::lanes::decode(payload.subspan(models.section_at), *walk, channels, predictor,
+                                 models.context_models, padded, path));
   return out;
 }
 
@@ -212,6 +229,76 @@ TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
   }
 }
 
+TEST(PtmLanes, ExplicitTablesRoundTripWithEveryDecoderAndPayForThemselves) {
+  // Texels on multiples of 16 (a comb): residuals that no model of the family is shaped for.
+  // The SIMD decoders build the tables behind their thread's copy of the family's symbol table;
+  // the scalar lanes use the tables' models. The tiles are small, so the payloads take a table
+  // wherever one saves any bytes (lanesPayloadWithAnyTables), not only where the encoder would.
+  for (uint32_t channels = 1; channels <= 4; ++channels) {
+    const PyramidTiles comb = makePyramid(75, 69, channels, 32, 1, channels + 5, 16);
+    const uint32_t side = 32 + 2;
+    for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                Predictor::kParentCorrected, Predictor::kLeastSquares}) {
+      size_t with_tables = 0, bytes = 0, bytes_without = 0;
+      expectCoarseToFineRoundTrip(
+          comb, channels,
+          [&](const Image& tile, const ParentTexels* parent) -> Result<std::vector<uint8_t>> {
+            PtmRecording recording;
+            TESSERA_TRY(recordPtm(tile.view(), parent, predictor, PtmCoder::kRans, nullptr, nullptr,
+                                  recording));
+            std::vector<uint8_t> payload = lanesPayloadWithAnyTables(recording);
+            if (hasTables(payload)) {
+              ++with_tables;
+              expectEveryDecoderAgrees(payload, side, channels, parent, tile);
+              // The same symbols under the family's models alone.
+              std::vector<uint8_t> params;
+              const double bits = rans::chooseModels(ptm::lanes::kFamily, recording.counts, params);
+              bytes += payload.size();
+              bytes_without += recording.header.size() + params.size() + size_t(bits / 8) +
+                               ptm::lanes::headerBytes(channels);
+            }
+            return payload;
+          },
+          fmt::format("comb, channels {} predictor {}", channels, int(predictor)));
+      EXPECT_GT(with_tables, 0u) << channels << " channels, predictor " << int(predictor);
+      EXPECT_LT(bytes, bytes_without) << channels << " channels, predictor " << int(predictor);
+    }
+  }
+}
+
+TEST(PtmLanes, TheEncoderSendsOnlyTablesWorthTheirDecoding) {
+  // Each table costs the SIMD decoder a build of kScale slot entries, so coder 7 takes one only
+  // where it saves kTableMinGainBytes. Random texels of two levels, 0 and 31, leave the median
+  // residuals of 0 and +-31, which every model of the family spreads over the codes between:
+  // on a 32-px tile no table saves that much, on a 128-px tile some do.
+  auto tableCount = [](const LaneModels& models) { return models.tables.size(); };
+  for (const uint32_t tile_px : {32u, 128u}) {
+    PyramidTiles pyramid = makePyramid(2 * tile_px, 2 * tile_px, 3, tile_px, 0, 9);
+    uint32_t seed = tile_px;
+    for (uint8_t& texel : pyramid.levels[0].texels) texel = (nextRandom(seed) & 1) != 0 ? 31 : 0;
+    for (size_t l = 1; l < pyramid.levels.size(); ++l)
+      pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+    const Image child = pyramid.tile(0, 1, 1), parent_tile = pyramid.tile(1, 0, 0);
+    const ParentTexels parent = parentOf(parent_tile, 1, 1, tile_px, 0);
+    PtmRecording recording;
+    ASSERT_TRUE(recordPtm(child.view(), &parent, Predictor::kNeighbourMedian, PtmCoder::kRans,
+                          nullptr, nullptr, recording)
+                    .has_value());
+    const std::vector<uint8_t> any = lanesPayloadWithAnyTables(recording);
+    const std::vector<uint8_t> sent = encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr);
+    const size_t any_tables = tableCount(laneModels(any, 3));
+    const size_t sent_tables = tableCount(laneModels(sent, 3));
+    EXPECT_GT(any_tables, 0u) << tile_px;
+    if (tile_px == 32) {
+      EXPECT_EQ(sent_tables, 0u);
+    } else {
+      EXPECT_GT(sent_tables, 0u);
+      EXPECT_LT(sent_tables, any_tables);
+    }
+    EXPECT_EQ(decodeOrDie(sent, tile_px, 3, &parent).texels, child.texels) << tile_px;
+  }
+}
+
 TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
   PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, 13);
   const Image child = pyramid.tile(0, 1, 1);
@@ -253,7 +340,8 @@ TEST(PtmLanes, CodesEveryPredictorButTheBilinearParent) {
                            PtmCoder::kRansLanes, nullptr);
   ASSERT_TRUE(payload.has_value());
   Image out(64, 64, 3);
-  // Another predictor's byte on a coder-7 payload, or the tables flag, is corrupt.
+  // Another predictor's byte on a coder-7 payload, or the tables flag toggled (the section
+  // read where there is none, or skipped where there is one), is corrupt.
   std::vector<uint8_t> bad = *payload;
   bad[0] = uint8_t(Predictor::kParentBilinear);
   auto decoded = decodeTile(Codec::kPtm, bad, out, &parent);
@@ -261,7 +349,7 @@ TEST(PtmLanes, CodesEveryPredictorButTheBilinearParent) {
   EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
   EXPECT_NE(decoded.error().message.find("lanes"), std::string::npos);
   bad = *payload;
-  bad[1] = uint8_t(bad[1] | kPtmTablesFlag);
+  bad[1] = uint8_t(bad[1] ^ kPtmTablesFlag);
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   ASSERT_TRUE(decodeTile(Codec::kPtm, *payload, out, &parent).has_value());
   EXPECT_EQ(out.texels, child.texels);
