@@ -97,9 +97,11 @@ int main(int argc, char** argv) {
   // 6 and with coder 7 ("l0", "l6", "l7"), and with coder 7 fitted without predictor 4's
   // estimate ("w7"); and the default on
   // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
-  // carry explicit tables.
-  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5",
-                               "c6", "m7", "p7", "l0", "l6", "l7", "w7", "t0"};
+  // carry explicit tables; and coder 7 with nearest parent on the same comb with a table
+  // wherever one saves any bytes ("t7": the encoder's own rule sends none on tiles this small;
+  // with 3 and 4 channels some save).
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5", "c6",
+                               "m7", "p7", "l0", "l6", "l7", "w7", "t0", "t7"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
@@ -114,8 +116,16 @@ int main(int argc, char** argv) {
             tessera::detail::Predictor::kParentNearest,
             tessera::detail::Predictor::kNeighbourMedian,
             tessera::detail::Predictor::kParentCorrected};
-        auto encode = [&]() {
+        auto encode = [&]() -> tessera::Result<std::vector<uint8_t>> {
           tessera::detail::EncodeOptions options;
+          if (mode == "t7") {
+            tessera::detail::PtmRecording recording;
+            TESSERA_TRY(tessera::detail::recordPtm(
+                tile.view(), &parent, tessera::detail::Predictor::kParentNearest,
+                tessera::detail::PtmCoder::kRans, nullptr, nullptr, recording));
+            return tessera::detail::encodeRecordedPtm(
+                recording, tessera::detail::PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
+          }
           if (mode[0] == 'e' || mode[0] == 't') {
             options.effort = mode[1] - '0';
             return tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);

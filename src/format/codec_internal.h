@@ -232,10 +232,14 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
 size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
                            std::vector<uint8_t>* models = nullptr);
 /// encodePtm's payload of the recorded tile with `coder` (walking as the recording's does),
-/// with the `models` estimateRecordedPtm chose for it, or choosing them when null.
+/// with the `models` estimateRecordedPtm chose for it, or choosing them when null. A context
+/// takes an explicit table where it saves `table_min_gain_bytes` beyond the table's bytes;
+/// without it, the coder's own rule (coder 7: ptm::lanes::kTableMinGainBytes, else 0). Only
+/// tools that must seed a decoder's tables on small tiles (tests, the fuzz corpus) pass it.
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
                                        CodecScratch* scratch,
-                                       const std::vector<uint8_t>* models = nullptr);
+                                       const std::vector<uint8_t>* models = nullptr,
+                                       std::optional<double> table_min_gain_bytes = {});
 /// Which of `predictors` gives the smallest payload with `coder` by estimatePtmBytes (kRoot
 /// without a parent); its estimate goes to `estimated_bytes` when given.
 Result<Predictor> smallestPtmPredictor(const ImageView& tile, const EncodeOptions& options,

@@ -195,7 +195,8 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
 }
 
 std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder coder,
-                                       CodecScratch* scratch, const std::vector<uint8_t>* models) {
+                                       CodecScratch* scratch, const std::vector<uint8_t>* models,
+                                       std::optional<double> table_min_gain_bytes) {
   // Coded under another walk's contexts, the payload would not decode to the tile.
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   ScratchRef state(scratch);
@@ -205,8 +206,9 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
     models = &chosen;
   }
   rans::Tables tables;
-  const bool with_tables = rans::chooseTables(familyOf(coder), recording.counts, *models, tables,
-                                              tableMinGainBytes(coder));
+  const bool with_tables =
+      rans::chooseTables(familyOf(coder), recording.counts, *models, tables,
+                         table_min_gain_bytes.value_or(tableMinGainBytes(coder)));
   std::vector<uint8_t> payload = recording.header;
   payload[1] = uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0);
   payload.insert(payload.end(), models->begin(), models->end());

@@ -14,29 +14,15 @@
 
 #include "format/codec.h"
 #include "format/codec_internal.h"
-#include "format/ptm_lanes.h"
-#include "format/ptm_rans.h"
 #include "support/test_images.h"
 
 namespace tessera::detail {
 
 // A coder-7 payload of `recording` (a walk of coder 1's) with a table wherever one saves any
-// bytes, assembled as encodeRecordedPtm does: the encoder sends only tables that save
-// lanes::kTableMinGainBytes, which small tiles never do, and the decoders' tables need them.
+// bytes: the encoder sends only tables that save lanes::kTableMinGainBytes, which small tiles
+// never do, and the decoders' tables need them.
 inline std::vector<uint8_t> lanesPayloadWithAnyTables(const PtmRecording& recording) {
-  std::vector<uint8_t> params;
-  rans::chooseModels(ptm::lanes::kFamily, recording.counts, params);
-  rans::Tables tables;
-  const bool with_tables =
-      rans::chooseTables(ptm::lanes::kFamily, recording.counts, params, tables);
-  std::vector<uint8_t> payload = recording.header;
-  payload[1] = uint8_t(uint8_t(PtmCoder::kRansLanes) | (with_tables ? kPtmTablesFlag : 0));
-  payload.insert(payload.end(), params.begin(), params.end());
-  payload.insert(payload.end(), tables.section.begin(), tables.section.end());
-  ptm::lanes::encode(recording.symbols, recording.symbol_contexts, recording.width,
-                     recording.height, recording.channels, recording.contexts,
-                     tables.context_models, payload);
-  return payload;
+  return encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
 }
 
 // The coder a payload names, without its tables flag.
