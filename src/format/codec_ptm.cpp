@@ -28,6 +28,16 @@ double tableMinGainBytes(PtmCoder coder) {
   return coder == PtmCoder::kRansLanes ? lanes::kTableMinGainBytes : 0;
 }
 
+// The model bytes of `coder` for the recorded symbols, and the bits the symbols cost under
+// them: coder 7 shares models among its contexts where that costs little
+// (lanes::kShareModelsSlack).
+double chooseCoderModels(PtmCoder coder, const PtmRecording& recording,
+                         std::vector<uint8_t>& params) {
+  const double bits = rans::chooseModels(familyOf(coder), recording.counts, params);
+  if (coder != PtmCoder::kRansLanes) return bits;
+  return rans::shareModels(familyOf(coder), recording.counts, lanes::kShareModelsSlack, params);
+}
+
 // Fits predictor 5's weights to the tile `walk` covers into `weights`, and without predictor
 // 4's estimate into `without_estimate`. `walk` has no weights yet (prepareWalk's null): the fit
 // uses the texels, not the predictions.
@@ -184,7 +194,7 @@ size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
   TESSERA_CHECK(walksAlike(recording.coder, coder)) << "ptm: a recording of another walk";
   std::vector<uint8_t> chosen;
   std::vector<uint8_t>& params = models != nullptr ? *models : chosen;
-  rans::chooseModels(familyOf(coder), recording.counts, params);
+  chooseCoderModels(coder, recording, params);
   rans::Tables tables;
   rans::chooseTables(familyOf(coder), recording.counts, params, tables, tableMinGainBytes(coder));
   // The states: the lanes' header holds them with the streams' lengths.
@@ -202,7 +212,7 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
   ScratchRef state(scratch);
   std::vector<uint8_t> chosen;
   if (models == nullptr) {
-    rans::chooseModels(familyOf(coder), recording.counts, chosen);
+    chooseCoderModels(coder, recording, chosen);
     models = &chosen;
   }
   rans::Tables tables;

@@ -41,6 +41,13 @@ inline constexpr rans::FamilyId kFamily = rans::FamilyId::kGeometric12;
 /// 290-360 us, whatever it saved (docs/benchmarks.md, "thirteenth session").
 inline constexpr double kTableMinGainBytes = 256;
 
+/// Coder 7 moves a context onto a model another context uses where that costs at most this
+/// share of the context's bits plus a byte (rans::shareModels): each distinct model is 16 KiB
+/// of the SIMD decoder's symbol table, and fewer of them stay in its cache. On the codec
+/// study's synthetic source and map effort 2 decoded 6-10 % faster for 0-0.4 % more bytes
+/// (docs/benchmarks.md, "thirteenth session").
+inline constexpr double kShareModelsSlack = 0.03;
+
 /// Bytes of the section's header: each (channel, lane) state as u32, then per channel the
 /// lengths of its word stream and its escape stream as u32.
 constexpr size_t headerBytes(uint32_t channels) {

@@ -299,6 +299,59 @@ double chooseModels(FamilyId family_id, const ContextCounts& context_counts,
   return total_bits;
 }
 
+double shareModels(FamilyId family_id, const ContextCounts& context_counts, double slack,
+                   std::vector<uint8_t>& params) {
+  const uint32_t context_count = context_counts.context_count;
+  const std::vector<uint32_t>& counts = context_counts.counts;
+  const Model* family = models(family_id);
+  auto bitsUnder = [&](uint32_t context, uint32_t model) {
+    const uint32_t* count = &counts[size_t(context) * kAlphabet];
+    double bits = 0;
+    for (uint32_t s = 0; s < kAlphabet; ++s)
+      if (count[s] != 0) bits += count[s] * double(family[model].cost_bits[s]);
+    return bits;
+  };
+  // The used contexts by symbol count, and how many use each model.
+  std::vector<std::pair<uint64_t, uint32_t>> by_size;
+  uint32_t users[kModelCount] = {};
+  for (uint32_t context = 0; context < context_count; ++context) {
+    const uint32_t* count = &counts[size_t(context) * kAlphabet];
+    uint64_t symbols = 0;
+    for (uint32_t s = 0; s < kAlphabet; ++s) symbols += count[s];
+    if (symbols == 0) continue;
+    by_size.emplace_back(symbols, context);
+    ++users[params[context]];
+  }
+  std::sort(by_size.begin(), by_size.end());
+  double total_bits = 0;
+  for (const auto& [symbols, context] : by_size) {
+    const uint32_t own_model = params[context];
+    const double own = bitsUnder(context, own_model);
+    double best = own;
+    uint32_t best_model = own_model;
+    // A model another context shares already stays.
+    if (users[own_model] == 1) {
+      double cheapest = -1;
+      for (uint32_t model = 0; model < kModelCount; ++model) {
+        if (users[model] == 0 || model == own_model) continue;
+        const double bits = bitsUnder(context, model);
+        if (cheapest < 0 || bits < cheapest) {
+          cheapest = bits;
+          best_model = model;
+        }
+      }
+      if (cheapest >= 0 && cheapest <= own * (1 + slack) + 8) {
+        best = cheapest;
+        --users[own_model];
+        ++users[best_model];
+        params[context] = uint8_t(best_model);
+      }
+    }
+    total_bits += best;
+  }
+  return total_bits;
+}
+
 void encode(FamilyId family, std::span<const uint8_t> residuals, std::span<const uint8_t> contexts,
             uint32_t channels, uint32_t contexts_per_channel,
             std::span<const Model* const> context_models, std::vector<uint8_t>& work,

@@ -234,4 +234,12 @@ size_t readTables(std::span<const uint8_t> bytes, uint32_t context_count, uint32
 /// final states).
 double chooseModels(FamilyId family, const ContextCounts& counts, std::vector<uint8_t>& params);
 
+/// Moves contexts onto models that other contexts of `params` (chooseModels') already use,
+/// the contexts with the fewest symbols first, wherever that costs at most `slack` of the
+/// context's bits plus one byte: fewer distinct models, for a decoder whose per-model tables
+/// compete for its cache (coder 7's, 16 KiB each). Returns the bits the symbols cost under
+/// the models it leaves in `params`.
+double shareModels(FamilyId family, const ContextCounts& counts, double slack,
+                   std::vector<uint8_t>& params);
+
 }  // namespace tessera::detail::rans

@@ -146,6 +146,55 @@ TEST(PtmRans, TheMixtureFamilyCodesMixedResidualsInFewerBits) {
   EXPECT_LE(std::abs(double(out.size()) - mixture / 8), 5.0);
 }
 
+TEST(PtmRans, SharedModelsAreFewerAndCostAtMostTheirSlack) {
+  // 40 contexts of Laplacian residuals with scales close to one another and counts from 20 to
+  // 20,000: the small contexts' best models sit near the large ones', so sharing finds them;
+  // but context kLoner's scale is far from every other's, and it keeps its own model.
+  std::vector<uint8_t> residuals, contexts;
+  uint32_t random = 17;
+  constexpr uint32_t kContexts = 40, kLoner = 37;
+  for (uint32_t context = 0; context < kContexts; ++context) {
+    const double scale = context == kLoner ? 12.0 : 1.0 + 0.1 * (context % 10);
+    const uint32_t symbols = context % 4 == 0 ? 20000 : 20 + 40 * context;
+    for (uint32_t i = 0; i < symbols; ++i) {
+      const double u = (nextRandom(random) % 1000000 + 0.5) / 1e6;
+      const int size = int(-scale * std::log(u));
+      residuals.push_back(uint8_t(nextRandom(random) % 2 ? size : -size));
+      contexts.push_back(uint8_t(context));
+    }
+  }
+  const rans::ContextCounts counts = rans::countByContext(residuals, contexts, 1, kContexts);
+  const auto family = rans::FamilyId::kGeometric12;
+  std::vector<uint8_t> best;
+  rans::chooseModels(family, counts, best);
+  constexpr double kSlack = 0.03;
+  std::vector<uint8_t> shared = best;
+  const double shared_bits = rans::shareModels(family, counts, kSlack, shared);
+  auto distinct = [](std::vector<uint8_t> models) {
+    std::sort(models.begin(), models.end());
+    return size_t(std::unique(models.begin(), models.end()) - models.begin());
+  };
+  EXPECT_LT(distinct(shared), distinct(best));
+  const rans::Model* models = rans::models(family);
+  double total = 0;
+  for (uint32_t context = 0; context < kContexts; ++context) {
+    double own = 0, now = 0;
+    for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
+      const uint32_t n = counts.counts[context * rans::kAlphabet + symbol];
+      own += n * double(models[best[context]].cost_bits[symbol]);
+      now += n * double(models[shared[context]].cost_bits[symbol]);
+    }
+    EXPECT_LE(now, own * (1 + kSlack) + 8) << "context " << context;
+    total += now;
+    // A context moves only onto a model another context keeps.
+    if (shared[context] != best[context]) {
+      EXPECT_GT(std::count(shared.begin(), shared.end(), shared[context]), 1) << context;
+    }
+  }
+  EXPECT_NEAR(shared_bits, total, 1e-6 * total);
+  EXPECT_EQ(shared[kLoner], best[kLoner]);
+}
+
 // Residuals on a comb (even magnitudes only, as a palette's steps leave them): no family
 // model is shaped so, in context 1; context 0 holds plain geometric residuals a family model
 // fits, so it needs no table.
