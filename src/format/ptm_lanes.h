@@ -44,7 +44,7 @@ inline constexpr double kTableMinGainBytes = 256;
 /// Coder 7 moves a context onto a model another context uses where that costs at most this
 /// share of the context's bits plus a byte (rans::shareModels): each distinct model is 16 KiB
 /// of the SIMD decoder's symbol table, and fewer of them stay in its cache. On the codec
-/// study's synthetic source and map effort 2 decoded 6-10 % faster for 0-0.4 % more bytes
+/// study's three inputs effort 2 decoded 3-7 % faster for pyramids within 0.4 %
 /// (docs/benchmarks.md, "thirteenth session").
 inline constexpr double kShareModelsSlack = 0.03;
 
