@@ -21,14 +21,13 @@ namespace {
 // - 1: nearest parent with zstd, the fastest to decode (about 240-254 MP/s per core);
 // - 2: per tile the smaller of nearest parent with zstd and coder 7, the lane coder
 //   (ptm_lanes.h), which decodes eight rows side by side, with the smaller of nearest parent
-//   and the neighbour median, or the parent-corrected predictor where its estimate is 5 %
-//   smaller, or where it is not and the median won, least squares where its estimate is,
-//   with the weights fitted without predictor 4's estimate unless those with it save 3 %:
-//   about 125-145 MP/s per core where nearest parent or the median wins, 55-65 where
-//   predictor 4 does, about 95-105 where predictor 5 without the estimate does and about 50
-//   where predictor 5 with it does; the codec study's map came out 11 % smaller with
-//   predictor 4 than with the median alone, its photograph 23 % with predictor 5, its
-//   synthetic source 3.6 % smaller with nearest parent in the lanes than with zstd;
+//   and the neighbour median; where the median won, least squares with the weights fitted
+//   without predictor 4's estimate where its estimate is 2 % smaller, and with them where
+//   those save 25 % again; then the parent-corrected predictor where its estimate is 25 %
+//   below the choice so far. In the lanes nearest parent, the median and least squares
+//   without the estimate decode at 150-185 MP/s per core on the codec study's inputs,
+//   predictor 4 and least squares with the estimate at 100-115 (docs/benchmarks.md,
+//   "thirteenth session");
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 7 (the lanes, coder 1's contexts), 1 (per-channel contexts,
 //   model family 1), 2 (chained contexts), 3 (model family 2), 4 (both), 6 (4 with the
@@ -46,13 +45,15 @@ namespace {
 //   Bytes are what ptm is for (storage, and remote refinement over a link), so the smallest is
 //   the default.
 constexpr size_t kSlowerCoderMinSavingPercent = 3;
-// Effort 2: predictors 4 and 5 decode at a half to two thirds of the median's speed in the
-// lanes, so they take a tile only where they save this much.
-constexpr size_t kLanesSlowerPredictorMinSavingPercent = 5;
-// Effort 2: predictor 5 with predictor 4's estimate decodes at about half the speed of
-// predictor 5 without it in the lanes (docs/codecs.md, "ptm (6)"), so the estimate keeps a
-// weight only where it saves this much.
-constexpr size_t kLanesEstimateMinSavingPercent = 3;
+// Effort 2: predictor 5 without predictor 4's estimate decodes at 85-105 % of the median's
+// speed in the lanes, so it takes a tile where it saves this much over the median.
+constexpr size_t kLanesLeastSquaresMinSavingPercent = 2;
+// Effort 2: predictor 4, and predictor 5 with predictor 4's estimate, decode at 60-75 % of the
+// speed of the others in the lanes (docs/benchmarks.md, "thirteenth session"), so they take
+// a tile only where they save about as much over the choice so far: on the study's map, 10 %
+// left a quarter of its bytes to predictor 4 and decoded at 145-154 MP/s per core, 25 % none,
+// at 155-178, 3 % larger.
+constexpr size_t kLanesSlowerPredictorMinSavingPercent = 25;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRansLanes,          PtmCoder::kRans,
@@ -161,25 +162,24 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
           std::swap(chosen_models, candidate_models);
           chosen_bytes = nearest_bytes;
         }
-        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
-                              scratch, nullptr, candidate));
-        // Predictor 5's fit costs a walk of its own: only where the median's lanes won and
-        // predictor 4 did not save enough, as the default tries it only where the median won.
-        // One fit gives both weight sets.
-        if (!takeIfItSaves(kLanesSlowerPredictorMinSavingPercent) &&
-            Predictor(chosen.header[0]) == Predictor::kNeighbourMedian &&
+        // Predictor 5's fit costs a walk of its own: only where the median's lanes won, as the
+        // default tries it only where the median won. One fit gives both weight sets.
+        if (Predictor(chosen.header[0]) == Predictor::kNeighbourMedian &&
             chosen_bytes < nearest.size()) {
           PtmLeastSquaresFit fit;
           fit.without_estimate = true;
           TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, PtmCoder::kRansLanes,
                                 scratch, &fit, candidate));
-          if (takeIfItSaves(kLanesSlowerPredictorMinSavingPercent)) {
+          if (takeIfItSaves(kLanesLeastSquaresMinSavingPercent)) {
             fit.without_estimate = false;
             TESSERA_TRY(recordPtm(tile, parent, Predictor::kLeastSquares, PtmCoder::kRansLanes,
                                   scratch, &fit, candidate));
-            takeIfItSaves(kLanesEstimateMinSavingPercent);
+            takeIfItSaves(kLanesSlowerPredictorMinSavingPercent);
           }
         }
+        TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
+                              scratch, nullptr, candidate));
+        takeIfItSaves(kLanesSlowerPredictorMinSavingPercent);
       }
       std::vector<uint8_t> lanes =
           encodeRecordedPtm(chosen, PtmCoder::kRansLanes, scratch, &chosen_models);
