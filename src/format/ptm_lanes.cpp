@@ -245,7 +245,8 @@ namespace {
 void fillSlots(const rans::Model& model, uint32_t* slots) {
   for (uint32_t symbol = 0; symbol < rans::kAlphabet; ++symbol) {
     const uint32_t freq = model.freq[symbol], first = symbol | freq << kFreqShift;
-    // A sum rather than an or, so that the compiler fills a run a vector at a time.
+    // Entry i of the run: the bias i added to the symbol and frequency (the fields do not
+    // overlap, so the sum is the or of the format).
     uint32_t* run = slots + model.start[symbol];
     for (uint32_t i = 0; i < freq; ++i) run[i] = first + (i << kBiasShift);
   }
