@@ -17,32 +17,42 @@ using namespace ptm;
 
 namespace {
 
-// Decodes a rANS coder's model bytes (present: decodePtm checked) and stream into walk.texels.
-template <bool kChained, rans::FamilyId kFamily, bool kErrors = false, bool kParent = false>
-Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predictor predictor,
-                        uint32_t channels, uint32_t contexts, bool with_tables,
-                        std::vector<rans::Model>& table_models, const Walk& walk) {
-  const size_t params_bytes = size_t(contexts) * channels;
-  RansReader<kChained, kFamily, kErrors, kParent> reader;
-  const rans::Model* family = rans::models(kFamily);
+// Each (channel, context)'s model, channel-major, into `context_models`: the model of `family`
+// its byte names (present: decodePtm checked), or with `with_tables` the table the payload
+// sends for it. Returns where the entropy-coded part after them starts.
+Result<size_t> readContextModels(std::span<const uint8_t> payload, size_t body_at,
+                                 uint32_t context_count, rans::FamilyId family_id, bool with_tables,
+                                 std::vector<rans::Model>& table_models,
+                                 const rans::Model** context_models) {
+  const rans::Model* family = rans::models(family_id);
   // Every parameter byte names a model, so a corrupt one shows only as a stream that does not
-  // finish cleanly (checked below), and then only if its context is used.
+  // finish cleanly, and then only if its context is used.
   static_assert(rans::kModelCount == 256);
-  const rans::Model* context_models[4 * kParentContexts];
-  for (uint32_t c = 0; c < channels; ++c)
-    for (uint32_t k = 0; k < contexts; ++k)
-      context_models[c * contexts + k] = &family[payload[body_at + c * contexts + k]];
-  size_t stream_at = body_at + params_bytes;
+  for (uint32_t i = 0; i < context_count; ++i) context_models[i] = &family[payload[body_at + i]];
+  size_t stream_at = body_at + context_count;
   if (with_tables) {
     const size_t section =
-        rans::readTables(payload.subspan(stream_at), channels * contexts, rans::scaleBits(kFamily),
-                         table_models, std::span(context_models, channels * contexts));
+        rans::readTables(payload.subspan(stream_at), context_count, rans::scaleBits(family_id),
+                         table_models, std::span(context_models, context_count));
     if (section == 0)
       return fail(ErrorCode::kCorrupt,
                   "ptm payload: explicit tables truncated, empty, or with a count outside 1..64 "
                   "or padding bits set");
     stream_at += section;
   }
+  return stream_at;
+}
+
+// Decodes a rANS coder's model bytes (present: decodePtm checked) and stream into walk.texels.
+template <bool kChained, rans::FamilyId kFamily, bool kErrors = false, bool kParent = false>
+Result<void> decodeRans(std::span<const uint8_t> payload, size_t body_at, Predictor predictor,
+                        uint32_t channels, uint32_t contexts, bool with_tables,
+                        std::vector<rans::Model>& table_models, const Walk& walk) {
+  RansReader<kChained, kFamily, kErrors, kParent> reader;
+  const rans::Model* context_models[4 * kParentContexts];
+  TESSERA_ASSIGN_OR_RETURN(const size_t stream_at,
+                           readContextModels(payload, body_at, channels * contexts, kFamily,
+                                             with_tables, table_models, context_models));
   for (uint32_t c = 0; c < channels; ++c)
     for (uint32_t k = 0; k < contexts; ++k) reader.models[c][k] = context_models[c * contexts + k];
   if (!reader.decoder.start(payload.subspan(stream_at), channels))
@@ -133,20 +143,11 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
       return decodeRans<true, FamilyId::kMixture15, true, true>(
           payload, body_at, predictor, channels, contexts, with_tables, state->ptm_tables, walk);
     case PtmCoder::kRansLanes: {
-      const rans::Model* family = rans::models(lanes::kFamily);
       const rans::Model* context_models[4 * kParentContexts];
-      for (size_t i = 0; i < params_bytes; ++i) context_models[i] = &family[payload[body_at + i]];
-      size_t section_at = body_at + params_bytes;
-      if (with_tables) {
-        const size_t section = rans::readTables(payload.subspan(section_at), uint32_t(params_bytes),
-                                                rans::scaleBits(lanes::kFamily), state->ptm_tables,
-                                                std::span(context_models, params_bytes));
-        if (section == 0)
-          return fail(ErrorCode::kCorrupt,
-                      "ptm payload: explicit tables truncated, empty, or with a count outside "
-                      "1..64 or padding bits set");
-        section_at += section;
-      }
+      TESSERA_ASSIGN_OR_RETURN(
+          const size_t section_at,
+          readContextModels(payload, body_at, uint32_t(params_bytes), lanes::kFamily, with_tables,
+                            state->ptm_tables, context_models));
       if (!lanes::decode(payload.subspan(section_at), walk, channels, predictor,
                          std::span(context_models, params_bytes), state->plane))
         return fail(ErrorCode::kCorrupt,
