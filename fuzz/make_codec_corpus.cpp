@@ -99,11 +99,13 @@ int main(int argc, char** argv) {
   // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
   // carry explicit tables; and coder 7 with nearest parent on the same comb with a table
   // wherever one saves any bytes ("t7": the encoder's own rule sends none on tiles this small;
-  // with 3 and 4 channels some save).
+  // with 3 and 4 channels some save); and coder 7 with the median and green-led contexts, with
+  // a table wherever one saves any bytes ("g7", 3 and 4 channels: the others have no green).
   const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5", "c6",
-                               "m7", "p7", "l0", "l6", "l7", "w7", "t0", "t7"};
+                               "m7", "p7", "l0", "l6", "l7", "w7", "t0", "t7", "g7"};
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
+      if (mode == "g7" && channels < 3) continue;
       for (uint32_t quadrant = 0; quadrant < 2; ++quadrant) {
         const uint32_t side = mode[0] == 't' ? 64 : 16;
         Image tile = makeTile(side, side, channels);
@@ -125,6 +127,15 @@ int main(int argc, char** argv) {
                 tessera::detail::PtmCoder::kRans, nullptr, nullptr, recording));
             return tessera::detail::encodeRecordedPtm(
                 recording, tessera::detail::PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
+          }
+          if (mode == "g7") {
+            tessera::detail::PtmRecording recording, led;
+            TESSERA_TRY(tessera::detail::recordPtm(
+                tile.view(), &parent, tessera::detail::Predictor::kNeighbourMedian,
+                tessera::detail::PtmCoder::kRansLanes, nullptr, nullptr, recording));
+            tessera::detail::leadRecordingByGreen(recording, led);
+            return tessera::detail::encodeRecordedPtm(led, tessera::detail::PtmCoder::kRansLanes,
+                                                      nullptr, nullptr, 0.0);
           }
           if (mode[0] == 'e' || mode[0] == 't') {
             options.effort = mode[1] - '0';

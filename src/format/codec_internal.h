@@ -147,6 +147,9 @@ enum class PtmCoder : uint8_t {
 /// Set in a rANS coder's byte when explicit tables follow its model bytes (docs/codecs.md,
 /// "ptm (6)", "Tables").
 inline constexpr uint8_t kPtmTablesFlag = 0x08;
+/// Set in coder 7's byte, with 3 or 4 channels, when red's and blue's contexts follow green's
+/// residual in the same texel (ptm::lanes::leadByGreen; docs/codecs.md, "ptm (6)", "Lanes").
+inline constexpr uint8_t kPtmGreenLedFlag = 0x10;
 /// True for the rANS coders, whose payload is model bytes and one rANS stream.
 constexpr bool isRansCoder(PtmCoder coder) {
   return coder != PtmCoder::kZstd;
@@ -216,6 +219,8 @@ struct PtmRecording {
   std::vector<uint8_t> symbol_contexts;
   /// The symbols counted per context, once for every estimate of the coders that walk alike.
   rans::ContextCounts counts;
+  /// Coder 7 only: the contexts are green-led (leadRecordingByGreen), and so is the payload.
+  bool green_led = false;
 };
 /// True when coders `a` and `b` (both rANS) record the same symbols and contexts.
 constexpr bool walksAlike(PtmCoder a, PtmCoder b) {
@@ -223,6 +228,10 @@ constexpr bool walksAlike(PtmCoder a, PtmCoder b) {
          isErrorActivityCoder(a) == isErrorActivityCoder(b) &&
          isParentActivityCoder(a) == isParentActivityCoder(b);
 }
+/// A recording for coder 7 (or coder 1, which walks alike) of a tile of 3 or 4 channels
+/// (`recording`, green-led or not) with
+/// green-led contexts (ptm::lanes::leadByGreen), recounted, into `led`.
+void leadRecordingByGreen(const PtmRecording& recording, PtmRecording& led);
 /// Walks the tile as encodePtm does with the rANS coder `coder` into `recording`.
 Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predictor predictor,
                        PtmCoder coder, CodecScratch* scratch, PtmLeastSquaresFit* fit,

@@ -188,6 +188,22 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
   return {};
 }
 
+void leadRecordingByGreen(const PtmRecording& recording, PtmRecording& led) {
+  TESSERA_CHECK(walksAlike(recording.coder, PtmCoder::kRansLanes) && recording.channels >= 3)
+      << "ptm: green leads coder 7's red and blue only";
+  led.coder = recording.coder;
+  led.channels = recording.channels;
+  led.width = recording.width;
+  led.height = recording.height;
+  led.contexts = recording.contexts;
+  led.header = recording.header;
+  led.symbols = recording.symbols;
+  led.symbol_contexts = recording.symbol_contexts;
+  if (!recording.green_led) lanes::leadByGreen(led.symbols, led.symbol_contexts, led.channels);
+  led.counts = rans::countByContext(led.symbols, led.symbol_contexts, led.channels, led.contexts);
+  led.green_led = true;
+}
+
 size_t estimateRecordedPtm(const PtmRecording& recording, PtmCoder coder,
                            std::vector<uint8_t>* models) {
   // Another walk's symbols under this coder's contexts would estimate nothing meaningful.
@@ -220,7 +236,8 @@ std::vector<uint8_t> encodeRecordedPtm(const PtmRecording& recording, PtmCoder c
       rans::chooseTables(familyOf(coder), recording.counts, *models, tables,
                          table_min_gain_bytes.value_or(tableMinGainBytes(coder)));
   std::vector<uint8_t> payload = recording.header;
-  payload[1] = uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0);
+  payload[1] = uint8_t(uint8_t(coder) | (with_tables ? kPtmTablesFlag : 0) |
+                       (recording.green_led ? kPtmGreenLedFlag : 0));
   payload.insert(payload.end(), models->begin(), models->end());
   payload.insert(payload.end(), tables.section.begin(), tables.section.end());
   if (coder == PtmCoder::kRansLanes) {

@@ -54,6 +54,9 @@ constexpr size_t kLanesLeastSquaresMinSavingPercent = 2;
 // left a quarter of its bytes to predictor 4 and decoded at 145-154 MP/s per core, 25 % none,
 // at 155-178, 3 % larger.
 constexpr size_t kLanesSlowerPredictorMinSavingPercent = 25;
+// Effort 2: the lanes' green-led contexts (ptm::lanes::leadByGreen) cost the SIMD decoder a
+// comparison and a blend on each step's longest chain of instructions.
+constexpr size_t kLanesGreenLedMinSavingPercent = 2;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {
     PtmCoder::kRansLanes,          PtmCoder::kRans,
@@ -180,6 +183,11 @@ Result<std::vector<uint8_t>> encodePtmForEffort(const ImageView& tile, const Enc
         TESSERA_TRY(recordPtm(tile, parent, Predictor::kParentCorrected, PtmCoder::kRansLanes,
                               scratch, nullptr, candidate));
         takeIfItSaves(kLanesSlowerPredictorMinSavingPercent);
+      }
+      // Green-led contexts where they save enough for their cost in decode speed.
+      if (tile.channels >= 3) {
+        leadRecordingByGreen(chosen, candidate);
+        takeIfItSaves(kLanesGreenLedMinSavingPercent);
       }
       std::vector<uint8_t> lanes =
           encodeRecordedPtm(chosen, PtmCoder::kRansLanes, scratch, &chosen_models);

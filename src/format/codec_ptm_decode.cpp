@@ -77,13 +77,17 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
                 fmt::format("ptm payload: {} bytes, shorter than its header", payload.size()));
   if (payload[0] > uint8_t(Predictor::kLeastSquares))
     return fail(ErrorCode::kCorrupt, fmt::format("ptm payload: unknown predictor {}", payload[0]));
-  // The tables flag goes with the rANS coders only.
+  // The tables flag goes with the rANS coders only, the green-led flag with coder 7 of 3 or 4
+  // channels.
   const bool with_tables = (payload[1] & kPtmTablesFlag) != 0;
-  const uint8_t coder_byte = payload[1] & uint8_t(~kPtmTablesFlag);
+  const bool green_led = (payload[1] & kPtmGreenLedFlag) != 0;
+  const uint8_t coder_byte = payload[1] & uint8_t(~(kPtmTablesFlag | kPtmGreenLedFlag));
   if (coder_byte > uint8_t(PtmCoder::kRansLanes) ||
-      (with_tables && !isRansCoder(PtmCoder(coder_byte))))
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("ptm payload: unknown entropy coder {}", payload[1]));
+      (with_tables && !isRansCoder(PtmCoder(coder_byte))) ||
+      (green_led && (coder_byte != uint8_t(PtmCoder::kRansLanes) || channels < 3)))
+    return fail(
+        ErrorCode::kCorrupt,
+        fmt::format("ptm payload: unknown entropy coder {} for {} channels", payload[1], channels));
   const Predictor predictor = Predictor(payload[0]);
   const PtmCoder coder = PtmCoder(coder_byte);
   const bool has_parent = predictor != Predictor::kRoot;
@@ -149,7 +153,7 @@ Result<void> decodePtm(std::span<const uint8_t> payload, Image& out, const Paren
           readContextModels(payload, body_at, uint32_t(params_bytes), lanes::kFamily, with_tables,
                             state->ptm_tables, context_models));
       if (!lanes::decode(payload.subspan(section_at), walk, channels, predictor,
-                         std::span(context_models, params_bytes), state->plane))
+                         std::span(context_models, params_bytes), green_led, state->plane))
         return fail(ErrorCode::kCorrupt,
                     "ptm payload: lane streams truncated, corrupt or followed by trailing bytes");
       return {};

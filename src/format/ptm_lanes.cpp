@@ -67,6 +67,19 @@ bool finished(const Streams& streams, uint32_t channels) {
   return true;
 }
 
+void leadByGreen(std::span<const uint8_t> symbols, std::span<uint8_t> contexts, uint32_t channels) {
+  for (size_t at = 0; at + channels <= contexts.size(); at += channels) {
+    // A remainder's texel keeps its contexts: every channel of it is a remainder.
+    if (contexts[at + kGreenChannel] >= kCodedContexts) continue;
+    const uint32_t context = contexts[at + kGreenChannel];
+    const uint32_t led =
+        context / kActivityClasses * kActivityClasses +
+        greenLedClass(context % kActivityClasses, symbols[at + kGreenChannel] == 0);
+    for (uint32_t c = 0; c < channels; ++c)
+      if (followsGreen(c)) contexts[at + c] = uint8_t(led);
+  }
+}
+
 namespace {
 
 // --- scalar ---------------------------------------------------------------------------------
@@ -173,8 +186,22 @@ bool decodeTexel(const Geometry& g, Streams& s, uint32_t x, uint32_t y, uint32_t
   const uint32_t position = g.has_parent ? 2u * g.rows->second[y] + g.columns->second[x] : 0u;
   const uint32_t context = position * kActivityClasses + activity_class;
   uint8_t symbols[4];
-  for (uint32_t c = 0; c < ch; ++c)
-    if (!decodeSymbol(s, c, lane, *models[c * g.contexts + context], symbols[c])) return false;
+  if (g.green_led) {
+    // Green first: red's and blue's contexts follow its residual.
+    if (!decodeSymbol(s, kGreenChannel, lane, *models[kGreenChannel * g.contexts + context],
+                      symbols[kGreenChannel]))
+      return false;
+    const uint32_t led =
+        position * kActivityClasses + greenLedClass(activity_class, symbols[kGreenChannel] == 0);
+    for (uint32_t c = 0; c < ch; ++c)
+      if (c != kGreenChannel &&
+          !decodeSymbol(s, c, lane, *models[c * g.contexts + (followsGreen(c) ? led : context)],
+                        symbols[c]))
+        return false;
+  } else {
+    for (uint32_t c = 0; c < ch; ++c)
+      if (!decodeSymbol(s, c, lane, *models[c * g.contexts + context], symbols[c])) return false;
+  }
   if (ch >= 3) {
     symbols[0] = uint8_t(symbols[0] + symbols[1]);
     symbols[2] = uint8_t(symbols[2] + symbols[1]);
@@ -355,12 +382,14 @@ void encode(std::span<const uint8_t> symbols, std::span<const uint8_t> contexts,
 }
 
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            Predictor predictor, std::span<const rans::Model* const> context_models,
+            Predictor predictor, std::span<const rans::Model* const> context_models, bool green_led,
             std::vector<uint8_t>& padded, Path path) {
+  if (green_led && channels < 3) return false;
   if (path == Path::kFastest && avx512Available())
-    return avx512::decodeSimd(section, walk, channels, predictor, context_models, padded);
+    return avx512::decodeSimd(section, walk, channels, predictor, context_models, green_led,
+                              padded);
   if ((path == Path::kFastest || path == Path::kAvx2) && simdAvailable())
-    return avx2::decodeSimd(section, walk, channels, predictor, context_models, padded);
+    return avx2::decodeSimd(section, walk, channels, predictor, context_models, green_led, padded);
   // The scalar lanes read predictor 4's planes, which prepareWalk leaves out where the SIMD
   // decoder was to run (decodesWithoutPlanes).
   if (computesParentCorrectedEstimate(predictor, walk) && walk.upsampled == nullptr) return false;
@@ -385,6 +414,7 @@ bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channel
                     {}};
   if (geometry.least_squares)
     sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
+  geometry.green_led = green_led;
   return decodeScalar(geometry, streams) && finished(streams, channels);
 }
 

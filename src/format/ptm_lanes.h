@@ -48,6 +48,33 @@ inline constexpr double kTableMinGainBytes = 256;
 /// (docs/benchmarks.md, "thirteenth session").
 inline constexpr double kShareModelsSlack = 0.03;
 
+/// Coder 7's green-led contexts (kPtmGreenLedFlag, tiles of 3 and 4 channels): in a coded
+/// texel, red's and blue's activity class follows whether green's residual in the same texel
+/// is zero, as coder 2's chained contexts follow each residual before them. Colour channels
+/// err together, so a zero green makes zeros likelier in red and blue; on the codec study's
+/// photograph the lanes came out 10 % smaller (docs/benchmarks.md, "fourteenth session").
+/// Green is the only lead, where coder 2 chains red on green and blue on red: the SIMD
+/// decoder reads whether green's symbol is zero from green's slot and its model's frequency
+/// of zero, before green's lookup, so red's and blue's lookups wait for no other.
+inline constexpr uint32_t kGreenChannel = 1;
+/// True for the channels whose class follows green's: red and blue, not alpha.
+constexpr bool followsGreen(uint32_t channel) {
+  return channel == 0 || channel == 2;
+}
+/// Red's and blue's class in a coded texel of activity class `activity_class` whose green
+/// residual is zero (`green_zero`) or not: of the rules tried on the study's three inputs,
+/// halved after a zero and raised by two after anything else coded the photograph smallest
+/// without costing the others.
+constexpr uint32_t greenLedClass(uint32_t activity_class, bool green_zero) {
+  return green_zero
+             ? activity_class / 2
+             : (activity_class + 2 < kActivityClasses ? activity_class + 2 : kActivityClasses - 1);
+}
+/// Rewrites the contexts RansRecorder<false, false> recorded (`channels` per texel, 3 or 4) to
+/// the green-led ones: red's and blue's in each coded texel by greenLedClass; remainders, and
+/// green's and alpha's, as they were.
+void leadByGreen(std::span<const uint8_t> symbols, std::span<uint8_t> contexts, uint32_t channels);
+
 /// Bytes of the section's header: each (channel, lane) state as u32, then per channel the
 /// lengths of its word stream and its escape stream as u32.
 constexpr size_t headerBytes(uint32_t channels) {
@@ -70,11 +97,12 @@ enum class Path : uint8_t { kFastest, kScalar, kAvx2 };
 /// Decodes the lane section `section` into walk.texels: the walk prepareWalk made for
 /// `predictor` (any but 2) with coder 7; `context_models` holds each (channel, context)'s
 /// model, channel-major: the model of family kFamily its model byte names, or the explicit
-/// table the payload sends for it (rans::readTables, at kFamily's scale); `padded` is scratch.
+/// table the payload sends for it (rans::readTables, at kFamily's scale); `green_led` says the
+/// contexts are the green-led ones (3 or 4 channels only); `padded` is scratch.
 /// Returns false when the section is truncated or corrupt (a state out of range, a stream that
 /// does not end where its symbols do, an escape of a residual that needed none).
 bool decode(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
-            Predictor predictor, std::span<const rans::Model* const> context_models,
+            Predictor predictor, std::span<const rans::Model* const> context_models, bool green_led,
             std::vector<uint8_t>& padded, Path path = Path::kFastest);
 
 /// True when decode() can take its SIMD path on this processor (AVX2).

@@ -93,6 +93,8 @@ struct Geometry {
   /// weight): the weights, [position][channel][term], and each position's and channel's sum.
   const int8_t* ls_weights;
   int ls_weight_sums[kLsSets][4];
+  /// Red's and blue's contexts are green-led (leadByGreen).
+  bool green_led = false;
 };
 
 /// Each position's and channel's sum of predictor 5's `weights` ([position][channel][term]).
@@ -134,12 +136,12 @@ void slotModels(std::span<const rans::Model* const> context_models, SlotModels& 
 namespace avx2 {
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
                 Predictor predictor, std::span<const rans::Model* const> context_models,
-                std::vector<uint8_t>& padded);
+                bool green_led, std::vector<uint8_t>& padded);
 }  // namespace avx2
 namespace avx512 {
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
                 Predictor predictor, std::span<const rans::Model* const> context_models,
-                std::vector<uint8_t>& padded);
+                bool green_led, std::vector<uint8_t>& padded);
 }  // namespace avx512
 
 }  // namespace tessera::detail::ptm::lanes

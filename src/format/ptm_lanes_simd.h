@@ -44,7 +44,9 @@ enum class LanePredictor : uint8_t {
 // parent-sized plane of eq. 3's block sum less its texels' upsampled values (decode()).
 //
 // kLeastSquares: predictor 5, predictor 4's estimate and more.
-template <uint32_t kCh, LanePredictor kPredictor>
+//
+// kGreenLed: red's and blue's contexts follow green's residual (leadByGreen; 3 and 4 channels).
+template <uint32_t kCh, LanePredictor kPredictor, bool kGreenLed>
 TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const SlotModels& models,
                                      const ParentCopy& parent, uint32_t* diagonal,
                                      int32_t* detail_diagonal, const int16_t* shortfall) {
@@ -124,6 +126,30 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const SlotMo
               ? _mm256_loadu_si256(reinterpret_cast<const __m256i*>(
                     models.offsets + c * g.contexts + group * kActivityClasses))
               : zero;
+  // Green-led contexts: per position group, green's model's frequency of symbol 0, and red's
+  // and blue's model offsets by class after a zero green residual and after any other
+  // (greenLedClass). The remainders' group is not led.
+  static_assert(!kGreenLed || kCh >= 3, "green leads red and blue only");
+  [[maybe_unused]] __m256i green_zero_freqs[kGroups - 1];
+  [[maybe_unused]] __m256i led_models[kGreenLed ? kCh : 1][2][kGroups - 1];
+  if constexpr (kGreenLed)
+    for (uint32_t group = 0; group + 1 < kGroups; ++group) {
+      alignas(32) int32_t freqs[kLanes] = {}, after[2][kCh][kLanes] = {};
+      if (group * kActivityClasses < g.contexts)
+        for (uint32_t k = 0; k < kActivityClasses; ++k) {
+          const uint32_t context = group * kActivityClasses + k;
+          freqs[k] = g.models[kGreenChannel * g.contexts + context]->freq[0];
+          for (uint32_t zero_green = 0; zero_green < 2; ++zero_green)
+            for (uint32_t c = 0; c < kCh; ++c)
+              after[zero_green][c][k] = models.offsets[c * g.contexts + group * kActivityClasses +
+                                                       greenLedClass(k, zero_green != 0)];
+        }
+      green_zero_freqs[group] = _mm256_load_si256(reinterpret_cast<const __m256i*>(freqs));
+      for (uint32_t zero_green = 0; zero_green < 2; ++zero_green)
+        for (uint32_t c = 0; c < kCh; ++c)
+          led_models[c][zero_green][group] =
+              _mm256_load_si256(reinterpret_cast<const __m256i*>(after[zero_green][c]));
+    }
   // The columns' parent texels: child column x lies in parent column (x + offset) / 2, the
   // second child of its block when x + offset is odd (mapAxis), so every lane of a step, whose
   // columns differ by even numbers, is a first child or every lane a second.
@@ -390,31 +416,48 @@ TESSERA_LANES_TARGET bool decodeAvx2(const Geometry& g, Streams& s, const SlotMo
 #ifdef TESSERA_LANES_AVX512
       const auto active_lanes = __mmask8(_mm256_movemask_ps(_mm256_castsi256_ps(active)));
 #endif
-      for (uint32_t c = 0; c < kCh; ++c) {
+      // A coded texel's value of its position group's `groups` for its class: the block
+      // position picks the group, and the class the lane.
+      auto byClass = [&](const __m256i* groups) TESSERA_LANES_TARGET {
 #ifdef TESSERA_LANES_AVX512
-        // One permute of two tables: the class picks the model, the row's parity the table.
-        __m256i model =
-            has_parent
-                ? _mm256_permutex2var_epi32(group_models[c][second_column],
-                                            _mm256_or_si256(activity_class, second_row_table),
-                                            group_models[c][2 + second_column])
-                : _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
-        if (derived_mask != 0)
+        // One permute of two tables: the class picks the entry, the row's parity the table.
+        return has_parent
+                   ? _mm256_permutex2var_epi32(groups[second_column],
+                                               _mm256_or_si256(activity_class, second_row_table),
+                                               groups[2 + second_column])
+                   : _mm256_permutevar8x32_epi32(groups[second_column], activity_class);
+#else
+        const __m256i first = _mm256_permutevar8x32_epi32(groups[second_column], activity_class);
+        if (!has_parent) return first;
+        return _mm256_blendv_epi8(
+            first, _mm256_permutevar8x32_epi32(groups[2 + second_column], activity_class),
+            second_row);
+#endif
+      };
+      // Green-led contexts: green's symbol is 0 where its slot lies below its model's frequency
+      // of 0, whose slots come first; so red's and blue's models are known before green's
+      // lookup, and their lookups wait for no other.
+      [[maybe_unused]] __m256i green_zero = zero;
+      if constexpr (kGreenLed)
+        green_zero = _mm256_cmpgt_epi32(byClass(green_zero_freqs),
+                                        _mm256_and_si256(state[kGreenChannel], slot_mask));
+      for (uint32_t c = 0; c < kCh; ++c) {
+        __m256i model;
+        if (kGreenLed && followsGreen(c))
+          model =
+              _mm256_blendv_epi8(byClass(led_models[c][0]), byClass(led_models[c][1]), green_zero);
+        else
+          model = byClass(group_models[c]);
+        if (derived_mask != 0) {
+#ifdef TESSERA_LANES_AVX512
           model = _mm256_mask_permutexvar_epi32(model, __mmask8(derived_mask), activity_class,
                                                 group_models[c][kGroups - 1]);
 #else
-        __m256i model = _mm256_permutevar8x32_epi32(group_models[c][second_column], activity_class);
-        if (has_parent) {
           model = _mm256_blendv_epi8(
-              model,
-              _mm256_permutevar8x32_epi32(group_models[c][2 + second_column], activity_class),
-              second_row);
-          if (derived_mask != 0)
-            model = _mm256_blendv_epi8(
-                model, _mm256_permutevar8x32_epi32(group_models[c][kGroups - 1], activity_class),
-                derived);
-        }
+              model, _mm256_permutevar8x32_epi32(group_models[c][kGroups - 1], activity_class),
+              derived);
 #endif
+        }
         const __m256i slot = _mm256_and_si256(state[c], slot_mask);
         const __m256i entry = gather32<4>(slot_tables, _mm256_add_epi32(model, slot));
         const __m256i symbol = _mm256_and_si256(entry, symbol_mask);
@@ -590,13 +633,23 @@ bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s, const 
                         const int16_t* shortfall) {
   switch (channels) {
     case 1:
-      return decodeAvx2<1, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
+      return decodeAvx2<1, kPredictor, false>(g, s, models, parent, diagonal, detail_diagonal,
+                                              shortfall);
     case 2:
-      return decodeAvx2<2, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
+      return decodeAvx2<2, kPredictor, false>(g, s, models, parent, diagonal, detail_diagonal,
+                                              shortfall);
     case 3:
-      return decodeAvx2<3, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
+      if (g.green_led)
+        return decodeAvx2<3, kPredictor, true>(g, s, models, parent, diagonal, detail_diagonal,
+                                               shortfall);
+      return decodeAvx2<3, kPredictor, false>(g, s, models, parent, diagonal, detail_diagonal,
+                                              shortfall);
     default:
-      return decodeAvx2<4, kPredictor>(g, s, models, parent, diagonal, detail_diagonal, shortfall);
+      if (g.green_led)
+        return decodeAvx2<4, kPredictor, true>(g, s, models, parent, diagonal, detail_diagonal,
+                                               shortfall);
+      return decodeAvx2<4, kPredictor, false>(g, s, models, parent, diagonal, detail_diagonal,
+                                              shortfall);
   }
 }
 
@@ -663,7 +716,7 @@ TESSERA_LANES_TARGET void blockShortfalls(const Walk& walk, uint32_t channels,
 
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,
                 Predictor predictor, std::span<const rans::Model* const> context_models,
-                std::vector<uint8_t>& padded) {
+                bool green_led, std::vector<uint8_t>& padded) {
   const bool has_parent = predictor != Predictor::kRoot;
   const bool least_squares = predictor == Predictor::kLeastSquares;
   // Predictor 5 whose weights give predictor 4's estimate none needs nothing of predictor 4's.
@@ -724,13 +777,14 @@ bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t cha
                     walk.parent,
                     walk.columns,
                     walk.rows,
-                    nullptr,
+                    context_models.data(),
                     uint32_t(context_models.size() / channels),
                     walk.upsampled,
                     nullptr,
                     walk.ls_weights,
                     {}};
   if (least_squares) sumLeastSquaresWeights(walk.ls_weights, channels, geometry.ls_weight_sums);
+  geometry.green_led = green_led;
   SlotModels models;
   slotModels(context_models, models);
   uint8_t* const scratch_end = padded.data() + padded.size();

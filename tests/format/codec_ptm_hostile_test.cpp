@@ -56,6 +56,20 @@ ChildPayload makeLanesPayloadWithTables(uint32_t channels) {
   return result;
 }
 
+// Coder 7 with green-led contexts (3 and 4 channels): the nearest parent's payload of a comb,
+// with a table wherever one saves any bytes.
+ChildPayload makeGreenLedLanesPayload(uint32_t channels) {
+  ChildPayload result =
+      makeChildPayload(channels, Predictor::kParentNearest, PtmCoder::kRansLanes, 8);
+  ParentTexels parent = parentOf(result.parent, 1, 1, kSweepTilePx, 1);
+  PtmRecording recording;
+  EXPECT_TRUE(recordPtm(result.child.view(), &parent, Predictor::kParentNearest,
+                        PtmCoder::kRansLanes, nullptr, nullptr, recording)
+                  .has_value());
+  result.payload = greenLedLanesPayload(recording, true);
+  return result;
+}
+
 // Every predictor that reads the parent with every coder: what the truncation and corruption
 // tests sweep. (On 64-px tiles the sweeps had to leave out the coders whose walks others share;
 // on kSweepTilePx tiles every combination costs less under ASan than that subset did.)
@@ -76,6 +90,11 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
   payloads.push_back(makeLanesPayloadWithTables(channels));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels, coder 7";
+  if (channels >= 3) {
+    payloads.push_back(makeGreenLedLanesPayload(channels));
+    EXPECT_TRUE(isGreenLed(payloads.back().payload) && hasTables(payloads.back().payload))
+        << channels << " channels, coder 7 green-led";
+  }
   return payloads;
 }
 
@@ -125,6 +144,27 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
     bad = tile.payload;
     bad[1] = coder_byte;
     EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value()) << int(coder_byte);
+  }
+  // The green-led flag on another coder than 7, or on coder 7 with fewer than three channels,
+  // which have no green to lead.
+  for (const uint8_t coder_byte :
+       {kPtmGreenLedFlag, uint8_t(kPtmGreenLedFlag | uint8_t(PtmCoder::kRans)),
+        uint8_t(kPtmGreenLedFlag | uint8_t(PtmCoder::kRansChained))}) {
+    bad = tile.payload;
+    bad[1] = coder_byte;
+    auto refused = decodeTile(Codec::kPtm, bad, out, &parent);
+    ASSERT_FALSE(refused.has_value()) << int(coder_byte);
+    EXPECT_NE(refused.error().message.find("unknown entropy coder"), std::string::npos);
+  }
+  for (uint32_t channels = 1; channels <= 2; ++channels) {
+    ChildPayload lanes =
+        makeChildPayload(channels, Predictor::kNeighbourMedian, PtmCoder::kRansLanes);
+    ParentTexels lanes_parent = parentOf(lanes.parent, 1, 1, kSweepTilePx, 1);
+    lanes.payload[1] = uint8_t(lanes.payload[1] | kPtmGreenLedFlag);
+    Image few(kSweepSide, kSweepSide, channels);
+    auto refused = decodeTile(Codec::kPtm, lanes.payload, few, &lanes_parent);
+    ASSERT_FALSE(refused.has_value()) << channels;
+    EXPECT_NE(refused.error().message.find("channels"), std::string::npos);
   }
   // Every model byte names a model of the family; one changed under a used context (the first
   // position's flattest class in slot 0, which this smooth tile uses with coder 1's gradient

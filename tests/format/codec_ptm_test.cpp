@@ -163,8 +163,13 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   // Effort 2: the smaller of effort 1's payload and coder 7's, whose predictor is the smaller
   // of 3 and 1 by estimate; where 3 won and came out below effort 1's size, 5 without
   // predictor 4's estimate if its estimate is at least 2 % below that, and then 5 with the
-  // estimate if 25 % below again; then 4 if its estimate is at least 25 % below the choice.
+  // estimate if 25 % below again; then 4 if its estimate is at least 25 % below the choice;
+  // then the choice with green-led contexts if their estimate is at least 2 % below it.
   const std::vector<uint8_t> smaller = payloadAt(2);
+  struct Choice {
+    Predictor predictor;
+    bool without_estimate;
+  };
   auto lanesWith = [&](Predictor predictor, bool without_estimate = false) {
     PtmLeastSquaresFit fit;
     fit.without_estimate = without_estimate;
@@ -184,16 +189,29 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   const auto [fitted, fitted_estimate] = lanesWith(Predictor::kLeastSquares);
   const bool median_won = median_estimate <= nearest_estimate;
   const std::vector<uint8_t>* lanes = median_won ? &median : &nearest;
+  Choice choice{median_won ? Predictor::kNeighbourMedian : Predictor::kParentNearest, false};
   size_t lanes_estimate = std::min(median_estimate, nearest_estimate);
-  auto takeIfItSaves = [&](const std::vector<uint8_t>& candidate, size_t estimate, size_t percent) {
+  auto takeIfItSaves = [&](const std::vector<uint8_t>& candidate, size_t estimate, size_t percent,
+                           Choice candidate_choice) {
     if (estimate * 100 > lanes_estimate * (100 - percent)) return false;
     lanes = &candidate;
     lanes_estimate = estimate;
+    choice = candidate_choice;
     return true;
   };
-  if (median_won && lanes_estimate < fast.size() && takeIfItSaves(plain, plain_estimate, 2))
-    takeIfItSaves(fitted, fitted_estimate, 25);
-  takeIfItSaves(corrected, corrected_estimate, 25);
+  if (median_won && lanes_estimate < fast.size() &&
+      takeIfItSaves(plain, plain_estimate, 2, {Predictor::kLeastSquares, true}))
+    takeIfItSaves(fitted, fitted_estimate, 25, {Predictor::kLeastSquares, false});
+  takeIfItSaves(corrected, corrected_estimate, 25, {Predictor::kParentCorrected, false});
+  PtmLeastSquaresFit fit;
+  fit.without_estimate = choice.without_estimate;
+  PtmRecording recording, led;
+  ASSERT_TRUE(recordPtm(child.view(), &parent, choice.predictor, PtmCoder::kRansLanes, nullptr,
+                        &fit, recording)
+                  .has_value());
+  leadRecordingByGreen(recording, led);
+  const std::vector<uint8_t> led_payload = encodeRecordedPtm(led, PtmCoder::kRansLanes, nullptr);
+  takeIfItSaves(led_payload, estimateRecordedPtm(led, PtmCoder::kRansLanes), 2, choice);
   EXPECT_EQ(smaller, lanes->size() < fast.size() ? *lanes : fast);
   // The default: the predictor that suits coder 6 best, and then the fastest coder within 3 %
   // of coder 6. Effort 3 applies the same rule without predictor 5.
@@ -255,6 +273,27 @@ PyramidTiles makeWavesWithNoise(double period, uint32_t noise) {
             uint8_t(120 + 90 * std::sin(x / (period + c)) * std::cos(y / (period + 2)) +
                     nextRandom(seed) % noise);
   return pyramid;
+}
+
+TEST(PtmCodec, EffortTwoTakesGreenLedContextsWhereTheyPay) {
+  // Colour that errs together (makeColourThatErrsTogether): effort 2 codes the tile with
+  // green-led contexts; on waves whose channels carry noise of their own, without.
+  for (const bool errs_together : {true, false}) {
+    PyramidTiles pyramid =
+        errs_together ? makeColourThatErrsTogether(23) : makeWavesWithNoise(40, 9);
+    for (size_t l = 1; l < pyramid.levels.size(); ++l)
+      pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
+    const Image parent_tile = pyramid.tile(1, 0, 0);
+    const Image child = pyramid.tile(0, 1, 1);
+    ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+    EncodeOptions options;
+    options.effort = 2;
+    auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
+    ASSERT_TRUE(payload.has_value());
+    EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
+    EXPECT_EQ(isGreenLed(*payload), errs_together);
+    EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
+  }
 }
 
 TEST(PtmCodec, EffortTwoTakesTheParentCorrectedLanesWhereTheyPay) {

@@ -3,8 +3,10 @@
 // runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it exists for
 // every predictor but 2 (bilinear parent). Hostile payloads of coder 7 are in
 // codec_ptm_hostile_test.cpp.
+#include <algorithm>
 #include <cmath>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include <fmt/format.h>
@@ -91,6 +93,7 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
   EXPECT_EQ(walk->estimates, estimates);
   EXPECT_EQ(walk->upsampled != nullptr, estimates && planes);
   const LaneModels models = laneModels(payload, channels);
+  const bool green_led = (payload[1] & kPtmGreenLedFlag) != 0;
   std::vector<uint8_t> padded;
   if (estimates && planes) {
     Image scratch_out(side, side, channels);
@@ -102,12 +105,12 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
     EXPECT_TRUE(without.has_value());
     if (without) {
       EXPECT_FALSE(ptm::lanes::decode(payload.subspan(models.section_at), *without, channels,
-                                      predictor, models.context_models, padded, path))
+                                      predictor, models.context_models, green_led, padded, path))
           << "the scalar lanes without predictor 4's planes";
     }
   }
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(models.section_at), *walk, channels, predictor,
-                                 models.context_models, padded, path));
+                                 models.context_models, green_led, padded, path));
   return out;
 }
 
@@ -165,9 +168,23 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithEveryDecoder) {
                   encodePtm(tile.view(), {}, parent, predictor, PtmCoder::kRansLanes, nullptr);
               if (payload) {
                 EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
+                EXPECT_FALSE(isGreenLed(*payload));
                 EXPECT_EQ((*payload)[0], uint8_t(parent ? predictor : Predictor::kRoot));
                 expectEveryDecoderAgrees(*payload, side, channels, parent, tile);
                 escapes += escapeBytes(*payload, channels);
+              }
+              // Green-led contexts (3 and 4 channels): the same symbols, red's and blue's
+              // contexts after green's residual; the fastest decoder by decodeTile.
+              if (payload && channels >= 3) {
+                PtmRecording recording;
+                EXPECT_TRUE(recordPtm(tile.view(), parent, predictor, PtmCoder::kRansLanes, nullptr,
+                                      nullptr, recording)
+                                .has_value());
+                const std::vector<uint8_t> led = greenLedLanesPayload(recording);
+                EXPECT_TRUE(isGreenLed(led));
+                EXPECT_EQ(coderIn(led), PtmCoder::kRansLanes);
+                EXPECT_EQ(decodeOrDie(led, side, channels, parent).texels, tile.texels);
+                expectEveryDecoderAgrees(led, side, channels, parent, tile);
               }
               return payload;
             },
@@ -239,7 +256,7 @@ TEST(PtmLanes, ExplicitTablesRoundTripWithEveryDecoderAndPayForThemselves) {
     const uint32_t side = 32 + 2;
     for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
                                 Predictor::kParentCorrected, Predictor::kLeastSquares}) {
-      size_t with_tables = 0, bytes = 0, bytes_without = 0;
+      size_t with_tables = 0, led_with_tables = 0, bytes = 0, bytes_without = 0;
       expectCoarseToFineRoundTrip(
           comb, channels,
           [&](const Image& tile, const ParentTexels* parent) -> Result<std::vector<uint8_t>> {
@@ -247,6 +264,16 @@ TEST(PtmLanes, ExplicitTablesRoundTripWithEveryDecoderAndPayForThemselves) {
             TESSERA_TRY(recordPtm(tile.view(), parent, predictor, PtmCoder::kRans, nullptr, nullptr,
                                   recording));
             std::vector<uint8_t> payload = lanesPayloadWithAnyTables(recording);
+            // With green-led contexts, whose decoders read green's frequency of zero from
+            // the tables too.
+            if (channels >= 3) {
+              const std::vector<uint8_t> led = greenLedLanesPayload(recording, true);
+              if (hasTables(led)) {
+                ++led_with_tables;
+                EXPECT_EQ(decodeOrDie(led, side, channels, parent).texels, tile.texels);
+                expectEveryDecoderAgrees(led, side, channels, parent, tile);
+              }
+            }
             if (hasTables(payload)) {
               ++with_tables;
               expectEveryDecoderAgrees(payload, side, channels, parent, tile);
@@ -261,6 +288,9 @@ TEST(PtmLanes, ExplicitTablesRoundTripWithEveryDecoderAndPayForThemselves) {
           },
           fmt::format("comb, channels {} predictor {}", channels, int(predictor)));
       EXPECT_GT(with_tables, 0u) << channels << " channels, predictor " << int(predictor);
+      if (channels >= 3) {
+        EXPECT_GT(led_with_tables, 0u) << channels << " channels, predictor " << int(predictor);
+      }
       EXPECT_LT(bytes, bytes_without) << channels << " channels, predictor " << int(predictor);
     }
   }
@@ -351,8 +381,88 @@ TEST(PtmLanes, CodesEveryPredictorButTheBilinearParent) {
   bad = *payload;
   bad[1] = uint8_t(bad[1] ^ kPtmTablesFlag);
   EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
+  // The green-led flag toggled reads red's and blue's symbols under other models: the streams
+  // do not end where the symbols do.
+  bad = *payload;
+  bad[1] = uint8_t(bad[1] ^ kPtmGreenLedFlag);
+  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
   ASSERT_TRUE(decodeTile(Codec::kPtm, *payload, out, &parent).has_value());
   EXPECT_EQ(out.texels, child.texels);
+}
+
+TEST(PtmLanes, GreenLeadsRedAndBlueInCodedTexelsOnly) {
+  // Four channels: a coded texel of position 1, class 5, with green's residual zero, then the
+  // same with green's residual 3 (a byte of 3), then a coded texel of class 7 after a nonzero
+  // green, then a remainder (all four channels' contexts kCodedContexts + class).
+  using ptm::kActivityClasses;
+  using ptm::kCodedContexts;
+  const uint8_t symbols[] = {4, 0, 250, 1, 9, 3, 0, 0, 1, 255, 0, 7, 1, 1, 1, 1};
+  const uint8_t p1 = kActivityClasses;  // position 1's first context
+  std::vector<uint8_t> contexts = {uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   uint8_t(p1 + 5),
+                                   7,
+                                   7,
+                                   7,
+                                   7,
+                                   uint8_t(kCodedContexts + 2),
+                                   uint8_t(kCodedContexts + 2),
+                                   uint8_t(kCodedContexts + 2),
+                                   uint8_t(kCodedContexts + 2)};
+  const std::vector<uint8_t> before = contexts;
+  ptm::lanes::leadByGreen(symbols, contexts, 4);
+  // Halved after a zero green, raised by two (at most to the last class) after any other.
+  const std::vector<uint8_t> expected = {uint8_t(p1 + 2),
+                                         uint8_t(p1 + 5),
+                                         uint8_t(p1 + 2),
+                                         uint8_t(p1 + 5),
+                                         uint8_t(p1 + 7),
+                                         uint8_t(p1 + 5),
+                                         uint8_t(p1 + 7),
+                                         uint8_t(p1 + 5),
+                                         7,
+                                         7,
+                                         7,
+                                         7,
+                                         before[12],
+                                         before[13],
+                                         before[14],
+                                         before[15]};
+  EXPECT_EQ(contexts, expected);
+  EXPECT_EQ(ptm::lanes::greenLedClass(0, true), 0u);
+  EXPECT_EQ(ptm::lanes::greenLedClass(6, false), kActivityClasses - 1);
+}
+
+TEST(PtmLanes, GreenLedContextsCodeColourThatErrsTogetherSmaller) {
+  // Colour that errs together (makeColourThatErrsTogether): the lead saves at least 5 % with
+  // the median, whose residuals are zero in the texels without noise, and 2 % with the nearest
+  // parent, whose prediction, the block's mean, takes in its noisy texels.
+  const PyramidTiles pyramid = makeColourThatErrsTogether(17);
+  const Image child = pyramid.tile(0, 1, 1), parent_tile = pyramid.tile(1, 0, 0);
+  const ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  for (const auto& [predictor, percent] :
+       {std::pair{Predictor::kNeighbourMedian, 5u}, std::pair{Predictor::kParentNearest, 2u}}) {
+    PtmRecording recording;
+    ASSERT_TRUE(recordPtm(child.view(), &parent, predictor, PtmCoder::kRansLanes, nullptr, nullptr,
+                          recording)
+                    .has_value());
+    const std::vector<uint8_t> plain = encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr);
+    PtmRecording led;
+    leadRecordingByGreen(recording, led);
+    const std::vector<uint8_t> led_payload = encodeRecordedPtm(led, PtmCoder::kRansLanes, nullptr);
+    EXPECT_LT(led_payload.size() * 100, plain.size() * (100 - percent)) << int(predictor);
+    // The estimate follows the payload, as for coder 7 without the lead.
+    EXPECT_LE(std::abs(double(estimateRecordedPtm(led, PtmCoder::kRansLanes)) -
+                       double(led_payload.size())),
+              2.0 * 3 * ptm::lanes::kLanes + 3 * 2 + 1);
+    EXPECT_EQ(decodeOrDie(led_payload, 128, 3, &parent).texels, child.texels);
+    expectEveryDecoderAgrees(led_payload, 128, 3, &parent, child);
+  }
 }
 
 }  // namespace

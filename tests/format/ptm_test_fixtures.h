@@ -25,12 +25,25 @@ inline std::vector<uint8_t> lanesPayloadWithAnyTables(const PtmRecording& record
   return encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
 }
 
-// The coder a payload names, without its tables flag.
+// A coder-7 payload of `recording` (a walk of coder 1's, 3 or 4 channels) with green-led
+// contexts, and with `any_tables` a table wherever one saves any bytes.
+inline std::vector<uint8_t> greenLedLanesPayload(const PtmRecording& recording,
+                                                 bool any_tables = false) {
+  PtmRecording led;
+  leadRecordingByGreen(recording, led);
+  return encodeRecordedPtm(led, PtmCoder::kRansLanes, nullptr, nullptr,
+                           any_tables ? std::optional<double>(0.0) : std::nullopt);
+}
+
+// The coder a payload names, without its flags.
 inline PtmCoder coderIn(std::span<const uint8_t> payload) {
-  return PtmCoder(payload[1] & uint8_t(~kPtmTablesFlag));
+  return PtmCoder(payload[1] & uint8_t(~(kPtmTablesFlag | kPtmGreenLedFlag)));
 }
 inline bool hasTables(std::span<const uint8_t> payload) {
   return (payload[1] & kPtmTablesFlag) != 0;
+}
+inline bool isGreenLed(std::span<const uint8_t> payload) {
+  return (payload[1] & kPtmGreenLedFlag) != 0;
 }
 
 // Smooth shading, an edge and noise: residuals that are neither all zero nor all random.
@@ -101,6 +114,27 @@ inline PyramidTiles makePyramid(uint32_t width, uint32_t height, uint32_t channe
   for (uint8_t& texel : pyramid.levels[0].texels) texel = uint8_t(texel / step * step);
   while (pyramid.levels.back().width_px > tile_px || pyramid.levels.back().height_px > tile_px)
     pyramid.levels.push_back(floorDownsample(pyramid.levels.back()));
+  return pyramid;
+}
+
+// Colour that errs together, 256 x 256 in 128-px tiles: smooth shading, and in a random third
+// of the texels noise in every channel at once. A texel's neighbours cannot tell whether it is
+// noisy, and its green residual can: red's and blue's residuals are large where green's is
+// and mostly zero where it is zero (coder 7's green-led contexts).
+inline PyramidTiles makeColourThatErrsTogether(uint32_t seed) {
+  PyramidTiles pyramid = makePyramid(256, 256, 3, 128, 0, seed);
+  Image& base = pyramid.levels[0];
+  for (uint32_t y = 0; y < 256; ++y)
+    for (uint32_t x = 0; x < 256; ++x) {
+      const bool noisy = test::nextRandom(seed) % 3 == 0;
+      for (uint32_t c = 0; c < 3; ++c) {
+        const int noise = noisy ? int(test::nextRandom(seed) % 25) - 12 : 0;
+        const int smooth = int(60 + 40 * c + x / 3 + y / 5);
+        base.row(y)[size_t(x) * 3 + c] = uint8_t(std::clamp(smooth + noise, 0, 255));
+      }
+    }
+  for (size_t l = 1; l < pyramid.levels.size(); ++l)
+    pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
   return pyramid;
 }
 
