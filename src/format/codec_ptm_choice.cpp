@@ -24,10 +24,12 @@ namespace {
 //   and the neighbour median; where the median won, least squares with the weights fitted
 //   without predictor 4's estimate where its estimate is 2 % smaller, and with them where
 //   those save 25 % again; then the parent-corrected predictor where its estimate is 25 %
-//   below the choice so far. In the lanes nearest parent, the median and least squares
-//   without the estimate decode at 150-185 MP/s per core on the codec study's inputs,
-//   predictor 4 and least squares with the estimate at 100-115 (docs/benchmarks.md,
-//   "thirteenth session");
+//   below the choice so far; then, with 3 or 4 channels, the choice with green-led contexts
+//   (ptm::lanes::leadByGreen) where they save 2 %. In the lanes nearest parent, the median
+//   and least squares without the estimate decode at 150-185 MP/s per core on the codec
+//   study's inputs, predictor 4 and least squares with the estimate at 100-115
+//   (docs/benchmarks.md, "thirteenth session"); green-led contexts cost 0-8 % ("fourteenth
+//   session");
 // - 3 and the default: predictors 1, 3 and 4 entropy-coded by rANS. Of its coders, fastest to
 //   decode first: 7 (the lanes, coder 1's contexts), 1 (per-channel contexts,
 //   model family 1), 2 (chained contexts), 3 (model family 2), 4 (both), 6 (4 with the
@@ -55,7 +57,10 @@ constexpr size_t kLanesLeastSquaresMinSavingPercent = 2;
 // at 155-178, 3 % larger.
 constexpr size_t kLanesSlowerPredictorMinSavingPercent = 25;
 // Effort 2: the lanes' green-led contexts (ptm::lanes::leadByGreen) cost the SIMD decoder a
-// comparison and a blend on each step's longest chain of instructions.
+// comparison and a blend on each step's longest chain of instructions. On the codec study's
+// photograph they save about 10 % in nearly every tile; with 0 % instead of 2 % the map came
+// out 0.6 % smaller and decoded at 145-151 MP/s per core against 150-162, in turn three times
+// (docs/benchmarks.md, "fourteenth session").
 constexpr size_t kLanesGreenLedMinSavingPercent = 2;
 // Fastest to decode first (docs/codecs.md, "ptm (6)").
 constexpr PtmCoder kRansCodersByDecodeSpeed[] = {

@@ -52,7 +52,7 @@ inline constexpr double kShareModelsSlack = 0.03;
 /// texel, red's and blue's activity class follows whether green's residual in the same texel
 /// is zero, as coder 2's chained contexts follow each residual before them. Colour channels
 /// err together, so a zero green makes zeros likelier in red and blue; on the codec study's
-/// photograph the lanes came out 10 % smaller (docs/benchmarks.md, "fourteenth session").
+/// photograph effort 2 came out 9.8 % smaller (docs/benchmarks.md, "fourteenth session").
 /// Green is the only lead, where coder 2 chains red on green and blue on red: the SIMD
 /// decoder reads whether green's symbol is zero from green's slot and its model's frequency
 /// of zero, before green's lookup, so red's and blue's lookups wait for no other.
