@@ -223,19 +223,35 @@ TEST(PtmCodec, EffortSelectsTheEncoderModeAndEveryModeRoundTrips) {
   EXPECT_LE(smaller.size(), fast.size());
 }
 
-// Rebuilds `pyramid`'s levels from its base, and expects effort 2 to code tile (1, 1) of level
-// 0 with coder 7 and `expected`, at least `percent` % smaller than coder 7 with each of
-// `others`; with predictor 5, with predictor 4's estimate exactly where it saves 25 %.
-void expectEffortTwoTakesTheLanesWith(PyramidTiles& pyramid, Predictor expected,
-                                      std::initializer_list<Predictor> others, size_t percent) {
+// Tile (1, 1) of level 0 of a pyramid, its parent (tile (0, 0) of level 1) and effort 2's
+// payload of it.
+struct EffortTwoTile {
+  Image parent_tile, child;
+  Result<std::vector<uint8_t>> payload;
+  ParentTexels parent() const { return parentOf(parent_tile, 1, 1, 128, 0); }
+};
+
+// Rebuilds `pyramid`'s levels from its base and codes tile (1, 1) of level 0 with effort 2.
+EffortTwoTile effortTwoTile(PyramidTiles& pyramid) {
   for (size_t l = 1; l < pyramid.levels.size(); ++l)
     pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
-  const Image parent_tile = pyramid.tile(1, 0, 0);
-  const Image child = pyramid.tile(0, 1, 1);
-  ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
+  EffortTwoTile tile{pyramid.tile(1, 0, 0), pyramid.tile(0, 1, 1), std::vector<uint8_t>{}};
+  const ParentTexels parent = tile.parent();
   EncodeOptions options;
   options.effort = 2;
-  auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
+  tile.payload = encodeTile(Codec::kPtm, tile.child.view(), options, &parent);
+  return tile;
+}
+
+// Expects effort 2 to code tile (1, 1) of level 0 of `pyramid` with coder 7 and `expected`, at
+// least `percent` % smaller than coder 7 with each of `others`; with predictor 5, with
+// predictor 4's estimate exactly where it saves 25 %.
+void expectEffortTwoTakesTheLanesWith(PyramidTiles& pyramid, Predictor expected,
+                                      std::initializer_list<Predictor> others, size_t percent) {
+  const EffortTwoTile tile = effortTwoTile(pyramid);
+  const Image& child = tile.child;
+  const ParentTexels parent = tile.parent();
+  const auto& payload = tile.payload;
   ASSERT_TRUE(payload.has_value());
   EXPECT_EQ((*payload)[0], uint8_t(expected));
   EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
@@ -281,18 +297,12 @@ TEST(PtmCodec, EffortTwoTakesGreenLedContextsWhereTheyPay) {
   for (const bool errs_together : {true, false}) {
     PyramidTiles pyramid =
         errs_together ? makeColourThatErrsTogether(23) : makeWavesWithNoise(40, 9);
-    for (size_t l = 1; l < pyramid.levels.size(); ++l)
-      pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
-    const Image parent_tile = pyramid.tile(1, 0, 0);
-    const Image child = pyramid.tile(0, 1, 1);
-    ParentTexels parent = parentOf(parent_tile, 1, 1, 128, 0);
-    EncodeOptions options;
-    options.effort = 2;
-    auto payload = encodeTile(Codec::kPtm, child.view(), options, &parent);
-    ASSERT_TRUE(payload.has_value());
-    EXPECT_EQ(coderIn(*payload), PtmCoder::kRansLanes);
-    EXPECT_EQ(isGreenLed(*payload), errs_together);
-    EXPECT_EQ(decodeOrDie(*payload, 128, 3, &parent).texels, child.texels);
+    const EffortTwoTile tile = effortTwoTile(pyramid);
+    const ParentTexels parent = tile.parent();
+    ASSERT_TRUE(tile.payload.has_value());
+    EXPECT_EQ(coderIn(*tile.payload), PtmCoder::kRansLanes);
+    EXPECT_EQ(isGreenLed(*tile.payload), errs_together);
+    EXPECT_EQ(decodeOrDie(*tile.payload, 128, 3, &parent).texels, tile.child.texels);
   }
 }
 
