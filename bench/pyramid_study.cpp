@@ -543,12 +543,15 @@ void study(const std::string& input, double min_seconds, const std::string& only
       for (const auto& level : payloads)
         for (const auto& payload : level) chosen[{payload[0], payload[1]}] += payload.size();
       std::string shares;
-      // The coder byte's tables flag says that explicit tables follow (docs/codecs.md).
+      // The coder byte's flags: explicit tables follow, and coder 7's contexts are green-led
+      // (docs/codecs.md).
+      using tessera::detail::kPtmGreenLedFlag, tessera::detail::kPtmTablesFlag;
       for (const auto& [key, bytes] : chosen)
-        shares += fmt::format("{}predictor {} coder {}{} {:.1f} %", shares.empty() ? "" : ", ",
-                              key.first, key.second & ~int(tessera::detail::kPtmTablesFlag),
-                              (key.second & tessera::detail::kPtmTablesFlag) != 0 ? "+tables" : "",
-                              100.0 * bytes / total);
+        shares +=
+            fmt::format("{}predictor {} coder {}{}{} {:.1f} %", shares.empty() ? "" : ", ",
+                        key.first, key.second & ~int(kPtmTablesFlag | kPtmGreenLedFlag),
+                        (key.second & kPtmGreenLedFlag) != 0 ? " green-led" : "",
+                        (key.second & kPtmTablesFlag) != 0 ? "+tables" : "", 100.0 * bytes / total);
       fmt::print(
           "\n({}'s bytes by predictor and coder: {})\n",
           variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort),
