@@ -228,9 +228,8 @@ constexpr bool walksAlike(PtmCoder a, PtmCoder b) {
          isErrorActivityCoder(a) == isErrorActivityCoder(b) &&
          isParentActivityCoder(a) == isParentActivityCoder(b);
 }
-/// A recording for coder 7 (or coder 1, which walks alike) of a tile of 3 or 4 channels
-/// (`recording`, green-led or not) with
-/// green-led contexts (ptm::lanes::leadByGreen), recounted, into `led`.
+/// `recording` (for coder 7, or coder 1, which walks alike; a tile of 3 or 4 channels;
+/// green-led or not) with green-led contexts (ptm::lanes::leadByGreen), recounted, into `led`.
 void leadRecordingByGreen(const PtmRecording& recording, PtmRecording& led);
 /// Walks the tile as encodePtm does with the rANS coder `coder` into `recording`.
 Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predictor predictor,
