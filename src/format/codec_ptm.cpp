@@ -191,15 +191,9 @@ Result<void> recordPtm(const ImageView& tile, const ParentTexels* parent, Predic
 void leadRecordingByGreen(const PtmRecording& recording, PtmRecording& led) {
   TESSERA_CHECK(walksAlike(recording.coder, PtmCoder::kRansLanes) && recording.channels >= 3)
       << "ptm: green leads coder 7's red and blue only";
-  led.coder = recording.coder;
-  led.channels = recording.channels;
-  led.width = recording.width;
-  led.height = recording.height;
-  led.contexts = recording.contexts;
-  led.header = recording.header;
-  led.symbols = recording.symbols;
-  led.symbol_contexts = recording.symbol_contexts;
-  if (!recording.green_led) lanes::leadByGreen(led.symbols, led.symbol_contexts, led.channels);
+  led = recording;
+  if (led.green_led) return;
+  lanes::leadByGreen(led.symbols, led.symbol_contexts, led.channels);
   led.counts = rans::countByContext(led.symbols, led.symbol_contexts, led.channels, led.contexts);
   led.green_led = true;
 }
