@@ -653,65 +653,6 @@ bool decodeAvx2Channels(uint32_t channels, const Geometry& g, Streams& s, const 
   }
 }
 
-// Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
-// place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
-// From the parent's wide rows rather than the walk's upsampled plane, which this decoder does
-// without: with each child's W = 9 P + 3 Ph + 3 Pv + Pd + 6 (upsampleParent), a block whose
-// children's side texels are Pl and Pr and whose rows' are Pu and Pd sums to
-// 36 P + 6 (Pl + Pr + Pu + Pd) + (the four diagonal texels) + 24, so its shortfall is
-// 28 P - 6 (Pl + Pr + Pu + Pd) - (Pul + Pur + Pdl + Pdr), four blocks and every channel at once
-// in 16-bit lanes. mapAxis makes the side texels P's neighbours, clamped to the parent, which
-// is what the wide rows' padding holds.
-TESSERA_LANES_TARGET void blockShortfalls(const Walk& walk, uint32_t channels,
-                                          const ParentCopy& parent, uint32_t parent_rows,
-                                          int16_t* shortfall) {
-  std::fill_n(shortfall, size_t(parent_rows) * parent.stride, int16_t(0));
-  const AxisMap& columns = *walk.columns;
-  const AxisMap& rows = *walk.rows;
-  // The blocks wholly in the tile have first children from column `first` to `last`, every
-  // other column.
-  uint32_t first = walk.width, last = 0;
-  for (uint32_t x = 0; x + 1 < walk.width; ++x)
-    if (columns.full[x] != 0 && columns.second[x] == 0) {
-      first = std::min(first, x);
-      last = x;
-    }
-  if (first > last) return;
-  const uint32_t first_block = columns.parent[first], blocks = (last - first) / 2 + 1;
-  // Word j of a wide row is parent column columns.parent[0] - 8 + j.
-  const uint32_t at = first_block - columns.parent[0] + 8;
-  const __m256i six = _mm256_set1_epi16(6), twenty_eight = _mm256_set1_epi16(28);
-  for (uint32_t y = 0; y + 1 < walk.height; ++y) {
-    if (rows.full[y] == 0 || rows.second[y] != 0) continue;
-    const uint32_t* middle =
-        parent.wide + size_t(rows.parent[y] - parent.first_row) * parent.wide_stride + at;
-    const uint32_t* above =
-        parent.wide + size_t(rows.neighbour[y] - parent.first_row) * parent.wide_stride + at;
-    const uint32_t* below =
-        parent.wide + size_t(rows.neighbour[y + 1] - parent.first_row) * parent.wide_stride + at;
-    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride +
-                   size_t(first_block - parent.first_column) * channels;
-    for (uint32_t i = 0; i < blocks; i += 4) {
-      const __m256i p = bytesAs16(middle + i), pl = bytesAs16(middle + i - 1),
-                    pr = bytesAs16(middle + i + 1);
-      const __m256i pu = bytesAs16(above + i), pul = bytesAs16(above + i - 1),
-                    pur = bytesAs16(above + i + 1);
-      const __m256i pd = bytesAs16(below + i), pdl = bytesAs16(below + i - 1),
-                    pdr = bytesAs16(below + i + 1);
-      const __m256i sides = _mm256_add_epi16(_mm256_add_epi16(pl, pr), _mm256_add_epi16(pu, pd));
-      const __m256i corners =
-          _mm256_add_epi16(_mm256_add_epi16(pul, pur), _mm256_add_epi16(pdl, pdr));
-      const __m256i g = _mm256_sub_epi16(
-          _mm256_sub_epi16(_mm256_mullo_epi16(p, twenty_eight), _mm256_mullo_epi16(sides, six)),
-          corners);
-      alignas(32) int16_t g4[16];
-      _mm256_store_si256(reinterpret_cast<__m256i*>(g4), g);
-      for (uint32_t b = 0; b < 4 && i + b < blocks; ++b)
-        std::memcpy(out + size_t(i + b) * channels, g4 + 4 * b, channels * sizeof(int16_t));
-    }
-  }
-}
-
 }  // namespace
 
 bool decodeSimd(std::span<const uint8_t> section, const Walk& walk, uint32_t channels,

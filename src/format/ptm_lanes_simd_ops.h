@@ -1,15 +1,19 @@
 #pragma once
 // The lane decoder's vector operations (ptm_lanes_simd.h, their only user): a band's eight rows
-// in the 32-bit lanes of an AVX2 vector, texels held a byte per channel in each lane. The
-// translation unit that includes them names the instruction set: TESSERA_LANES_ISA, the
-// namespace they go in, and TESSERA_LANES_TARGET, the target attribute every function is
-// compiled with (ptm_lanes_avx2.cpp, ptm_lanes_avx512.cpp). Only code that checked the
-// processor (simdAvailable(), avx512Available()) may call them.
+// in the 32-bit lanes of an AVX2 vector, texels held a byte per channel in each lane; and what
+// it prepares from the parent before the bands (wide rows, band tables, predictor 4's block
+// shortfalls). The translation unit that includes them names the instruction set:
+// TESSERA_LANES_ISA, the namespace they go in, and TESSERA_LANES_TARGET, the target attribute
+// every function is compiled with (ptm_lanes_avx2.cpp, ptm_lanes_avx512.cpp). Only code that
+// checked the processor (simdAvailable(), avx512Available()) may call them.
 
 #include <immintrin.h>
 
+#include <algorithm>
 #include <cstdint>
 #include <cstring>
+
+#include "ptm_lanes_internal.h"
 
 #if !defined(TESSERA_LANES_ISA) || !defined(TESSERA_LANES_TARGET)
 #error "ptm_lanes_simd_ops.h needs TESSERA_LANES_ISA and TESSERA_LANES_TARGET"
@@ -210,6 +214,65 @@ TESSERA_LANES_TARGET inline __m256i bytesAs16(const uint32_t* words) {
 // Entry `entry` of a band's parent table (skewedParents).
 TESSERA_LANES_TARGET inline __m256i bandParents(const uint32_t* table, uint32_t entry) {
   return _mm256_load_si256(reinterpret_cast<const __m256i*>(table + size_t(entry) * 8));
+}
+
+// Predictor 4's shortfall of each block wholly in the tile, per channel, at its parent texel's
+// place in `parent`'s copy: 16 (4P + 1.5) less its four texels' upsampled values (0 elsewhere).
+// From the parent's wide rows rather than the walk's upsampled plane, which this decoder does
+// without: with each child's W = 9 P + 3 Ph + 3 Pv + Pd + 6 (upsampleParent), a block whose
+// children's side texels are Pl and Pr and whose rows' are Pu and Pd sums to
+// 36 P + 6 (Pl + Pr + Pu + Pd) + (the four diagonal texels) + 24, so its shortfall is
+// 28 P - 6 (Pl + Pr + Pu + Pd) - (Pul + Pur + Pdl + Pdr), four blocks and every channel at once
+// in 16-bit lanes. mapAxis makes the side texels P's neighbours, clamped to the parent, which
+// is what the wide rows' padding holds.
+TESSERA_LANES_TARGET inline void blockShortfalls(const Walk& walk, uint32_t channels,
+                                                 const ParentCopy& parent, uint32_t parent_rows,
+                                                 int16_t* shortfall) {
+  std::fill_n(shortfall, size_t(parent_rows) * parent.stride, int16_t(0));
+  const AxisMap& columns = *walk.columns;
+  const AxisMap& rows = *walk.rows;
+  // The blocks wholly in the tile have first children from column `first` to `last`, every
+  // other column.
+  uint32_t first = walk.width, last = 0;
+  for (uint32_t x = 0; x + 1 < walk.width; ++x)
+    if (columns.full[x] != 0 && columns.second[x] == 0) {
+      first = std::min(first, x);
+      last = x;
+    }
+  if (first > last) return;
+  const uint32_t first_block = columns.parent[first], blocks = (last - first) / 2 + 1;
+  // Word j of a wide row is parent column columns.parent[0] - 8 + j.
+  const uint32_t at = first_block - columns.parent[0] + 8;
+  const __m256i six = _mm256_set1_epi16(6), twenty_eight = _mm256_set1_epi16(28);
+  for (uint32_t y = 0; y + 1 < walk.height; ++y) {
+    if (rows.full[y] == 0 || rows.second[y] != 0) continue;
+    const uint32_t* middle =
+        parent.wide + size_t(rows.parent[y] - parent.first_row) * parent.wide_stride + at;
+    const uint32_t* above =
+        parent.wide + size_t(rows.neighbour[y] - parent.first_row) * parent.wide_stride + at;
+    const uint32_t* below =
+        parent.wide + size_t(rows.neighbour[y + 1] - parent.first_row) * parent.wide_stride + at;
+    int16_t* out = shortfall + size_t(rows.parent[y] - parent.first_row) * parent.stride +
+                   size_t(first_block - parent.first_column) * channels;
+    for (uint32_t i = 0; i < blocks; i += 4) {
+      const __m256i p = bytesAs16(middle + i), pl = bytesAs16(middle + i - 1),
+                    pr = bytesAs16(middle + i + 1);
+      const __m256i pu = bytesAs16(above + i), pul = bytesAs16(above + i - 1),
+                    pur = bytesAs16(above + i + 1);
+      const __m256i pd = bytesAs16(below + i), pdl = bytesAs16(below + i - 1),
+                    pdr = bytesAs16(below + i + 1);
+      const __m256i sides = _mm256_add_epi16(_mm256_add_epi16(pl, pr), _mm256_add_epi16(pu, pd));
+      const __m256i corners =
+          _mm256_add_epi16(_mm256_add_epi16(pul, pur), _mm256_add_epi16(pdl, pdr));
+      const __m256i g = _mm256_sub_epi16(
+          _mm256_sub_epi16(_mm256_mullo_epi16(p, twenty_eight), _mm256_mullo_epi16(sides, six)),
+          corners);
+      alignas(32) int16_t g4[16];
+      _mm256_store_si256(reinterpret_cast<__m256i*>(g4), g);
+      for (uint32_t b = 0; b < 4 && i + b < blocks; ++b)
+        std::memcpy(out + size_t(i + b) * channels, g4 + 4 * b, channels * sizeof(int16_t));
+    }
+  }
 }
 
 // Channel c of each lane's texels `low` and `high` (a byte per channel) as the low and high
