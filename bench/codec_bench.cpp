@@ -10,13 +10,13 @@
 
 #include <benchmark/benchmark.h>
 
-#include "format/codec.h"
+#include "codecs/encode.h"
 
 namespace {
 
 using tessera::Codec;
+using tessera::CodecScratch;
 using tessera::Image;
-using tessera::detail::CodecScratch;
 using tessera::detail::EncodeOptions;
 
 uint32_t hash(uint32_t x, uint32_t y, uint32_t seed) {

@@ -20,7 +20,7 @@
 #include <fmt/format.h>
 #include <tiffio.h>
 
-#include "build/band_reader.h"
+#include "builder/band_reader.h"
 
 namespace {
 

@@ -30,11 +30,11 @@
 #include <jxl/encode.h>
 #endif
 
-#include "build/band_reader.h"
-#include "build/downsample.h"
-#include "format/codec.h"
-#include "format/codec_internal.h"
-#include "format/ptm_walk.h"
+#include "builder/band_reader.h"
+#include "builder/downsample.h"
+#include "codecs/encode.h"
+#include "ptm/ptm_codec.h"
+#include "ptm/ptm_walk.h"
 
 using namespace tessera;
 using namespace tessera::detail;

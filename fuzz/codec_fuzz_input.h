@@ -16,7 +16,7 @@
 #include <span>
 #include <vector>
 
-#include "format/codec.h"
+#include "codecs/decode.h"
 
 namespace tessera::fuzz {
 

@@ -5,7 +5,7 @@
 #include <cstring>
 
 #include "codec_fuzz_input.h"
-#include "format/codec.h"
+#include "codecs/encode.h"
 
 namespace tessera::fuzz {
 namespace {
@@ -35,7 +35,7 @@ FuzzParent fuzzParent(const CodecFuzzInput& input) {
   return parent;
 }
 
-void fuzzDecode(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
+void fuzzDecode(const CodecFuzzInput& input, CodecScratch& scratch) {
   Image out(input.width_px, input.height_px, input.channels);
   const size_t expected_bytes = out.texels.size();
   const FuzzParent parent = fuzzParent(input);
@@ -44,7 +44,7 @@ void fuzzDecode(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   if (!result && result.error().message.empty()) die("error without a message", input);
 }
 
-void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
+void fuzzRoundTrip(const CodecFuzzInput& input, CodecScratch& scratch) {
   if (input.rest.size() < 2) return;
   detail::EncodeOptions options;
   options.quality = 1 + input.rest[0] % 100;
@@ -56,10 +56,10 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   Image tile(input.width_px, input.height_px, input.channels);
   for (size_t i = 0; i < tile.texels.size(); ++i)
     tile.texels[i] = seed.empty() ? 0 : seed[i % seed.size()];
-  const detail::CodecFunctions* functions = detail::findCodec(input.codec);
+  const detail::CodecEncoder* encoder = detail::findEncoder(input.codec);
   const FuzzParent parent = fuzzParent(input);
   auto payload = detail::encodeTile(input.codec, tile.view(), options, parent.get(), &scratch);
-  if (functions == nullptr) {
+  if (encoder == nullptr) {
     if (payload) die("unimplemented codec encoded", input);
     return;
   }
@@ -68,7 +68,7 @@ void fuzzRoundTrip(const CodecFuzzInput& input, detail::CodecScratch& scratch) {
   Image decoded(input.width_px, input.height_px, input.channels);
   auto result = detail::decodeTile(input.codec, *payload, decoded, parent.get(), &scratch);
   if (!result) die("decode of a fresh payload failed", input, result.error().message.c_str());
-  if (functions->lossless) {
+  if (codecIsLossless(input.codec)) {
     if (decoded.texels != tile.texels) die("lossless round trip changed texels", input);
   } else if (input.channels == 2 || input.channels == 4) {
     for (size_t i = input.channels - 1; i < tile.texels.size(); i += input.channels)
@@ -85,7 +85,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (!parseCodecFuzzInput({data, size}, &input)) return 0;
   // One scratch per process, as a worker keeps one: it also checks that no state leaks from
   // one (possibly failed) call into the next.
-  static tessera::detail::CodecScratch scratch;
+  static tessera::CodecScratch scratch;
   if (input.round_trip) {
     fuzzRoundTrip(input, scratch);
   } else {

@@ -11,8 +11,8 @@
 #include <vector>
 
 #include "codec_fuzz_input.h"
-#include "format/codec.h"
-#include "format/codec_internal.h"
+#include "codecs/encode.h"
+#include "ptm/ptm_codec.h"
 
 namespace {
 

@@ -11,17 +11,12 @@
 #include <string>
 #include <vector>
 
-#include <nlohmann/json.hpp>
-
 #include <tessera/byte_source.h>
+#include <tessera/codec_scratch.h>
 #include <tessera/format.h>
 #include <tessera/result.h>
 
 namespace tessera {
-
-namespace detail {
-class CodecScratch;
-}
 
 /// A tile's directory entry (docs/format.md, "Tile entries").
 struct TileEntry {
@@ -63,12 +58,9 @@ class Archive {
   /// problem: not an archive, newer major version, truncated file, checksum mismatch, field
   /// out of bounds.
   [[nodiscard]] static Result<std::shared_ptr<Archive>> open(std::shared_ptr<ByteSource> source);
-  /// Opens a local file (pread-based byte source).
+  /// Opens a local file (openFileSource, pread-based). For a path or an http(s):// URL, see
+  /// openArchive in tessera/open.h.
   [[nodiscard]] static Result<std::shared_ptr<Archive>> openFile(const std::string& path);
-  /// Opens a local file or an http(s):// URL (openByteSource): over HTTP the open costs one
-  /// request, the ranged GET of the first 16 KiB the HTTP source makes when it opens
-  /// (docs/remote.md), plus one per block outside it.
-  [[nodiscard]] static Result<std::shared_ptr<Archive>> openUri(const std::string& path_or_url);
 
   ~Archive();
   Archive(const Archive&) = delete;
@@ -79,8 +71,9 @@ class Archive {
   /// several.
   std::string tileName(const TileId& tile) const;
   const std::vector<ImageInfo>& images() const;
-  /// The archive's JSON metadata (docs/format.md, "Metadata").
-  const nlohmann::json& metadata() const;
+  /// The archive's metadata block as stored: a UTF-8 JSON object (docs/format.md, "Metadata"),
+  /// "{}" when the file has none. Checked at open to be one JSON object.
+  const std::string& metadataJson() const;
   /// Total file size in bytes as recorded in the header.
   uint64_t fileBytes() const;
   const ByteSource& source() const;
@@ -111,13 +104,13 @@ class Archive {
   /// parent other than its own verified one.
   [[nodiscard]] Result<Image> decodeTile(const TileId& tile, const TileEntry& entry,
                                          std::span<const uint8_t> payload,
-                                         detail::CodecScratch* scratch = nullptr) const;
+                                         CodecScratch* scratch = nullptr) const;
   /// The same into `out`, reusing its buffer: when `out.texels` already holds a stored tile's
   /// bytes nothing is allocated, zeroed or page-faulted (the streamer recycles evicted tiles'
   /// buffers this way). Every texel is written, whatever `out` held before.
   [[nodiscard]] Result<void> decodeTileInto(const TileId& tile, const TileEntry& entry,
                                             std::span<const uint8_t> payload, Image& out,
-                                            detail::CodecScratch* scratch = nullptr) const;
+                                            CodecScratch* scratch = nullptr) const;
 
   /// The same with the parent's decoded stored tile supplied by the caller (a loader that
   /// decodes coarse to fine): `parent` must be what decodeTile returned for
@@ -126,7 +119,7 @@ class Archive {
   [[nodiscard]] Result<void> decodeTileInto(const TileId& tile, const TileEntry& entry,
                                             std::span<const uint8_t> payload, Image& out,
                                             const Image& parent,
-                                            detail::CodecScratch* scratch = nullptr) const;
+                                            CodecScratch* scratch = nullptr) const;
 
   /// The tile one level coarser whose quarter `tile` refines. `tile.level + 1` must be below
   /// the image's level_count.
@@ -135,8 +128,7 @@ class Archive {
   }
 
   /// tileEntry + readPayload + decodeTile.
-  [[nodiscard]] Result<Image> readTile(const TileId& tile,
-                                       detail::CodecScratch* scratch = nullptr) const;
+  [[nodiscard]] Result<Image> readTile(const TileId& tile, CodecScratch* scratch = nullptr) const;
 
   /// Reads `rect` of `level` of `image` into RGBA (gray replicated, alpha 255 when absent).
   /// Texels outside the level read as transparent black. The rectangle may be at most
@@ -160,9 +152,9 @@ class Archive {
   explicit Archive(std::unique_ptr<Impl> impl);
   Result<void> decodeWithParent(const TileId& tile, const TileEntry& entry,
                                 std::span<const uint8_t> payload, Image& out, const Image* parent,
-                                detail::CodecScratch* scratch) const;
+                                CodecScratch* scratch) const;
   Result<std::shared_ptr<const Image>> decodedParent(const TileId& tile,
-                                                     detail::CodecScratch* scratch) const;
+                                                     CodecScratch* scratch) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -1,7 +1,8 @@
 #pragma once
 /// \file
-/// Byte sources: where archive bytes come from (a local file, memory, HTTP ranges:
-/// tessera/http_source.h). The archive reader and the loader pool see only this interface.
+/// Byte sources: where archive bytes come from (a local file, memory; HTTP ranges in
+/// tessera/http_source.h; a path or URL in tessera/open.h). The archive reader and the loader
+/// pool see only this interface.
 
 #include <atomic>
 #include <chrono>
@@ -94,14 +95,6 @@ class ByteSource {
 /// Opens a local file for positional reads (pread: thread-safe without a shared file offset,
 /// and an I/O error is an error value, not a SIGBUS as with mmap). Fails naming the path.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openFileSource(const std::string& path);
-
-/// True when `path_or_url` starts with http:// or https:// (case-insensitive scheme).
-bool isRemoteUri(const std::string& path_or_url);
-
-/// Opens an archive's bytes wherever they are: an http:// or https:// URL through
-/// openHttpSource (tessera/http_source.h) with default HttpOptions, anything else as a local
-/// file (openFileSource). Fails as those do, naming the path or URL.
-[[nodiscard]] Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url);
 
 /// Wraps bytes held in memory; `name` is used in messages.
 std::shared_ptr<ByteSource> makeMemorySource(std::vector<uint8_t> bytes, std::string name);

@@ -53,6 +53,9 @@ bool parseCodecName(std::string_view name, Codec* codec);
 /// parent tile (ptm): a loader must decode the parent first (docs/runtime.md, "Dependent
 /// codecs").
 bool codecNeedsParent(Codec codec);
+/// True for a codec whose decoded texels equal the encoded ones bit for bit (every codec but
+/// JPEG); false for an unknown value.
+bool codecIsLossless(Codec codec);
 /// Names a tile kind: "empty", "uniform", "encoded", "procedural".
 const char* tileKindName(TileKind kind);
 

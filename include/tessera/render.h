@@ -81,8 +81,4 @@ struct PictureDifference {
 /// Compares two pictures; fails (kInvalidArgument) when their sizes differ.
 [[nodiscard]] Result<PictureDifference> comparePictures(const Picture& a, const Picture& b);
 
-/// Writes a picture as an 8-bit RGBA PNG; fails naming the path. Written to a temporary name
-/// and renamed, so a failed write leaves no half-written file.
-[[nodiscard]] Result<void> writePng(const Picture& picture, const std::string& path);
-
 }  // namespace tessera

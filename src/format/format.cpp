@@ -7,15 +7,27 @@ namespace tessera {
 
 namespace {
 
-struct CodecNameEntry {
+// The codec values of docs/format.md, "Codecs": what the format says of each, independent of
+// any implementation (src/codecs has the decoders and encoders).
+struct CodecSpec {
   Codec codec;
   const char* name;
+  bool needs_parent;  ///< coded against the decoded parent tile
+  bool lossless;      ///< decode(encode(x)) == x bit for bit
 };
 
-constexpr CodecNameEntry kCodecNames[] = {
-    {Codec::kRaw, "raw"}, {Codec::kZstd, "zstd"}, {Codec::kLz4, "lz4"}, {Codec::kJpeg, "jpeg"},
-    {Codec::kPng, "png"}, {Codec::kWebp, "webp"}, {Codec::kPtm, "ptm"},
+constexpr CodecSpec kCodecSpecs[] = {
+    {Codec::kRaw, "raw", false, true}, {Codec::kZstd, "zstd", false, true},
+    {Codec::kLz4, "lz4", false, true}, {Codec::kJpeg, "jpeg", false, false},
+    {Codec::kPng, "png", false, true}, {Codec::kWebp, "webp", false, true},
+    {Codec::kPtm, "ptm", true, true},
 };
+
+const CodecSpec* findSpec(Codec codec) {
+  for (const auto& entry : kCodecSpecs)
+    if (entry.codec == codec) return &entry;
+  return nullptr;
+}
 
 uint32_t ceilShift(uint32_t value, uint32_t shift) {
   return uint32_t((uint64_t(value) + (uint64_t(1) << shift) - 1) >> shift);
@@ -24,13 +36,22 @@ uint32_t ceilShift(uint32_t value, uint32_t shift) {
 }  // namespace
 
 const char* codecName(Codec codec) {
-  for (const auto& entry : kCodecNames)
-    if (entry.codec == codec) return entry.name;
-  return "unknown";
+  const CodecSpec* spec = findSpec(codec);
+  return spec != nullptr ? spec->name : "unknown";
+}
+
+bool codecNeedsParent(Codec codec) {
+  const CodecSpec* spec = findSpec(codec);
+  return spec != nullptr && spec->needs_parent;
+}
+
+bool codecIsLossless(Codec codec) {
+  const CodecSpec* spec = findSpec(codec);
+  return spec != nullptr && spec->lossless;
 }
 
 bool parseCodecName(std::string_view name, Codec* codec) {
-  for (const auto& entry : kCodecNames) {
+  for (const auto& entry : kCodecSpecs) {
     if (name == entry.name) {
       *codec = entry.codec;
       return true;

@@ -17,7 +17,7 @@
 
 #include "gl/gl_objects.h"
 #include "gl/renderers.h"
-#include "stream/residency.h"
+#include "stream/footprint.h"
 
 namespace tessera::gl {
 

@@ -1,18 +1,11 @@
-// Pictures: comparison (PSNR, maximum and mean difference) and PNG output.
-#include <sys/stat.h>
-#include <unistd.h>
-
-#include <cerrno>
+// Pictures: comparison (PSNR, maximum and mean difference).
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
 #include <limits>
 
 #include <fmt/format.h>
 
 #include <tessera/render.h>
-
-#include "format/codec.h"
 
 namespace tessera {
 
@@ -20,18 +13,6 @@ namespace {
 
 bool wellFormed(const Picture& picture) {
   return picture.rgba.size() == size_t(picture.width) * picture.height * 4;
-}
-
-/// Writes all of `bytes` to `fd`, retrying short writes and interrupts.
-bool writeAll(int fd, const std::vector<uint8_t>& bytes) {
-  size_t done = 0;
-  while (done < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + done, bytes.size() - done);
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) return false;
-    done += size_t(n);
-  }
-  return true;
 }
 
 }  // namespace
@@ -62,41 +43,6 @@ Result<PictureDifference> comparePictures(const Picture& a, const Picture& b) {
                            ? std::numeric_limits<double>::infinity()
                            : 10 * std::log10(255.0 * 255.0 * samples / double(sum_squares));
   return difference;
-}
-
-Result<void> writePng(const Picture& picture, const std::string& path) {
-  if (picture.width == 0 || picture.height == 0 || !wellFormed(picture))
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("{}: cannot write a {}x{} picture of {} bytes as PNG", path,
-                            picture.width, picture.height, picture.rgba.size()));
-  const ImageView view{picture.rgba.data(), picture.width, picture.height, 4,
-                       size_t(picture.width) * 4};
-  Result<std::vector<uint8_t>> png = detail::encodeTile(Codec::kPng, view, detail::EncodeOptions{});
-  if (!png) return fail(png.error().code, fmt::format("{}: {}", path, png.error().message));
-  // A temporary beside the final path, renamed over it once complete.
-  std::string temp_path = path + ".XXXXXX";
-  const int fd = ::mkstemp(temp_path.data());
-  if (fd < 0)
-    return fail(ErrorCode::kIo,
-                fmt::format("{}: cannot create a temporary file: {}", path, std::strerror(errno)));
-  // mkstemp creates 0600; a picture is for others to view (umask is process-wide state we
-  // must not flip under other threads, so the mode is fixed).
-  ::fchmod(fd, 0644);
-  const bool written = writeAll(fd, *png);
-  const int write_errno = errno;
-  const bool closed = ::close(fd) == 0;
-  if (!written || !closed) {
-    ::unlink(temp_path.c_str());
-    return fail(ErrorCode::kIo, fmt::format("{}: write failed: {}", path,
-                                            std::strerror(written ? errno : write_errno)));
-  }
-  if (::rename(temp_path.c_str(), path.c_str()) != 0) {
-    const int rename_errno = errno;
-    ::unlink(temp_path.c_str());
-    return fail(ErrorCode::kIo,
-                fmt::format("{}: cannot rename into place: {}", path, std::strerror(rename_errno)));
-  }
-  return {};
 }
 
 }  // namespace tessera

@@ -11,7 +11,7 @@
 
 #include <tessera/render.h>
 
-#include "render/view_math.h"
+#include "view_math.h"
 
 namespace tessera {
 

@@ -1,4 +1,4 @@
-#include "render/view_math.h"
+#include "view_math.h"
 
 #include <algorithm>
 #include <cmath>

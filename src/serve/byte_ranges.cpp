@@ -1,4 +1,4 @@
-#include "serve/byte_ranges.h"
+#include "byte_ranges.h"
 
 #include <algorithm>
 #include <optional>

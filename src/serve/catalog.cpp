@@ -1,4 +1,4 @@
-#include "serve/catalog.h"
+#include "catalog.h"
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -9,7 +9,7 @@
 #include <mutex>
 #include <string>
 
-#include "serve/transcode_cache.h"
+#include "transcode_cache.h"
 
 namespace tessera::detail {
 

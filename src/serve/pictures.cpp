@@ -1,4 +1,4 @@
-#include "serve/pictures.h"
+#include "pictures.h"
 
 #include <algorithm>
 #include <bit>
@@ -6,7 +6,7 @@
 
 #include <fmt/format.h>
 
-#include "format/codec.h"
+#include "codecs/encode.h"
 
 namespace tessera::detail {
 

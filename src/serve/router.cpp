@@ -1,4 +1,4 @@
-#include "serve/router.h"
+#include "router.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -11,9 +11,9 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
-#include "serve/byte_ranges.h"
-#include "serve/pictures.h"
-#include "serve/viewer_assets.h"
+#include "byte_ranges.h"
+#include "pictures.h"
+#include "viewer_assets.h"
 
 namespace tessera::detail {
 

@@ -13,10 +13,10 @@
 
 #include <tessera/serve.h>
 
-#include "serve/catalog.h"
-#include "serve/metrics.h"
-#include "serve/parts_body.h"
-#include "serve/transcode_cache.h"
+#include "catalog.h"
+#include "metrics.h"
+#include "parts_body.h"
+#include "transcode_cache.h"
 
 namespace tessera::detail {
 

@@ -27,7 +27,7 @@
 #include <boost/beast/http/write.hpp>
 #include <fmt/format.h>
 
-#include "serve/router.h"
+#include "router.h"
 
 namespace tessera {
 

@@ -1,4 +1,4 @@
-#include "serve/transcode_cache.h"
+#include "transcode_cache.h"
 
 namespace tessera::detail {
 

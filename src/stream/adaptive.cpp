@@ -1,4 +1,4 @@
-#include "stream/adaptive.h"
+#include "adaptive.h"
 
 #include <algorithm>
 #include <cmath>

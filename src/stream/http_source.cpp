@@ -3,13 +3,14 @@
 // keep-alive connections (and HTTP/2 streams) instead of each opening its own; fetch-ahead
 // into a bounded buffer; waiting with cancellation. The class: http_source_impl.h.
 #include <tessera/http_source.h>
+#include <tessera/open.h>
 
 #include <algorithm>
 #include <cstring>
 
 #include <fmt/format.h>
 
-#include "format/read_plan.h"
+#include "reader/read_plan.h"
 #include "http_source_impl.h"
 
 namespace tessera {
@@ -288,16 +289,6 @@ Result<std::shared_ptr<ByteSource>> openHttpSource(const std::string& url,
   auto source = std::make_shared<detail::HttpSource>(url, options);
   TESSERA_TRY(source->probe());
   return std::shared_ptr<ByteSource>(std::move(source));
-}
-
-bool isRemoteUri(const std::string& path_or_url) {
-  const std::string head = detail::lowercase(path_or_url.substr(0, 8));
-  return head.rfind("http://", 0) == 0 || head.rfind("https://", 0) == 0;
-}
-
-Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url) {
-  if (isRemoteUri(path_or_url)) return openHttpSource(path_or_url);
-  return openFileSource(path_or_url);
 }
 
 }  // namespace tessera

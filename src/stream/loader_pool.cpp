@@ -1,4 +1,4 @@
-#include "stream/loader_pool.h"
+#include "loader_pool.h"
 
 #include <pthread.h>
 #include <sched.h>
@@ -10,7 +10,7 @@
 
 #include <fmt/format.h>
 
-#include "format/codec.h"
+#include <tessera/codec_scratch.h>
 
 namespace tessera::detail {
 

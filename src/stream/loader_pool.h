@@ -22,7 +22,7 @@
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
-#include "stream/texel_pool.h"
+#include "texel_pool.h"
 
 namespace tessera::detail {
 

@@ -1,4 +1,4 @@
-#include "stream/residency.h"
+#include "residency.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "stream/texel_pool.h"
+#include "texel_pool.h"
 
 namespace tessera::detail {
 

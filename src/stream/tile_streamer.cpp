@@ -10,9 +10,9 @@
 
 #include <fmt/format.h>
 
-#include "stream/adaptive.h"
-#include "stream/loader_pool.h"
-#include "stream/residency.h"
+#include "adaptive.h"
+#include "loader_pool.h"
+#include "residency.h"
 
 namespace tessera {
 

@@ -6,7 +6,7 @@
 
 #include <tessera/build.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 

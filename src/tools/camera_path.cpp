@@ -1,4 +1,4 @@
-#include "tools/camera_path.h"
+#include "camera_path.h"
 
 #include <algorithm>
 #include <cmath>

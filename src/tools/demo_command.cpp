@@ -11,9 +11,9 @@
 
 #include <tessera/build.h>
 
-#include "tools/cli.h"
-#include "tools/fly_command.h"
-#include "tools/view_command.h"
+#include "cli.h"
+#include "fly_command.h"
+#include "view_command.h"
 
 namespace tessera::cli {
 

@@ -5,10 +5,10 @@
 #include <fmt/format.h>
 
 #include <tessera/archive.h>
+#include <tessera/picture_file.h>
+#include <tessera/open.h>
 
-#include "build/output_file.h"
-#include "format/codec.h"
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 
@@ -24,19 +24,11 @@ struct ExtractArgs {
   bool with_border = false;
 };
 
-Result<void> writePng(const Image& image, const std::string& path) {
-  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> png,
-                           detail::encodeTile(Codec::kPng, image.view(), detail::EncodeOptions{}));
-  TESSERA_ASSIGN_OR_RETURN(detail::TempFile file, detail::TempFile::create(path));
-  TESSERA_TRY(file.pwrite(0, png));
-  return file.commit();
-}
-
 int runExtract(const ExtractArgs& args) {
   if (args.tile.empty() == args.rect.empty())
     return reportError(
         {ErrorCode::kInvalidArgument, "give exactly one of --tile X,Y or --rect X,Y,W,H"});
-  Result<std::shared_ptr<Archive>> opened = Archive::openUri(args.archive);
+  Result<std::shared_ptr<Archive>> opened = openArchive(args.archive);
   if (!opened) return reportError(opened.error());
   const Archive& archive = **opened;
   Result<Image> image = Unexpected(ErrorCode::kInternal, "unset");

@@ -15,15 +15,17 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/open.h>
+#include <tessera/picture_file.h>
 #include <tessera/byte_source.h>
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
-#include "format/codec.h"
-#include "tools/camera_path.h"
-#include "tools/fly_command.h"
-#include "tools/fly_render.h"
-#include "tools/cli.h"
+#include <tessera/codec_scratch.h>
+#include "camera_path.h"
+#include "fly_command.h"
+#include "fly_render.h"
+#include "cli.h"
 
 namespace tessera::cli {
 
@@ -105,7 +107,7 @@ Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> til
   std::atomic<size_t> next{0};
   std::atomic<bool> failed{false};
   auto worker = [&] {
-    detail::CodecScratch scratch;
+    CodecScratch scratch;
     for (size_t i; (i = next.fetch_add(1)) < work.size();)
       if (!archive.decodeTileInto(work[i].id, work[i].entry, work[i].payload, work[i].out,
                                   &scratch))
@@ -145,7 +147,7 @@ int runFly(const FlyArgs& args) {
     link = makeThrottledSource(*inner, *model);
     archive = Archive::open(link);
   } else {
-    archive = Archive::openUri(args.archive);
+    archive = openArchive(args.archive);
   }
   if (!archive) return reportError(archive.error());
   const double open_ms =

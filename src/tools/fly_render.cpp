@@ -1,15 +1,15 @@
-#include "tools/fly_render.h"
+#include "fly_render.h"
 
 #include <epoxy/gl.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 
 #include <fmt/format.h>
 
-#include "tools/view_overlay.h"
+#include "output/output_file.h"
+#include "view_overlay.h"
 
 namespace tessera::cli {
 
@@ -293,17 +293,8 @@ Result<void> writeFlyReport(const std::string& path, const nlohmann::json& summa
           base64(picture.png), escape(picture.caption));
   }
   html += "</body></html>\n";
-  const std::string temporary = path + ".partial";
-  {
-    std::ofstream out(temporary, std::ios::binary);
-    out << html;
-    if (!out) return fail(ErrorCode::kIo, fmt::format("{}: cannot write the report", path));
-  }
-  if (std::rename(temporary.c_str(), path.c_str()) != 0) {
-    std::remove(temporary.c_str());
-    return fail(ErrorCode::kIo, fmt::format("{}: cannot write the report", path));
-  }
-  return {};
+  return detail::writeFileAtomically(path,
+                                     {reinterpret_cast<const uint8_t*>(html.data()), html.size()});
 }
 
 }  // namespace tessera::cli

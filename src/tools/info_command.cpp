@@ -3,8 +3,9 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/open.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 
@@ -34,20 +35,21 @@ Result<LevelCounts> countLevel(const Archive& archive, uint32_t image, uint32_t 
 }
 
 int runInfo(const std::string& path, bool json, bool levels) {
-  Result<std::shared_ptr<Archive>> opened = Archive::openUri(path);
+  Result<std::shared_ptr<Archive>> opened = openArchive(path);
   if (!opened) return reportError(opened.error());
   const Archive& archive = **opened;
+  // Checked at open to be one JSON object.
+  const nlohmann::json metadata = nlohmann::json::parse(archive.metadataJson());
   nlohmann::json out = {{"path", path},
                         {"file_bytes", archive.fileBytes()},
-                        {"format_version", archive.metadata().value("format_version", "1.0")},
+                        {"format_version", metadata.value("format_version", "1.0")},
                         {"images", nlohmann::json::array()}};
   if (!json)
     std::printf("%s: Tessera archive %s, %s, %zu image(s)\n", path.c_str(),
-                archive.metadata().value("format_version", "1.0").c_str(),
+                metadata.value("format_version", "1.0").c_str(),
                 formatBytes(archive.fileBytes()).c_str(), archive.images().size());
-  const nlohmann::json& meta_images = archive.metadata().contains("images")
-                                          ? archive.metadata()["images"]
-                                          : nlohmann::json::array();
+  const nlohmann::json meta_images =
+      metadata.contains("images") ? metadata["images"] : nlohmann::json::array();
   for (uint32_t i = 0; i < archive.images().size(); ++i) {
     const ImageInfo& info = archive.images()[i];
     nlohmann::json image = {{"name", info.name},
@@ -99,7 +101,7 @@ int runInfo(const std::string& path, bool json, bool levels) {
     out["images"].push_back(image);
   }
   if (json) {
-    out["metadata"] = archive.metadata();
+    out["metadata"] = metadata;
     std::printf("%s\n", out.dump(2).c_str());
   }
   return kExitOk;

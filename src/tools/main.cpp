@@ -8,7 +8,7 @@
 #include <tessera/byte_source.h>
 #include <tessera/stream.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 

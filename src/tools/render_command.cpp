@@ -9,9 +9,10 @@
 #include <fmt/format.h>
 
 #include <tessera/archive.h>
+#include <tessera/picture_file.h>
 #include <tessera/render.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 

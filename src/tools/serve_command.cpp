@@ -8,7 +8,7 @@
 
 #include <tessera/serve.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 

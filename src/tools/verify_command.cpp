@@ -2,15 +2,16 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/open.h>
 
-#include "tools/cli.h"
+#include "cli.h"
 
 namespace tessera::cli {
 
 namespace {
 
 int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
-  Result<std::shared_ptr<Archive>> opened = Archive::openUri(path);
+  Result<std::shared_ptr<Archive>> opened = openArchive(path);
   if (!opened) {
     if (json)
       std::printf("%s\n", nlohmann::json({{"path", path},

@@ -1,4 +1,4 @@
-#include "tools/view_camera.h"
+#include "view_camera.h"
 
 #include <algorithm>
 #include <cmath>

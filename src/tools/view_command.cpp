@@ -19,15 +19,17 @@
 #include <fmt/format.h>
 
 #include <tessera/archive.h>
+#include <tessera/open.h>
+#include <tessera/picture_file.h>
 #include <tessera/gl.h>
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
-#include "tools/cli.h"
-#include "tools/view_camera.h"
-#include "tools/view_command.h"
-#include "tools/view_overlay.h"
-#include "tools/view_screenshot.h"
+#include "cli.h"
+#include "view_camera.h"
+#include "view_command.h"
+#include "view_overlay.h"
+#include "view_screenshot.h"
 
 namespace tessera::cli {
 
@@ -421,7 +423,7 @@ int runView(const ViewArgs& args) {
     archive = Archive::open(makeThrottledSource(*inner, *model));
     over_link = true;
   } else {
-    archive = Archive::openUri(args.archive);
+    archive = openArchive(args.archive);
   }
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())

@@ -1,11 +1,11 @@
-#include "tools/view_overlay.h"
+#include "view_overlay.h"
 
 #include <algorithm>
 #include <cmath>
 #include <optional>
 
 #include "gl/renderers.h"
-#include "tools/view_camera.h"
+#include "view_camera.h"
 
 namespace tessera::cli {
 

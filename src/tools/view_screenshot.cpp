@@ -1,4 +1,4 @@
-#include "tools/view_screenshot.h"
+#include "view_screenshot.h"
 
 #include <filesystem>
 

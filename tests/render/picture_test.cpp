@@ -1,15 +1,10 @@
-// comparePictures and writePng: exact PSNR figures, size checks, a libpng round trip and
-// failed writes that leave nothing behind.
+// comparePictures: exact PSNR figures, the largest and mean differences, size checks.
 #include <tessera/render.h>
 
 #include <cmath>
-#include <filesystem>
 #include <limits>
 
 #include <gtest/gtest.h>
-#include <png.h>
-
-#include "support/test_images.h"
 
 namespace tessera {
 namespace {
@@ -65,71 +60,5 @@ TEST(RenderPicture, SizeMismatchIsInvalidArgument) {
 }
 
 /// Reads a PNG with libpng's simplified API as RGBA.
-Picture readPngRgba(const std::string& path) {
-  png_image image{};
-  image.version = PNG_IMAGE_VERSION;
-  Picture picture;
-  if (!png_image_begin_read_from_file(&image, path.c_str())) {
-    ADD_FAILURE() << path << ": " << image.message;
-    return picture;
-  }
-  image.format = PNG_FORMAT_RGBA;
-  picture.width = image.width;
-  picture.height = image.height;
-  picture.rgba.resize(PNG_IMAGE_SIZE(image));
-  if (!png_image_finish_read(&image, nullptr, picture.rgba.data(), 0, nullptr))
-    ADD_FAILURE() << path << ": " << image.message;
-  return picture;
-}
-
-TEST(RenderPicture, WritePngRoundTrips) {
-  const std::string dir = test::testTempDir();
-  const std::string path = dir + "shot.png";
-  Picture picture = gradient(37, 23);
-  picture.rgba[3] = 0;  // a transparent pixel keeps its colour bytes
-  ASSERT_TRUE(writePng(picture, path));
-  const Picture back = readPngRgba(path);
-  EXPECT_EQ(back.width, 37u);
-  EXPECT_EQ(back.height, 23u);
-  EXPECT_EQ(back.rgba, picture.rgba);
-  // Overwriting replaces the file; no temporary stays beside it.
-  ASSERT_TRUE(writePng(gradient(5, 4), path));
-  EXPECT_EQ(readPngRgba(path).width, 5u);
-  size_t files = 0;
-  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir)) ++files;
-  EXPECT_EQ(files, 1u);
-}
-
-TEST(RenderPicture, WritePngToAMissingDirectoryFailsNamingThePath) {
-  const std::string path = test::testTempDir() + "no/such/dir/shot.png";
-  Result<void> written = writePng(gradient(4, 4), path);
-  ASSERT_FALSE(written);
-  EXPECT_EQ(written.error().code, ErrorCode::kIo);
-  EXPECT_NE(written.error().message.find(path), std::string::npos) << written.error().message;
-  EXPECT_FALSE(std::filesystem::exists(path));
-}
-
-TEST(RenderPicture, FailedRenameLeavesNoFile) {
-  // The target is a directory: the PNG is written, the rename fails, the temporary goes.
-  const std::string dir = test::testTempDir();
-  const std::string path = dir + "taken";
-  std::filesystem::create_directory(path);
-  Result<void> written = writePng(gradient(4, 4), path);
-  ASSERT_FALSE(written);
-  EXPECT_NE(written.error().message.find(path), std::string::npos) << written.error().message;
-  size_t files = 0;
-  for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir)) ++files;
-  EXPECT_EQ(files, 1u);  // only the directory
-  EXPECT_TRUE(std::filesystem::is_directory(path));
-}
-
-TEST(RenderPicture, WritePngRejectsAnEmptyPicture) {
-  const std::string path = test::testTempDir() + "empty.png";
-  Result<void> written = writePng(Picture{}, path);
-  ASSERT_FALSE(written);
-  EXPECT_EQ(written.error().code, ErrorCode::kInvalidArgument);
-  EXPECT_FALSE(std::filesystem::exists(path));
-}
-
 }  // namespace
 }  // namespace tessera

@@ -13,7 +13,7 @@
 #include <tessera/archive.h>
 #include <tessera/serve.h>
 
-#include "format/codec.h"
+#include "codecs/decode.h"
 #include "serve/serve_fixture.h"
 
 namespace tessera::test {

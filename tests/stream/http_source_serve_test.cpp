@@ -1,6 +1,7 @@
 // The HTTP byte source against `tessera serve`'s archive endpoint (GET /<name>.tess with byte
 // ranges, docs/serve.md), the server running in this process on an ephemeral port.
 #include <tessera/http_source.h>
+#include <tessera/open.h>
 
 #include <filesystem>
 #include <fstream>
@@ -92,7 +93,7 @@ TEST_F(ServeTest, ConcurrentRangeReadsEqualTheArchiveBytes) {
 }
 
 TEST_F(ServeTest, ArchiveOpensInOneRequestAndDecodesAsTheLocalFile) {
-  auto remote = Archive::openUri(url_);
+  auto remote = openArchive(url_);
   ASSERT_TRUE(remote) << remote.error().message;
   auto local = Archive::openFile(path_);
   ASSERT_TRUE(local);

@@ -1,6 +1,7 @@
 // The HTTP byte source against nginx serving files statically (started on loopback by the
 // test) and against a fault-injecting range server (tests/support/range_server.h).
 #include <tessera/http_source.h>
+#include <tessera/open.h>
 
 #include <filesystem>
 #include <fstream>
@@ -244,7 +245,7 @@ TEST_F(NginxTest, ArchiveOverHttpDecodesAsTheLocalFile) {
   const std::vector<uint8_t>& archive_bytes = test::syntheticArchiveBytes(spec);
   ASSERT_FALSE(archive_bytes.empty());
   writeFile((dir_ / "www" / "x.tess").string(), archive_bytes);
-  auto remote = Archive::openUri(nginx_->url("x.tess"));
+  auto remote = openArchive(nginx_->url("x.tess"));
   ASSERT_TRUE(remote) << remote.error().message;
   auto local = Archive::openFile((dir_ / "www" / "x.tess").string());
   ASSERT_TRUE(local);

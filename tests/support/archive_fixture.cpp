@@ -2,7 +2,7 @@
 
 #include <gtest/gtest.h>
 
-#include "build/band_reader.h"
+#include "builder/band_reader.h"
 #include "support/test_images.h"
 
 namespace tessera::test {

@@ -17,7 +17,7 @@
 #include <tessera/archive.h>
 #include <tessera/stream.h>
 
-#include "format/codec.h"
+#include "codecs/decode.h"
 #include "support/archive_fixture.h"
 #include "support/nginx_server.h"
 #include "support/reference_pyramid.h"

@@ -1,0 +1,498 @@
+// buildArchive: band readers -> streaming pyramid -> encoders on all cores -> spool -> layout.
+#include <tessera/build.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <condition_variable>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <thread>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "archive_writer.h"
+#include "band_reader.h"
+#include "output/output_file.h"
+#include "pyramid_builder.h"
+#include "tile_cutter.h"
+#include "worker_pool.h"
+#include "format/checksum.h"
+#include "codecs/encode.h"
+#include "format/header.h"
+
+namespace tessera {
+
+using namespace detail;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Each worker batches payloads into a chunk and writes it to the spool in one call.
+constexpr size_t kSpoolChunkBytes = 4u << 20;
+
+/// Recycled tile buffers. Their count bounds the tiles in flight between the cutter and the
+/// encoders (the builder's memory bound), and recycling avoids a fresh mmap per tile.
+class TileBufferPool {
+ public:
+  TileBufferPool(size_t count, size_t bytes) {
+    for (size_t i = 0; i < count; ++i)
+      free_.push_back(std::make_unique<std::vector<uint8_t>>(bytes));
+  }
+  std::unique_ptr<std::vector<uint8_t>> acquire() {
+    std::unique_lock lock(mutex_);
+    available_.wait(lock, [&] { return !free_.empty(); });
+    auto buffer = std::move(free_.back());
+    free_.pop_back();
+    return buffer;
+  }
+  void release(std::unique_ptr<std::vector<uint8_t>> buffer) {
+    {
+      std::lock_guard lock(mutex_);
+      free_.push_back(std::move(buffer));
+    }
+    available_.notify_one();
+  }
+
+ private:
+  std::mutex mutex_;  // guards free_
+  std::condition_variable available_;
+  std::vector<std::unique_ptr<std::vector<uint8_t>>> free_;
+};
+
+/// A payload waiting in a worker's chunk for its spool offset.
+struct PendingPayload {
+  SpoolEntry* entry;
+  uint64_t offset_in_chunk;
+};
+
+struct WorkerSpool {
+  std::vector<uint8_t> chunk;
+  std::vector<PendingPayload> pending;
+};
+
+/// State shared by the cutter (this thread) and the encoders.
+struct EncodeContext {
+  const TempFile* spool = nullptr;
+  std::atomic<uint64_t> spool_end{0};
+  EncodeOptions encode_options;
+  Codec codec = Codec::kJpeg;
+  std::vector<WorkerSpool> worker_spools;  ///< indexed by WorkerState::index
+  std::atomic<uint64_t> tiles_encoded{0}, tiles_uniform{0}, tiles_empty{0};
+  std::mutex error_mutex;  // guards first_error
+  std::optional<Error> first_error;
+
+  void recordError(Error error) {
+    std::lock_guard lock(error_mutex);
+    if (!first_error) first_error = std::move(error);
+  }
+  std::optional<Error> error() {
+    std::lock_guard lock(error_mutex);
+    return first_error;
+  }
+};
+
+Result<void> flushWorkerSpool(EncodeContext& context, WorkerSpool& spool) {
+  if (spool.chunk.empty()) return {};
+  uint64_t base = context.spool_end.fetch_add(spool.chunk.size());
+  TESSERA_TRY(context.spool->pwrite(base, spool.chunk));
+  for (const PendingPayload& pending : spool.pending)
+    pending.entry->spool_offset = base + pending.offset_in_chunk;
+  spool.chunk.clear();
+  spool.pending.clear();
+  return {};
+}
+
+enum class TileClass { kEmpty, kUniform, kMixed };
+
+// Empty means every byte is zero in an image with alpha: nothing to draw. Uniform means every
+// texel, border and padding included, equals the first.
+TileClass classifyTile(const uint8_t* texels, uint32_t side, uint32_t channels,
+                       uint32_t* uniform_rgba) {
+  const size_t row_bytes = size_t(side) * channels;
+  uint8_t pattern[64 * 4];
+  const uint32_t pattern_texels = 64;
+  for (uint32_t i = 0; i < pattern_texels; ++i)
+    std::memcpy(pattern + i * channels, texels, channels);
+  const size_t total = row_bytes * side;
+  const size_t pattern_bytes = size_t(pattern_texels) * channels;
+  for (size_t pos = 0; pos < total; pos += pattern_bytes) {
+    size_t n = std::min(pattern_bytes, total - pos);
+    if (std::memcmp(texels + pos, pattern, n) != 0) return TileClass::kMixed;
+  }
+  uint32_t colour = 0;
+  for (uint32_t c = 0; c < channels; ++c) colour |= uint32_t(texels[c]) << (8 * c);
+  *uniform_rgba = colour;
+  bool has_alpha = channels == 2 || channels == 4;
+  return has_alpha && colour == 0 ? TileClass::kEmpty : TileClass::kUniform;
+}
+
+void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
+               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
+               const ParentTexels* parent = nullptr) {
+  uint32_t colour = 0;
+  switch (classifyTile(texels, side, channels, &colour)) {
+    case TileClass::kEmpty:
+      entry.kind = TileKind::kEmpty;
+      ++context.tiles_empty;
+      return;
+    case TileClass::kUniform:
+      entry.kind = TileKind::kUniform;
+      entry.uniform_rgba = colour;
+      ++context.tiles_uniform;
+      return;
+    case TileClass::kMixed: break;
+  }
+  ImageView view{texels, side, side, channels, size_t(side) * channels};
+  auto payload =
+      encodeTile(context.codec, view, context.encode_options, parent, &worker.codec_scratch);
+  if (!payload) {
+    context.recordError({payload.error().code, what + ": " + payload.error().message});
+    return;
+  }
+  if (payload->size() > UINT32_MAX) {
+    context.recordError({ErrorCode::kTooLarge, what + ": payload over 4 GiB"});
+    return;
+  }
+  entry.kind = TileKind::kEncoded;
+  entry.codec = context.codec;
+  entry.length_bytes = uint32_t(payload->size());
+  entry.checksum = checksum64(*payload);
+  WorkerSpool& spool = context.worker_spools[worker.index];
+  spool.pending.push_back({&entry, spool.chunk.size()});
+  spool.chunk.insert(spool.chunk.end(), payload->begin(), payload->end());
+  ++context.tiles_encoded;
+  if (spool.chunk.size() >= kSpoolChunkBytes) {
+    Result<void> flushed = flushWorkerSpool(context, spool);
+    if (!flushed) context.recordError(flushed.error());
+  }
+}
+
+/// Summary statistics of an image, from its coarsest level (one tile: cheap, and the mean is
+/// exact up to rounding of the box filter).
+nlohmann::json coarsestLevelStatistics(const LevelRows& rows) {
+  std::vector<uint64_t> sum(rows.channels, 0);
+  std::vector<int> low(rows.channels, 255), high(rows.channels, 0);
+  for (uint32_t y = 0; y < rows.height_px; ++y) {
+    const uint8_t* row = rows.row(y);
+    for (uint32_t x = 0; x < rows.width_px; ++x) {
+      for (uint32_t c = 0; c < rows.channels; ++c) {
+        int v = row[x * rows.channels + c];
+        sum[c] += v;
+        low[c] = std::min(low[c], v);
+        high[c] = std::max(high[c], v);
+      }
+    }
+  }
+  nlohmann::json mean = nlohmann::json::array();
+  double count = double(rows.width_px) * rows.height_px;
+  for (uint64_t s : sum) mean.push_back(std::round(s / count * 100) / 100);
+  return {{"from_level_width", rows.width_px}, {"mean", mean}, {"min", low}, {"max", high}};
+}
+
+class EncodingSink final : public TileSink {
+ public:
+  EncodingSink(const ImageInfo& info, SpooledImage& spooled, EncodeContext& context,
+               WorkerPool& pool, TileBufferPool& buffers, const std::string& source_name)
+      : info_(info),
+        spooled_(spooled),
+        context_(context),
+        pool_(pool),
+        buffers_(buffers),
+        source_name_(source_name) {}
+
+  Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
+    if (codecNeedsParent(context_.codec)) return holdRow(level, tile_row, rows);
+    const uint32_t side = info_.storedTileSidePx();
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      auto buffer = buffers_.acquire();
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, buffer->data());
+      SpoolEntry* entry = &spooled_.entries[level][size_t(tile_row) * info_.tilesX(level) + x];
+      auto* raw = buffer.release();
+      pool_.submit([this, raw, entry, side, level, x, tile_row](WorkerState& worker) {
+        std::unique_ptr<std::vector<uint8_t>> owned(raw);
+        encodeJob(context_, worker, *entry, owned->data(), side, info_.channels,
+                  fmt::format("{}: tile ({},{},{})", source_name_, level, x, tile_row));
+        buffers_.release(std::move(owned));
+      });
+    }
+    return {};
+  }
+
+  nlohmann::json statistics;
+
+ private:
+  // Codecs that code a tile against its parent (ptm) need the parent's tile row, which the
+  // streaming pyramid cuts after both of its child rows (or, without borders, between them).
+  // So a row's raw tiles are held until its parent row exists, and a parent row until both
+  // child rows are submitted: at most about three tile rows per level.
+  struct HeldRow {
+    std::vector<std::vector<uint8_t>> tiles;  ///< stored tiles, raw, x = 0..tilesX - 1
+    bool submitted = false;                   ///< encode jobs queued for this row
+    uint32_t children_waiting = 0;            ///< child rows not yet submitted against it
+  };
+
+  Result<void> holdRow(uint32_t level, uint32_t tile_row, const LevelRows& rows) {
+    if (held_.empty()) held_.resize(info_.level_count);
+    auto row = std::make_shared<HeldRow>();
+    row->tiles.resize(info_.tilesX(level));
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      row->tiles[x].resize(info_.storedTileBytes());
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, row->tiles[x].data());
+    }
+    const uint32_t first_child = 2 * tile_row;
+    if (level > 0) row->children_waiting = std::min(2u, info_.tilesY(level - 1) - first_child);
+    const uint32_t children = row->children_waiting;
+    held_[level][tile_row] = row;
+
+    if (level + 1 == info_.level_count) {
+      submitRow(level, tile_row, row, nullptr);
+    } else if (auto parent = held_[level + 1].find(tile_row / 2);
+               parent != held_[level + 1].end()) {
+      submitRow(level, tile_row, row, parent->second);
+    }
+    for (uint32_t child = first_child; child < first_child + children; ++child) {
+      auto it = held_[level - 1].find(child);
+      if (it != held_[level - 1].end() && !it->second->submitted)
+        submitRow(level - 1, child, it->second, row);
+    }
+    return {};
+  }
+
+  // Queues the row's tiles; the jobs share ownership of the row and its parent row, which are
+  // freed when the last job is done and the bookkeeping below has let go of them.
+  // By value: releasing the rows below may drop the map's references while this runs.
+  void submitRow(uint32_t level, uint32_t tile_row, std::shared_ptr<HeldRow> row,
+                 std::shared_ptr<HeldRow> parent) {
+    row->submitted = true;
+    const uint32_t side = info_.storedTileSidePx();
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      SpoolEntry* entry = &spooled_.entries[level][size_t(tile_row) * info_.tilesX(level) + x];
+      pool_.submit([this, row, parent, entry, side, level, x, tile_row](WorkerState& worker) {
+        std::optional<ParentTexels> parent_texels;
+        if (parent) {
+          const std::vector<uint8_t>& texels = parent->tiles[x / 2];
+          parent_texels = ParentTexels{
+              {texels.data(), side, side, info_.channels, size_t(side) * info_.channels},
+              x & 1,
+              tile_row & 1,
+              info_.tile_size_px,
+              info_.border_px};
+        }
+        encodeJob(context_, worker, *entry, row->tiles[x].data(), side, info_.channels,
+                  fmt::format("{}: tile ({},{},{})", source_name_, level, x, tile_row),
+                  parent_texels ? &*parent_texels : nullptr);
+      });
+    }
+    if (parent) --parent->children_waiting;
+    release(level, tile_row);
+    if (parent) release(level + 1, tile_row / 2);
+  }
+
+  void release(uint32_t level, uint32_t tile_row) {
+    auto it = held_[level].find(tile_row);
+    if (it != held_[level].end() && it->second->submitted && it->second->children_waiting == 0)
+      held_[level].erase(it);
+  }
+
+  /// Per level, rows held for the parent-coded path, by tile row. Owned by the cutter thread.
+  std::vector<std::map<uint32_t, std::shared_ptr<HeldRow>>> held_;
+
+  const ImageInfo& info_;
+  SpooledImage& spooled_;
+  EncodeContext& context_;
+  WorkerPool& pool_;
+  TileBufferPool& buffers_;
+  const std::string& source_name_;
+};
+
+Result<void> validateOptions(const BuildOptions& options) {
+  if (options.inputs.empty()) return fail(ErrorCode::kInvalidArgument, "no input given");
+  if (options.output.empty()) return fail(ErrorCode::kInvalidArgument, "no output path given");
+  if (options.quality < 1 || options.quality > 100)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("quality {} out of 1..100", options.quality));
+  if (!findEncoder(options.codec))
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("codec {} is not available in this build", codecName(options.codec)));
+  if (options.codec == Codec::kPtm && options.srgb_downsample)
+    return fail(ErrorCode::kInvalidArgument,
+                "codec ptm stores the integer floor-average pyramid of Marvie & Bouatouch; it "
+                "cannot average in linear light (--srgb)");
+  if (options.image_names.size() > options.inputs.size())
+    return fail(ErrorCode::kInvalidArgument, "more image names than inputs");
+  for (const std::string& input : options.inputs) {
+    if (std::filesystem::path(input).lexically_normal() ==
+        std::filesystem::path(options.output).lexically_normal())
+      return fail(ErrorCode::kInvalidArgument, input + ": output would overwrite the input");
+  }
+  return {};
+}
+
+std::string displayName(const std::string& input) {
+  if (input.rfind("synthetic:", 0) == 0) return input;
+  return std::filesystem::path(input).filename().string();
+}
+
+}  // namespace
+
+Result<BuildReport> buildArchive(const BuildOptions& options,
+                                 const std::function<void(const BuildProgress&)>& on_progress,
+                                 const std::atomic<bool>* cancel) {
+  const auto start = Clock::now();
+  TESSERA_TRY(validateOptions(options));
+
+  // Open every source first: bad inputs fail before any output exists, and progress knows
+  // the total.
+  std::vector<std::unique_ptr<BandReader>> readers;
+  std::vector<ImageInfo> infos;
+  uint64_t pixels_total = 0;
+  for (size_t i = 0; i < options.inputs.size(); ++i) {
+    TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(options.inputs[i]));
+    const SourceInfo& source = reader->info();
+    ImageInfo info;
+    info.width_px = source.width_px;
+    info.height_px = source.height_px;
+    info.channels = source.channels;
+    info.tile_size_px = options.tile_size_px;
+    info.border_px = options.border_px;
+    info.page_tiles_log2 = options.page_tiles_log2;
+    info.default_codec = options.codec;
+    info.srgb_downsample = options.srgb_downsample;
+    info.name =
+        i < options.image_names.size() ? options.image_names[i] : displayName(options.inputs[i]);
+    TESSERA_TRY(validateImageInfo(info, options.inputs[i]));
+    info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
+    pixels_total += uint64_t(info.width_px) * info.height_px;
+    readers.push_back(std::move(reader));
+    infos.push_back(info);
+  }
+
+  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
+  TESSERA_ASSIGN_OR_RETURN(TempFile spool, TempFile::create(options.output));
+
+  uint32_t threads =
+      options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  EncodeContext context;
+  context.spool = &spool;
+  context.codec = options.codec;
+  context.encode_options.quality = options.quality;
+  context.encode_options.effort = options.effort;
+  context.encode_options.chroma_subsampling = options.chroma_subsampling;
+  context.worker_spools.resize(threads);
+
+  std::vector<SpooledImage> spooled(infos.size());
+  nlohmann::json image_metadata = nlohmann::json::array();
+  uint64_t pixels_done = 0;
+  auto last_progress = Clock::now();
+  auto cancelled = [&] { return cancel && cancel->load(std::memory_order_relaxed); };
+  {
+    WorkerPool pool(threads, 2 * threads);
+    size_t max_tile_bytes = 0;
+    for (const ImageInfo& info : infos)
+      max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
+    TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
+    // On any early return the pool must finish its jobs before the buffers and context die.
+    auto stop = [&](Error error) -> Unexpected {
+      pool.waitIdle();
+      return Unexpected(std::move(error));
+    };
+
+    for (uint32_t i = 0; i < infos.size(); ++i) {
+      const ImageInfo& info = infos[i];
+      BandReader& reader = *readers[i];
+      spooled[i].info = info;
+      spooled[i].entries.resize(info.level_count);
+      for (uint32_t l = 0; l < info.level_count; ++l)
+        spooled[i].entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
+      EncodingSink sink(info, spooled[i], context, pool, buffers, options.inputs[i]);
+      PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
+      const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
+      const uint32_t band_rows = natural >= info.tile_size_px
+                                     ? std::min(natural, 4 * info.tile_size_px)
+                                     : info.tile_size_px;
+      const size_t row_bytes = size_t(info.width_px) * info.channels;
+      std::vector<uint8_t> band(row_bytes * std::min(band_rows, info.height_px));
+      for (uint32_t y = 0; y < info.height_px;) {
+        if (cancelled()) return stop({ErrorCode::kCancelled, options.output + ": build cancelled"});
+        if (auto error = context.error()) return stop(*error);
+        uint32_t rows = std::min(band_rows, info.height_px - y);
+        Result<void> read = reader.readRows(rows, {band.data(), row_bytes * rows});
+        if (!read) return stop(read.error());
+        Result<void> added = pyramid.addRows(band.data(), rows);
+        if (!added) return stop(added.error());
+        y += rows;
+        pixels_done += uint64_t(rows) * info.width_px;
+        if (on_progress && Clock::now() - last_progress > std::chrono::milliseconds(100)) {
+          last_progress = Clock::now();
+          on_progress({pixels_done, pixels_total,
+                       context.tiles_encoded + context.tiles_uniform + context.tiles_empty,
+                       std::chrono::duration<double>(last_progress - start).count()});
+        }
+      }
+      Result<void> finished = pyramid.finish();
+      if (!finished) return stop(finished.error());
+      pool.waitIdle();  // queued jobs hold `sink`, which dies with this iteration
+      nlohmann::json meta = {{"name", info.name},
+                             {"source", options.inputs[i]},
+                             {"source_format", reader.info().format},
+                             {"width", info.width_px},
+                             {"height", info.height_px},
+                             {"channels", info.channels},
+                             {"statistics", sink.statistics}};
+      for (auto& [key, value] : reader.info().metadata.items()) meta[key] = value;
+      image_metadata.push_back(std::move(meta));
+    }
+    pool.waitIdle();
+    for (WorkerSpool& worker_spool : context.worker_spools)
+      if (Result<void> flushed = flushWorkerSpool(context, worker_spool); !flushed)
+        context.recordError(flushed.error());
+    if (auto error = context.error()) return Unexpected(*error);
+  }
+  if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+
+  nlohmann::json metadata = {
+      {"format", "tessera"},
+      {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+      {"created_by", "tessera build"},
+      {"build",
+       {{"tile_size", options.tile_size_px},
+        {"border", options.border_px},
+        {"codec", codecName(options.codec)},
+        {"quality", options.quality},
+        {"effort", options.effort},
+        {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
+        {"downsample", options.codec == Codec::kPtm ? "box-floor"
+                       : options.srgb_downsample    ? "box-linear-light"
+                                                    : "box"},
+        {"order", options.order == TileOrder::kHilbert    ? "hilbert"
+                  : options.order == TileOrder::kQuadtree ? "quadtree"
+                                                          : "row-major"}}},
+      {"images", image_metadata}};
+  TESSERA_ASSIGN_OR_RETURN(
+      WrittenArchive written,
+      writeArchive(spool, context.spool_end.load(), spooled, options.order, metadata, out));
+  if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+  TESSERA_TRY(out.commit());
+
+  BuildReport report;
+  report.output_bytes = written.file_bytes;
+  report.payload_bytes = written.payload_bytes;
+  report.tiles_encoded = context.tiles_encoded;
+  report.tiles_uniform = context.tiles_uniform;
+  report.tiles_empty = context.tiles_empty;
+  report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
+  report.megapixels_per_s = pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
+  report.images = infos;
+  if (on_progress)
+    on_progress({pixels_total, pixels_total, report.tiles_encoded, report.elapsed_s});
+  return report;
+}
+
+}  // namespace tessera

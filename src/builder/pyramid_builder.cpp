@@ -1,0 +1,104 @@
+#include "pyramid_builder.h"
+
+#include <algorithm>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "downsample.h"
+
+namespace tessera::detail {
+
+// One level's band: a ring of rows. When tile row r is announced the ring holds rows
+// [r*t - b, (r+1)*t + b), and the next announcement needs rows from (r+1)*t - b on, so
+// t + 2b slots never overwrite a row still needed (a row y replaces y - t - 2b).
+struct PyramidBuilder::Level final : LevelRows {
+  std::vector<uint8_t> ring;
+  uint32_t ring_rows = 0;
+  size_t row_bytes = 0;
+  uint32_t received = 0;
+  uint32_t next_tile_row = 0;
+  uint32_t tile_rows = 0;
+  std::vector<uint8_t> downsampled;  ///< one row of the next level
+
+  const uint8_t* row(uint32_t y) const override {
+    return ring.data() + size_t(y % ring_rows) * row_bytes;
+  }
+  uint8_t* mutableRow(uint32_t y) { return ring.data() + size_t(y % ring_rows) * row_bytes; }
+};
+
+PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average)
+    : info_(info), sink_(sink), floor_average_(floor_average) {
+  TESSERA_CHECK(!floor_average || !info.srgb_downsample) << "floor average is in sRGB codes only";
+  for (uint32_t l = 0; l < info.level_count; ++l) {
+    auto level = std::make_unique<Level>();
+    level->width_px = info.levelWidthPx(l);
+    level->height_px = info.levelHeightPx(l);
+    level->channels = info.channels;
+    level->row_bytes = size_t(level->width_px) * info.channels;
+    level->ring_rows = std::min(level->height_px, info.tile_size_px + 2 * info.border_px);
+    level->ring.resize(level->row_bytes * level->ring_rows);
+    level->tile_rows = info.tilesY(l);
+    if (l + 1 < info.level_count)
+      level->downsampled.resize(size_t(info.levelWidthPx(l + 1)) * info.channels);
+    levels_.push_back(std::move(level));
+  }
+}
+
+PyramidBuilder::~PyramidBuilder() = default;
+
+uint32_t PyramidBuilder::rowsReceived() const {
+  return levels_[0]->received;
+}
+
+Result<void> PyramidBuilder::addRows(const uint8_t* rows, uint32_t count) {
+  const size_t row_bytes = levels_[0]->row_bytes;
+  for (uint32_t i = 0; i < count; ++i) TESSERA_TRY(addRow(0, rows + i * row_bytes));
+  return {};
+}
+
+Result<void> PyramidBuilder::addRow(uint32_t level_index, const uint8_t* row) {
+  Level& level = *levels_[level_index];
+  TESSERA_CHECK(level.received < level.height_px) << "more rows than the level has";
+  const uint32_t y = level.received++;
+  std::memcpy(level.mutableRow(y), row, level.row_bytes);
+
+  if (level_index + 1 < levels_.size()) {
+    const bool pair_complete = (y & 1) == 1;
+    const bool odd_last_row = (y & 1) == 0 && y + 1 == level.height_px;
+    if (pair_complete || odd_last_row) {
+      const uint8_t* top = level.row(pair_complete ? y - 1 : y);
+      if (floor_average_)
+        downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels,
+                               level.downsampled.data());
+      else
+        downsampleRowPair(top, level.row(y), level.width_px, info_.channels, info_.srgb_downsample,
+                          level.downsampled.data());
+      TESSERA_TRY(addRow(level_index + 1, level.downsampled.data()));
+    }
+  }
+
+  const uint32_t t = info_.tile_size_px, b = info_.border_px;
+  while (level.next_tile_row < level.tile_rows) {
+    uint64_t last_needed =
+        std::min<uint64_t>(level.height_px, uint64_t(level.next_tile_row + 1) * t + b);
+    if (level.received < last_needed) break;
+    TESSERA_TRY(sink_.tileRowReady(level_index, level.next_tile_row, level));
+    ++level.next_tile_row;
+  }
+  return {};
+}
+
+Result<void> PyramidBuilder::finish() {
+  for (uint32_t l = 0; l < levels_.size(); ++l) {
+    const Level& level = *levels_[l];
+    if (level.received != level.height_px || level.next_tile_row != level.tile_rows)
+      return fail(
+          ErrorCode::kInternal,
+          fmt::format("pyramid level {} incomplete: {} of {} rows, {} of {} tile rows", l,
+                      level.received, level.height_px, level.next_tile_row, level.tile_rows));
+  }
+  return {};
+}
+
+}  // namespace tessera::detail

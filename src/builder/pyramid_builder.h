@@ -1,0 +1,54 @@
+#pragma once
+// The streaming pyramid: level-0 rows go in top to bottom; each level keeps one band of
+// tile_size + 2 * border rows, announces each tile row as soon as its last row (border
+// included) has arrived, and feeds every completed pair of rows, 2x2-averaged, to the next
+// level (Backes et al., section 4; libvips dzsave's strip_arrived). Memory is about
+// 2 x width x (tile + 2 border) x channels bytes whatever the height.
+
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include <tessera/format.h>
+#include <tessera/result.h>
+
+#include "tile_cutter.h"
+
+namespace tessera::detail {
+
+/// Receives tile rows. Called on the pyramid builder's thread; `rows` is valid only during
+/// the call (cut what you need with cutTile before returning).
+class TileSink {
+ public:
+  virtual ~TileSink() = default;
+  [[nodiscard]] virtual Result<void> tileRowReady(uint32_t level, uint32_t tile_row,
+                                                  const LevelRows& rows) = 0;
+};
+
+/// Owned by one thread.
+class PyramidBuilder {
+ public:
+  /// `info` gives size, channels, tile size, border, level count and the sRGB flag. With
+  /// `floor_average` levels are the unweighted floor average of downsampleRowPairFloor (the
+  /// ptm codec's pyramid) and the sRGB flag must be off.
+  PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average = false);
+  ~PyramidBuilder();
+
+  /// Adds `count` level-0 rows (tightly packed). Fails if the sink fails.
+  [[nodiscard]] Result<void> addRows(const uint8_t* rows, uint32_t count);
+  /// Rows received so far at level 0.
+  uint32_t rowsReceived() const;
+  /// Valid after all rows were added: checks every level emitted all its tile rows.
+  [[nodiscard]] Result<void> finish();
+
+ private:
+  struct Level;
+  Result<void> addRow(uint32_t level, const uint8_t* row);
+
+  ImageInfo info_;
+  TileSink& sink_;
+  bool floor_average_;
+  std::vector<std::unique_ptr<Level>> levels_;
+};
+
+}  // namespace tessera::detail

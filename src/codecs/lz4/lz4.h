@@ -1,0 +1,20 @@
+#pragma once
+// LZ4: the packed texels as one LZ4 block (no frame: the size comes from the geometry)
+// (docs/codecs.md, "lz4"): the codec's two entry points, one per library.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "codecs/encode.h"
+
+namespace tessera::detail {
+
+/// Decode side (tessera::codecs): the contract of DecodeFunction (codecs/decode.h).
+Result<void> decodeLz4(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
+                       CodecScratch* scratch);
+/// Encode side (tessera::encoders): the contract of EncodeFunction (codecs/encode.h).
+Result<std::vector<uint8_t>> encodeLz4(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent, CodecScratch* scratch);
+
+}  // namespace tessera::detail

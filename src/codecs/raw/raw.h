@@ -1,0 +1,20 @@
+#pragma once
+// Raw: the texels themselves, row-major, channels interleaved, rows packed (docs/codecs.md, "raw"):
+// the codec's two entry points, one per library.
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "codecs/encode.h"
+
+namespace tessera::detail {
+
+/// Decode side (tessera::codecs): the contract of DecodeFunction (codecs/decode.h).
+Result<void> decodeRaw(std::span<const uint8_t> payload, Image& out, const ParentTexels* parent,
+                       CodecScratch* scratch);
+/// Encode side (tessera::encoders): the contract of EncodeFunction (codecs/encode.h).
+Result<std::vector<uint8_t>> encodeRaw(const ImageView& tile, const EncodeOptions& options,
+                                       const ParentTexels* parent, CodecScratch* scratch);
+
+}  // namespace tessera::detail

@@ -1,0 +1,392 @@
+#include <tessera/archive.h>
+
+#include <algorithm>
+#include <cstring>
+#include <optional>
+
+#include <fmt/format.h>
+
+#include "archive_impl.h"
+#include "codecs/decode.h"
+#include "format/checksum.h"
+#include "format/metadata.h"
+
+namespace tessera {
+
+using detail::BlockRef;
+using detail::PageRef;
+
+namespace {
+
+uint64_t levelKey(uint32_t image, uint32_t level) {
+  return (uint64_t(image) << 8) | level;
+}
+
+uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
+  return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
+}
+
+// Images < 2^16, levels < 2^5 and tile columns and rows < 2^18 (kMaxImageSidePx over the
+// smallest tile) pack into 57 bits.
+uint64_t tileKey(const TileId& tile) {
+  return (uint64_t(tile.image) << 41) | (uint64_t(tile.level) << 36) | (uint64_t(tile.x) << 18) |
+         tile.y;
+}
+
+}  // namespace
+
+std::string Archive::tileName(const TileId& tile) const {
+  return impl_->tileName(tile);
+}
+
+std::string Archive::Impl::tileName(const TileId& tile) const {
+  if (records.size() == 1)
+    return fmt::format("{}: tile ({},{},{})", name, tile.level, tile.x, tile.y);
+  return fmt::format("{}: image {} tile ({},{},{})", name, tile.image, tile.level, tile.x, tile.y);
+}
+
+Result<std::vector<uint8_t>> Archive::Impl::readBlock(const BlockRef& block,
+                                                      const std::string& what) const {
+  std::vector<uint8_t> bytes(block.length_bytes);
+  if (block.offset_bytes + block.length_bytes <= header_region.size()) {
+    std::memcpy(bytes.data(), header_region.data() + block.offset_bytes, bytes.size());
+  } else {
+    TESSERA_TRY(source->read(block.offset_bytes, bytes));
+  }
+  uint64_t actual = detail::checksum64(bytes);
+  if (actual != block.checksum)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: {} checksum mismatch at offset {} (stored {:016x}, computed "
+                            "{:016x})",
+                            name, what, block.offset_bytes, block.checksum, actual));
+  return bytes;
+}
+
+Result<PageRef> Archive::Impl::pageRef(uint32_t image, uint32_t level, uint32_t page_index) {
+  const ImageInfo& info = infos[image];
+  const BlockRef& index_block = records[image].levels[level].page_index;
+  if (index_block.length_bytes == 0) return PageRef{};
+  std::string what = fmt::format("{}: image {} level {} page index", name, image, level);
+  bool whole = index_block.length_bytes <= kWholePageIndexBytes ||
+               index_block.offset_bytes + index_block.length_bytes <= header_region.size();
+  if (!whole) {
+    uint8_t ref_bytes[detail::kPageRefBytes];
+    TESSERA_TRY(source->read(
+        index_block.offset_bytes + uint64_t(page_index) * detail::kPageRefBytes, ref_bytes));
+    return detail::decodePageRef(ref_bytes, info, level, page_index, header.file_bytes, what);
+  }
+  uint64_t key = levelKey(image, level);
+  {
+    std::lock_guard lock(cache_mutex);
+    auto it = page_indexes.find(key);
+    if (it != page_indexes.end()) return (*it->second)[page_index];
+  }
+  TESSERA_ASSIGN_OR_RETURN(
+      std::vector<uint8_t> bytes,
+      readBlock(index_block, fmt::format("image {} level {} page index", image, level)));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<PageRef> refs,
+                           detail::decodePageIndex(bytes, info, level, header.file_bytes, what));
+  auto shared = std::make_shared<const std::vector<PageRef>>(std::move(refs));
+  std::lock_guard lock(cache_mutex);
+  page_indexes.emplace(key, shared);
+  return (*shared)[page_index];
+}
+
+Archive::Impl::PageResult Archive::Impl::page(uint32_t image, uint32_t level, uint32_t page_x,
+                                              uint32_t page_y) {
+  const ImageInfo& info = infos[image];
+  uint32_t page_index = page_y * detail::pagesX(info, level) + page_x;
+  uint64_t key = pageKey(image, level, page_index);
+  std::promise<PageResult> reading;
+  {
+    std::unique_lock lock(cache_mutex);
+    auto it = pages.find(key);
+    if (it != pages.end()) return it->second;
+    auto loading = pages_loading.find(key);
+    if (loading != pages_loading.end()) {
+      std::shared_future<PageResult> pending = loading->second;
+      lock.unlock();
+      return pending.get();
+    }
+    pages_loading.emplace(key, reading.get_future().share());
+  }
+  auto read = [&]() -> PageResult {
+    TESSERA_ASSIGN_OR_RETURN(PageRef ref, pageRef(image, level, page_index));
+    detail::PageGeometry geometry = detail::pageGeometry(info, level, page_x, page_y);
+    std::vector<TileEntry> entries;
+    if (ref.length_bytes == 0) {
+      entries.resize(size_t(geometry.columns) * geometry.rows);
+    } else {
+      std::string what =
+          fmt::format("image {} level {} page ({},{})", image, level, page_x, page_y);
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readBlock(ref, what));
+      TESSERA_ASSIGN_OR_RETURN(entries,
+                               detail::decodeTileEntries(bytes, info, header, name + ": " + what));
+    }
+    return std::make_shared<const std::vector<TileEntry>>(std::move(entries));
+  };
+  PageResult result = read();
+  {
+    std::lock_guard lock(cache_mutex);
+    pages_loading.erase(key);
+    if (result && pages.emplace(key, *result).second) {
+      page_order.push_back(key);
+      if (page_order.size() > kMaxCachedPages) {
+        pages.erase(page_order.front());
+        page_order.pop_front();
+      }
+    }
+  }
+  reading.set_value(result);
+  return result;
+}
+
+Archive::Archive(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+Archive::~Archive() = default;
+
+Result<std::shared_ptr<Archive>> Archive::open(std::shared_ptr<ByteSource> source) {
+  auto impl = std::make_unique<Impl>();
+  impl->name = source->name();
+  impl->source = source;
+  const std::string& name = impl->name;
+  uint64_t size = source->sizeBytes();
+  if (size == 0) return fail(ErrorCode::kCorrupt, name + ": empty file, not a Tessera archive");
+  impl->header_region.resize(std::min<uint64_t>(size, detail::kHeaderRegionBytes));
+  TESSERA_TRY(source->read(0, impl->header_region));
+  TESSERA_ASSIGN_OR_RETURN(impl->header, detail::decodeHeader(impl->header_region, name));
+  const detail::FileHeader& header = impl->header;
+  if (header.file_bytes != size)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: header records {} bytes but the file has {} (truncated or "
+                            "appended to)",
+                            name, header.file_bytes, size));
+  if (header.header_region_bytes > impl->header_region.size()) {
+    // A writer may use a larger header region; read the rest once so its blocks are free too.
+    size_t old_size = impl->header_region.size();
+    impl->header_region.resize(header.header_region_bytes);
+    TESSERA_TRY(source->read(old_size, std::span(impl->header_region).subspan(old_size)));
+  }
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> root_bytes,
+                           impl->readBlock(header.root, "root directory"));
+  TESSERA_ASSIGN_OR_RETURN(impl->records, detail::decodeRootDirectory(root_bytes, header, name));
+  detail::ArchiveMetadata metadata;
+  metadata.image_names.resize(impl->records.size());
+  if (header.metadata.length_bytes > 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> json_bytes,
+                             impl->readBlock(header.metadata, "metadata"));
+    TESSERA_ASSIGN_OR_RETURN(metadata,
+                             detail::parseMetadata(json_bytes, impl->records.size(), name));
+  }
+  impl->metadata_json = std::move(metadata.json);
+  for (size_t i = 0; i < impl->records.size(); ++i) {
+    ImageInfo info = impl->records[i].info;
+    info.name = std::move(metadata.image_names[i]);
+    impl->infos.push_back(std::move(info));
+  }
+  return std::shared_ptr<Archive>(new Archive(std::move(impl)));
+}
+
+const std::string& Archive::name() const {
+  return impl_->name;
+}
+const std::vector<ImageInfo>& Archive::images() const {
+  return impl_->infos;
+}
+const std::string& Archive::metadataJson() const {
+  return impl_->metadata_json;
+}
+uint64_t Archive::fileBytes() const {
+  return impl_->header.file_bytes;
+}
+const ByteSource& Archive::source() const {
+  return *impl_->source;
+}
+
+Result<TileEntry> Archive::tileEntry(const TileId& tile) const {
+  if (tile.image >= impl_->infos.size())
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: no image {} (archive has {})", impl_->name, tile.image,
+                            impl_->infos.size()));
+  const ImageInfo& info = impl_->infos[tile.image];
+  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
+      tile.y >= info.tilesY(tile.level))
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{} is outside the image ({} levels)",
+                                                         impl_->tileName(tile), info.level_count));
+  uint32_t shift = info.page_tiles_log2;
+  TESSERA_ASSIGN_OR_RETURN(auto entries,
+                           impl_->page(tile.image, tile.level, tile.x >> shift, tile.y >> shift));
+  detail::PageGeometry geometry =
+      detail::pageGeometry(info, tile.level, tile.x >> shift, tile.y >> shift);
+  return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
+                    (tile.x - geometry.first_tile_x)];
+}
+
+std::optional<TileEntry> Archive::tileEntryIfCached(const TileId& tile) const {
+  if (tile.image >= impl_->infos.size()) return std::nullopt;
+  const ImageInfo& info = impl_->infos[tile.image];
+  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
+      tile.y >= info.tilesY(tile.level))
+    return std::nullopt;
+  const uint32_t shift = info.page_tiles_log2;
+  const uint32_t page_x = tile.x >> shift, page_y = tile.y >> shift;
+  const uint64_t key =
+      pageKey(tile.image, tile.level, page_y * detail::pagesX(info, tile.level) + page_x);
+  std::shared_ptr<const std::vector<TileEntry>> entries;
+  {
+    std::lock_guard lock(impl_->cache_mutex);
+    auto it = impl_->pages.find(key);
+    if (it == impl_->pages.end()) return std::nullopt;
+    entries = it->second;
+  }
+  detail::PageGeometry geometry = detail::pageGeometry(info, tile.level, page_x, page_y);
+  return (*entries)[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
+                    (tile.x - geometry.first_tile_x)];
+}
+
+Result<void> Archive::verifyPayload(const TileId& tile, const TileEntry& entry,
+                                    std::span<const uint8_t> payload) const {
+  if (payload.size() != entry.length_bytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{} payload of {} bytes, entry says {}", impl_->tileName(tile),
+                            payload.size(), entry.length_bytes));
+  uint64_t actual = detail::checksum64(payload);
+  if (actual != entry.checksum)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{} checksum mismatch at offset {} (stored {:016x}, computed {:016x})",
+                            impl_->tileName(tile), entry.offset_bytes, entry.checksum, actual));
+  return {};
+}
+
+Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
+                                                  const TileEntry& entry) const {
+  TESSERA_CHECK(entry.kind == TileKind::kEncoded) << "readPayload on a tile without payload";
+  std::vector<uint8_t> payload(entry.length_bytes);
+  TESSERA_TRY(impl_->source->read(entry.offset_bytes, payload));
+  TESSERA_TRY(verifyPayload(tile, entry, payload));
+  return payload;
+}
+
+Result<Image> Archive::decodeTile(const TileId& tile, const TileEntry& entry,
+                                  std::span<const uint8_t> payload, CodecScratch* scratch) const {
+  Image image;
+  TESSERA_TRY(decodeTileInto(tile, entry, payload, image, scratch));
+  return image;
+}
+
+Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                     std::span<const uint8_t> payload, Image& image,
+                                     CodecScratch* scratch) const {
+  return decodeWithParent(tile, entry, payload, image, nullptr, scratch);
+}
+
+Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
+                                     std::span<const uint8_t> payload, Image& image,
+                                     const Image& parent, CodecScratch* scratch) const {
+  return decodeWithParent(tile, entry, payload, image, &parent, scratch);
+}
+
+std::shared_ptr<const Image> Archive::Impl::cachedParent(const TileId& tile) {
+  std::lock_guard lock(parent_mutex);
+  auto it = parents.find(tileKey(tile));
+  return it == parents.end() ? nullptr : it->second;
+}
+
+void Archive::Impl::cacheParent(const TileId& tile, std::shared_ptr<const Image> image) {
+  std::lock_guard lock(parent_mutex);
+  const uint64_t key = tileKey(tile);
+  if (parents.count(key) != 0) return;
+  parent_bytes += image->texels.size();
+  parents.emplace(key, std::move(image));
+  parent_order.push_back(key);
+  while (parent_bytes > kParentCacheBytes && parent_order.size() > 1) {
+    auto it = parents.find(parent_order.front());
+    parent_bytes -= it->second->texels.size();
+    parents.erase(it);
+    parent_order.pop_front();
+  }
+}
+
+Result<std::shared_ptr<const Image>> Archive::decodedParent(const TileId& tile,
+                                                            CodecScratch* scratch) const {
+  const TileId parent = parentTile(tile);
+  if (auto cached = impl_->cachedParent(parent)) return cached;
+  Result<Image> decoded = readTile(parent, scratch);
+  if (!decoded)
+    return fail(decoded.error().code, fmt::format("{}: its parent cannot be decoded: {}",
+                                                  impl_->tileName(tile), decoded.error().message));
+  auto shared = std::make_shared<const Image>(std::move(*decoded));
+  impl_->cacheParent(parent, shared);
+  return shared;
+}
+
+Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entry,
+                                       std::span<const uint8_t> payload, Image& image,
+                                       const Image* parent, CodecScratch* scratch) const {
+  const ImageInfo& info = impl_->infos.at(tile.image);
+  uint32_t side = info.storedTileSidePx();
+  image.width_px = side;
+  image.height_px = side;
+  image.channels = info.channels;
+  image.texels.resize(size_t(side) * side * info.channels);
+  switch (entry.kind) {
+    case TileKind::kEmpty: std::fill(image.texels.begin(), image.texels.end(), uint8_t{0}); break;
+    case TileKind::kUniform: {
+      uint8_t colour[4];
+      for (uint32_t c = 0; c < 4; ++c) colour[c] = uint8_t(entry.uniform_rgba >> (8 * c));
+      // One texel, then copies of what is filled so far: a few large copies, not one per texel.
+      std::span<uint8_t> texels(image.texels);
+      size_t filled = std::min<size_t>(info.channels, texels.size());
+      std::memcpy(texels.data(), colour, filled);
+      while (filled < texels.size()) {
+        size_t copy = std::min(filled, texels.size() - filled);
+        std::memcpy(texels.data() + filled, texels.data(), copy);
+        filled += copy;
+      }
+      break;
+    }
+    case TileKind::kEncoded: {
+      const detail::CodecDecoder* codec = detail::findDecoder(entry.codec);
+      if (!codec)
+        return fail(ErrorCode::kUnsupported,
+                    fmt::format("{}: codec {} is not supported by this build",
+                                impl_->tileName(tile), codecName(entry.codec)));
+      std::optional<detail::ParentTexels> parent_texels;
+      std::shared_ptr<const Image> owned_parent;
+      if (codecNeedsParent(entry.codec) && tile.level + 1 < info.level_count) {
+        if (parent == nullptr) {
+          TESSERA_ASSIGN_OR_RETURN(owned_parent, decodedParent(tile, scratch));
+          parent = owned_parent.get();
+        }
+        if (parent->width_px != side || parent->height_px != side ||
+            parent->channels != info.channels ||
+            parent->texels.size() != size_t(side) * side * info.channels)
+          return fail(ErrorCode::kInvalidArgument,
+                      fmt::format("{}: parent tile given as {}x{}x{}, expected {}x{}x{}",
+                                  impl_->tileName(tile), parent->width_px, parent->height_px,
+                                  parent->channels, side, side, info.channels));
+        parent_texels = detail::ParentTexels{parent->view(), tile.x & 1, tile.y & 1,
+                                             info.tile_size_px, info.border_px};
+      }
+      Result<void> decoded = detail::decodeTile(entry.codec, payload, image,
+                                                parent_texels ? &*parent_texels : nullptr, scratch);
+      if (!decoded)
+        return fail(decoded.error().code,
+                    fmt::format("{}: {}", impl_->tileName(tile), decoded.error().message));
+      break;
+    }
+    case TileKind::kProcedural:
+      return fail(ErrorCode::kUnsupported, impl_->tileName(tile) + " is procedural");
+  }
+  return {};
+}
+
+Result<Image> Archive::readTile(const TileId& tile, CodecScratch* scratch) const {
+  TESSERA_ASSIGN_OR_RETURN(TileEntry entry, tileEntry(tile));
+  std::vector<uint8_t> payload;
+  if (entry.kind == TileKind::kEncoded) {
+    TESSERA_ASSIGN_OR_RETURN(payload, readPayload(tile, entry));
+  }
+  return decodeTile(tile, entry, payload, scratch);
+}
+
+}  // namespace tessera

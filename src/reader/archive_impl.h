@@ -1,0 +1,65 @@
+#pragma once
+// Archive internals shared by archive.cpp, region.cpp and verify.cpp.
+
+#include <deque>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <unordered_map>
+#include <vector>
+
+#include <tessera/archive.h>
+
+#include "format/directory.h"
+#include "format/header.h"
+
+namespace tessera {
+
+struct Archive::Impl {
+  std::shared_ptr<ByteSource> source;
+  std::string name;
+  detail::FileHeader header;
+  std::vector<detail::ImageRecord> records;
+  std::vector<ImageInfo> infos;
+  std::string metadata_json;  ///< the metadata block as stored, "{}" when there is none
+  /// The first min(header_region_bytes, file) bytes, read at open; blocks inside it cost no I/O.
+  std::vector<uint8_t> header_region;
+
+  /// Pages kept decoded; beyond this the oldest are dropped (a page is at most 1.5 MiB).
+  static constexpr size_t kMaxCachedPages = 1024;
+  /// Page indexes up to this size are read whole and verified; larger ones (terapixel levels)
+  /// are read one 24-byte reference at a time, each page then verified by its own checksum.
+  static constexpr uint64_t kWholePageIndexBytes = 65536;
+
+  std::mutex cache_mutex;  // guards pages, page_order and page_indexes
+  std::unordered_map<uint64_t, std::shared_ptr<const std::vector<TileEntry>>> pages;
+  std::deque<uint64_t> page_order;  ///< insertion order of `pages`, for FIFO eviction
+  /// Whole page indexes by (image, level) key; null entry means "read per reference".
+  std::unordered_map<uint64_t, std::shared_ptr<const std::vector<detail::PageRef>>> page_indexes;
+
+  /// Reads a block (from header_region when inside it) and verifies its checksum.
+  Result<std::vector<uint8_t>> readBlock(const detail::BlockRef& block,
+                                         const std::string& what) const;
+  /// The page reference for a page of a level.
+  Result<detail::PageRef> pageRef(uint32_t image, uint32_t level, uint32_t page_index);
+  using PageResult = Result<std::shared_ptr<const std::vector<TileEntry>>>;
+  /// The decoded entries of one directory page. A page another thread is reading is waited
+  /// for, not read again: after a jump every loader thread wants the same pages at once, and
+  /// over a network link each duplicate read costs a round trip and the page's bytes.
+  PageResult page(uint32_t image, uint32_t level, uint32_t page_x, uint32_t page_y);
+  /// Pages being read now, by key (under cache_mutex).
+  std::unordered_map<uint64_t, std::shared_future<PageResult>> pages_loading;
+  std::string tileName(const TileId& tile) const;
+
+  /// Decoded parents of parent-coded (ptm) tiles, so that the four children of a parent, read
+  /// one after another (a region, verify, extract), decode it once. FIFO within a byte budget.
+  static constexpr size_t kParentCacheBytes = 32u << 20;
+  std::mutex parent_mutex;  // guards parents, parent_order and parent_bytes
+  std::unordered_map<uint64_t, std::shared_ptr<const Image>> parents;
+  std::deque<uint64_t> parent_order;
+  size_t parent_bytes = 0;
+  std::shared_ptr<const Image> cachedParent(const TileId& tile);
+  void cacheParent(const TileId& tile, std::shared_ptr<const Image> image);
+};
+
+}  // namespace tessera

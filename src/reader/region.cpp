@@ -1,0 +1,91 @@
+// Archive::readRegion: assembles any rectangle of a level from the tiles under it.
+#include <tessera/archive.h>
+
+#include <algorithm>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "archive_impl.h"
+
+namespace tessera {
+
+namespace {
+
+constexpr uint32_t kMaxRegionSidePx = 16384;
+
+}  // namespace
+
+Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRect& rect) const {
+  if (image >= impl_->infos.size())
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: no image {}", impl_->name, image));
+  const ImageInfo& info = impl_->infos[image];
+  if (level >= info.level_count)
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: no level {} (image has {})",
+                                                         impl_->name, level, info.level_count));
+  if (rect.width == 0 || rect.height == 0)
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: empty rectangle", impl_->name));
+  if (rect.width > kMaxRegionSidePx || rect.height > kMaxRegionSidePx)
+    return fail(ErrorCode::kTooLarge,
+                fmt::format("{}: region {}x{} exceeds {} px per side", impl_->name, rect.width,
+                            rect.height, kMaxRegionSidePx));
+  Image out(rect.width, rect.height, info.channels);
+  int64_t level_w = info.levelWidthPx(level), level_h = info.levelHeightPx(level);
+  int64_t x0 = std::max<int64_t>(rect.x, 0), y0 = std::max<int64_t>(rect.y, 0);
+  int64_t x1 = std::min<int64_t>(rect.x + rect.width, level_w);
+  int64_t y1 = std::min<int64_t>(rect.y + rect.height, level_h);
+  if (x0 >= x1 || y0 >= y1) return out;
+  int64_t t = info.tile_size_px;
+  uint32_t b = info.border_px, channels = info.channels;
+  CodecScratch scratch;
+  for (int64_t ty = y0 / t; ty <= (y1 - 1) / t; ++ty) {
+    for (int64_t tx = x0 / t; tx <= (x1 - 1) / t; ++tx) {
+      TESSERA_ASSIGN_OR_RETURN(Image tile,
+                               readTile({image, level, uint32_t(tx), uint32_t(ty)}, &scratch));
+      int64_t cx0 = std::max(x0, tx * t), cx1 = std::min(x1, (tx + 1) * t);
+      int64_t cy0 = std::max(y0, ty * t), cy1 = std::min(y1, (ty + 1) * t);
+      size_t row_bytes = size_t(cx1 - cx0) * channels;
+      for (int64_t y = cy0; y < cy1; ++y) {
+        const uint8_t* src = tile.row(uint32_t(y - ty * t + b)) + (cx0 - tx * t + b) * channels;
+        uint8_t* dst = out.row(uint32_t(y - rect.y)) + (cx0 - rect.x) * channels;
+        std::memcpy(dst, src, row_bytes);
+      }
+    }
+  }
+  return out;
+}
+
+Result<Image> Archive::readRegionRgba(uint32_t image, uint32_t level, const PixelRect& rect) const {
+  TESSERA_ASSIGN_OR_RETURN(Image native, readRegion(image, level, rect));
+  if (native.channels == 4) return native;
+  Image rgba(native.width_px, native.height_px, 4);
+  // Texels outside the level were zero-filled in `native`; keep them transparent.
+  int64_t level_w = impl_->infos[image].levelWidthPx(level);
+  int64_t level_h = impl_->infos[image].levelHeightPx(level);
+  size_t pixels = size_t(native.width_px) * native.height_px;
+  for (size_t i = 0; i < pixels; ++i) {
+    const uint8_t* s = &native.texels[i * native.channels];
+    uint8_t* d = &rgba.texels[i * 4];
+    int64_t x = rect.x + int64_t(i % native.width_px), y = rect.y + int64_t(i / native.width_px);
+    bool inside = x >= 0 && y >= 0 && x < level_w && y < level_h;
+    switch (native.channels) {
+      case 1:
+        d[0] = d[1] = d[2] = s[0];
+        d[3] = inside ? 255 : 0;
+        break;
+      case 2:
+        d[0] = d[1] = d[2] = s[0];
+        d[3] = s[1];
+        break;
+      case 3:
+        d[0] = s[0];
+        d[1] = s[1];
+        d[2] = s[2];
+        d[3] = inside ? 255 : 0;
+        break;
+    }
+  }
+  return rgba;
+}
+
+}  // namespace tessera

@@ -1,0 +1,23 @@
+#include <tessera/open.h>
+
+#include <tessera/http_source.h>
+
+namespace tessera {
+
+bool isRemoteUri(const std::string& path_or_url) {
+  std::string head = path_or_url.substr(0, 8);
+  for (char& c : head) c = char(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c);
+  return head.rfind("http://", 0) == 0 || head.rfind("https://", 0) == 0;
+}
+
+Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url) {
+  if (isRemoteUri(path_or_url)) return openHttpSource(path_or_url);
+  return openFileSource(path_or_url);
+}
+
+Result<std::shared_ptr<Archive>> openArchive(const std::string& path_or_url) {
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ByteSource> source, openByteSource(path_or_url));
+  return Archive::open(std::move(source));
+}
+
+}  // namespace tessera

@@ -1,0 +1,137 @@
+// The streaming pyramid: fed rows in bands of any height, it announces every tile row of every
+// level exactly once, in order, each time with the rows it needs, and the tiles cut from them
+// equal the reference pyramid.
+#include "builder/pyramid_builder.h"
+
+#include <map>
+
+#include <gtest/gtest.h>
+
+#include "support/reference_pyramid.h"
+
+namespace tessera::detail {
+namespace {
+
+class CollectingSink final : public TileSink {
+ public:
+  CollectingSink(const ImageInfo& info, const test::ReferencePyramid& reference)
+      : info_(info), reference_(reference) {}
+
+  Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    uint32_t& next = next_row_[level];
+    EXPECT_EQ(tile_row, next) << "level " << level << " tile rows out of order";
+    next = tile_row + 1;
+    EXPECT_EQ(rows.width_px, info_.levelWidthPx(level));
+    EXPECT_EQ(rows.height_px, info_.levelHeightPx(level));
+    std::vector<uint8_t> tile(info_.storedTileBytes());
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile.data());
+      test::ReferenceTile expected =
+          reference_.tile(level, x, tile_row, info_.tile_size_px, info_.border_px);
+      ++tiles;
+      if (tile != expected.texels.texels) {
+        ++mismatches;
+        if (mismatches == 1)
+          ADD_FAILURE() << "tile (" << level << "," << x << "," << tile_row << ") differs";
+      }
+    }
+    if (fail_at_level == int(level)) return fail(ErrorCode::kIo, "sink full");
+    return {};
+  }
+
+  uint32_t rowsAnnounced(uint32_t level) { return next_row_[level]; }
+  int tiles = 0;
+  int mismatches = 0;
+  int fail_at_level = -1;
+
+ private:
+  const ImageInfo& info_;
+  const test::ReferencePyramid& reference_;
+  std::map<uint32_t, uint32_t> next_row_;
+};
+
+ImageInfo makeInfo(const Image& image, uint32_t tile, uint32_t border) {
+  ImageInfo info;
+  info.width_px = image.width_px;
+  info.height_px = image.height_px;
+  info.channels = image.channels;
+  info.tile_size_px = tile;
+  info.border_px = border;
+  info.level_count = levelCountFor(image.width_px, image.height_px, tile);
+  return info;
+}
+
+struct Case {
+  uint32_t width, height, channels, tile, border, band_rows;
+};
+
+void PrintTo(const Case& c, std::ostream* out) {
+  *out << c.width << "x" << c.height << " c" << c.channels << " t" << c.tile << " b" << c.border
+       << " rows" << c.band_rows;
+}
+
+class PyramidBuilderTest : public testing::TestWithParam<Case> {};
+
+TEST_P(PyramidBuilderTest, EmitsEveryTileOnceAndEqualToTheReference) {
+  const Case c = GetParam();
+  Image image = test::makePatternImage(c.width, c.height, c.channels, c.width ^ c.height);
+  test::ReferencePyramid reference(image);
+  ImageInfo info = makeInfo(image, c.tile, c.border);
+  CollectingSink sink(info, reference);
+  PyramidBuilder pyramid(info, sink);
+  for (uint32_t y = 0; y < c.height; y += c.band_rows) {
+    uint32_t rows = std::min(c.band_rows, c.height - y);
+    ASSERT_TRUE(pyramid.addRows(image.row(y), rows));
+    EXPECT_EQ(pyramid.rowsReceived(), y + rows);
+  }
+  ASSERT_TRUE(pyramid.finish());
+  int expected_tiles = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level) {
+    EXPECT_EQ(sink.rowsAnnounced(level), info.tilesY(level)) << "level " << level;
+    expected_tiles += info.tilesX(level) * info.tilesY(level);
+  }
+  EXPECT_EQ(sink.tiles, expected_tiles);
+  EXPECT_EQ(sink.mismatches, 0);
+}
+
+INSTANTIATE_TEST_SUITE_P(Shapes, PyramidBuilderTest,
+                         testing::Values(Case{1, 1, 1, 64, 0, 1}, Case{1, 300, 2, 64, 1, 1},
+                                         Case{300, 1, 3, 64, 4, 1}, Case{257, 513, 4, 64, 4, 7},
+                                         Case{257, 513, 1, 128, 16, 64},
+                                         Case{200, 130, 2, 64, 0, 130}, Case{129, 129, 3, 64, 1, 3},
+                                         Case{640, 400, 4, 64, 2, 256},
+                                         Case{1000, 999, 3, 256, 1, 100}),
+                         [](const testing::TestParamInfo<Case>& param_info) {
+                           const Case& c = param_info.param;
+                           return std::to_string(c.width) + "x" + std::to_string(c.height) + "c" +
+                                  std::to_string(c.channels) + "t" + std::to_string(c.tile) + "b" +
+                                  std::to_string(c.border) + "rows" + std::to_string(c.band_rows);
+                         });
+
+TEST(PyramidBuilder, FinishBeforeAllRowsFailsNamingTheLevel) {
+  Image image = test::makePatternImage(100, 100, 1, 1);
+  test::ReferencePyramid reference(image);
+  ImageInfo info = makeInfo(image, 64, 0);
+  CollectingSink sink(info, reference);
+  PyramidBuilder pyramid(info, sink);
+  ASSERT_TRUE(pyramid.addRows(image.row(0), 99));
+  auto finished = pyramid.finish();
+  ASSERT_FALSE(finished);
+  EXPECT_NE(finished.error().message.find("level 0"), std::string::npos)
+      << finished.error().message;
+}
+
+TEST(PyramidBuilder, ASinkFailureStopsAddRows) {
+  Image image = test::makePatternImage(100, 100, 1, 1);
+  test::ReferencePyramid reference(image);
+  ImageInfo info = makeInfo(image, 64, 0);
+  CollectingSink sink(info, reference);
+  sink.fail_at_level = 0;
+  PyramidBuilder pyramid(info, sink);
+  auto added = pyramid.addRows(image.row(0), 100);
+  ASSERT_FALSE(added);
+  EXPECT_EQ(added.error().message, "sink full");
+}
+
+}  // namespace
+}  // namespace tessera::detail
