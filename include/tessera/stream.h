@@ -15,46 +15,9 @@
 #include <tessera/cache.h>
 #include <tessera/format.h>
 #include <tessera/result.h>
+#include <tessera/view.h>
 
 namespace tessera {
-
-/// Orthographic 2D view. Positions are level-0 pixels of the image; y grows downwards.
-struct OrthoView {
-  double centre_x = 0;
-  double centre_y = 0;
-  double texels_per_pixel = 1;  ///< level-0 texels per screen pixel (zoom); > 0
-  uint32_t viewport_w = 1280;
-  uint32_t viewport_h = 720;
-  double rotation_rad = 0;  ///< screen rotation about the centre
-};
-
-/// Perspective camera over the texture plane (terrain), in level-0 pixel units: the plane is
-/// z = 0, x right, y down the image; `eye_z` is the height above it.
-struct PerspectiveView {
-  double eye_x = 0;
-  double eye_y = 0;
-  double eye_z = 1000;
-  double yaw_rad = 0;       ///< heading: 0 looks towards -y (up the image)
-  double pitch_rad = -0.7;  ///< below 0 looks down; -pi/2 straight down
-  double fov_y_rad = 1.0;
-  uint32_t viewport_w = 1280;
-  uint32_t viewport_h = 720;
-};
-
-/// A view of one image of an archive.
-struct View {
-  enum class Kind { kOrtho, kPerspective };
-  Kind kind = Kind::kOrtho;
-  uint32_t image = 0;
-  OrthoView ortho;
-  PerspectiveView perspective;
-  uint32_t viewportWidth() const {
-    return kind == Kind::kOrtho ? ortho.viewport_w : perspective.viewport_w;
-  }
-  uint32_t viewportHeight() const {
-    return kind == Kind::kOrtho ? ortho.viewport_h : perspective.viewport_h;
-  }
-};
 
 /// A block of tiles at one level: [x0, x1) x [y0, y1).
 struct TileRect {

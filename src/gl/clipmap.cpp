@@ -243,9 +243,9 @@ class ClipmapRenderer final : public TargetRenderer {
       stats_.draw_cpu_ms = 0;
       return;
     }
-    const ViewTransform transform = viewTransform(view, info_);
+    const ViewProjection transform = viewProjection(view, info_);
     const GLuint p = program_.get();
-    glProgramUniformMatrix4fv(p, view_projection_uniform_, 1, GL_FALSE, transform.view_projection);
+    glProgramUniformMatrix4fv(p, view_projection_uniform_, 1, GL_FALSE, transform.matrix);
     glProgramUniform4f(p, rect_uniform_, float(-transform.anchor_x), float(-transform.anchor_y),
                        float(info_.width_px - transform.anchor_x),
                        float(info_.height_px - transform.anchor_y));

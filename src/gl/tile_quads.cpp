@@ -235,7 +235,7 @@ class TileQuadsRenderer final : public TargetRenderer {
     glDisable(GL_DEPTH_TEST);
     glDisable(GL_BLEND);
 
-    const ViewTransform transform = viewTransform(view, info_);
+    const ViewProjection transform = viewProjection(view, info_);
     const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
     instances_.clear();
     const uint32_t t = info_.tile_size_px;
@@ -246,9 +246,7 @@ class TileQuadsRenderer final : public TargetRenderer {
     // every level: their level of detail varies across a tile.
     const bool ortho = view.kind == View::Kind::kOrtho;
     const uint32_t finest_drawn =
-        ortho ? desiredLevelFor(view.ortho.texels_per_pixel > 0 ? view.ortho.texels_per_pixel : 1,
-                                info_.level_count)
-              : 0;
+        ortho ? desiredLevelFor(texelsPerPixelOf(view.ortho), info_.level_count) : 0;
     auto hiddenByChildren = [&](const TileId& id) {
       if (!ortho || id.level == 0 || id.level - 1 < finest_drawn) return false;
       const uint32_t child_level = id.level - 1;
@@ -327,7 +325,7 @@ class TileQuadsRenderer final : public TargetRenderer {
       }
       glUseProgram(program_.get());
       glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
-                                transform.view_projection);
+                                transform.matrix);
       glBindTextureUnit(0, tiles_.get());
       glBindVertexArray(vertex_array_.get());
       glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));

@@ -14,31 +14,6 @@ double levelScale(uint32_t level) {
   return std::ldexp(1.0, int(level));
 }
 
-/// Camera basis of a perspective view: forward, right and up unit vectors.
-struct Basis {
-  double fx, fy, fz, rx, ry, rz, ux, uy, uz;
-};
-
-Basis basisOf(const PerspectiveView& v) {
-  Basis b{};
-  b.fx = std::sin(v.yaw_rad) * std::cos(v.pitch_rad);
-  b.fy = -std::cos(v.yaw_rad) * std::cos(v.pitch_rad);
-  b.fz = std::sin(v.pitch_rad);
-  b.rx = std::cos(v.yaw_rad);
-  b.ry = std::sin(v.yaw_rad);
-  b.rz = 0;
-  // up = right x forward
-  b.ux = b.ry * b.fz - b.rz * b.fy;
-  b.uy = b.rz * b.fx - b.rx * b.fz;
-  b.uz = b.rx * b.fy - b.ry * b.fx;
-  return b;
-}
-
-/// Screen-space size of one pixel at unit distance, in radians.
-double pixelAngle(const PerspectiveView& v) {
-  return 2 * std::tan(v.fov_y_rad / 2) / std::max(1u, v.viewport_h);
-}
-
 /// Rays that miss the ground (above the horizon) are cut where one pixel covers a whole
 /// coarsest-level tile: nothing finer could be seen there.
 double farDistance(const PerspectiveView& v, const ImageInfo& info) {
@@ -52,7 +27,7 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
   Footprint f;
   if (view.kind == View::Kind::kOrtho) {
     const OrthoView& o = view.ortho;
-    double tpp = o.texels_per_pixel > 0 ? o.texels_per_pixel : 1;
+    double tpp = texelsPerPixelOf(o);
     double hw = o.viewport_w * 0.5 * tpp, hh = o.viewport_h * 0.5 * tpp;
     double c = std::abs(std::cos(o.rotation_rad)), s = std::abs(std::sin(o.rotation_rad));
     double ex = c * hw + s * hh, ey = s * hw + c * hh;
@@ -66,9 +41,6 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
     return f;
   }
   const PerspectiveView& p = view.perspective;
-  Basis b = basisOf(p);
-  double tan_half = std::tan(p.fov_y_rad / 2);
-  double aspect = double(std::max(1u, p.viewport_w)) / std::max(1u, p.viewport_h);
   double far = farDistance(p, info);
   double eye_z = std::max(p.eye_z, 1e-6);
   f.x0 = f.x1 = p.eye_x;
@@ -85,10 +57,8 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
   for (int i = 0; i <= kSteps; ++i) {
     for (int j = 0; j <= kSteps; ++j) {
       if (i != 0 && i != kSteps && j != 0 && j != kSteps) continue;
-      double sx = -1 + 2.0 * i / kSteps, sy = -1 + 2.0 * j / kSteps;
-      double dx = b.fx + (b.rx * sx * aspect + b.ux * sy) * tan_half;
-      double dy = b.fy + (b.ry * sx * aspect + b.uy * sy) * tan_half;
-      double dz = b.fz + (b.rz * sx * aspect + b.uz * sy) * tan_half;
+      const Vec3 d = rayDirection(p, -1 + 2.0 * i / kSteps, -1 + 2.0 * j / kSteps);
+      const double dx = d.x, dy = d.y, dz = d.z;
       double len = std::sqrt(dx * dx + dy * dy + dz * dz);
       double dist = dz < 0 ? std::min(far, eye_z / -dz * len) : far;
       include(p.eye_x + dx / len * dist, p.eye_y + dy / len * dist);

@@ -1,5 +1,5 @@
 #pragma once
-// Shared by the renderers: the view's transform and their factories.
+// Shared by the renderers: their common base and their factories.
 
 #include <memory>
 #include <optional>
@@ -10,17 +10,6 @@
 #include "gl_objects.h"
 
 namespace tessera::gl {
-
-/// Maps level-0 texel coordinates, taken relative to `anchor` (the ortho view's centre or the
-/// eye's ground point) so that floats keep sub-texel precision on huge images, to clip space.
-struct ViewTransform {
-  double anchor_x = 0, anchor_y = 0;
-  float view_projection[16] = {};  ///< column-major, for glProgramUniformMatrix4fv
-};
-
-/// The transform of tessera::textureAt: a point the view shows at screen position (sx, sy)
-/// lands on that pixel.
-ViewTransform viewTransform(const View& view, const ImageInfo& info);
 
 /// What both renderers share: the colour target a view is drawn into, read back from and
 /// presented from.
