@@ -135,7 +135,8 @@ struct FrameReport {
 /// What the renderer should do this frame.
 struct FrameUpdate {
   /// Tiles to upload now, parents before children, within the upload budget. Each is in
-  /// the cache and pinned until the renderer calls `TileStreamer::uploaded`.
+  /// the cache and pinned until `TileStreamer::acknowledge` hears whether the renderer
+  /// accepted or declined it.
   std::vector<std::shared_ptr<const DecodedTile>> uploads;
   /// Resident tiles the renderer may drop (left every region).
   std::vector<TileId> releases;
@@ -149,6 +150,18 @@ struct FrameUpdate {
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
   FrameReport report;
+};
+
+/// A renderer's answer to a FrameUpdate (`Renderer::apply`), for `TileStreamer::acknowledge`.
+/// Every tile of `FrameUpdate::uploads` is in exactly one of `accepted` and `declined`.
+struct ApplyResult {
+  std::vector<TileId> accepted;  ///< uploaded: resident from now on
+  /// Not taken (no room, or not this image's): still loaded, offered again in a later frame.
+  std::vector<TileId> declined;
+  /// Tiles resident before this frame that the renderer gave up on its own (a clipmap slot
+  /// taken by a tile of the clip region, its layers reallocated): offered again from the
+  /// cache while they are wanted.
+  std::vector<TileId> dropped;
 };
 
 /// Budgets for one mode of adaptive scheduling.
@@ -235,8 +248,9 @@ void tuneForRemoteSource(StreamerOptions& options);
 /// source's default connection count matches it.
 inline constexpr uint32_t kRemoteLoaderThreads = 16;
 
-/// The runtime for one archive. `update`, `uploaded` and `release` are render-thread only and
-/// never wait on disk, network or decoding; loading happens on the loader threads.
+/// The runtime for one archive. Render thread only, except where a method says otherwise:
+/// `update` and `acknowledge` never wait on disk, network or decoding; loading happens on the
+/// loader threads it owns.
 class TileStreamer {
  public:
   [[nodiscard]] static Result<std::unique_ptr<TileStreamer>> create(
@@ -248,14 +262,11 @@ class TileStreamer {
   /// Once per frame: drains finished loads, recomputes clip regions and priorities for
   /// `view`, cancels requests that left every region, and returns the uploads for this frame.
   const FrameUpdate& update(const View& view);
-  /// The renderer uploaded this tile (from the last FrameUpdate): it becomes resident and
-  /// its cache pin is released.
-  void uploaded(const TileId& id);
-  /// The renderer dropped a resident tile.
-  void released(const TileId& id);
-  /// The renderer could not take this tile from the last FrameUpdate (no room on the GPU):
-  /// its pin is released and it is offered again in a later frame.
-  void declined(const TileId& id);
+  /// The renderer's answer to the last FrameUpdate, once per apply and before the next
+  /// update: accepted tiles become resident and their cache pins are released; declined ones
+  /// are unpinned and offered again in a later frame; dropped ones stop being resident and are
+  /// offered again from the cache while wanted. Tiles it does not know are ignored.
+  void acknowledge(const ApplyResult& result);
   /// Current state of a tile.
   TileState state(const TileId& id) const;
   /// Blocks until the loader is idle: for tests and benchmarks, never the render thread.

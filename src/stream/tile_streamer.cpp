@@ -268,22 +268,23 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   return out;
 }
 
-void TileStreamer::uploaded(const TileId& id) {
-  if (impl_->awaiting_upload.erase(id) == 0) return;
-  impl_->resident.insert(id);
-  impl_->cache->unpin(id);
-}
-
-void TileStreamer::released(const TileId& id) {
-  // Probably still cached (a renderer that drops a tile to make room, or is replaced, drops
-  // one the runtime loaded): offered again from the cache, requested only if it was evicted.
-  if (impl_->resident.erase(id)) impl_->loaded.insert(id);
-}
-
-void TileStreamer::declined(const TileId& id) {
-  if (impl_->awaiting_upload.erase(id) == 0) return;
-  impl_->cache->unpin(id);
-  impl_->loaded.insert(id);
+void TileStreamer::acknowledge(const ApplyResult& result) {
+  Impl& s = *impl_;
+  for (const TileId& id : result.accepted) {
+    if (s.awaiting_upload.erase(id) == 0) continue;
+    s.resident.insert(id);
+    s.cache->unpin(id);
+  }
+  for (const TileId& id : result.declined) {
+    if (s.awaiting_upload.erase(id) == 0) continue;
+    s.cache->unpin(id);
+    s.loaded.insert(id);
+  }
+  // A dropped tile is probably still cached (a renderer that drops a tile to make room, or is
+  // replaced, drops one the runtime loaded): offered again from the cache, requested only if
+  // it was evicted meanwhile.
+  for (const TileId& id : result.dropped)
+    if (s.resident.erase(id)) s.loaded.insert(id);
 }
 
 TileState TileStreamer::state(const TileId& id) const {

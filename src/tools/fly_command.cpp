@@ -19,6 +19,7 @@
 #include <tessera/picture_file.h>
 #include <tessera/byte_source.h>
 #include <tessera/link.h>
+#include <tessera/renderer.h>
 #include <tessera/stream.h>
 
 #include <tessera/codec_scratch.h>
@@ -33,8 +34,12 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// Loader threads over a simulated link when --threads is 0: reads there wait a round trip
-/// each, so more of them in flight than cores keep the link busy.
+/// Without --render, what a renderer with room for everything answers: every upload accepted.
+ApplyResult acceptEverything(const FrameUpdate& update) {
+  ApplyResult result;
+  for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+  return result;
+}
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -192,8 +197,11 @@ int runFly(const FlyArgs& args) {
   if (!streamer) return reportError(streamer.error());
   std::unique_ptr<FlyRenderer> gpu;
   if (args.render != "none") {
-    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(
-        args.render == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads, info);
+    const std::optional<RendererKind> kind = rendererNamed(args.render);
+    if (!kind)
+      return reportError(
+          {ErrorCode::kInvalidArgument, fmt::format("--render {}: no such renderer", args.render)});
+    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(*kind, info);
     if (!created) return reportError(created.error());
     gpu = std::move(*created);
   }
@@ -259,7 +267,7 @@ int runFly(const FlyArgs& args) {
       frame_render_ms = gpu->frame(k, view, update, **streamer);
       render_ms.push_back(frame_render_ms);
     } else {
-      for (const auto& tile : update.uploads) (*streamer)->uploaded(tile->id);  // null renderer
+      (*streamer)->acknowledge(acceptEverything(update));  // no GPU: a renderer of infinite room
     }
     const FrameReport& r = update.report;
     last = r;

@@ -22,10 +22,12 @@
 #include <tessera/open.h>
 #include <tessera/picture_file.h>
 #include <tessera/gl.h>
+#include <tessera/renderer.h>
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "gl/window.h"
 #include "view_camera.h"
 #include "view_command.h"
 #include "view_overlay.h"
@@ -267,7 +269,7 @@ struct FrameFigures {
 
 // The panel; returns the renderer the user picked (the current one when unchanged).
 RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUpdate& update,
-                       TileStreamer& streamer, const GlRenderer& renderer,
+                       TileStreamer& streamer, const Renderer& renderer,
                        const FrameFigures& figures, size_t cache_budget_bytes,
                        const std::string& last_screenshot) {
   RendererKind picked = renderer.kind();
@@ -394,12 +396,14 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
 
 // Hands the old renderer's tiles back to the streamer and creates the new one: the streamer
 // offers them again (from its cache) and the new renderer uploads them over the next frames.
-Result<std::unique_ptr<GlRenderer>> switchRenderer(
-    RendererKind kind, const ImageInfo& info, TileStreamer& streamer,
-    std::unordered_set<TileId, TileIdHash>& resident) {
-  for (const TileId& id : resident) streamer.released(id);
+Result<std::unique_ptr<Renderer>> switchRenderer(RendererKind kind, const ImageInfo& info,
+                                                 TileStreamer& streamer,
+                                                 std::unordered_set<TileId, TileIdHash>& resident) {
+  ApplyResult handed_back;
+  handed_back.dropped.assign(resident.begin(), resident.end());
+  streamer.acknowledge(handed_back);
   resident.clear();
-  return GlRenderer::create(kind, info);
+  return createRenderer(kind, info);
 }
 
 }  // namespace
@@ -410,8 +414,10 @@ int runView(const ViewArgs& args) {
       window_h == 0 || window_w > 16384 || window_h > 16384)
     return reportError({ErrorCode::kInvalidArgument,
                         fmt::format("--size {}: expected WxH, e.g. 1280x720", args.size)});
-  const RendererKind kind =
-      args.renderer == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads;
+  const std::optional<RendererKind> kind = rendererNamed(args.renderer);
+  if (!kind)
+    return reportError({ErrorCode::kInvalidArgument,
+                        fmt::format("--renderer {}: no such renderer", args.renderer)});
 
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
   bool over_link = false;
@@ -436,7 +442,7 @@ int runView(const ViewArgs& args) {
   Result<std::unique_ptr<GlContext>> context =
       GlContext::createWindow(window_w, window_h, fmt::format("tessera view: {}", args.archive));
   if (!context) return reportError(context.error());
-  GLFWwindow* window = (*context)->window();
+  GLFWwindow* window = (*context)->window()->glfw;
   glfwSwapInterval(1);
 
   StreamerOptions options;
@@ -446,7 +452,7 @@ int runView(const ViewArgs& args) {
   if (args.adaptive != "auto") options.adaptive.enabled = args.adaptive == "on";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
-  Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
+  Result<std::unique_ptr<Renderer>> renderer = createRenderer(*kind, info);
   if (!renderer) return reportError(renderer.error());
   Result<std::unique_ptr<ViewOverlay>> overlay = ViewOverlay::create();
   if (!overlay) return reportError(overlay.error());
@@ -496,7 +502,7 @@ int runView(const ViewArgs& args) {
     v.view.ortho.viewport_h = v.view.perspective.viewport_h = uint32_t(fh);
 
     const FrameUpdate& update = (*streamer)->update(v.view);
-    (*renderer)->apply(update, **streamer);
+    (*streamer)->acknowledge((*renderer)->apply(update));
     // The renderer may drop tiles of its own accord (a clipmap slot taken by a newer tile),
     // so the set keeps only what it still holds.
     for (const auto& tile : update.uploads) resident.insert(tile->id);

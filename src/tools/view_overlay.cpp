@@ -4,7 +4,6 @@
 #include <cmath>
 #include <optional>
 
-#include "gl/renderers.h"
 #include "view_camera.h"
 
 namespace tessera::cli {
@@ -80,7 +79,7 @@ Result<std::unique_ptr<ViewOverlay>> ViewOverlay::create() {
 void ViewOverlay::draw(const View& view, const ImageInfo& info, const OverlayOptions& options,
                        const FrameUpdate& update,
                        const std::unordered_set<TileId, TileIdHash>& resident,
-                       const GlRenderer& renderer) {
+                       const Renderer& renderer) {
   if (!options.any()) return;
   const ViewProjection transform = viewProjection(view, info);
   triangles_.clear();

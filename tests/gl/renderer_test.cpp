@@ -8,6 +8,7 @@
 
 #include <tessera/build.h>
 #include <tessera/gl.h>
+#include <tessera/renderer.h>
 #include <tessera/render.h>
 #include <tessera/stream.h>
 
@@ -63,7 +64,7 @@ struct Rig {
   std::shared_ptr<test::FaultSource> source;
   std::shared_ptr<Archive> archive;
   std::unique_ptr<TileStreamer> streamer;
-  std::unique_ptr<GlRenderer> renderer;
+  std::unique_ptr<Renderer> renderer;
 
   explicit Rig(const test::SyntheticArchiveSpec& spec, RendererKind kind) {
     sharedContext();
@@ -78,7 +79,7 @@ struct Rig {
     auto created = TileStreamer::create(archive, options);
     EXPECT_TRUE(created) << created.error().message;
     if (created) streamer = std::move(*created);
-    auto made = GlRenderer::create(kind, archive->images()[0]);
+    auto made = createRenderer(kind, archive->images()[0]);
     EXPECT_TRUE(made) << made.error().message;
     if (made) renderer = std::move(*made);
   }
@@ -93,7 +94,7 @@ struct Rig {
   /// One frame as a viewer runs it.
   const FrameUpdate& frame(const View& view) {
     const FrameUpdate& update = streamer->update(view);
-    renderer->apply(update, *streamer);
+    streamer->acknowledge(renderer->apply(update));
     renderer->draw(view);
     return update;
   }
@@ -328,7 +329,7 @@ TEST_P(Renderers, TileEdgesShowNoSeamsMagnifiedOrMinified) {
     StreamerOptions options;
     options.loader_threads = 2;
     auto streamer = TileStreamer::create(archive, options);
-    auto renderer = GlRenderer::create(GetParam(), archive->images()[0]);
+    auto renderer = createRenderer(GetParam(), archive->images()[0]);
     ASSERT_TRUE(streamer && renderer);
     for (double tpp : {0.25, 0.6, 1.0, 2.5, 3.7}) {
       SCOPED_TRACE(tpp);
@@ -336,7 +337,7 @@ TEST_P(Renderers, TileEdgesShowNoSeamsMagnifiedOrMinified) {
       const View view = orthoAt(256.3, 192.4, tpp, 160, 120);
       for (int i = 0; i < 200; ++i) {
         const FrameUpdate& update = (*streamer)->update(view);
-        (*renderer)->apply(update, **streamer);
+        (*streamer)->acknowledge((*renderer)->apply(update));
         if (update.uploads.empty() && update.report.queue_length == 0 &&
             update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
           break;

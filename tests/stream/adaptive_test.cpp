@@ -399,11 +399,9 @@ class AdaptiveStreamerTest : public testing::Test {
   FrameReport frame(const View& view) {
     const FrameUpdate& update = streamer_->update(view);
     FrameReport report = update.report;
-    std::vector<TileId> uploads;
-    for (const auto& tile : update.uploads) uploads.push_back(tile->id);
-    std::vector<TileId> releases = update.releases;
-    for (const TileId& id : uploads) streamer_->uploaded(id);
-    for (const TileId& id : releases) streamer_->released(id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer_->acknowledge(result);
     return report;
   }
   TileId tileAtOffset(uint64_t offset) const {

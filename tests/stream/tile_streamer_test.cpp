@@ -84,11 +84,12 @@ class TileStreamerTest : public testing::TestWithParam<Codec> {
     std::vector<TileId> uploads;
     for (const auto& tile : update.uploads) uploads.push_back(tile->id);
     std::vector<TileId> releases = update.releases;
-    for (const TileId& id : uploads) streamer_->uploaded(id);
+    ApplyResult result;
+    result.accepted = uploads;
+    streamer_->acknowledge(result);
     for (const TileId& id : releases) {
       EXPECT_NE(id.level, coarsest()) << "the coarsest level was released";
       resident_.erase(keyOf(id));
-      streamer_->released(id);
     }
     ++frames_;
     return report;
@@ -177,10 +178,10 @@ TEST_P(TileStreamerTest, TileStatesFollowTheLoadAndUploadLifeCycle) {
   std::vector<TileId> uploads;
   for (const auto& tile : update.uploads) uploads.push_back(tile->id);
   EXPECT_EQ(streamer.state(top), TileState::kLoaded);  // handed out, not yet confirmed
-  for (const TileId& id : uploads) {
-    streamer.uploaded(id);
-    resident_.insert(keyOf(id));
-  }
+  ApplyResult result;
+  result.accepted = uploads;
+  streamer.acknowledge(result);
+  for (const TileId& id : uploads) resident_.insert(keyOf(id));
   EXPECT_EQ(streamer.state(top), TileState::kLocked);
   settle(orthoView(512, 384));
   EXPECT_EQ(streamer.state(centre), TileState::kResident);
@@ -198,8 +199,10 @@ TEST_P(TileStreamerTest, ADeclinedTileStaysLoadedAndIsOfferedAgain) {
   for (const auto& tile : first.uploads)
     if (tile->id != declined) others.push_back(tile->id);
   // The renderer had no room for it: not resident, still in the cache.
-  streamer.declined(declined);
-  for (const TileId& id : others) streamer.uploaded(id);
+  ApplyResult result;
+  result.declined = {declined};
+  result.accepted = others;
+  streamer.acknowledge(result);
   EXPECT_EQ(streamer.state(declined), TileState::kLoaded);
   EXPECT_TRUE(streamer.cache().contains(declined));
   const FrameUpdate& second = streamer.update(view);
@@ -234,7 +237,9 @@ TEST_P(TileStreamerTest, UploadsKeepTheByteBudget) {
       EXPECT_LE(update.report.upload_bytes, options_.residency.upload_budget_bytes)
           << update.uploads.size() << " tiles in frame " << i;
     }
-    for (const auto& tile : update.uploads) streamer.uploaded(tile->id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer.acknowledge(result);
   }
 }
 
