@@ -20,6 +20,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using detail::AdaptiveScheduler;
+using detail::LinkEstimate;
 using detail::TileFacts;
 
 Clock::time_point at(double s) {
