@@ -2,6 +2,7 @@
 // streamer feeds a real renderer; pictures are read back and checked texel by texel.
 #include <algorithm>
 #include <map>
+#include <unordered_set>
 #include <memory>
 
 #include <gtest/gtest.h>
@@ -399,6 +400,45 @@ TEST_P(Renderers, AFastPanNeverUncoversThePictureAndEachFrameMatchesItsResidentL
   // The fallback was exercised.
   EXPECT_GT(frames_below_full_detail, 0u);
   rig.source->openGate();
+}
+
+TEST_P(Renderers, ApplyAnswersForEveryUploadAndHoldsWhatItAccepted) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, GetParam());
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  // A pan across the image and back: uploads, releases, and for the clipmap slots that wrap.
+  size_t accepted = 0;
+  for (int i = 0; i < 60; ++i) {
+    const double x = 100 + (info.width_px - 200.0) * (i < 30 ? i : 59 - i) / 29.0;
+    const View view = orthoAt(x, info.height_px / 2.0, 1, 128, 96);
+    const FrameUpdate& update = rig.streamer->update(view);
+    std::unordered_set<TileId, TileIdHash> uploads;
+    for (const auto& tile : update.uploads) uploads.insert(tile->id);
+    std::unordered_set<TileId, TileIdHash> held_before;
+    for (const TileId& id : test::allTiles(*rig.archive))
+      if (rig.renderer->resident(id)) held_before.insert(id);
+    const ApplyResult& result = rig.renderer->apply(update);
+    // Each upload is accepted or declined, never both, and nothing else is.
+    std::unordered_set<TileId, TileIdHash> answered(result.accepted.begin(), result.accepted.end());
+    for (const TileId& id : result.declined) EXPECT_TRUE(answered.insert(id).second);
+    EXPECT_EQ(answered, uploads);
+    for (const TileId& id : result.accepted) EXPECT_TRUE(rig.renderer->resident(id));
+    for (const TileId& id : result.declined) EXPECT_FALSE(rig.renderer->resident(id));
+    // Dropped tiles were held before this frame and are not any more.
+    for (const TileId& id : result.dropped) {
+      EXPECT_TRUE(held_before.count(id));
+      EXPECT_FALSE(rig.renderer->resident(id));
+    }
+    EXPECT_EQ(rig.renderer->stats().uploads, result.accepted.size());
+    EXPECT_EQ(rig.renderer->stats().declined, result.declined.size());
+    accepted += result.accepted.size();
+    rig.streamer->acknowledge(result);
+    rig.renderer->draw(view);
+    rig.streamer->waitIdleForTesting();
+  }
+  EXPECT_GT(accepted, 0u);
 }
 
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {

@@ -211,6 +211,26 @@ TEST_P(TileStreamerTest, ADeclinedTileStaysLoadedAndIsOfferedAgain) {
   })) << "a declined tile is offered again";
 }
 
+TEST_P(TileStreamerTest, ATileTheRendererDropsIsOfferedAgainFromTheCache) {
+  TileStreamer& streamer = start();
+  const View view = orthoView(512, 384);
+  settle(view);
+  const TileId centre{0, 0, 8, 6};
+  ASSERT_EQ(streamer.state(centre), TileState::kResident);
+  // The renderer gave it up on its own (a clipmap slot taken, say): no longer resident, still
+  // in the cache, and handed over again without a new read.
+  const uint64_t reads = streamer.update(view).report.reads_total;
+  ApplyResult result;
+  result.dropped = {centre};
+  streamer.acknowledge(result);
+  EXPECT_EQ(streamer.state(centre), TileState::kLoaded);
+  const FrameUpdate& again = streamer.update(view);
+  EXPECT_TRUE(std::any_of(again.uploads.begin(), again.uploads.end(), [&](const auto& tile) {
+    return tile->id == centre;
+  })) << "a dropped tile that is still wanted is offered again";
+  EXPECT_EQ(again.report.reads_total, reads);
+}
+
 TEST_P(TileStreamerTest, UploadsKeepTheTileBudgetAndGoParentBeforeChild) {
   options_.residency.upload_budget_tiles = 5;
   start();
