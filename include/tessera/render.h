@@ -54,6 +54,7 @@ struct ReferenceOptions {
 /// The level each pixel of `view` shows by the sampling rules (the finest available level at
 /// or above floor(lambda); the next level may blend in), row-major, -1 outside the image or
 /// where nothing is available. Reads no tile: for level overlays (Backes et al., Fig. 1).
+/// Fails (kInvalidArgument) for an image the archive lacks. Any thread, as renderReference.
 [[nodiscard]] Result<std::vector<int32_t>> levelsShown(const Archive& archive, const View& view,
                                                        const ReferenceOptions& options = {});
 
@@ -64,7 +65,7 @@ struct PictureDifference {
   double mean_abs = 0;   ///< mean absolute difference per channel
 };
 
-/// Compares two pictures; fails (kInvalidArgument) when their sizes differ.
+/// Compares two pictures; fails (kInvalidArgument) when their sizes differ. Thread-safe.
 [[nodiscard]] Result<PictureDifference> comparePictures(const Picture& a, const Picture& b);
 
 }  // namespace tessera
