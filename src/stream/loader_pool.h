@@ -19,9 +19,9 @@
 
 #include <tessera/archive.h>
 #include <tessera/cache.h>
-#include <tessera/link.h>
 #include <tessera/stream.h>
 
+#include "link_estimator.h"
 #include "texel_pool.h"
 
 namespace tessera::detail {
