@@ -12,6 +12,8 @@
 
 #include <tessera/codec_scratch.h>
 
+#include "reader/parent_chain.h"
+
 namespace tessera::detail {
 
 using Clock = std::chrono::steady_clock;
@@ -38,6 +40,26 @@ size_t addToRuns(std::vector<ByteRange>& runs, uint64_t offset, uint64_t length,
   }
   return runs.size() - 1;
 }
+
+/// The loader's decoded-tile cache as the reader's store of decoded parents, so a process
+/// keeps them in one cache: a parent found there is pinned for as long as the handle lives, so
+/// eviction cannot recycle its buffer half-way through a decode. The ancestors a fallback
+/// decodes are not kept: they would take budget the residency manager never asked for.
+class CachedParents final : public ParentStore {
+ public:
+  explicit CachedParents(TileCache& cache) : cache_(cache) {}
+  std::shared_ptr<const Image> find(const TileId& id) override {
+    std::shared_ptr<const DecodedTile> tile = cache_.pinIfCached(id);
+    if (!tile) return nullptr;
+    TileCache* cache = &cache_;
+    return std::shared_ptr<const Image>(&tile->texels,
+                                        [cache, tile](const Image*) { cache->unpin(tile->id); });
+  }
+  void offer(const TileId&, const std::shared_ptr<const Image>&) override {}
+
+ private:
+  TileCache& cache_;
+};
 
 /// Tiles one worker looks up for read-ahead per batch it takes: bounds the time a worker
 /// spends on hints before its own read.
@@ -446,79 +468,31 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
     work_ready_.notify_one();
 }
 
-Result<Image> LoaderPool::decodeParentChain(const TileId& child, CodecScratch& scratch,
-                                            uint64_t& bytes_read, size_t& reads) {
-  const Archive& archive = *archive_;
-  std::vector<TileId> chain;  // finest first
-  std::shared_ptr<const DecodedTile> base;
-  for (TileId id = Archive::parentTile(child);; id = Archive::parentTile(id)) {
-    if ((base = cache_.pinIfCached(id))) break;
-    chain.push_back(id);
-    if (!needsParent(id)) break;  // the coarsest level decodes on its own
-  }
-  const TileId base_id = base ? base->id : TileId{};
-  Image decoded;
-  const Image* parent = base ? &base->texels : nullptr;
-  Result<void> status;
-  for (auto it = chain.rbegin(); it != chain.rend() && status; ++it) {
-    Result<TileEntry> entry = archive.tileEntry(*it);
-    if (!entry) {
-      status = forwardError(entry);
-      break;
-    }
-    std::vector<uint8_t> payload;
-    if (entry->kind == TileKind::kEncoded) {
-      Result<std::vector<uint8_t>> read = archive.readPayload(*it, *entry);
-      ++reads;
-      if (!read) {
-        status = forwardError(read);
-        break;
-      }
-      bytes_read += read->size();
-      payload = std::move(*read);
-    }
-    Image next;
-    status = parent ? archive.decodeTileInto(*it, *entry, payload, next, *parent, &scratch)
-                    : archive.decodeTileInto(*it, *entry, payload, next, &scratch);
-    decoded = std::move(next);
-    parent = &decoded;
-  }
-  if (base) cache_.unpin(base_id);
-  if (!status)
-    return fail(status.error().code, fmt::format("{}: its parent cannot be decoded: {}",
-                                                 archive.tileName(child), status.error().message));
-  return decoded;
-}
-
 Result<void> LoaderPool::decodeItem(const TileId& id, const TileEntry& entry,
                                     std::span<const uint8_t> payload, Image& texels,
                                     size_t tile_bytes, CodecScratch& scratch) {
   const Archive& archive = *archive_;
-  if (entry.kind != TileKind::kEncoded || !codecNeedsParent(entry.codec) || !needsParent(id))
+  if (!codedAgainstParent(archive, id, entry))
     return archive.decodeTileInto(id, entry, payload, texels, &scratch);
-  const TileId parent_id = Archive::parentTile(id);
-  if (std::shared_ptr<const DecodedTile> parent = cache_.pinIfCached(parent_id)) {
-    Result<void> decoded =
-        archive.decodeTileInto(id, entry, payload, texels, parent->texels, &scratch);
-    cache_.unpin(parent_id);
-    return decoded;
-  }
-  // The parent left the cache after it loaded (or failed to load): its chain is read and
-  // decoded here, in the budget, never an unverified or stale parent.
+  CachedParents cached(cache_);
+  if (std::shared_ptr<const Image> parent = cached.find(Archive::parentTile(id)))
+    return archive.decodeTileInto(id, entry, payload, texels, *parent, &scratch);
+  // The parent left the cache after it loaded (or failed to load): the reader decodes its
+  // chain from the nearest cached ancestor down, in the budget, never an unverified or stale
+  // parent.
   if (!cache_.reserve(tile_bytes))
     return fail(ErrorCode::kIo, fmt::format("{}: tile cache full of pinned tiles", archive.name()));
-  uint64_t bytes_read = 0;
-  size_t reads = 0;
-  Result<Image> parent = decodeParentChain(id, scratch, bytes_read, reads);
+  ChainReads reads;
+  Result<std::shared_ptr<const Image>> parent = decodeParent(archive, id, cached, &scratch, &reads);
   {
     std::lock_guard lock(mutex_);
     ++stats_.parent_fallbacks;
-    stats_.reads += reads;
-    stats_.bytes_read += bytes_read;
+    stats_.reads += reads.reads;
+    stats_.bytes_read += reads.bytes_read;
   }
-  Result<void> decoded = parent
-                             ? archive.decodeTileInto(id, entry, payload, texels, *parent, &scratch)
-                             : Result<void>(forwardError(parent));
+  Result<void> decoded =
+      parent ? archive.decodeTileInto(id, entry, payload, texels, **parent, &scratch)
+             : Result<void>(forwardError(parent));
   cache_.unreserve(tile_bytes);
   return decoded;
 }

@@ -159,15 +159,12 @@ class LoaderPool {
       std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash>& wanted,
       std::chrono::steady_clock::time_point now);
   /// Decodes a verified payload into `texels`: a dependent codec's tile against its parent,
-  /// pinned in the cache for the decode, or decodeParentChain's when the parent is not cached.
+  /// pinned in the cache for the decode; when the parent is not cached, against the one the
+  /// reader decodes from the nearest cached ancestor down (detail::decodeParent), counted in
+  /// parent_fallbacks and the read statistics. The tiles decoded on the way are not cached.
   Result<void> decodeItem(const TileId& id, const TileEntry& entry,
                           std::span<const uint8_t> payload, Image& texels, size_t tile_bytes,
                           CodecScratch& scratch);
-  /// The decoded parent of `child` when it is not in the cache: reads and decodes the chain
-  /// from the nearest cached ancestor (or the coarsest level) down, counting the bytes and
-  /// reads in `bytes_read` and `reads`. The tiles decoded on the way are not cached.
-  Result<Image> decodeParentChain(const TileId& child, CodecScratch& scratch, uint64_t& bytes_read,
-                                  size_t& reads);
   void finish(const TileId& id, LoadEvent event, bool failed);
   /// Queued tiles at the head of the queue not hinted yet, if the read-ahead window has room;
   /// marks them hinted (size unknown yet). Under mutex_.
