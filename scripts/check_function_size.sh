@@ -21,9 +21,10 @@
 # a file (its errors are printed): a file it cannot parse would otherwise pass unseen.
 #
 # Cost: clang-tidy parses each file as the compiler's front end does, so the check costs about
-# one -fsyntax-only compile of src/ and no build. On the 2-core development machine, shared
-# with other compiles (load 3-4), the 95 files took 4 min 16 s with 2 jobs (about 2.2 s of CPU
-# a file, the CLI's files that include CLI11 the most); a machine with more cores divides that.
+# one -fsyntax-only compile of src/ and no build: 3.6 min of CPU for the 98 files (2.2 s a
+# file, the CLI's, which include CLI11, the most). On the 2-core development machine, shared
+# with other compiles, that took 4 min 16 s with 2 jobs at load 3-4 and 7 min 25 s at load 7;
+# more cores divide it.
 #
 # The CLI's subcommand files are compiled through one unity source (src/tools/CMakeLists.txt)
 # and so have no entry of their own in compile_commands.json: clang-tidy then takes the flags

@@ -200,13 +200,10 @@ if [[ $("${CXX:-c++}" --version 2>/dev/null) == *"Free Software Foundation"* ]];
   release_flags="-Wno-error=array-bounds -Wno-error=stringop-overflow -Wno-error=stringop-overread"
 fi
 
-# The sanitizer stages compile with -g1 (line tables only), all a sanitizer's symbolized stack
-# needs: full -g made their compiles about 30 % slower (ptm's codec, then one file, under ASan +
-# UBSan: 173 s against 119 s). The ASan stage also compiles at -O1, as AddressSanitizer's
-# documentation advises: its build was most of CI's time, and -O1 takes 16-40 % off its files
-# (cli_test.cpp 53 s against 31 s). The whole run went from 30 min 3 s to 21 min 41 s with
-# this, the CLI11 unity file (src/tools/CMakeLists.txt) and smaller ptm sweep tiles, the ASan
-# tests from 260 s to 165 s.
+# The sanitizer stages compile with -g1 (line tables only): that is all a sanitizer's
+# symbolized stack needs, and full -g makes their compiles about 30 % slower. The ASan stage
+# also compiles at -O1, as AddressSanitizer's documentation advises: its build is most of CI's
+# time, and -O1 takes 16-40 % off its files.
 asan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
 tsan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG")
 
