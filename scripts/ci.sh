@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run): installs the Debian packages, then
 #   1. checks clang-format on every tracked C++ file and .editorconfig on every text file,
-#   2. builds Release and runs every test,
+#   2. builds Release and runs every test; before that build, right after configuring, checks
+#      that no function in src/ is over 120 lines (scripts/check_function_size.sh, clang-tidy
+#      over compile_commands.json),
 #   3. builds RelWithDebInfo with AddressSanitizer + UBSan and runs every test,
 #   4. builds with ThreadSanitizer and runs the tests labelled "concurrency",
 # and ends with each stage's ctest summary. Every stage runs even when an earlier one failed,
@@ -123,6 +125,26 @@ targets_with_label() {
     }' "${files[@]}"
 }
 
+# No function in src/ over 120 lines, by clang-tidy over the configured build's
+# compile_commands.json: it needs no build, so it runs before the release build and its
+# failure (a list of file:line function lines) does not stop the tests.
+function_size_check() {
+  local dir=$1 out=$1/function-size.log status line
+  log "function size, $jobs jobs ($(clang-tidy --version 2>/dev/null | grep -o 'version.*'))"
+  TESSERA_TIDY_JOBS=$jobs scripts/check_function_size.sh "$dir" 2>&1 | tee "$out"
+  status=${PIPESTATUS[0]}
+  line=$(grep -E '^check_function_size: [0-9]+ files' "$out" | tail -1)
+  line=${line#check_function_size: }
+  case $status in
+    0) stage_result functions ok "no function over 120 lines ($line)" ;;
+    1) stage_result functions FAIL "$(grep -c '^  src/' "$out") functions over 120 lines ($line)" ;;
+    *) stage_result functions FAIL "clang-tidy missing or could not parse a file (exit $status)" ;;
+  esac
+}
+
+# Steps run right after a stage's configure, given its build folder.
+declare -A after_configure=([release]=function_size_check)
+
 # build_and_test NAME BUILD_TYPE SANITIZE LABEL TIMEOUT [extra cmake args...]
 # With LABEL, only the test executables carrying it are built (all of them if none is found).
 build_and_test() {
@@ -135,6 +157,7 @@ build_and_test() {
     stage_result "$name" FAIL "configure failed"
     return
   fi
+  [[ -n ${after_configure[$name]:-} ]] && "${after_configure[$name]}" "$dir"
   local targets=()
   if [[ -n $label ]]; then
     mapfile -t targets < <(targets_with_label "$label")
@@ -177,13 +200,10 @@ if [[ $("${CXX:-c++}" --version 2>/dev/null) == *"Free Software Foundation"* ]];
   release_flags="-Wno-error=array-bounds -Wno-error=stringop-overflow -Wno-error=stringop-overread"
 fi
 
-# The sanitizer stages compile with -g1 (line tables only), all a sanitizer's symbolized stack
-# needs: full -g made their compiles about 30 % slower (ptm's codec, then one file, under ASan +
-# UBSan: 173 s against 119 s). The ASan stage also compiles at -O1, as AddressSanitizer's
-# documentation advises: its build was most of CI's time, and -O1 takes 16-40 % off its files
-# (cli_test.cpp 53 s against 31 s). The whole run went from 30 min 3 s to 21 min 41 s with
-# this, the CLI11 unity file (src/tools/CMakeLists.txt) and smaller ptm sweep tiles, the ASan
-# tests from 260 s to 165 s.
+# The sanitizer stages compile with -g1 (line tables only): that is all a sanitizer's
+# symbolized stack needs, and full -g makes their compiles about 30 % slower. The ASan stage
+# also compiles at -O1, as AddressSanitizer's documentation advises: its build is most of CI's
+# time, and -O1 takes 16-40 % off its files.
 asan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
 tsan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG")
 

@@ -340,19 +340,17 @@ std::string displayName(const std::string& input) {
   return std::filesystem::path(input).filename().string();
 }
 
-}  // namespace
-
-Result<BuildReport> buildArchive(const BuildOptions& options,
-                                 const std::function<void(const BuildProgress&)>& on_progress,
-                                 const std::atomic<bool>* cancel) {
-  const auto start = Clock::now();
-  TESSERA_TRY(validateOptions(options));
-
-  // Open every source first: bad inputs fail before any output exists, and progress knows
-  // the total.
+/// The build's sources, opened, with the images they become.
+struct OpenedSources {
   std::vector<std::unique_ptr<BandReader>> readers;
-  std::vector<ImageInfo> infos;
-  uint64_t pixels_total = 0;
+  std::vector<ImageInfo> infos;  ///< one per reader, level_count set
+  uint64_t pixels_total = 0;     ///< level-0 pixels of every image
+};
+
+/// Opens every source first: bad inputs fail before any output exists, and progress knows the
+/// total.
+Result<OpenedSources> openSources(const BuildOptions& options) {
+  OpenedSources sources;
   for (size_t i = 0; i < options.inputs.size(); ++i) {
     TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(options.inputs[i]));
     const SourceInfo& source = reader->info();
@@ -369,11 +367,146 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
         i < options.image_names.size() ? options.image_names[i] : displayName(options.inputs[i]);
     TESSERA_TRY(validateImageInfo(info, options.inputs[i]));
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
-    pixels_total += uint64_t(info.width_px) * info.height_px;
-    readers.push_back(std::move(reader));
-    infos.push_back(info);
+    sources.pixels_total += uint64_t(info.width_px) * info.height_px;
+    sources.readers.push_back(std::move(reader));
+    sources.infos.push_back(info);
   }
+  return sources;
+}
 
+/// A build's progress across its images, reported at most every 100 ms.
+struct BuildProgressClock {
+  const std::function<void(const BuildProgress&)>& on_progress;
+  const Clock::time_point start;
+  const uint64_t pixels_total;
+  uint64_t pixels_done = 0;
+  Clock::time_point last = Clock::now();
+
+  void rowsRead(uint64_t pixels, const EncodeContext& context) {
+    pixels_done += pixels;
+    if (!on_progress || Clock::now() - last <= std::chrono::milliseconds(100)) return;
+    last = Clock::now();
+    on_progress({pixels_done, pixels_total,
+                 context.tiles_encoded + context.tiles_uniform + context.tiles_empty,
+                 std::chrono::duration<double>(last - start).count()});
+  }
+};
+
+/// What the builder and the encoders share while the images stream through.
+struct EncodeStage {
+  EncodeContext& context;
+  WorkerPool& pool;
+  TileBufferPool& buffers;
+  BuildProgressClock& progress;
+  const std::atomic<bool>* cancel;
+  bool cancelled() const { return cancel && cancel->load(std::memory_order_relaxed); }
+};
+
+/// An image's entry in the archive metadata: its source and statistics, then the reader's
+/// source-specific facts (georeference, TIFF layout, synthetic seed).
+nlohmann::json imageMetadata(const ImageInfo& info, const std::string& input,
+                             const SourceInfo& source, const nlohmann::json& statistics) {
+  nlohmann::json meta = {
+      {"name", info.name},       {"source", input},          {"source_format", source.format},
+      {"width", info.width_px},  {"height", info.height_px}, {"channels", info.channels},
+      {"statistics", statistics}};
+  for (auto& [key, value] : source.metadata.items()) meta[key] = value;
+  return meta;
+}
+
+/// Waits for the pool's jobs when it goes out of scope: queued jobs hold the sink and buffers
+/// of the image being encoded, so no early return may outrun them.
+struct PoolDrain {
+  WorkerPool& pool;
+  ~PoolDrain() { pool.waitIdle(); }
+};
+
+/// Streams image `index` band by band through the pyramid into the encoders and returns its
+/// metadata; every tile is encoded into `spooled` when it returns.
+Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, const ImageInfo& info,
+                                   BandReader& reader, SpooledImage& spooled, EncodeStage& stage) {
+  spooled.info = info;
+  spooled.entries.resize(info.level_count);
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    spooled.entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
+  EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, options.inputs[index]);
+  PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
+  const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
+  const uint32_t band_rows =
+      natural >= info.tile_size_px ? std::min(natural, 4 * info.tile_size_px) : info.tile_size_px;
+  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  std::vector<uint8_t> band(row_bytes * std::min(band_rows, info.height_px));
+  PoolDrain drain{stage.pool};
+  for (uint32_t y = 0; y < info.height_px;) {
+    if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+    if (auto error = stage.context.error()) return Unexpected(*error);
+    uint32_t rows = std::min(band_rows, info.height_px - y);
+    TESSERA_TRY(reader.readRows(rows, {band.data(), row_bytes * rows}));
+    TESSERA_TRY(pyramid.addRows(band.data(), rows));
+    y += rows;
+    stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
+  }
+  TESSERA_TRY(pyramid.finish());
+  stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
+  return imageMetadata(info, options.inputs[index], reader.info(), sink.statistics);
+}
+
+/// The archive's metadata: the format, the build's options and each image's entry.
+nlohmann::json archiveMetadata(const BuildOptions& options, nlohmann::json image_metadata) {
+  return {{"format", "tessera"},
+          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+          {"created_by", "tessera build"},
+          {"build",
+           {{"tile_size", options.tile_size_px},
+            {"border", options.border_px},
+            {"codec", codecName(options.codec)},
+            {"quality", options.quality},
+            {"effort", options.effort},
+            {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
+            {"downsample", options.codec == Codec::kPtm ? "box-floor"
+                           : options.srgb_downsample    ? "box-linear-light"
+                                                        : "box"},
+            {"order", options.order == TileOrder::kHilbert    ? "hilbert"
+                      : options.order == TileOrder::kQuadtree ? "quadtree"
+                                                              : "row-major"}}},
+          {"images", std::move(image_metadata)}};
+}
+
+/// Streams every image into the spool and returns their metadata entries, the worker spools
+/// flushed.
+Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& sources,
+                                    std::vector<SpooledImage>& spooled, EncodeContext& context,
+                                    uint32_t threads, BuildProgressClock& progress,
+                                    const std::atomic<bool>* cancel) {
+  nlohmann::json image_metadata = nlohmann::json::array();
+  WorkerPool pool(threads, 2 * threads);
+  size_t max_tile_bytes = 0;
+  for (const ImageInfo& info : sources.infos)
+    max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
+  TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
+  EncodeStage stage{context, pool, buffers, progress, cancel};
+  for (uint32_t i = 0; i < sources.infos.size(); ++i) {
+    TESSERA_ASSIGN_OR_RETURN(
+        nlohmann::json meta,
+        encodeImage(options, i, sources.infos[i], *sources.readers[i], spooled[i], stage));
+    image_metadata.push_back(std::move(meta));
+  }
+  pool.waitIdle();
+  for (WorkerSpool& worker_spool : context.worker_spools)
+    if (Result<void> flushed = flushWorkerSpool(context, worker_spool); !flushed)
+      context.recordError(flushed.error());
+  if (auto error = context.error()) return Unexpected(*error);
+  return image_metadata;
+}
+
+}  // namespace
+
+Result<BuildReport> buildArchive(const BuildOptions& options,
+                                 const std::function<void(const BuildProgress&)>& on_progress,
+                                 const std::atomic<bool>* cancel) {
+  const auto start = Clock::now();
+  TESSERA_TRY(validateOptions(options));
+  TESSERA_ASSIGN_OR_RETURN(OpenedSources sources, openSources(options));
   TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
   TESSERA_ASSIGN_OR_RETURN(TempFile spool, TempFile::create(options.output));
 
@@ -387,97 +520,17 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   context.encode_options.chroma_subsampling = options.chroma_subsampling;
   context.worker_spools.resize(threads);
 
-  std::vector<SpooledImage> spooled(infos.size());
-  nlohmann::json image_metadata = nlohmann::json::array();
-  uint64_t pixels_done = 0;
-  auto last_progress = Clock::now();
+  std::vector<SpooledImage> spooled(sources.infos.size());
+  BuildProgressClock progress{on_progress, start, sources.pixels_total};
+  TESSERA_ASSIGN_OR_RETURN(
+      nlohmann::json image_metadata,
+      encodeImages(options, sources, spooled, context, threads, progress, cancel));
   auto cancelled = [&] { return cancel && cancel->load(std::memory_order_relaxed); };
-  {
-    WorkerPool pool(threads, 2 * threads);
-    size_t max_tile_bytes = 0;
-    for (const ImageInfo& info : infos)
-      max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
-    TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
-    // On any early return the pool must finish its jobs before the buffers and context die.
-    auto stop = [&](Error error) -> Unexpected {
-      pool.waitIdle();
-      return Unexpected(std::move(error));
-    };
-
-    for (uint32_t i = 0; i < infos.size(); ++i) {
-      const ImageInfo& info = infos[i];
-      BandReader& reader = *readers[i];
-      spooled[i].info = info;
-      spooled[i].entries.resize(info.level_count);
-      for (uint32_t l = 0; l < info.level_count; ++l)
-        spooled[i].entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
-      EncodingSink sink(info, spooled[i], context, pool, buffers, options.inputs[i]);
-      PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
-      const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
-      const uint32_t band_rows = natural >= info.tile_size_px
-                                     ? std::min(natural, 4 * info.tile_size_px)
-                                     : info.tile_size_px;
-      const size_t row_bytes = size_t(info.width_px) * info.channels;
-      std::vector<uint8_t> band(row_bytes * std::min(band_rows, info.height_px));
-      for (uint32_t y = 0; y < info.height_px;) {
-        if (cancelled()) return stop({ErrorCode::kCancelled, options.output + ": build cancelled"});
-        if (auto error = context.error()) return stop(*error);
-        uint32_t rows = std::min(band_rows, info.height_px - y);
-        Result<void> read = reader.readRows(rows, {band.data(), row_bytes * rows});
-        if (!read) return stop(read.error());
-        Result<void> added = pyramid.addRows(band.data(), rows);
-        if (!added) return stop(added.error());
-        y += rows;
-        pixels_done += uint64_t(rows) * info.width_px;
-        if (on_progress && Clock::now() - last_progress > std::chrono::milliseconds(100)) {
-          last_progress = Clock::now();
-          on_progress({pixels_done, pixels_total,
-                       context.tiles_encoded + context.tiles_uniform + context.tiles_empty,
-                       std::chrono::duration<double>(last_progress - start).count()});
-        }
-      }
-      Result<void> finished = pyramid.finish();
-      if (!finished) return stop(finished.error());
-      pool.waitIdle();  // queued jobs hold `sink`, which dies with this iteration
-      nlohmann::json meta = {{"name", info.name},
-                             {"source", options.inputs[i]},
-                             {"source_format", reader.info().format},
-                             {"width", info.width_px},
-                             {"height", info.height_px},
-                             {"channels", info.channels},
-                             {"statistics", sink.statistics}};
-      for (auto& [key, value] : reader.info().metadata.items()) meta[key] = value;
-      image_metadata.push_back(std::move(meta));
-    }
-    pool.waitIdle();
-    for (WorkerSpool& worker_spool : context.worker_spools)
-      if (Result<void> flushed = flushWorkerSpool(context, worker_spool); !flushed)
-        context.recordError(flushed.error());
-    if (auto error = context.error()) return Unexpected(*error);
-  }
   if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
 
-  nlohmann::json metadata = {
-      {"format", "tessera"},
-      {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
-      {"created_by", "tessera build"},
-      {"build",
-       {{"tile_size", options.tile_size_px},
-        {"border", options.border_px},
-        {"codec", codecName(options.codec)},
-        {"quality", options.quality},
-        {"effort", options.effort},
-        {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
-        {"downsample", options.codec == Codec::kPtm ? "box-floor"
-                       : options.srgb_downsample    ? "box-linear-light"
-                                                    : "box"},
-        {"order", options.order == TileOrder::kHilbert    ? "hilbert"
-                  : options.order == TileOrder::kQuadtree ? "quadtree"
-                                                          : "row-major"}}},
-      {"images", image_metadata}};
-  TESSERA_ASSIGN_OR_RETURN(
-      WrittenArchive written,
-      writeArchive(spool, context.spool_end.load(), spooled, options.order, metadata, out));
+  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
+                           writeArchive(spool, context.spool_end.load(), spooled, options.order,
+                                        archiveMetadata(options, std::move(image_metadata)), out));
   if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
   TESSERA_TRY(out.commit());
 
@@ -488,10 +541,11 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   report.tiles_uniform = context.tiles_uniform;
   report.tiles_empty = context.tiles_empty;
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
-  report.megapixels_per_s = pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
-  report.images = infos;
+  report.megapixels_per_s = sources.pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
+  report.images = sources.infos;
   if (on_progress)
-    on_progress({pixels_total, pixels_total, report.tiles_encoded, report.elapsed_s});
+    on_progress(
+        {sources.pixels_total, sources.pixels_total, report.tiles_encoded, report.elapsed_s});
   return report;
 }
 

@@ -27,6 +27,7 @@
 
 #include "band_reader.h"
 #include "file_reader.h"
+#include "scanline_reader.h"
 
 namespace tessera::detail {
 namespace {
@@ -49,9 +50,9 @@ void onPngError(png_structp png, png_const_charp message) {
 // Warnings (bad ancillary chunks, an sRGB profile mismatch) leave the pixels intact.
 void onPngWarning(png_structp, png_const_charp) {}
 
-class PngReader final : public BandReader {
+class PngReader final : public ScanlineReader {
  public:
-  explicit PngReader(std::string path) : path_(std::move(path)) {}
+  explicit PngReader(std::string path) : ScanlineReader(std::move(path)) {}
   ~PngReader() override {
     if (png_) png_destroy_read_struct(&png_, &png_info_, nullptr);
     if (file_) std::fclose(file_);
@@ -60,8 +61,6 @@ class PngReader final : public BandReader {
   PngReader& operator=(const PngReader&) = delete;
 
   Result<void> open();
-  const SourceInfo& info() const override { return info_; }
-  Result<void> readRows(uint32_t rows, std::span<uint8_t> out) override;
 
  private:
   struct Header {
@@ -77,19 +76,15 @@ class PngReader final : public BandReader {
   // messages_.error).
   bool readHeader(Header* header);
   bool setUpTransforms(Header* header);
-  bool readRow(uint8_t* row);
+  bool decodeRow(uint8_t* row) override;
   // Reads past the last row to IEND, so a file cut after its pixels still fails.
-  bool finish();
+  bool finishDecoding() override;
+  const char* decoderMessage() const override { return messages_.error; }
 
-  std::string path_;
   std::FILE* file_ = nullptr;
   png_structp png_ = nullptr;
   png_infop png_info_ = nullptr;
   PngMessages messages_;
-  SourceInfo info_;
-  uint32_t next_row_ = 0;
-  // libpng's state is undefined after an error, so a failed reader only repeats its error.
-  std::string failure_;
 };
 
 bool PngReader::readHeader(Header* header) {
@@ -116,13 +111,13 @@ bool PngReader::setUpTransforms(Header* header) {
   return true;
 }
 
-bool PngReader::readRow(uint8_t* row) {
+bool PngReader::decodeRow(uint8_t* row) {
   if (setjmp(png_jmpbuf(png_))) return false;
   png_read_row(png_, row, nullptr);
   return true;
 }
 
-bool PngReader::finish() {
+bool PngReader::finishDecoding() {
   if (setjmp(png_jmpbuf(png_))) return false;
   png_read_end(png_, nullptr);
   return true;
@@ -182,28 +177,6 @@ Result<void> PngReader::open() {
       {"colour_type", header.colour_type <= 6 ? kColourNames[header.colour_type] : "?"},
       {"bit_depth", header.bit_depth},
   };
-  return {};
-}
-
-Result<void> PngReader::readRows(uint32_t rows, std::span<uint8_t> out) {
-  const size_t row_bytes = size_t(info_.width_px) * info_.channels;
-  TESSERA_CHECK(rows > 0 && rows <= info_.height_px - next_row_)
-      << path_ << ": readRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
-  TESSERA_CHECK(out.size() >= rows * row_bytes) << path_ << ": output span too small";
-  if (!failure_.empty()) return fail(ErrorCode::kCorrupt, failure_);
-  for (uint32_t r = 0; r < rows; ++r) {
-    if (!readRow(out.data() + r * row_bytes)) {
-      failure_ = fmt::format("{}: row {}: truncated or corrupt data ({})", path_, next_row_,
-                             messages_.error);
-      return fail(ErrorCode::kCorrupt, failure_);
-    }
-    ++next_row_;
-  }
-  if (next_row_ == info_.height_px && !finish()) {
-    failure_ = fmt::format("{}: after the last row: truncated or corrupt data ({})", path_,
-                           messages_.error);
-    return fail(ErrorCode::kCorrupt, failure_);
-  }
   return {};
 }
 
