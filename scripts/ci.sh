@@ -6,22 +6,26 @@
 #      over compile_commands.json),
 #   3. builds RelWithDebInfo with AddressSanitizer + UBSan and runs every test,
 #   4. builds with ThreadSanitizer and runs the tests labelled "concurrency",
+#   5. builds every fuzzer of fuzz/ with clang's libFuzzer under ASan + UBSan and runs each
+#      from its committed corpus for a minute (two at a time),
 # and ends with each stage's ctest summary. Every stage runs even when an earlier one failed,
 # so one run reports everything; the exit status is non-zero when any stage failed.
 #
 # Environment (all optional):
-#   TESSERA_CI_STAGES   stages to run, default "format release asan tsan"
+#   TESSERA_CI_STAGES   stages to run, default "format release asan tsan fuzz"
 #   TESSERA_CI_BUILD    build root, default <repo>/build-ci (one subfolder per stage)
 #   TESSERA_CI_JOBS     parallel compile jobs, default $(nproc)
 #   TESSERA_CI_TIMEOUT  per-test timeout in seconds, default 300 (sanitizer stages: 3x)
 #   TESSERA_CI_FILTER   ctest -R regex, to run a subset while iterating
 #   TESSERA_CI_WERROR   ON/OFF for -Werror in the Release stage, default ON
+#   TESSERA_CI_FUZZ_SECONDS  seconds each fuzzer runs in the fuzz stage, default 60
 set -uo pipefail
 
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo" || exit 1
 
-stages=${TESSERA_CI_STAGES:-format release asan tsan}
+stages=${TESSERA_CI_STAGES:-format release asan tsan fuzz}
+fuzz_seconds=${TESSERA_CI_FUZZ_SECONDS:-60}
 build_root=${TESSERA_CI_BUILD:-$repo/build-ci}
 jobs=${TESSERA_CI_JOBS:-$(nproc)}
 timeout_s=${TESSERA_CI_TIMEOUT:-300}
@@ -207,6 +211,67 @@ fi
 asan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
 tsan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG")
 
+# The fuzzers declared with `tessera_add_fuzzer(NAME ...)` in fuzz/CMakeLists.txt.
+fuzzer_names() {
+  grep -oE '^tessera_add_fuzzer\([a-z_0-9]+' fuzz/CMakeLists.txt | sed 's/^tessera_add_fuzzer(//'
+}
+
+# The fuzz stage: every fuzzer under ASan + UBSan with libFuzzer (clang), each for
+# $fuzz_seconds from its committed corpus, two at a time (one per core). New inputs go to a
+# scratch folder, so the committed corpus is only read; a crash, a sanitizer report, a timeout
+# (10 s for one input) or an RSS over 2 GiB fails the stage, and the reproducer stays in
+# build-ci/fuzz/artifacts/ (replay: build-ci/fuzz/fuzz/NAME_fuzzer FILE).
+fuzz_stage() {
+  local dir=$build_root/fuzz names=() name
+  log "fuzz: configure (clang, libFuzzer, sanitize=address,undefined) in $dir"
+  if ! command -v clang++ >/dev/null 2>&1; then
+    stage_result fuzz FAIL "clang++ not found (scripts/install-deps.sh installs clang)"
+    return
+  fi
+  if ! CC=clang CXX=clang++ cmake -S "$repo" -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+      -DTESSERA_BUILD_FUZZ=ON -DTESSERA_BUILD_TOOLS=OFF -DTESSERA_SANITIZE=address,undefined \
+      "${asan_flags[@]}" >"$dir.configure.log" 2>&1; then
+    cat "$dir.configure.log"
+    stage_result fuzz FAIL "configure failed"
+    return
+  fi
+  mapfile -t names < <(fuzzer_names)
+  log "fuzz: build (-j$jobs) ${names[*]}"
+  if ! cmake --build "$dir" -j "$jobs" --target "${names[@]/%/_fuzzer}" -- -k 0; then
+    stage_result fuzz FAIL "build failed"
+    return
+  fi
+  mkdir -p "$dir/artifacts"
+  local failures=() running=0 pids=() pid_names=()
+  for name in "${names[@]}"; do
+    local scratch=$dir/scratch/$name
+    rm -rf "$scratch" && mkdir -p "$scratch"
+    log "fuzz: $name for ${fuzz_seconds} s"
+    "$dir/fuzz/${name}_fuzzer" -max_total_time="$fuzz_seconds" -timeout=10 -rss_limit_mb=2048 \
+      -print_final_stats=1 -artifact_prefix="$dir/artifacts/$name-" "$scratch" \
+      "fuzz/corpus/$name" >"$dir/$name.log" 2>&1 &
+    pids+=($!)
+    pid_names+=("$name")
+    if ((${#pids[@]} >= 2)); then
+      wait "${pids[0]}" || failures+=("${pid_names[0]}")
+      pids=("${pids[@]:1}")
+      pid_names=("${pid_names[@]:1}")
+    fi
+  done
+  local i
+  for i in "${!pids[@]}"; do wait "${pids[$i]}" || failures+=("${pid_names[$i]}"); done
+  for name in "${names[@]}"; do
+    printf '%-16s %s\n' "$name" "$(grep -E '^stat::number_of_executed_units' "$dir/$name.log" | \
+      sed 's/.*: */runs: /')"
+  done
+  if ((${#failures[@]})); then
+    for name in "${failures[@]}"; do tail -40 "$dir/$name.log"; done
+    stage_result fuzz FAIL "${#failures[@]} of ${#names[@]} fuzzers found a fault: ${failures[*]}"
+  else
+    stage_result fuzz ok "${#names[@]} fuzzers, ${fuzz_seconds} s each, nothing found"
+  fi
+}
+
 start=$SECONDS
 for stage in $stages; do
   case $stage in
@@ -218,7 +283,8 @@ for stage in $stages; do
       build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) "${asan_flags[@]}" ;;
     tsan)
       build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) "${tsan_flags[@]}" ;;
-    *) echo "ci: unknown stage '$stage' (known: format release asan tsan)" >&2; exit 2 ;;
+    fuzz) fuzz_stage ;;
+    *) echo "ci: unknown stage '$stage' (known: format release asan tsan fuzz)" >&2; exit 2 ;;
   esac
 done
 
