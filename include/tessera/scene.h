@@ -166,6 +166,9 @@ class SceneArchive {
   const SceneSummary& summary() const;
   uint64_t fileBytes() const;
   const ByteSource& source() const;
+  /// The archive's JSON metadata (docs/format.md, "Metadata"; a scene's build statistics are
+  /// under "scene"): one verified read, "{}" when there is none.
+  [[nodiscard]] Result<std::string> readMetadata() const;
   /// The range holding every node record; reading it (nodes()) costs one read.
   FileRange nodeTableRange() const;
   /// The coarse block: every texture's coarsest-level payload, in texture order.

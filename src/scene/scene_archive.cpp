@@ -205,6 +205,13 @@ const std::string& SceneArchive::name() const { return impl_->name; }
 const SceneSummary& SceneArchive::summary() const { return impl_->summary; }
 uint64_t SceneArchive::fileBytes() const { return impl_->header.file_bytes; }
 const ByteSource& SceneArchive::source() const { return *impl_->source; }
+Result<std::string> SceneArchive::readMetadata() const {
+  const BlockRef& block = impl_->header.metadata;
+  if (block.length_bytes == 0) return std::string("{}");
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, impl_->readVerified(block, "metadata"));
+  return std::string(bytes.begin(), bytes.end());
+}
+
 FileRange SceneArchive::nodeTableRange() const {
   return {impl_->directory.node_table.offset_bytes, impl_->directory.node_table.length_bytes};
 }

@@ -319,7 +319,12 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
     for (LevelRecord& level : record.levels) level.page_index = page_indexes[next_index++].ref;
   PlacedBlock root = makeBlock(encodeRootDirectory(records));
   TESSERA_TRY(place(root));
-  const std::string metadata_text = in.metadata.dump();
+  nlohmann::json metadata_json = in.metadata;
+  metadata_json["scene"]["bytes"] = {{"textures", s.result.texture_payload_bytes},
+                                     {"coarse_block", s.result.coarse_bytes},
+                                     {"geometry", s.result.geometry_stored_bytes},
+                                     {"geometry_raw", s.result.geometry_raw_bytes}};
+  const std::string metadata_text = metadata_json.dump();
   if (metadata_text.size() > kMaxMetadataBytes)
     return fail(ErrorCode::kTooLarge, name + ": metadata exceeds 16 MiB");
   PlacedBlock metadata = makeBlock({metadata_text.begin(), metadata_text.end()});
