@@ -75,17 +75,17 @@ struct FileRange {
 
 /// One R-tree node (docs/format.md, "Node table").
 struct SceneNode {
-  uint32_t index = 0;  ///< depth-first pre-order; 0 is the root
-  Box3 bounds;         ///< contains its children's and its objects' boxes
+  uint32_t index = 0;          ///< depth-first pre-order; 0 is the root
+  Box3 bounds;                 ///< contains its children's and its objects' boxes
   uint32_t subtree_nodes = 1;  ///< nodes [index, index + subtree_nodes) are its subtree
   uint32_t child_count = 0;    ///< 0 for a leaf; the first child is index + 1
   uint32_t depth = 0;
   uint32_t first_object = 0, object_count = 0;    ///< objects held here (leaves only)
   uint32_t first_texture = 0, texture_count = 0;  ///< textures stored here
   uint32_t first_mesh = 0, mesh_count = 0;        ///< meshes stored here
-  FileRange own;      ///< the node's block: head, pages, geometry, texture levels
+  FileRange own;            ///< the node's block: head, pages, geometry, texture levels
   uint32_t head_bytes = 0;  ///< the head is the first head_bytes of `own`
-  FileRange subtree;  ///< own block and every descendant's; starts where `own` does
+  FileRange subtree;        ///< own block and every descendant's; starts where `own` does
   bool isLeaf() const { return child_count == 0; }
 };
 
@@ -97,8 +97,8 @@ struct SceneObject {
   uint32_t mesh = 0;
   uint32_t mesh_node = 0;  ///< the node storing the mesh: this object's leaf or an ancestor
   std::array<uint32_t, kTextureSlotCount> textures{};  ///< texture index or kNoTexture
-  uint32_t base_color_rgba = 0xFFFFFFFFu;             ///< factor; R in the low byte
-  uint32_t source_index = 0;                          ///< the importer's object number
+  uint32_t base_color_rgba = 0xFFFFFFFFu;              ///< factor; R in the low byte
+  uint32_t source_index = 0;                           ///< the importer's object number
 };
 
 /// A mesh's record: where its geometry is and how it is coded.

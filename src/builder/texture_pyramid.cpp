@@ -17,8 +17,8 @@ namespace {
 // Encodes each tile row as the streaming pyramid announces it.
 class PyramidSink final : public TileSink {
  public:
-  PyramidSink(EncodedPyramid& out, Codec codec, const EncodeOptions& options,
-              CodecScratch* scratch, const std::string& what)
+  PyramidSink(EncodedPyramid& out, Codec codec, const EncodeOptions& options, CodecScratch* scratch,
+              const std::string& what)
       : out_(out), codec_(codec), options_(options), scratch_(scratch), what_(what) {
     tile_.resize(out.info.storedTileBytes());
   }
@@ -99,9 +99,9 @@ Result<EncodedPyramid> encodePyramid(const Image& image, ImageInfo info, Codec c
                 image.channels == info.channels)
       << "encodePyramid: image and info disagree";
   if (codecNeedsParent(codec))
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("{}: codec {} is not supported for scene textures", what,
-                            codecName(codec)));
+    return fail(
+        ErrorCode::kUnsupported,
+        fmt::format("{}: codec {} is not supported for scene textures", what, codecName(codec)));
   TESSERA_TRY(validateImageInfo(info, what));
   info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
   info.default_codec = codec;

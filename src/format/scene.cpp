@@ -63,9 +63,9 @@ Result<void> checkSceneBlock(const BlockRef& block, uint64_t file_bytes, const s
   }
   if (block.offset_bytes < kHeaderBytes || block.offset_bytes > file_bytes ||
       block.length_bytes > file_bytes - block.offset_bytes)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: block [{}, +{}) outside the file of {} bytes",
-                                                 what, block.offset_bytes, block.length_bytes,
-                                                 file_bytes));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: block [{}, +{}) outside the file of {} bytes", what,
+                            block.offset_bytes, block.length_bytes, file_bytes));
   return {};
 }
 
@@ -139,8 +139,8 @@ bool operator==(const TextureRecord& a, const TextureRecord& b) {
            x.uniform_rgba == y.uniform_rgba;
   };
   const ImageInfo &p = a.info, &q = b.info;
-  return a.image == b.image && a.node == b.node && a.users == b.users &&
-         p.width_px == q.width_px && p.height_px == q.height_px && p.channels == q.channels &&
+  return a.image == b.image && a.node == b.node && a.users == b.users && p.width_px == q.width_px &&
+         p.height_px == q.height_px && p.channels == q.channels &&
          p.tile_size_px == q.tile_size_px && p.border_px == q.border_px &&
          p.level_count == q.level_count && p.page_tiles_log2 == q.page_tiles_log2 &&
          p.default_codec == q.default_codec && p.srgb_downsample == q.srgb_downsample &&
@@ -191,8 +191,8 @@ Result<SceneDirectory> decodeSceneDirectory(std::span<const uint8_t> bytes,
                                             const FileHeader& header, const std::string& name) {
   const std::string what = name + ": scene directory";
   if (bytes.size() != kSceneDirectoryBytes)
-    return fail(ErrorCode::kCorrupt, fmt::format("{} of {} bytes, expected {}", what,
-                                                 bytes.size(), kSceneDirectoryBytes));
+    return fail(ErrorCode::kCorrupt, fmt::format("{} of {} bytes, expected {}", what, bytes.size(),
+                                                 kSceneDirectoryBytes));
   const uint8_t* p = bytes.data();
   SceneDirectory d;
   d.node_count = loadU32(p);
@@ -217,8 +217,8 @@ Result<SceneDirectory> decodeSceneDirectory(std::span<const uint8_t> bytes,
                 fmt::format("{}: {} objects, {} meshes or {} textures over the bounds", what,
                             d.object_count, d.mesh_count, d.texture_count));
   if (d.tree_depth == 0 || d.tree_depth > kMaxSceneDepth || d.tree_depth > d.node_count)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: tree depth {} out of bounds", what,
-                                                 d.tree_depth));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: tree depth {} out of bounds", what, d.tree_depth));
   if (d.max_children < 2 || d.max_children > 256 || d.leaf_capacity == 0)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: fan-out {} or leaf capacity {} out of bounds",
                                                  what, d.max_children, d.leaf_capacity));
@@ -230,9 +230,9 @@ Result<SceneDirectory> decodeSceneDirectory(std::span<const uint8_t> bytes,
     return fail(ErrorCode::kCorrupt, fmt::format("{}: node table of {} bytes for {} nodes", what,
                                                  d.node_table.length_bytes, d.node_count));
   if (d.texture_table.length_bytes != uint64_t(d.texture_count) * kTextureRecordBytes)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: texture table of {} bytes for {} textures",
-                                                 what, d.texture_table.length_bytes,
-                                                 d.texture_count));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: texture table of {} bytes for {} textures", what,
+                            d.texture_table.length_bytes, d.texture_count));
   return d;
 }
 
@@ -266,14 +266,14 @@ Result<std::vector<NodeRecord>> decodeNodeRecords(std::span<const uint8_t> bytes
                                                   const FileHeader& header,
                                                   const std::string& name) {
   if (bytes.size() % kNodeRecordBytes != 0)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: {} bytes is not a whole number of node records", name,
-                            bytes.size()));
+    return fail(
+        ErrorCode::kCorrupt,
+        fmt::format("{}: {} bytes is not a whole number of node records", name, bytes.size()));
   const uint64_t count = bytes.size() / kNodeRecordBytes;
   if (first_index > directory.node_count || count > directory.node_count - first_index)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: node records {}..{} past the {} nodes", name,
-                                                 first_index, first_index + count,
-                                                 directory.node_count));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: node records {}..{} past the {} nodes", name, first_index,
+                            first_index + count, directory.node_count));
   std::vector<NodeRecord> nodes(count);
   for (uint64_t k = 0; k < count; ++k) {
     const uint8_t* p = bytes.data() + k * kNodeRecordBytes;
@@ -306,25 +306,25 @@ Result<std::vector<NodeRecord>> decodeNodeRecords(std::span<const uint8_t> bytes
       return fail(ErrorCode::kCorrupt, fmt::format("{}: {} children for a subtree of {} nodes",
                                                    what, n.child_count, n.subtree_nodes));
     if (n.depth >= directory.tree_depth)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: depth {} not below the tree depth {}",
-                                                   what, n.depth, directory.tree_depth));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: depth {} not below the tree depth {}", what,
+                                                   n.depth, directory.tree_depth));
     if (n.object_count > 0 && n.child_count > 0)
       return fail(ErrorCode::kCorrupt, what + ": an inner node holds objects");
     if (n.object_count > directory.leaf_capacity)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: {} objects over the leaf capacity {}",
-                                                   what, n.object_count, directory.leaf_capacity));
-    TESSERA_TRY(checkRange(n.first_object, n.object_count, directory.object_count,
-                           what + " objects"));
-    TESSERA_TRY(checkRange(n.first_texture, n.texture_count, directory.texture_count,
-                           what + " textures"));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: {} objects over the leaf capacity {}", what,
+                                                   n.object_count, directory.leaf_capacity));
+    TESSERA_TRY(
+        checkRange(n.first_object, n.object_count, directory.object_count, what + " objects"));
+    TESSERA_TRY(
+        checkRange(n.first_texture, n.texture_count, directory.texture_count, what + " textures"));
     TESSERA_TRY(checkRange(n.first_mesh, n.mesh_count, directory.mesh_count, what + " meshes"));
     if (n.object_count > kMaxNodeItems || n.mesh_count > kMaxNodeItems ||
         n.texture_count > kMaxNodeItems)
       return fail(ErrorCode::kCorrupt, what + ": more items than a node may hold");
     if (n.head_bytes != nodeHeadBytes(n.object_count, n.mesh_count, n.texture_count))
-      return fail(ErrorCode::kCorrupt,
-                  fmt::format("{}: head of {} bytes does not match its item counts", what,
-                              n.head_bytes));
+      return fail(
+          ErrorCode::kCorrupt,
+          fmt::format("{}: head of {} bytes does not match its item counts", what, n.head_bytes));
     if (n.head_bytes > n.own_bytes || n.own_bytes > n.subtree_bytes ||
         (n.child_count == 0 && n.own_bytes != n.subtree_bytes))
       return fail(ErrorCode::kCorrupt,
@@ -366,8 +366,8 @@ Result<void> validateNodeTable(std::span<const NodeRecord> nodes, const SceneDir
         return fail(ErrorCode::kCorrupt, what + ": children overrun its subtree");
       const NodeRecord& k = nodes[child];
       if (k.depth != n.depth + 1)
-        return fail(ErrorCode::kCorrupt, fmt::format("{}: child {} at depth {}", what, child,
-                                                     k.depth));
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("{}: child {} at depth {}", what, child, k.depth));
       if (!boxContains(n.bounds, k.bounds))
         return fail(ErrorCode::kCorrupt, fmt::format("{}: child {}'s box is outside", what, child));
       if (k.offset_bytes != expected_offset)
@@ -414,9 +414,9 @@ Result<std::vector<TextureRecord>> decodeTextureRecords(std::span<const uint8_t>
                                                         const FileHeader& header,
                                                         const std::string& name) {
   if (bytes.size() % kTextureRecordBytes != 0)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: {} bytes is not a whole number of texture records", name,
-                            bytes.size()));
+    return fail(
+        ErrorCode::kCorrupt,
+        fmt::format("{}: {} bytes is not a whole number of texture records", name, bytes.size()));
   const uint64_t count = bytes.size() / kTextureRecordBytes;
   if (first_index > directory.texture_count || count > directory.texture_count - first_index)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: texture records past the {} textures", name,
@@ -436,9 +436,9 @@ Result<std::vector<TextureRecord>> decodeTextureRecords(std::span<const uint8_t>
       return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: image {} or node {} out of range", what, t.image, t.node));
     TESSERA_ASSIGN_OR_RETURN(t.info, loadImageInfo(p + 16, known_minor, what));
-    TESSERA_ASSIGN_OR_RETURN(std::vector<TileEntry> entry,
-                             decodeTileEntries({p + 32, kTileEntryBytes}, t.info, header,
-                                               what + " coarsest tile"));
+    TESSERA_ASSIGN_OR_RETURN(
+        std::vector<TileEntry> entry,
+        decodeTileEntries({p + 32, kTileEntryBytes}, t.info, header, what + " coarsest tile"));
     t.coarsest = entry[0];
   }
   return textures;
@@ -503,8 +503,8 @@ Result<ObjectRecord> decodeObject(const uint8_t* p, bool known_minor,
   for (uint32_t s = 0; s < kSceneTextureSlots; ++s) {
     o.textures[s] = loadU32(p + 80 + 4 * s);
     if (o.textures[s] != kNoSceneTexture && o.textures[s] >= directory.texture_count)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: texture {} in slot {} out of range", what,
-                                                   o.textures[s], s));
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("{}: texture {} in slot {} out of range", what, o.textures[s], s));
   }
   o.base_color_rgba = loadU32(p + 100);
   o.source_index = loadU32(p + 104);
@@ -529,8 +529,8 @@ Result<MeshRecord> decodeMesh(const uint8_t* p, bool known_minor, uint64_t body_
   if (known_minor && (p[14] || p[15] || !allZero(p + 20, 4) || !allZero(p + 48, 16)))
     return fail(ErrorCode::kCorrupt, what + ": reserved fields are not zero");
   if (m.attributes & ~uint8_t(kMeshNormals | kMeshUv0))
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: unknown attributes {:#x}", what,
-                                                 m.attributes));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: unknown attributes {:#x}", what, m.attributes));
   if (uint8_t(m.codec) > uint8_t(GeometryCodecId::kMeshopt))
     return fail(ErrorCode::kUnsupported,
                 fmt::format("{}: geometry codec {} unknown", what, int(m.codec)));

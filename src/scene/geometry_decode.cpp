@@ -21,8 +21,8 @@ Result<std::vector<uint8_t>> decodePart(GeometryCodecId codec, std::span<const u
   switch (codec) {
     case GeometryCodecId::kRaw:
       if (part.size() != expected_bytes)
-        return fail(ErrorCode::kCorrupt, fmt::format("{}: {} bytes, expected {}", what,
-                                                     part.size(), expected_bytes));
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("{}: {} bytes, expected {}", what, part.size(), expected_bytes));
       out.assign(part.begin(), part.end());
       return out;
     case GeometryCodecId::kZstd: {
@@ -37,9 +37,9 @@ Result<std::vector<uint8_t>> decodePart(GeometryCodecId codec, std::span<const u
       out.resize(expected_bytes);
       const size_t got = ZSTD_decompress(out.data(), out.size(), part.data(), part.size());
       if (ZSTD_isError(got) || got != expected_bytes)
-        return fail(ErrorCode::kCorrupt, fmt::format("{}: zstd: {}", what,
-                                                     ZSTD_isError(got) ? ZSTD_getErrorName(got)
-                                                                       : "short frame"));
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("{}: zstd: {}", what,
+                                ZSTD_isError(got) ? ZSTD_getErrorName(got) : "short frame"));
       return out;
     }
     case GeometryCodecId::kMeshopt: {
@@ -92,10 +92,9 @@ Result<MeshData> decodeMeshBlob(const MeshRecord& record, std::span<const uint8_
       std::vector<uint8_t> vertices,
       decodePart(record.codec, blob.first(record.vertex_part_bytes), vertex_bytes,
                  record.vertex_count, stride, false, what + " vertices"));
-  TESSERA_ASSIGN_OR_RETURN(
-      std::vector<uint8_t> indices,
-      decodePart(record.codec, blob.subspan(record.vertex_part_bytes), index_bytes,
-                 record.index_count, 4, true, what + " indices"));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> indices,
+                           decodePart(record.codec, blob.subspan(record.vertex_part_bytes),
+                                      index_bytes, record.index_count, 4, true, what + " indices"));
   MeshData mesh;
   mesh.positions.resize(size_t(record.vertex_count) * 3);
   if (record.attributes & kMeshNormals) mesh.normals.resize(size_t(record.vertex_count) * 3);

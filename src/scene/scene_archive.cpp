@@ -155,8 +155,8 @@ struct SceneArchive::Impl {
         const uint64_t end = coarsest ? coarse.offset_bytes + coarse.length_bytes : own_end;
         if (e.offset_bytes < begin || e.offset_bytes + e.length_bytes > end)
           return fail(ErrorCode::kCorrupt,
-                      fmt::format("{}: texture {} level {}: a payload at {} lies outside {}",
-                                  name, texture.texture, level, e.offset_bytes,
+                      fmt::format("{}: texture {} level {}: a payload at {} lies outside {}", name,
+                                  texture.texture, level, e.offset_bytes,
                                   coarsest ? "the coarse block" : "its node's block"));
       }
     }
@@ -188,11 +188,10 @@ Result<std::shared_ptr<SceneArchive>> SceneArchive::open(std::shared_ptr<ByteSou
   impl->source = std::move(source);
   TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes,
                            impl->readVerified(scene, "scene directory"));
-  TESSERA_ASSIGN_OR_RETURN(impl->directory,
-                           decodeSceneDirectory(bytes, impl->header, impl->name));
+  TESSERA_ASSIGN_OR_RETURN(impl->directory, decodeSceneDirectory(bytes, impl->header, impl->name));
   const SceneDirectory& d = impl->directory;
-  impl->summary = {d.node_count,  d.object_count,   d.mesh_count,     d.texture_count,
-                   d.tree_depth,  d.max_children,   d.leaf_capacity,  toBox(d.bounds)};
+  impl->summary = {d.node_count, d.object_count, d.mesh_count,    d.texture_count,
+                   d.tree_depth, d.max_children, d.leaf_capacity, toBox(d.bounds)};
   return std::shared_ptr<SceneArchive>(new SceneArchive(std::move(impl)));
 }
 
@@ -201,10 +200,18 @@ Result<std::shared_ptr<SceneArchive>> SceneArchive::openFile(const std::string& 
   return open(std::move(source));
 }
 
-const std::string& SceneArchive::name() const { return impl_->name; }
-const SceneSummary& SceneArchive::summary() const { return impl_->summary; }
-uint64_t SceneArchive::fileBytes() const { return impl_->header.file_bytes; }
-const ByteSource& SceneArchive::source() const { return *impl_->source; }
+const std::string& SceneArchive::name() const {
+  return impl_->name;
+}
+const SceneSummary& SceneArchive::summary() const {
+  return impl_->summary;
+}
+uint64_t SceneArchive::fileBytes() const {
+  return impl_->header.file_bytes;
+}
+const ByteSource& SceneArchive::source() const {
+  return *impl_->source;
+}
 Result<std::string> SceneArchive::readMetadata() const {
   const BlockRef& block = impl_->header.metadata;
   if (block.length_bytes == 0) return std::string("{}");
@@ -257,9 +264,9 @@ Result<std::vector<SceneNode>> SceneArchive::children(const SceneNode& parent) c
     }
   }
   if (out.size() != parent.child_count)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: node {} records {} children, has {}",
-                                                 impl_->name, parent.index, parent.child_count,
-                                                 out.size()));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: node {} records {} children, has {}", impl_->name, parent.index,
+                            parent.child_count, out.size()));
   return out;
 }
 
@@ -284,9 +291,9 @@ Result<std::vector<SceneTexture>> SceneArchive::textures(uint32_t first, uint32_
   if (first == 0 && count == d.texture_count) {
     TESSERA_ASSIGN_OR_RETURN(bytes, impl_->readVerified(d.texture_table, "texture table"));
   } else {
-    TESSERA_ASSIGN_OR_RETURN(
-        bytes, impl_->readRange(d.texture_table.offset_bytes + uint64_t(first) * kTextureRecordBytes,
-                                uint64_t(count) * kTextureRecordBytes));
+    TESSERA_ASSIGN_OR_RETURN(bytes, impl_->readRange(d.texture_table.offset_bytes +
+                                                         uint64_t(first) * kTextureRecordBytes,
+                                                     uint64_t(count) * kTextureRecordBytes));
   }
   TESSERA_ASSIGN_OR_RETURN(std::vector<TextureRecord> records,
                            decodeTextureRecords(bytes, first, d, impl_->header, impl_->name));
@@ -311,16 +318,15 @@ Result<NodeContents> SceneArchive::parseNode(const SceneNode& node, std::span<co
   TESSERA_ASSIGN_OR_RETURN(NodeRecord record, impl_->record(node.index));
   const std::string what = fmt::format("{}: node {}", impl_->name, node.index);
   if (block.size() < record.head_bytes || (with_textures && block.size() != record.own_bytes))
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("{}: {} bytes given, the block has {}", what, block.size(),
-                            record.own_bytes));
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: {} bytes given, the block has {}",
+                                                         what, block.size(), record.own_bytes));
   std::span<const uint8_t> head_bytes = block.first(record.head_bytes);
   if (checksum64(head_bytes) != record.head_checksum)
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: head checksum mismatch at offset {}", what, record.offset_bytes));
-  TESSERA_ASSIGN_OR_RETURN(NodeHead head, decodeNodeHead(head_bytes, record, node.index,
-                                                         impl_->directory, impl_->header,
-                                                         impl_->name));
+  TESSERA_ASSIGN_OR_RETURN(
+      NodeHead head,
+      decodeNodeHead(head_bytes, record, node.index, impl_->directory, impl_->header, impl_->name));
   NodeContents out;
   for (uint32_t k = 0; k < head.objects.size(); ++k) {
     const ObjectRecord& o = head.objects[k];
@@ -328,10 +334,10 @@ Result<NodeContents> SceneArchive::parseNode(const SceneNode& node, std::span<co
                            o.mesh_node, o.textures, o.base_color_rgba, o.source_index});
   }
   for (const MeshRecord& m : head.meshes) {
-    out.meshes.push_back({m.mesh, m.vertex_count, m.index_count,
-                          (m.attributes & kMeshNormals) != 0, (m.attributes & kMeshUv0) != 0,
-                          GeometryCodec(m.codec), FileRange{m.blob.offset_bytes, m.blob.length_bytes},
-                          m.blob.checksum, m.vertex_part_bytes});
+    out.meshes.push_back({m.mesh, m.vertex_count, m.index_count, (m.attributes & kMeshNormals) != 0,
+                          (m.attributes & kMeshUv0) != 0, GeometryCodec(m.codec),
+                          FileRange{m.blob.offset_bytes, m.blob.length_bytes}, m.blob.checksum,
+                          m.vertex_part_bytes});
   }
   if (!with_textures) return out;
   for (const NodeTextureRecord& t : head.textures) {
@@ -346,10 +352,9 @@ Result<NodeContents> SceneArchive::parseNode(const SceneNode& node, std::span<co
     size_t pos = 0;
     for (uint32_t level = 0; level < t.info.level_count; ++level) {
       const size_t bytes = size_t(t.info.tilesX(level)) * t.info.tilesY(level) * kTileEntryBytes;
-      TESSERA_ASSIGN_OR_RETURN(
-          std::vector<TileEntry> entries,
-          decodeTileEntries(pages.subspan(pos, bytes), t.info, impl_->header,
-                            fmt::format("{} level {}", texture_what, level)));
+      TESSERA_ASSIGN_OR_RETURN(std::vector<TileEntry> entries,
+                               decodeTileEntries(pages.subspan(pos, bytes), t.info, impl_->header,
+                                                 fmt::format("{} level {}", texture_what, level)));
       texture.levels.push_back(std::move(entries));
       pos += bytes;
     }
@@ -363,9 +368,8 @@ Result<MeshData> SceneArchive::decodeMesh(const SceneMesh& mesh,
                                           std::span<const uint8_t> blob) const {
   const std::string what = fmt::format("{}: mesh {}", impl_->name, mesh.index);
   if (blob.size() != mesh.blob.length_bytes || checksum64(blob) != mesh.blob_checksum)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: geometry checksum mismatch at offset {}", what,
-                            mesh.blob.offset_bytes));
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: geometry checksum mismatch at offset {}",
+                                                 what, mesh.blob.offset_bytes));
   MeshRecord record;
   record.mesh = mesh.index;
   record.vertex_count = mesh.vertex_count;
@@ -410,8 +414,7 @@ Result<Image> SceneArchive::decodeTile(uint32_t texture, const ImageInfo& info, 
   return out;
 }
 
-Result<Image> SceneArchive::readCoarsest(const SceneTexture& texture,
-                                         CodecScratch* scratch) const {
+Result<Image> SceneArchive::readCoarsest(const SceneTexture& texture, CodecScratch* scratch) const {
   const TileEntry& entry = texture.coarsest;
   std::vector<uint8_t> payload;
   if (entry.kind == TileKind::kEncoded) {

@@ -34,8 +34,7 @@ struct ModelContext {
   std::vector<uint32_t> material_colour;
 };
 
-Result<uint32_t> textureFor(ModelContext& ctx, const std::string& reference,
-                            uint32_t material) {
+Result<uint32_t> textureFor(ModelContext& ctx, const std::string& reference, uint32_t material) {
   const std::string what = fmt::format("{}: material {}", ctx.path, material);
   if (const aiTexture* embedded = ctx.ai.GetEmbeddedTexture(reference.c_str())) {
     if (embedded->mHeight != 0)
@@ -170,7 +169,8 @@ Result<ModelTemplate> loadAssimpModel(const std::string& path, ImportedScene& sc
   if (!std::filesystem::is_regular_file(path, ec))
     return fail(ErrorCode::kNotFound, path + ": no such file");
   Assimp::Importer importer;
-  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE, aiPrimitiveType_POINT | aiPrimitiveType_LINE);
+  importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
+                              aiPrimitiveType_POINT | aiPrimitiveType_LINE);
   const aiScene* ai =
       importer.ReadFile(path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices |
                                   aiProcess_SortByPType | aiProcess_ValidateDataStructure);

@@ -28,8 +28,8 @@ std::vector<uint8_t> zstdFrame(const std::vector<uint8_t>& bytes) {
 
 EncodedMesh encodeMesh(const ImportedMesh& mesh, GeometryCodecId codec) {
   EncodedMesh out;
-  out.attributes = uint8_t((mesh.normals.empty() ? 0 : kMeshNormals) |
-                           (mesh.uv0.empty() ? 0 : kMeshUv0));
+  out.attributes =
+      uint8_t((mesh.normals.empty() ? 0 : kMeshNormals) | (mesh.uv0.empty() ? 0 : kMeshUv0));
   MeshData data;
   data.positions = mesh.positions;
   data.normals = mesh.normals;

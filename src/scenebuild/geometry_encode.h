@@ -12,10 +12,10 @@
 namespace tessera::detail {
 
 struct EncodedMesh {
-  std::vector<uint8_t> blob;       ///< vertex part, then index part
+  std::vector<uint8_t> blob;  ///< vertex part, then index part
   uint32_t vertex_part_bytes = 0;
-  uint8_t attributes = 0;          ///< MeshAttributeBits present in the source mesh
-  uint64_t raw_bytes = 0;          ///< interleaved vertices + u32 indices before coding
+  uint8_t attributes = 0;  ///< MeshAttributeBits present in the source mesh
+  uint64_t raw_bytes = 0;  ///< interleaved vertices + u32 indices before coding
 };
 
 /// Encodes a validated mesh with `codec`. meshoptimizer's vertex codec is lossless on the

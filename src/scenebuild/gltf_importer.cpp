@@ -47,25 +47,25 @@ struct GltfContext {
 };
 
 // Reads accessor element `i` component `c` as float (normalized integers scaled).
-Result<std::vector<float>> readFloats(const GltfContext& ctx, int accessor_index,
-                                      int components, const std::string& what) {
+Result<std::vector<float>> readFloats(const GltfContext& ctx, int accessor_index, int components,
+                                      const std::string& what) {
   const auto& model = ctx.model;
   if (accessor_index < 0 || size_t(accessor_index) >= model.accessors.size())
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: accessor {} out of range", what,
-                                                 accessor_index));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: accessor {} out of range", what, accessor_index));
   const tinygltf::Accessor& a = model.accessors[accessor_index];
   if (a.bufferView < 0 || size_t(a.bufferView) >= model.bufferViews.size())
     return fail(ErrorCode::kCorrupt, what + ": accessor without a valid buffer view");
   if (tinygltf::GetNumComponentsInType(a.type) != components)
-    return fail(ErrorCode::kUnsupported, fmt::format("{}: {} components, expected {}", what,
-                                                     tinygltf::GetNumComponentsInType(a.type),
-                                                     components));
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: {} components, expected {}", what,
+                            tinygltf::GetNumComponentsInType(a.type), components));
   const int component_bytes = tinygltf::GetComponentSizeInBytes(a.componentType);
   if (component_bytes <= 0 || (a.componentType != TINYGLTF_COMPONENT_TYPE_FLOAT && !a.normalized))
     return fail(ErrorCode::kUnsupported, what + ": not float or normalized integer data");
   if (a.count > kMaxMeshVertices)
-    return fail(ErrorCode::kTooLarge, fmt::format("{}: {} elements exceed {}", what, a.count,
-                                                  kMaxMeshVertices));
+    return fail(ErrorCode::kTooLarge,
+                fmt::format("{}: {} elements exceed {}", what, a.count, kMaxMeshVertices));
   const tinygltf::BufferView& view = model.bufferViews[a.bufferView];
   if (view.buffer < 0 || size_t(view.buffer) >= model.buffers.size())
     return fail(ErrorCode::kCorrupt, what + ": buffer view without a valid buffer");
@@ -87,7 +87,9 @@ Result<std::vector<float>> readFloats(const GltfContext& ctx, int accessor_index
       switch (a.componentType) {
         case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&v, q, 4); break;
         case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = q[0] / 255.0f; break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: v = uint16_t(q[0] | q[1] << 8) / 65535.0f; break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT:
+          v = uint16_t(q[0] | q[1] << 8) / 65535.0f;
+          break;
         case TINYGLTF_COMPONENT_TYPE_BYTE: v = std::max(int8_t(q[0]) / 127.0f, -1.0f); break;
         case TINYGLTF_COMPONENT_TYPE_SHORT:
           v = std::max(int16_t(q[0] | q[1] << 8) / 32767.0f, -1.0f);
@@ -104,8 +106,8 @@ Result<std::vector<uint32_t>> readIndices(const GltfContext& ctx, int accessor_i
                                           const std::string& what) {
   const auto& model = ctx.model;
   if (accessor_index < 0 || size_t(accessor_index) >= model.accessors.size())
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: index accessor {} out of range", what,
-                                                 accessor_index));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: index accessor {} out of range", what, accessor_index));
   const tinygltf::Accessor& a = model.accessors[accessor_index];
   // Bounded before anything is allocated: a hostile count of 2^31 is an error, not 8 GiB.
   if (a.count > kMaxMeshIndices)
@@ -129,8 +131,9 @@ Result<std::vector<uint32_t>> readIndices(const GltfContext& ctx, int accessor_i
   const unsigned char* base = buffer.data() + view.byteOffset + a.byteOffset;
   for (size_t i = 0; i < a.count; ++i) {
     const unsigned char* p = base + i * stride;
-    out[i] = bytes == 1 ? p[0] : bytes == 2 ? uint32_t(p[0] | p[1] << 8)
-                                            : uint32_t(p[0] | p[1] << 8 | p[2] << 16 | p[3] << 24);
+    out[i] = bytes == 1   ? p[0]
+             : bytes == 2 ? uint32_t(p[0] | p[1] << 8)
+                          : uint32_t(p[0] | p[1] << 8 | p[2] << 16 | p[3] << 24);
   }
   return out;
 }
@@ -141,8 +144,10 @@ std::vector<uint32_t> toTriangleList(int mode, const std::vector<uint32_t>& in) 
   std::vector<uint32_t> out;
   for (size_t i = 2; i < in.size(); ++i) {
     if (mode == TINYGLTF_MODE_TRIANGLE_STRIP) {
-      if (i % 2 == 0) out.insert(out.end(), {in[i - 2], in[i - 1], in[i]});
-      else out.insert(out.end(), {in[i - 1], in[i - 2], in[i]});
+      if (i % 2 == 0)
+        out.insert(out.end(), {in[i - 2], in[i - 1], in[i]});
+      else
+        out.insert(out.end(), {in[i - 1], in[i - 2], in[i]});
     } else {
       out.insert(out.end(), {in[0], in[i - 1], in[i]});
     }
@@ -157,8 +162,8 @@ Result<void> importMeshes(GltfContext& ctx) {
     const tinygltf::Mesh& mesh = model.meshes[m];
     for (size_t p = 0; p < mesh.primitives.size(); ++p) {
       const tinygltf::Primitive& prim = mesh.primitives[p];
-      const std::string what = fmt::format("{}: mesh {} ({}) primitive {}", ctx.name, m,
-                                           mesh.name, p);
+      const std::string what =
+          fmt::format("{}: mesh {} ({}) primitive {}", ctx.name, m, mesh.name, p);
       const int mode = prim.mode < 0 ? TINYGLTF_MODE_TRIANGLES : prim.mode;
       if (mode != TINYGLTF_MODE_TRIANGLES && mode != TINYGLTF_MODE_TRIANGLE_STRIP &&
           mode != TINYGLTF_MODE_TRIANGLE_FAN)
@@ -168,7 +173,8 @@ Result<void> importMeshes(GltfContext& ctx) {
         return fail(ErrorCode::kCorrupt, what + ": no POSITION attribute");
       ImportedMesh out;
       out.name = fmt::format("{}/{}", mesh.name, p);
-      TESSERA_ASSIGN_OR_RETURN(out.positions, readFloats(ctx, position->second, 3, what + " POSITION"));
+      TESSERA_ASSIGN_OR_RETURN(out.positions,
+                               readFloats(ctx, position->second, 3, what + " POSITION"));
       if (auto n = prim.attributes.find("NORMAL"); n != prim.attributes.end()) {
         TESSERA_ASSIGN_OR_RETURN(out.normals, readFloats(ctx, n->second, 3, what + " NORMAL"));
       }
@@ -193,8 +199,8 @@ Result<void> importMeshes(GltfContext& ctx) {
 
 // One material's slots as image indices (texture sharing is by image: two glTF textures with
 // the same source are one texture here).
-Result<std::array<uint32_t, kSceneTextureSlots>> materialSlots(const GltfContext& ctx,
-                                                               int material, uint32_t* colour) {
+Result<std::array<uint32_t, kSceneTextureSlots>> materialSlots(const GltfContext& ctx, int material,
+                                                               uint32_t* colour) {
   std::array<uint32_t, kSceneTextureSlots> slots;
   slots.fill(kNoSceneTexture);
   *colour = 0xFFFFFFFFu;
@@ -204,13 +210,12 @@ Result<std::array<uint32_t, kSceneTextureSlots>> materialSlots(const GltfContext
     return fail(ErrorCode::kCorrupt, fmt::format("{}: material {} out of range ({} materials)",
                                                  ctx.name, material, model.materials.size()));
   const tinygltf::Material& m = model.materials[material];
-  const int textures[kSceneTextureSlots] = {
-      m.pbrMetallicRoughness.baseColorTexture.index,
-      m.pbrMetallicRoughness.metallicRoughnessTexture.index, m.normalTexture.index,
-      m.occlusionTexture.index, m.emissiveTexture.index};
+  const int textures[kSceneTextureSlots] = {m.pbrMetallicRoughness.baseColorTexture.index,
+                                            m.pbrMetallicRoughness.metallicRoughnessTexture.index,
+                                            m.normalTexture.index, m.occlusionTexture.index,
+                                            m.emissiveTexture.index};
   const char* names[kSceneTextureSlots] = {"baseColorTexture", "metallicRoughnessTexture",
-                                           "normalTexture", "occlusionTexture",
-                                           "emissiveTexture"};
+                                           "normalTexture", "occlusionTexture", "emissiveTexture"};
   for (uint32_t s = 0; s < kSceneTextureSlots; ++s) {
     const int t = textures[s];
     if (t < 0) continue;
@@ -290,8 +295,7 @@ Result<void> importNodes(GltfContext& ctx) {
                               ctx.name, f.node));
     if (f.depth >= kMaxNodeGraphDepth)
       return fail(ErrorCode::kTooLarge, fmt::format("{}: node {} is nested {} deep, over {}",
-                                                    ctx.name, f.node, f.depth,
-                                                    kMaxNodeGraphDepth));
+                                                    ctx.name, f.node, f.depth, kMaxNodeGraphDepth));
     path.push_back(f.node);
     const tinygltf::Node& node = model.nodes[f.node];
     const auto world = composeTransforms(f.parent, nodeTransform(node));

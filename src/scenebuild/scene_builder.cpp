@@ -30,7 +30,8 @@ constexpr const char* kSyntheticPrefix = "synthetic-scene:";
 
 std::string extensionOf(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return std::tolower(c); });
   return ext;
 }
 
@@ -49,8 +50,7 @@ Result<void> validateOptions(const SceneBuildOptions& o) {
   if (!findEncoder(o.codec) || codecNeedsParent(o.codec))
     return fail(ErrorCode::kUnsupported,
                 fmt::format("codec {} is not available for scene textures", codecName(o.codec)));
-  if (o.leaf_capacity < 1 || o.leaf_capacity > 65535 || o.max_children < 2 ||
-      o.max_children > 256)
+  if (o.leaf_capacity < 1 || o.leaf_capacity > 65535 || o.max_children < 2 || o.max_children > 256)
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("leaf capacity {} or fan-out {} out of 1..65535 and 2..256",
                             o.leaf_capacity, o.max_children));
@@ -59,8 +59,7 @@ Result<void> validateOptions(const SceneBuildOptions& o) {
 
 Result<ImportedScene> importScene(const SceneBuildOptions& o) {
   if (o.input.rfind(kSyntheticPrefix, 0) == 0)
-    return generateSyntheticScene(o.input.substr(std::strlen(kSyntheticPrefix)),
-                                  o.texture_sources);
+    return generateSyntheticScene(o.input.substr(std::strlen(kSyntheticPrefix)), o.texture_sources);
   const std::string ext = extensionOf(o.input);
   if (ext == ".gltf" || ext == ".glb") return importGltf(o.input);
   if (ext == ".stg") return importStg(o.input);
@@ -204,9 +203,10 @@ bool isSceneInput(const std::string& input) {
   return kExtensions.count(extensionOf(input)) > 0;
 }
 
-Result<SceneBuildReport> buildScene(const SceneBuildOptions& options,
-                                    const std::function<void(const SceneBuildProgress&)>& on_progress,
-                                    const std::atomic<bool>* cancel) {
+Result<SceneBuildReport> buildScene(
+    const SceneBuildOptions& options,
+    const std::function<void(const SceneBuildProgress&)>& on_progress,
+    const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
   TESSERA_TRY(validateOptions(options));
   TESSERA_ASSIGN_OR_RETURN(ImportedScene scene, importScene(options));
@@ -267,9 +267,13 @@ Result<SceneBuildReport> buildScene(const SceneBuildOptions& options,
     return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
   TESSERA_TRY(out.commit());
 
-  report.summary = {uint32_t(tree.nodes.size()), uint32_t(scene.objects.size()),
-                    uint32_t(scene.meshes.size()), uint32_t(scene.textures.size()),
-                    tree.depth, options.max_children, options.leaf_capacity,
+  report.summary = {uint32_t(tree.nodes.size()),
+                    uint32_t(scene.objects.size()),
+                    uint32_t(scene.meshes.size()),
+                    uint32_t(scene.textures.size()),
+                    tree.depth,
+                    options.max_children,
+                    options.leaf_capacity,
                     Box3{tree.nodes[0].bounds.min, tree.nodes[0].bounds.max}};
   report.promotion = placement.stats;
   report.output_bytes = written.file_bytes;

@@ -44,8 +44,8 @@ Result<void> validateMesh(ImportedMesh& mesh, const std::string& what) {
     if (!std::isfinite(x)) return fail(ErrorCode::kCorrupt, what + ": non-finite uv");
   for (size_t i = 0; i < mesh.indices.size(); ++i)
     if (mesh.indices[i] >= vertices)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: index {} is {}, past its {} vertices",
-                                                   what, i, mesh.indices[i], vertices));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: index {} is {}, past its {} vertices", what,
+                                                   i, mesh.indices[i], vertices));
   mesh.bounds = box;
   return {};
 }

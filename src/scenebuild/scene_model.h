@@ -25,8 +25,8 @@ struct ImportedMesh {
 /// Where a texture's texels come from: a file, bytes embedded in the scene file, or a crop of
 /// one of the generator's source images.
 struct TextureSource {
-  std::string name;  ///< for messages and metadata: "image 2 (bricks.png)"
-  std::string path;  ///< a file to read, or empty
+  std::string name;            ///< for messages and metadata: "image 2 (bricks.png)"
+  std::string path;            ///< a file to read, or empty
   std::vector<uint8_t> bytes;  ///< embedded bytes (a .glb buffer view, a data URI), or empty
   std::string mime_type;       ///< of the embedded bytes, as the scene file declares it
   /// Generator crops: source image index (>= 0) and the rectangle in it.
@@ -38,9 +38,8 @@ struct TextureSource {
 struct ImportedObject {
   uint32_t mesh = 0;
   std::array<float, 12> transform{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0};
-  std::array<uint32_t, kSceneTextureSlots> textures{kNoSceneTexture, kNoSceneTexture,
-                                                    kNoSceneTexture, kNoSceneTexture,
-                                                    kNoSceneTexture};
+  std::array<uint32_t, kSceneTextureSlots> textures{
+      kNoSceneTexture, kNoSceneTexture, kNoSceneTexture, kNoSceneTexture, kNoSceneTexture};
   uint32_t base_color_rgba = 0xFFFFFFFFu;
   SceneBox bounds;  ///< world space; set by validateScene
 };

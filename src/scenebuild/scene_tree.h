@@ -16,12 +16,12 @@ namespace tessera::detail {
 inline constexpr uint32_t kNoNode = 0xFFFFFFFFu;
 
 struct TreeNode {
-  SceneBox bounds;                ///< union of its children's or objects' boxes
-  uint32_t parent = kNoNode;      ///< kNoNode at the root
-  uint32_t depth = 0;             ///< 0 at the root
-  uint32_t subtree_nodes = 1;     ///< this node and its descendants
-  std::vector<uint32_t> children; ///< node indices, in order
-  std::vector<uint32_t> objects;  ///< input object indices (leaves only)
+  SceneBox bounds;                 ///< union of its children's or objects' boxes
+  uint32_t parent = kNoNode;       ///< kNoNode at the root
+  uint32_t depth = 0;              ///< 0 at the root
+  uint32_t subtree_nodes = 1;      ///< this node and its descendants
+  std::vector<uint32_t> children;  ///< node indices, in order
+  std::vector<uint32_t> objects;   ///< input object indices (leaves only)
 };
 
 /// Nodes in depth-first pre-order (node 0 the root, a subtree a contiguous index range).

@@ -109,8 +109,8 @@ Result<void> writeNode(LayoutState& s, uint32_t index) {
     r.mesh = s.final_mesh[o.mesh];
     r.mesh_node = s.in.mesh_node[r.mesh];
     for (uint32_t slot = 0; slot < kSceneTextureSlots; ++slot)
-      r.textures[slot] = o.textures[slot] == kNoSceneTexture ? kNoSceneTexture
-                                                             : s.final_texture[o.textures[slot]];
+      r.textures[slot] =
+          o.textures[slot] == kNoSceneTexture ? kNoSceneTexture : s.final_texture[o.textures[slot]];
     r.base_color_rgba = o.base_color_rgba;
     r.source_index = s.in.object_order[record.first_object + k];
     head.objects.push_back(r);
@@ -118,8 +118,8 @@ Result<void> writeNode(LayoutState& s, uint32_t index) {
   uint64_t pages_bytes = 0;
   for (uint32_t k = 0; k < record.texture_count; ++k)
     pages_bytes += texturePagesBytes(s.in.textures[record.first_texture + k].info);
-  record.head_bytes = uint32_t(nodeHeadBytes(record.object_count, record.mesh_count,
-                                             record.texture_count));
+  record.head_bytes =
+      uint32_t(nodeHeadBytes(record.object_count, record.mesh_count, record.texture_count));
   TESSERA_ASSIGN_OR_RETURN(record.offset_bytes, s.appender.skip(record.head_bytes + pages_bytes));
 
   for (uint32_t k = 0; k < record.mesh_count; ++k) {
@@ -276,8 +276,8 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
 
   std::vector<TextureRecord> texture_records;
   for (uint32_t t = 0; t < s.entries.size(); ++t)
-    texture_records.push_back({t, in.texture_node[t], in.texture_users[t], in.textures[t].info,
-                               s.entries[t].back()[0]});
+    texture_records.push_back(
+        {t, in.texture_node[t], in.texture_users[t], in.textures[t].info, s.entries[t].back()[0]});
   std::vector<PlacedBlock> page_indexes;
   std::vector<ImageRecord> records = imageRecords(s, page_indexes);
 

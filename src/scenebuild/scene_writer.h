@@ -23,12 +23,12 @@ namespace tessera::detail {
 struct SceneLayoutInput {
   const ImportedScene* scene = nullptr;
   const SceneTree* tree = nullptr;
-  std::vector<uint32_t> object_order;   ///< final object -> imported object
-  std::vector<uint32_t> mesh_order;     ///< final mesh -> imported mesh
-  std::vector<uint32_t> mesh_node;      ///< final mesh -> holding node
-  std::vector<uint32_t> texture_order;  ///< final texture -> imported texture
-  std::vector<uint32_t> texture_node;   ///< final texture -> holding node
-  std::vector<uint32_t> texture_users;  ///< final texture -> objects using it
+  std::vector<uint32_t> object_order;    ///< final object -> imported object
+  std::vector<uint32_t> mesh_order;      ///< final mesh -> imported mesh
+  std::vector<uint32_t> mesh_node;       ///< final mesh -> holding node
+  std::vector<uint32_t> texture_order;   ///< final texture -> imported texture
+  std::vector<uint32_t> texture_node;    ///< final texture -> holding node
+  std::vector<uint32_t> texture_users;   ///< final texture -> objects using it
   std::vector<SpooledTexture> textures;  ///< final texture -> its encoded pyramid (spool offsets)
   const TempFile* spool = nullptr;
   uint64_t spool_bytes = 0;

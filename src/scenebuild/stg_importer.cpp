@@ -52,9 +52,8 @@ Result<std::vector<Placement>> parseStg(const std::string& path) {
     Placement p;
     p.line = line;
     if (!(fields >> model >> p.lon_deg >> p.lat_deg >> p.elevation_m >> p.heading_deg) ||
-        !std::isfinite(p.lon_deg) || !std::isfinite(p.lat_deg) ||
-        !std::isfinite(p.elevation_m) || !std::isfinite(p.heading_deg) ||
-        std::abs(p.lat_deg) > 90 || std::abs(p.lon_deg) > 360)
+        !std::isfinite(p.lon_deg) || !std::isfinite(p.lat_deg) || !std::isfinite(p.elevation_m) ||
+        !std::isfinite(p.heading_deg) || std::abs(p.lat_deg) > 90 || std::abs(p.lon_deg) > 360)
       return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: line {}: expected MODEL LON LAT ELEV HDG", path, line));
     p.model = resolveModel(dir, model, keyword == "OBJECT_SHARED");
@@ -83,15 +82,15 @@ Result<ImportedScene> importStg(const std::string& path) {
     if (it == models.end()) {
       Result<ModelTemplate> model = loadAssimpModel(p.model, scene, textures);
       if (!model)
-        return fail(model.error().code, fmt::format("{}: line {}: {}", path, p.line,
-                                                    model.error().message));
+        return fail(model.error().code,
+                    fmt::format("{}: line {}: {}", path, p.line, model.error().message));
       it = models.emplace(p.model, std::move(*model)).first;
     }
     const double h = p.heading_deg * kPi / 180;
     const float c = float(std::cos(h)), s = float(std::sin(h));
     const std::array<float, 12> place = {
-        c, 0, s, float((p.lon_deg - origin.lon_deg) * metres_per_lon),
-        0, 1, 0, float(p.elevation_m - origin.elevation_m),
+        c,  0, s, float((p.lon_deg - origin.lon_deg) * metres_per_lon),
+        0,  1, 0, float(p.elevation_m - origin.elevation_m),
         -s, 0, c, float(-(p.lat_deg - origin.lat_deg) * kMetresPerLat)};
     for (ImportedObject object : it->second.objects) {
       object.transform = composeTransforms(place, object.transform);

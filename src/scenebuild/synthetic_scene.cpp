@@ -57,9 +57,11 @@ ImportedMesh boxMesh(uint32_t variant) {
         mesh.uv0.insert(mesh.uv0.end(), {(corner & 1) * repeat, float((corner >> 1) & 1)});
       }
       if (sign > 0)
-        mesh.indices.insert(mesh.indices.end(), {base, base + 1, base + 3, base, base + 3, base + 2});
+        mesh.indices.insert(mesh.indices.end(),
+                            {base, base + 1, base + 3, base, base + 3, base + 2});
       else
-        mesh.indices.insert(mesh.indices.end(), {base, base + 3, base + 1, base, base + 2, base + 3});
+        mesh.indices.insert(mesh.indices.end(),
+                            {base, base + 3, base + 1, base, base + 2, base + 3});
     }
   }
   return mesh;
@@ -106,9 +108,9 @@ Result<ImportedScene> generateSyntheticScene(const std::string& spec,
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}: {} objects out of 1..{}", name, objects, kMaxImportedObjects));
   if (textures == 0 || textures > kMaxImages || textures > objects)
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("{}: {} textures out of 1..min(objects, {})", name, textures,
-                            kMaxImages));
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("{}: {} textures out of 1..min(objects, {})", name, textures, kMaxImages));
   ImportedScene scene;
   scene.source = name;
   scene.importer = "synthetic";
@@ -155,8 +157,8 @@ Result<ImportedScene> generateSyntheticScene(const std::string& spec,
     const float z = (cell / side + 0.3f * random.uniform()) * kSpacingM;
     object.transform = {c * width, 0, s * depth, x, 0, height, 0, 0, -s * width, 0, c * depth, z};
     const bool use_global = random.below(100) < kGlobalPercent;
-    object.textures[0] = use_global ? global_first + random.below(global)
-                                    : uint32_t(k * local / objects);
+    object.textures[0] =
+        use_global ? global_first + random.below(global) : uint32_t(k * local / objects);
     object.base_color_rgba = 0xFFFFFFFFu;
     scene.objects.push_back(object);
   }

@@ -27,7 +27,8 @@ namespace {
 class TempDir {
  public:
   TempDir() {
-    std::string pattern = (std::filesystem::temp_directory_path() / "tessera-scene-XXXXXX").string();
+    std::string pattern =
+        (std::filesystem::temp_directory_path() / "tessera-scene-XXXXXX").string();
     if (::mkdtemp(pattern.data()) != nullptr) path_ = pattern;
   }
   ~TempDir() {
@@ -67,8 +68,8 @@ Result<std::shared_ptr<const Image>> cropSource(SpoolState& state, int32_t index
   if (auto it = state.sources.find(index); it != state.sources.end()) return it->second;
   if (index < 0 || size_t(index) >= state.scene.crop_sources.size())
     return fail(ErrorCode::kInternal, "crop source out of range");
-  TESSERA_ASSIGN_OR_RETURN(Image image, readImageFile(state.scene.crop_sources[index],
-                                                      state.options.max_side_px));
+  TESSERA_ASSIGN_OR_RETURN(
+      Image image, readImageFile(state.scene.crop_sources[index], state.options.max_side_px));
   auto shared = std::make_shared<const Image>(std::move(image));
   state.sources.emplace(index, shared);
   return shared;
@@ -109,8 +110,8 @@ Result<SpooledTexture> encodeOne(SpoolState& state, uint32_t index, CodecScratch
   info.height_px = image.height_px;
   info.channels = image.channels;
   info.tile_size_px = state.options.tile_size_px;
-  const uint32_t tiles = (std::max(image.width_px, image.height_px) + info.tile_size_px - 1) /
-                         info.tile_size_px;
+  const uint32_t tiles =
+      (std::max(image.width_px, image.height_px) + info.tile_size_px - 1) / info.tile_size_px;
   info.page_tiles_log2 = std::max(3u, uint32_t(std::bit_width(tiles - 1)));
   if (info.page_tiles_log2 > 8)
     return fail(ErrorCode::kTooLarge,
@@ -170,8 +171,7 @@ Result<std::string> textureFile(const TextureSource& texture, const std::string&
   if (!texture.path.empty()) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(texture.path, ec))
-      return fail(ErrorCode::kNotFound,
-                  fmt::format("texture file {} not found", texture.path));
+      return fail(ErrorCode::kNotFound, fmt::format("texture file {} not found", texture.path));
     return texture.path;
   }
   const std::vector<uint8_t>& b = texture.bytes;
@@ -199,7 +199,8 @@ Result<std::vector<SpooledTexture>> spoolTextures(const ImportedScene& scene,
                                                   const std::atomic<bool>* cancel) {
   SpoolState state{scene, order, options, spool};
   state.out.resize(order.size());
-  const uint32_t threads = std::max(1u, std::min<uint32_t>(options.threads, uint32_t(order.size())));
+  const uint32_t threads =
+      std::max(1u, std::min<uint32_t>(options.threads, uint32_t(order.size())));
   std::vector<std::thread> pool;
   for (uint32_t i = 0; i < threads; ++i) pool.emplace_back([&] { worker(state, cancel); });
   while (state.done < order.size() && !state.stop) {

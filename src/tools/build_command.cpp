@@ -48,7 +48,8 @@ int runBuild(BuildArgs& args) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
-  if (isSceneBuild(args.options)) return runSceneBuild(args.options, args.quiet, args.json, &g_interrupted);
+  if (isSceneBuild(args.options))
+    return runSceneBuild(args.options, args.quiet, args.json, &g_interrupted);
   bool show_progress = !args.quiet && !args.json && stderrIsTerminal();
   ProgressBar bar("building");
   auto on_progress = [&](const BuildProgress& progress) {

@@ -67,12 +67,13 @@ void printSceneReport(const SceneBuildReport& r, const std::string& output, bool
 void printTree(const SceneArchive& scene, const SceneNode& node, uint32_t max_depth,
                nlohmann::json& out, bool json) {
   if (!json)
-    std::printf("  %*snode %u: %u children, %u objects, %u textures, %u meshes; block %s, "
-                "subtree %u nodes [%llu, +%s)\n",
-                int(2 * node.depth), "", node.index, node.child_count, node.object_count,
-                node.texture_count, node.mesh_count, formatBytes(node.own.length_bytes).c_str(),
-                node.subtree_nodes, (unsigned long long)node.subtree.offset_bytes,
-                formatBytes(node.subtree.length_bytes).c_str());
+    std::printf(
+        "  %*snode %u: %u children, %u objects, %u textures, %u meshes; block %s, "
+        "subtree %u nodes [%llu, +%s)\n",
+        int(2 * node.depth), "", node.index, node.child_count, node.object_count,
+        node.texture_count, node.mesh_count, formatBytes(node.own.length_bytes).c_str(),
+        node.subtree_nodes, (unsigned long long)node.subtree.offset_bytes,
+        formatBytes(node.subtree.length_bytes).c_str());
   out.push_back({{"node", node.index},
                  {"depth", node.depth},
                  {"children", node.child_count},
@@ -101,8 +102,9 @@ void addSceneBuildOptions(CLI::App& build) {
       ->capture_default_str();
   build.add_option("--texture-source", o.texture_sources,
                    "synthetic-scene: images to cut textures from (default: synthetic terrain)");
-  build.add_option("--max-texture-side", o.max_texture_side_px,
-                   "Scenes: largest texture side accepted, px")
+  build
+      .add_option("--max-texture-side", o.max_texture_side_px,
+                  "Scenes: largest texture side accepted, px")
       ->capture_default_str();
 }
 
@@ -130,8 +132,8 @@ int runSceneBuild(const BuildOptions& options, bool quiet, bool json,
   const bool show = !quiet && !json && stderrIsTerminal();
   ProgressBar bar("building scene");
   auto on_progress = [&](const SceneBuildProgress& p) {
-    if (show) bar.update(double(p.textures_done), double(p.textures_total), p.elapsed_s, 1,
-                         "textures/s");
+    if (show)
+      bar.update(double(p.textures_done), double(p.textures_total), p.elapsed_s, 1, "textures/s");
   };
   Result<SceneBuildReport> report = buildScene(scene, on_progress, cancel);
   bar.finish();
@@ -160,29 +162,38 @@ bool runSceneInfo(const std::string& path, bool json, int* exit_code) {
   Result<std::string> metadata_text = scene.readMetadata();
   nlohmann::json meta = metadata_text ? nlohmann::json::parse(*metadata_text, nullptr, false)
                                       : nlohmann::json::object();
-  const nlohmann::json scene_meta = meta.is_object() ? meta.value("scene", nlohmann::json::object())
-                                                     : nlohmann::json::object();
-  nlohmann::json out = {{"path", path}, {"file_bytes", scene.fileBytes()}, {"format_version", "1.1"},
-                        {"objects", s.objects}, {"meshes", s.meshes}, {"textures", s.textures},
-                        {"nodes", s.nodes}, {"tree_depth", s.tree_depth},
-                        {"max_children", s.max_children}, {"leaf_capacity", s.leaf_capacity},
-                        {"scene", scene_meta}, {"tree", nlohmann::json::array()}};
+  const nlohmann::json scene_meta =
+      meta.is_object() ? meta.value("scene", nlohmann::json::object()) : nlohmann::json::object();
+  nlohmann::json out = {{"path", path},
+                        {"file_bytes", scene.fileBytes()},
+                        {"format_version", "1.1"},
+                        {"objects", s.objects},
+                        {"meshes", s.meshes},
+                        {"textures", s.textures},
+                        {"nodes", s.nodes},
+                        {"tree_depth", s.tree_depth},
+                        {"max_children", s.max_children},
+                        {"leaf_capacity", s.leaf_capacity},
+                        {"scene", scene_meta},
+                        {"tree", nlohmann::json::array()}};
   if (!json) {
-    std::printf("%s: Tessera scene archive 1.1, %s: %u objects, %u meshes, %u textures; R-tree "
-                "of %u nodes, depth %u (fan-out %u, leaves of %u)\n",
-                path.c_str(), formatBytes(scene.fileBytes()).c_str(), s.objects, s.meshes,
-                s.textures, s.nodes, s.tree_depth, s.max_children, s.leaf_capacity);
+    std::printf(
+        "%s: Tessera scene archive 1.1, %s: %u objects, %u meshes, %u textures; R-tree "
+        "of %u nodes, depth %u (fan-out %u, leaves of %u)\n",
+        path.c_str(), formatBytes(scene.fileBytes()).c_str(), s.objects, s.meshes, s.textures,
+        s.nodes, s.tree_depth, s.max_children, s.leaf_capacity);
     if (scene_meta.contains("promotion")) {
       const auto& p = scene_meta["promotion"];
-      std::printf("  promotion (Zhou et al., Table 4): %s texture references, %s leaf copies "
-                  "without promotion, %s stored, %s copies avoided, %s shared; stored per "
-                  "depth %s\n",
-                  p.value("texture_references", nlohmann::json()).dump().c_str(),
-                  p.value("leaf_copies", nlohmann::json()).dump().c_str(),
-                  p.value("stored", nlohmann::json()).dump().c_str(),
-                  p.value("copies_avoided", nlohmann::json()).dump().c_str(),
-                  p.value("shared", nlohmann::json()).dump().c_str(),
-                  p.value("stored_at_depth", nlohmann::json()).dump().c_str());
+      std::printf(
+          "  promotion (Zhou et al., Table 4): %s texture references, %s leaf copies "
+          "without promotion, %s stored, %s copies avoided, %s shared; stored per "
+          "depth %s\n",
+          p.value("texture_references", nlohmann::json()).dump().c_str(),
+          p.value("leaf_copies", nlohmann::json()).dump().c_str(),
+          p.value("stored", nlohmann::json()).dump().c_str(),
+          p.value("copies_avoided", nlohmann::json()).dump().c_str(),
+          p.value("shared", nlohmann::json()).dump().c_str(),
+          p.value("stored_at_depth", nlohmann::json()).dump().c_str());
     }
     if (scene_meta.contains("bytes")) {
       const auto& b = scene_meta["bytes"];

@@ -42,8 +42,8 @@ SceneDirectory goldenDirectory() {
 TEST(SceneFormat, DirectoryGoldenBytes) {
   // Bytes by hand from the table in docs/format.md, "Scene directory".
   std::vector<uint8_t> golden(128, 0);
-  const uint8_t head[] = {3, 0, 0, 0, 2, 0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0,  // counts
-                          2, 0, 8, 0, 16, 0, 0, 0};                          // depth, fan-out, leaf
+  const uint8_t head[] = {3, 0, 0, 0, 2,  0, 0, 0, 1, 0, 0, 0, 2, 0, 0, 0,  // counts
+                          2, 0, 8, 0, 16, 0, 0, 0};                         // depth, fan-out, leaf
   std::memcpy(golden.data(), head, sizeof(head));
   const float box[6] = {-1, 0, -2, 1, 4, 2};
   std::memcpy(golden.data() + 24, box, 24);  // little-endian IEEE 754 on this host
@@ -126,10 +126,10 @@ TEST(SceneFormat, NodeRecordGoldenBytes) {
   ASSERT_EQ(bytes.size(), 96u);
   const float box[6] = {-1, 0, -2, 0, 4, 2};
   EXPECT_EQ(std::memcmp(bytes.data(), box, 24), 0);
-  const uint8_t fields[] = {1, 0, 0, 0,  0, 0, 1, 0,   // subtree 1, children 0, depth 1, reserved
-                            0, 0, 0, 0,  1, 0, 0, 0,   // first object 0, 1 object
-                            2, 0, 0, 0,  0, 0, 0, 0,   // first texture 2, none
-                            1, 0, 0, 0,  0, 0, 0, 0};  // first mesh 1, none
+  const uint8_t fields[] = {1, 0, 0, 0, 0, 0, 1, 0,   // subtree 1, children 0, depth 1, reserved
+                            0, 0, 0, 0, 1, 0, 0, 0,   // first object 0, 1 object
+                            2, 0, 0, 0, 0, 0, 0, 0,   // first texture 2, none
+                            1, 0, 0, 0, 0, 0, 0, 0};  // first mesh 1, none
   EXPECT_EQ(std::memcmp(bytes.data() + 24, fields, sizeof(fields)), 0);
   EXPECT_EQ(loadU64(bytes.data() + 56), 17384u);
   EXPECT_EQ(loadU32(bytes.data() + 64), 16u + 128u);
@@ -194,7 +194,7 @@ TEST(SceneFormat, TextureRecordGoldenBytesAndRoundTrip) {
   t.coarsest.kind = TileKind::kUniform;
   t.coarsest.uniform_rgba = 0x00332211;
   std::vector<uint8_t> bytes = encodeTextureRecords({&t, 1});
-  const uint8_t golden[32] = {1, 0, 0, 0, 2, 0, 0, 0, 7, 0, 0, 0, 0, 0, 0, 0,
+  const uint8_t golden[32] = {1,   0, 0, 0, 2,   0, 0, 0, 7, 0, 0, 0, 0, 0, 0, 0,
                               200, 0, 0, 0, 100, 0, 0, 0, 3, 6, 0, 3, 3, 3, 0, 0};
   EXPECT_EQ(std::memcmp(bytes.data(), golden, 32), 0);
   EXPECT_EQ(loadU32(bytes.data() + 32), 0x00332211u);  // uniform colour
@@ -237,8 +237,8 @@ TEST(SceneFormat, NodeHeadRoundTripsAndEveryPrefixIsRejected) {
   EXPECT_EQ(decoded->textures[1].pages, head.textures[1].pages);
   for (size_t n = 0; n < bytes.size(); ++n) {
     std::vector<uint8_t> prefix(bytes.begin(), bytes.begin() + n);  // a fresh allocation
-    EXPECT_FALSE(decodeNodeHead(prefix, root, 0, goldenDirectory(), sceneHeader(), "g.tess")
-                     .has_value())
+    EXPECT_FALSE(
+        decodeNodeHead(prefix, root, 0, goldenDirectory(), sceneHeader(), "g.tess").has_value())
         << n;
   }
 }
@@ -247,8 +247,8 @@ TEST(SceneFormat, NodeHeadRejectsABlobOutsideItsNode) {
   const NodeRecord root = smallTree()[0];
   NodeHead head = sampleHead();
   head.meshes[0].blob.offset_bytes = root.offset_bytes + root.own_bytes - 10;
-  auto decoded = decodeNodeHead(encodeNodeHead(head), root, 0, goldenDirectory(), sceneHeader(),
-                                "g.tess");
+  auto decoded =
+      decodeNodeHead(encodeNodeHead(head), root, 0, goldenDirectory(), sceneHeader(), "g.tess");
   ASSERT_FALSE(decoded.has_value());
   EXPECT_NE(decoded.error().message.find("node 0 mesh 0 geometry"), std::string::npos)
       << decoded.error().message;

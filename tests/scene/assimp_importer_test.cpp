@@ -15,8 +15,8 @@ using test::ScratchDir;
 
 // Two textured quads sharing one material and one untextured.
 std::string writeObj(const ScratchDir& dir, const std::string& texture) {
-  std::ofstream(dir.file("street.mtl")) << "newmtl brick\nKd 1 1 1\nmap_Kd " << texture
-                                        << "\nnewmtl plain\nKd 0.5 0.5 0.5\n";
+  std::ofstream(dir.file("street.mtl"))
+      << "newmtl brick\nKd 1 1 1\nmap_Kd " << texture << "\nnewmtl plain\nKd 0.5 0.5 0.5\n";
   std::ofstream(dir.file("street.obj"))
       << "mtllib street.mtl\n"
          "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 5 0 0\nv 6 0 0\nv 6 1 0\nv 5 1 0\n"
@@ -38,8 +38,8 @@ SceneBuildOptions options(const std::string& input, const std::string& output) {
 TEST(AssimpImporter, BuildsAnObjWithItsMaterialLibrary) {
   ScratchDir dir;
   test::writeTestPng(dir.file("brick.png"), 128, 128, 4);
-  Result<SceneBuildReport> report = buildScene(options(writeObj(dir, "brick.png"),
-                                                       dir.file("street.tess")));
+  Result<SceneBuildReport> report =
+      buildScene(options(writeObj(dir, "brick.png"), dir.file("street.tess")));
   ASSERT_TRUE(report.has_value()) << report.error().message;
   EXPECT_EQ(report->importer, "assimp");
   EXPECT_EQ(report->summary.textures, 1u);
@@ -53,8 +53,8 @@ TEST(AssimpImporter, BuildsAnObjWithItsMaterialLibrary) {
 
 TEST(AssimpImporter, MissingTextureNamesTheFile) {
   ScratchDir dir;
-  Result<SceneBuildReport> report = buildScene(options(writeObj(dir, "gone.png"),
-                                                       dir.file("street.tess")));
+  Result<SceneBuildReport> report =
+      buildScene(options(writeObj(dir, "gone.png"), dir.file("street.tess")));
   ASSERT_FALSE(report.has_value());
   EXPECT_NE(report.error().message.find("street.obj"), std::string::npos) << report.error().message;
   EXPECT_NE(report.error().message.find("gone.png"), std::string::npos) << report.error().message;

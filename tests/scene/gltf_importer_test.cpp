@@ -98,7 +98,8 @@ TEST(GltfImporter, MissingTextureFileNamesFileAndImage) {
 TEST(GltfImporter, UnsupportedEmbeddedImageNamesIt) {
   ScratchDir dir;
   GltfBuilder g = cityBlock(dir, 2, 1, true);
-  const std::vector<uint8_t> ktx2 = {0xAB, 'K', 'T', 'X', ' ', '2', '0', 0xBB, 0x0D, 0x0A, 0x1A, 0x0A};
+  const std::vector<uint8_t> ktx2 = {0xAB, 'K',  'T',  'X',  ' ',  '2',
+                                     '0',  0xBB, 0x0D, 0x0A, 0x1A, 0x0A};
   const int image = g.addImageBytes(ktx2, "image/ktx2");
   g.setRoots({0, g.addNode(g.addQuadMesh(g.addMaterial(g.addTexture(image))), 9, 9)});
   const std::string path = g.writeGlb(dir, "ktx");
@@ -164,8 +165,8 @@ TEST(GltfImporter, TruncatedGlbIsRefusedAtEveryCut) {
   ScratchDir dir;
   GltfBuilder g = cityBlock(dir, 3, 1, true);
   const std::vector<uint8_t> whole = test::readFileBytes(g.writeGlb(dir, "whole"));
-  for (size_t cut : {size_t(0), size_t(5), size_t(12), size_t(20), whole.size() / 2,
-                     whole.size() - 1}) {
+  for (size_t cut :
+       {size_t(0), size_t(5), size_t(12), size_t(20), whole.size() / 2, whole.size() - 1}) {
     SCOPED_TRACE(testing::Message() << "cut at " << cut);
     test::writeFileBytes(dir.file("cut.glb"), {whole.begin(), whole.begin() + cut});
     expectFailure(build(dir.file("cut.glb"), dir.file("out.tess")), dir, dir.file("out.tess"),

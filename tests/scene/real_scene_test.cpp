@@ -83,8 +83,8 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
     std::ofstream stg(dir.file("sf.stg"));
     for (size_t k = 0; k < 2 * usable.size(); ++k) {
       const double lon = -122.40 + 0.004 * double(k % 30), lat = 37.62 + 0.004 * double(k / 30);
-      stg << "OBJECT_STATIC " << fs::relative(usable[k % usable.size()], dir.path()).string()
-          << " " << lon << " " << lat << " " << 5.0 + k % 7 << " " << (k * 37) % 360 << "\n";
+      stg << "OBJECT_STATIC " << fs::relative(usable[k % usable.size()], dir.path()).string() << " "
+          << lon << " " << lat << " " << 5.0 + k % 7 << " " << (k * 37) % 360 << "\n";
     }
   }
   SceneBuildOptions options;
@@ -94,16 +94,16 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
   options.threads = 2;
   Result<SceneBuildReport> report = buildScene(options);
   ASSERT_TRUE(report.has_value()) << report.error().message;
-  std::printf("FlightGear scene: %zu models placed twice, %u objects, %u meshes, %u textures, "
-              "%u nodes (depth %u), %llu bytes in %.1f s; %llu leaf copies, %llu copies avoided; "
-              "geometry %llu bytes (%llu raw)\n",
-              usable.size(), report->summary.objects, report->summary.meshes,
-              report->summary.textures, report->summary.nodes, report->summary.tree_depth,
-              (unsigned long long)report->output_bytes, report->elapsed_s,
-              (unsigned long long)report->promotion.leaf_copies,
-              (unsigned long long)report->promotion.copies_avoided,
-              (unsigned long long)report->geometry_stored_bytes,
-              (unsigned long long)report->geometry_raw_bytes);
+  std::printf(
+      "FlightGear scene: %zu models placed twice, %u objects, %u meshes, %u textures, "
+      "%u nodes (depth %u), %llu bytes in %.1f s; %llu leaf copies, %llu copies avoided; "
+      "geometry %llu bytes (%llu raw)\n",
+      usable.size(), report->summary.objects, report->summary.meshes, report->summary.textures,
+      report->summary.nodes, report->summary.tree_depth, (unsigned long long)report->output_bytes,
+      report->elapsed_s, (unsigned long long)report->promotion.leaf_copies,
+      (unsigned long long)report->promotion.copies_avoided,
+      (unsigned long long)report->geometry_stored_bytes,
+      (unsigned long long)report->geometry_raw_bytes);
   EXPECT_GE(report->summary.objects, 300u);
   EXPECT_GE(report->summary.textures, 100u);
   EXPECT_GT(report->promotion.copies_avoided, 0u) << "placements share textures";

@@ -26,12 +26,13 @@ TEST(SceneScale, HundredThousandObjectsTenThousandTexturesInBoundedMemory) {
   rusage usage{};
   getrusage(RUSAGE_SELF, &usage);
   const double peak_mib = usage.ru_maxrss / 1024.0;
-  std::printf("100,000 objects, 10,000 textures: %u nodes, depth %u, %.1f MiB archive in %.1f s, "
-              "peak RSS %.0f MiB; promotion: %llu leaf copies, %llu stored, %llu avoided\n",
-              report->summary.nodes, report->summary.tree_depth, report->output_bytes / 1048576.0,
-              report->elapsed_s, peak_mib, (unsigned long long)report->promotion.leaf_copies,
-              (unsigned long long)report->promotion.stored,
-              (unsigned long long)report->promotion.copies_avoided);
+  std::printf(
+      "100,000 objects, 10,000 textures: %u nodes, depth %u, %.1f MiB archive in %.1f s, "
+      "peak RSS %.0f MiB; promotion: %llu leaf copies, %llu stored, %llu avoided\n",
+      report->summary.nodes, report->summary.tree_depth, report->output_bytes / 1048576.0,
+      report->elapsed_s, peak_mib, (unsigned long long)report->promotion.leaf_copies,
+      (unsigned long long)report->promotion.stored,
+      (unsigned long long)report->promotion.copies_avoided);
   EXPECT_EQ(report->summary.objects, 100000u);
   EXPECT_EQ(report->summary.textures, 10000u);
   EXPECT_LT(peak_mib, 512) << "the build's memory should not grow with the textures";

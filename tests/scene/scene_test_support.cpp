@@ -11,7 +11,8 @@
 namespace tessera::test {
 
 ScratchDir::ScratchDir() {
-  std::string pattern = (std::filesystem::temp_directory_path() / "tessera-scene-test-XXXXXX").string();
+  std::string pattern =
+      (std::filesystem::temp_directory_path() / "tessera-scene-test-XXXXXX").string();
   TESSERA_CHECK(::mkdtemp(pattern.data()) != nullptr) << "mkdtemp failed";
   path_ = pattern;
 }
@@ -33,7 +34,8 @@ void writeTestPng(const std::string& path, uint32_t width, uint32_t height, uint
   for (uint32_t y = 0; y < height; ++y)
     for (uint32_t x = 0; x < width; ++x)
       for (uint32_t c = 0; c < 3; ++c)
-        image.row(y)[3 * x + c] = uint8_t((x * (c + 1) + y * (seed + 2) + seed * 37 + c * 50) & 255);
+        image.row(y)[3 * x + c] =
+            uint8_t((x * (c + 1) + y * (seed + 2) + seed * 37 + c * 50) & 255);
   TESSERA_CHECK(writePng(image, path).has_value()) << "writePng " << path;
 }
 
@@ -78,8 +80,12 @@ int GltfBuilder::addQuadMesh(int material) {
   int uv = addView(uvs, sizeof(uvs));
   int iv = addView(indices, sizeof(indices));
   auto& acc = doc["accessors"];
-  acc.push_back({{"bufferView", pv}, {"componentType", 5126}, {"count", 4}, {"type", "VEC3"},
-                 {"min", {0, 0, 0}}, {"max", {1, 0, 1}}});
+  acc.push_back({{"bufferView", pv},
+                 {"componentType", 5126},
+                 {"count", 4},
+                 {"type", "VEC3"},
+                 {"min", {0, 0, 0}},
+                 {"max", {1, 0, 1}}});
   acc.push_back({{"bufferView", uv}, {"componentType", 5126}, {"count", 4}, {"type", "VEC2"}});
   acc.push_back({{"bufferView", iv}, {"componentType", 5123}, {"count", 6}, {"type", "SCALAR"}});
   const int first = int(acc.size()) - 3;

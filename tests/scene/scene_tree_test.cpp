@@ -67,8 +67,8 @@ TEST(SceneTree, EveryObjectInExactlyOneLeafAndBoundsNest) {
     const uint32_t capacity = 1 + seed % 20, fan_out = 2 + seed % 15;
     auto boxes = randomBoxes(count, seed);
     SceneTree tree = buildSceneTree(boxes, capacity, fan_out);
-    SCOPED_TRACE(testing::Message() << count << " boxes, capacity " << capacity << ", fan-out "
-                                    << fan_out);
+    SCOPED_TRACE(testing::Message()
+                 << count << " boxes, capacity " << capacity << ", fan-out " << fan_out);
     expectTreeInvariants(tree, boxes, capacity, fan_out);
   }
 }

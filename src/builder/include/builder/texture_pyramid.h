@@ -33,8 +33,8 @@ struct EncodedPyramid {
 /// that are one colour become uniform entries, all-zero tiles of images with alpha empty ones,
 /// as in buildArchive. Codecs coded against a parent tile (ptm) are refused (kUnsupported).
 /// `what` prefixes errors. Owned by the calling thread; `scratch` may be null.
-[[nodiscard]] Result<EncodedPyramid> encodePyramid(const Image& image, ImageInfo info,
-                                                   Codec codec, const EncodeOptions& options,
+[[nodiscard]] Result<EncodedPyramid> encodePyramid(const Image& image, ImageInfo info, Codec codec,
+                                                   const EncodeOptions& options,
                                                    CodecScratch* scratch, const std::string& what);
 
 }  // namespace tessera::detail

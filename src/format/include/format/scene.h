@@ -119,9 +119,8 @@ struct ObjectRecord {
   uint32_t mesh_node = 0;  ///< node holding the mesh: this object's leaf or an ancestor
   /// Per slot (base colour, metallic-roughness, normal, occlusion, emissive): a texture index
   /// or kNoSceneTexture.
-  std::array<uint32_t, kSceneTextureSlots> textures{kNoSceneTexture, kNoSceneTexture,
-                                                    kNoSceneTexture, kNoSceneTexture,
-                                                    kNoSceneTexture};
+  std::array<uint32_t, kSceneTextureSlots> textures{
+      kNoSceneTexture, kNoSceneTexture, kNoSceneTexture, kNoSceneTexture, kNoSceneTexture};
   uint32_t base_color_rgba = 0xFFFFFFFFu;  ///< factor, 8-bit sRGB channels, R in the low byte
   uint32_t source_index = 0;               ///< the importer's object number (diagnostics)
   friend bool operator==(const ObjectRecord&, const ObjectRecord&) = default;
