@@ -81,24 +81,23 @@ Result<uint64_t> copyFromSpool(LayoutState& s, const TileEntry& entry) {
 Result<BlockRef> writeCoarseBlock(LayoutState& s) {
   BlockRef block;
   block.offset_bytes = s.appender.end();
-  uint64_t hash_state_bytes = 0;
+  uint64_t coarse_bytes = 0;
   std::vector<uint8_t> all;  // the coarse block is small: one tile per texture
   for (size_t t = 0; t < s.entries.size(); ++t) {
     TileEntry& entry = s.entries[t].back()[0];
     if (entry.kind != TileKind::kEncoded) continue;
     TESSERA_ASSIGN_OR_RETURN(entry.offset_bytes, copyFromSpool(s, entry));
     all.insert(all.end(), s.payload.begin(), s.payload.end());
-    hash_state_bytes += entry.length_bytes;
+    coarse_bytes += entry.length_bytes;
   }
-  block.length_bytes = hash_state_bytes;
-  block.checksum = hash_state_bytes ? checksum64(all) : 0;
-  if (hash_state_bytes == 0) block.offset_bytes = 0;
-  s.result.coarse_bytes = hash_state_bytes;
+  block.length_bytes = coarse_bytes;
+  block.checksum = coarse_bytes ? checksum64(all) : 0;
+  if (coarse_bytes == 0) block.offset_bytes = 0;
+  s.result.coarse_bytes = coarse_bytes;
   return block;
 }
 
 Result<void> writeNode(LayoutState& s, uint32_t index) {
-  const TreeNode& tree_node = s.in.tree->nodes[index];
   NodeRecord& record = s.nodes[index];
   NodeHead head;
   for (uint32_t k = 0; k < record.object_count; ++k) {
@@ -182,7 +181,6 @@ Result<void> writeNode(LayoutState& s, uint32_t index) {
   TESSERA_TRY(s.out.pwrite(record.offset_bytes, head_bytes));
   if (!pages.empty()) TESSERA_TRY(s.out.pwrite(pages_offset, pages));
   record.own_bytes = s.appender.end() - record.offset_bytes;
-  (void)tree_node;
   return {};
 }
 
@@ -320,10 +318,11 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
   PlacedBlock root = makeBlock(encodeRootDirectory(records));
   TESSERA_TRY(place(root));
   nlohmann::json metadata_json = in.metadata;
-  metadata_json["scene"]["bytes"] = {{"textures", s.result.texture_payload_bytes},
-                                     {"coarse_block", s.result.coarse_bytes},
-                                     {"geometry", s.result.geometry_stored_bytes},
-                                     {"geometry_raw", s.result.geometry_raw_bytes}};
+  metadata_json["scene"]["bytes"] = {
+      {"textures", s.result.texture_payload_bytes + s.result.coarse_bytes},
+      {"coarse_block", s.result.coarse_bytes},
+      {"geometry", s.result.geometry_stored_bytes},
+      {"geometry_raw", s.result.geometry_raw_bytes}};
   const std::string metadata_text = metadata_json.dump();
   if (metadata_text.size() > kMaxMetadataBytes)
     return fail(ErrorCode::kTooLarge, name + ": metadata exceeds 16 MiB");
