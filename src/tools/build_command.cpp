@@ -7,6 +7,7 @@
 #include <tessera/build.h>
 
 #include "cli.h"
+#include "scene_command.h"
 
 namespace tessera::cli {
 
@@ -47,6 +48,8 @@ int runBuild(BuildArgs& args) {
   sigaction(SIGINT, &action, nullptr);
   sigaction(SIGTERM, &action, nullptr);
 
+  if (isSceneBuild(args.options))
+    return runSceneBuild(args.options, args.quiet, args.json, &g_interrupted);
   bool show_progress = !args.quiet && !args.json && stderrIsTerminal();
   ProgressBar bar("building");
   auto on_progress = [&](const BuildProgress& progress) {
@@ -115,6 +118,7 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
                   "Directory page side as a power of two of tiles (3..8)")
       ->capture_default_str();
   cmd->add_option("--name", args->options.image_names, "Image name(s), one per input");
+  addSceneBuildOptions(*cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress and no summary");
   cmd->add_flag("--json", args->json, "Print the build report as JSON");
   cmd->callback([args, &exit_code] { exit_code = runBuild(*args); });
