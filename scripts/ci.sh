@@ -228,6 +228,7 @@ fuzz_stage() {
     stage_result fuzz FAIL "clang++ not found (scripts/install-deps.sh installs clang)"
     return
   fi
+  mkdir -p "$build_root"
   if ! CC=clang CXX=clang++ cmake -S "$repo" -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
       -DTESSERA_BUILD_FUZZ=ON -DTESSERA_BUILD_TOOLS=OFF -DTESSERA_SANITIZE=address,undefined \
       "${asan_flags[@]}" >"$dir.configure.log" 2>&1; then
