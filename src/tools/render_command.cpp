@@ -11,6 +11,7 @@
 #include <tessera/archive.h>
 #include <tessera/picture_file.h>
 #include <tessera/render.h>
+#include <tessera/stream.h>
 
 #include "cli.h"
 
