@@ -61,9 +61,10 @@ Result<void> checkOutputPath(const std::string& path) {
   if (::stat(path.c_str(), &st) != 0) return {};  // nothing there (or a dangling link) to lose
   if (S_ISREG(st.st_mode)) return {};
   return fail(ErrorCode::kInvalidArgument,
-              fmt::format("{}: exists and is {}, not a regular file; refusing to replace it (write "
-                          "to a file, then copy it there)",
-                          path, fileKind(st.st_mode)));
+              fmt::format("{}: exists and is {}, not a regular file; refusing to replace it ({})",
+                          path, fileKind(st.st_mode),
+                          S_ISDIR(st.st_mode) ? "name a file inside it"
+                                              : "write to a regular file and copy it there"));
 }
 
 Result<DiskSpace> diskSpaceAt(const std::string& directory) {
