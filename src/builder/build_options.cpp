@@ -21,7 +21,7 @@ struct EffortRange {
 
 EffortRange effortRange(Codec codec) {
   switch (codec) {
-    case Codec::kZstd: return {-100, 22, "the zstd level (negative levels are faster)"};
+    case Codec::kZstd: return {-100, 22, "the zstd level, negative for the fast levels"};
     case Codec::kPng: return {0, 9, "the zlib level"};
     case Codec::kWebp: return {0, 9, "the lossless preset"};
     case Codec::kPtm: return {0, 4, "the mode (docs/codecs.md)"};

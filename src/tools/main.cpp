@@ -149,7 +149,7 @@ bool reportUnknownSubcommand(const CLI::App& app, int argc, char** argv) {
   const std::string word = argv[1];
   if (std::find(names.begin(), names.end(), word) != names.end()) return false;
   const std::string nearest = nearestName(word, names);
-  std::fprintf(stderr, "tessera: unknown subcommand '%s'%s; the subcommands are %s\n", word.c_str(),
+  std::fprintf(stderr, "tessera: unknown subcommand '%s'%s; it must be one of %s\n", word.c_str(),
                nearest.empty() ? "" : fmt::format(" (did you mean '{}'?)", nearest).c_str(),
                listChoices(names).c_str());
   return true;
