@@ -177,6 +177,7 @@ int main(int argc, char** argv) {
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
   registerServeCommand(app, exit_code);
+  registerExportCommand(app, exit_code);
   if (reportUnknownSubcommand(app, argc, argv)) return kExitUsage;
   // The subcommands run inside parse: whatever escapes them (an allocation the estimates did
   // not foresee, a library's exception) ends here as one line and exit 1, never an abort.

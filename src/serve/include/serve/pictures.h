@@ -27,6 +27,10 @@ inline uint32_t dziOverlap(const ImageInfo& info) {
 }
 /// The format a DZI descriptor names: jpg for JPEG archives without alpha, png otherwise.
 PictureFormat dziFormat(const ImageInfo& info);
+/// The file extension of `format` in Deep Zoom paths: "jpg" or "png".
+const char* dziExtension(PictureFormat format);
+/// The .dzi descriptor (XML) of `info`: tile size, overlap, format and level-0 size.
+std::string dziDescriptor(const ImageInfo& info);
 /// The XYZ zoom at which one tile pixel is one level-0 pixel: ceil(log2(max(W, H) / 256)),
 /// at least 0.
 uint32_t xyzMaxZoom(const ImageInfo& info);
@@ -40,6 +44,7 @@ uint32_t scaledHeightPx(const ImageInfo& info, uint32_t scale_log2);
 /// An encoded picture, or the reason there is none (kNotFound: outside the grid).
 struct Picture {
   std::string bytes;
+  bool copied = false;  ///< the stored payload as is, neither decoded nor encoded
 };
 
 /// DZI tile (dz_level, col, row) of `image`, edge tiles cropped to the image, encoded in
