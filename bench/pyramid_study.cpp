@@ -374,19 +374,16 @@ void study(const std::string& input, double min_seconds, const std::string& only
                         key.first, key.second & ~int(kPtmTablesFlag | kPtmGreenLedFlag),
                         (key.second & kPtmGreenLedFlag) != 0 ? " green-led" : "",
                         (key.second & kPtmTablesFlag) != 0 ? "+tables" : "", 100.0 * bytes / total);
-      fmt::print(
-          "\n({}'s bytes by predictor and coder: {})\n",
-          variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort),
-          shares);
+      const std::string mode =
+          variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort);
+      fmt::print("\n({}'s bytes by predictor and coder: {})\n", mode, shares);
+      fmt::print("({}: {:.0f} bytes; its base level alone: {:.0f} bytes)\n", mode, total,
+                 base_alone);
       if (smallest_peer_bytes > 0 && variant.effort == 0)
-        fmt::print("(default: {:.0f} bytes; {}: {:.0f} bytes; the default is {:.2f} % {})\n", total,
-                   smallest_peer, smallest_peer_bytes,
+        fmt::print("(the default is {:.2f} % {} than {}, {:.0f} bytes)\n",
                    100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,
-                   total <= smallest_peer_bytes ? "smaller" : "larger");
-      else if (variant.effort == 0)
-        fmt::print("(default: {:.0f} bytes)\n", total);
-      if (variant.effort == 0)
-        fmt::print("(default's base level alone: {:.0f} bytes)\n", base_alone);
+                   total <= smallest_peer_bytes ? "smaller" : "larger", smallest_peer,
+                   smallest_peer_bytes);
       fmt::print("\n");
     }
     if (per_level) {

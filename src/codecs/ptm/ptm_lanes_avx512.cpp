@@ -280,27 +280,31 @@ struct Geometry {
   int ls_sums[kLsSets][4];
 };
 
-// What every step of a tile reads.
+// What every step of a tile reads from memory: the arrays a lane's class or the step's parity
+// indexes. The class bounds too: the compiler otherwise rebuilt them from immediates at every
+// step, for want of registers. Each channel's model offsets by context group, eight classes
+// each: a lane picks its model with a permute. Green-led: green's frequency of 0 and red's and
+// blue's models after a zero green residual and after any other, per position group.
 template <uint32_t kCh, bool kGreenLed>
-struct TileConstants {
-  // The class bounds from memory at every use: the compiler otherwise rebuilt them from
-  // immediates at every step, for want of registers.
+struct TileTables {
   alignas(32) int32_t bounds[kActivityClasses - 1][kLanes];
-  // Each channel's model offsets by context group, eight classes each: a lane picks its model
-  // with a permute. Green-led: green's frequency of 0 and red's and blue's models after a zero
-  // green residual and after any other, per position group.
   __m256i group_models[kCh][kGroups];
   __m256i green_zero_freqs[kGroups - 1];
   __m256i led_models[kGreenLed ? kCh : 1][2][kGroups - 1];
-  // Predictor 5: byte shuffles that put channel c of each lane in its low or high 16 bits.
-  __m256i low_masks[kCh], high_masks[kCh];
+};
+
+// What every step of a tile reads from registers (a structure apart from the arrays above, so
+// that the compiler keeps its fields in registers).
+template <uint32_t kCh>
+struct TileConstants {
+  __m256i low_masks[kCh], high_masks[kCh];  ///< channel c of each lane to its low, high 16 bits
   uint32_t column_offset;  ///< the first column's place among its parent's children
   bool first_column_partial, last_column_partial;  ///< predictor 4 pulls no texel there
 };
 
 template <uint32_t kCh, bool kGreenLed>
 TESSERA_AVX512_INLINE void setUpModels(const Geometry& g, const SlotModels& models,
-                                       TileConstants<kCh, kGreenLed>& tc) {
+                                       TileTables<kCh, kGreenLed>& tc) {
   for (uint32_t c = 0; c < kCh; ++c)
     for (uint32_t group = 0; group < kGroups; ++group)
       tc.group_models[c][group] = group * kActivityClasses < g.contexts
@@ -325,10 +329,10 @@ TESSERA_AVX512_INLINE void setUpModels(const Geometry& g, const SlotModels& mode
 
 template <uint32_t kCh, bool kGreenLed>
 TESSERA_AVX512_INLINE void setUpTile(const Geometry& g, const SlotModels& models, bool corrected,
-                                     TileConstants<kCh, kGreenLed>& tc) {
+                                     TileTables<kCh, kGreenLed>& tables, TileConstants<kCh>& tc) {
   for (uint32_t i = 0; i < kActivityClasses - 1; ++i)
-    std::fill_n(tc.bounds[i], kLanes, kActivityBounds[i] * int(g.channels) - 1);
-  setUpModels(g, models, tc);
+    std::fill_n(tables.bounds[i], kLanes, kActivityBounds[i] * int(g.channels) - 1);
+  setUpModels(g, models, tables);
   for (uint32_t c = 0; c < kCh; ++c) {
     alignas(32) int8_t low[32], high[32];
     for (uint32_t i = 0; i < 32; ++i) {
@@ -353,13 +357,14 @@ struct BandConstants {
   bool first_band;
   __m256i row_in, second_row, second_row_table, derived_row, full_row;
   __m256i parent_rows;  ///< predictor 4: each lane's parent row's offset in the copy
-  // Predictor 5: per step parity and channel, each lane's weight pairs for its block position.
-  __m256i ls_pairs[2][kCh][kLsPairs];
 };
+// Predictor 5: per step parity and channel, each lane's weight pairs for its block position.
+template <uint32_t kCh>
+using BandWeights = __m256i[2][kCh][kLsPairs];
 
 template <uint32_t kCh, LanePredictor kPredictor>
 TESSERA_AVX512_INLINE void setUpBand(const Geometry& g, const ParentCopy& parent, uint32_t y0,
-                                     BandConstants<kCh>& band) {
+                                     BandConstants<kCh>& band, BandWeights<kCh>& ls_pairs) {
   constexpr bool kSides =
       kPredictor == LanePredictor::kCorrected || kPredictor == LanePredictor::kLeastSquares;
   band.y0 = y0;
@@ -398,7 +403,7 @@ TESSERA_AVX512_INLINE void setUpBand(const Geometry& g, const ParentCopy& parent
         auto pair = [](int low, int high) { return int(uint16_t(low)) | high << 16; };
         for (uint32_t k = 0; k < kLsPairs; ++k) {
           const bool sum = k == kLsPairs - 1;
-          band.ls_pairs[column][c][k] = _mm256_blendv_epi8(
+          ls_pairs[column][c][k] = _mm256_blendv_epi8(
               _mm256_set1_epi32(sum ? pair(-g.ls_sums[column][c], 64)
                                     : pair(first[2 * k], first[2 * k + 1])),
               _mm256_set1_epi32(sum ? pair(-g.ls_sums[2 + column][c], 64)
@@ -429,9 +434,10 @@ struct History {
 
 template <uint32_t kCh, LanePredictor kPredictor, bool kGreenLed>
 TESSERA_AVX512_INLINE Step stepAt(uint32_t t, const Geometry& g,
-                                  const TileConstants<kCh, kGreenLed>& tc,
-                                  const BandConstants<kCh>& band, const History<kCh>& history,
-                                  const uint32_t* above, const ParentCopy& parent) {
+                                  const TileTables<kCh, kGreenLed>& tables,
+                                  const TileConstants<kCh>& tc, const BandConstants<kCh>& band,
+                                  const History<kCh>& history, const uint32_t* above,
+                                  const ParentCopy& parent) {
   constexpr bool kSides =
       kPredictor == LanePredictor::kCorrected || kPredictor == LanePredictor::kLeastSquares;
   const __m256i zero = _mm256_setzero_si256();
@@ -459,7 +465,8 @@ TESSERA_AVX512_INLINE Step stepAt(uint32_t t, const Geometry& g,
       _mm256_set1_epi16(1));
   s.medians = medianBytes(left, up, up_left);
   s.activity_class = zero;
-  for (const auto& bound : tc.bounds)
+#pragma GCC unroll 8
+  for (const auto& bound : tables.bounds)
     s.activity_class =
         _mm256_sub_epi32(s.activity_class, _mm256_cmpgt_epi32(activity, load(bound)));
   s.second_column = g.has_parent ? (t + tc.column_offset) & 1 : 0;
@@ -489,15 +496,13 @@ TESSERA_AVX512_INLINE Step stepAt(uint32_t t, const Geometry& g,
 // since D(t) = 16 t - W(t). The division towards zero is a single-precision one truncated,
 // exact because |G| <= 16344 and |D|, |δ| <= 4086. `detail_above` is lane 0's row above in the
 // band before, per channel (History).
-template <uint32_t kCh, bool kGreenLed>
-TESSERA_AVX512_INLINE void correctedPredictions(const Step& s, const Geometry& g,
-                                                const TileConstants<kCh, kGreenLed>& tc,
-                                                const BandConstants<kCh>& band,
-                                                const ParentCopy& parent, const int* shortfalls,
-                                                const int32_t* detail_above, size_t detail_words,
-                                                History<kCh>& history, __m256i* upsampled,
-                                                __m256i* predicted) {
+template <uint32_t kCh>
+TESSERA_AVX512_INLINE void correctedPredictions(
+    const Step& s, const Geometry& g, const TileConstants<kCh>& tc, const BandConstants<kCh>& band,
+    const ParentCopy& parent, const int* shortfalls, const int32_t* detail_above,
+    size_t detail_words, History<kCh>& history, __m256i* upsampled, __m256i* predicted) {
   const __m256i zero = _mm256_setzero_si256();
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c)
     upsampled[c] = _mm256_add_epi32(
         _mm256_add_epi32(_mm256_madd_epi16(channelPair(s.parents, s.side_parents, tc.low_masks[c],
@@ -533,6 +538,7 @@ TESSERA_AVX512_INLINE void correctedPredictions(const Step& s, const Geometry& g
     shortfall[c] = _mm256_srai_epi32(_mm256_slli_epi32(both, 16), 16);
     if (c + 1 < kCh) shortfall[c + 1] = _mm256_srai_epi32(both, 16);
   }
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     const int32_t* above = detail_above + c * detail_words;
     auto up0 = [&](ptrdiff_t at)
@@ -568,13 +574,13 @@ TESSERA_AVX512_INLINE void correctedPredictions(const Step& s, const Geometry& g
 // multiply-add sums two terms, (L, U), (UL, UR), (P, Ph), (Pv, Pd) and (m, 1) with the weights'
 // pairs, the last -Σw and 64; that is Σ w v - m Σw + 64, the factored sum plus its rounding over
 // 16, shifted by 4 bits less.
-template <uint32_t kCh, bool kGreenLed>
-TESSERA_AVX512_INLINE void leastSquaresPredictions(const Step& s,
-                                                   const TileConstants<kCh, kGreenLed>& tc,
-                                                   const BandConstants<kCh>& band,
+template <uint32_t kCh>
+TESSERA_AVX512_INLINE void leastSquaresPredictions(const Step& s, const TileConstants<kCh>& tc,
+                                                   const BandWeights<kCh>& ls_pairs,
                                                    __m256i* predicted) {
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
-    const __m256i* pairs = band.ls_pairs[s.second_column][c];
+    const __m256i* pairs = ls_pairs[s.second_column][c];
     const __m256i low = tc.low_masks[c], high = tc.high_masks[c];
     const __m256i median_and_one =
         _mm256_or_si256(_mm256_shuffle_epi8(s.medians, low), _mm256_set1_epi32(1 << 16));
@@ -598,7 +604,7 @@ TESSERA_AVX512_INLINE void leastSquaresPredictions(const Step& s,
 // random: mispredicted, it cost more than the load, which the padding allows at every step).
 template <uint32_t kCh, bool kGreenLed>
 TESSERA_AVX512_INLINE void decodeSymbols(const Step& s, const Geometry& g,
-                                         const TileConstants<kCh, kGreenLed>& tc,
+                                         const TileTables<kCh, kGreenLed>& tc,
                                          const BandConstants<kCh>& band, const int* slot_tables,
                                          __m256i* state, const uint8_t** words_at,
                                          __m256i* symbols) {
@@ -618,6 +624,7 @@ TESSERA_AVX512_INLINE void decodeSymbols(const Step& s, const Geometry& g,
   if constexpr (kGreenLed)
     green_zero = _mm256_cmpgt_epi32(byClass(tc.green_zero_freqs),
                                     _mm256_and_si256(state[kGreenChannel], slot_mask));
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     __m256i model = byClass(tc.group_models[c]);
     if (kGreenLed && followsGreen(c))
@@ -650,9 +657,11 @@ TESSERA_AVX512_INLINE void decodeEscapes(const Step& s, const uint8_t** escapes_
                                          __m256i* symbols, __m256i& failed) {
   const __m256i escape = _mm256_set1_epi32(int(rans::kEscape));
   __m256i largest = symbols[0];
+#pragma GCC unroll 4
   for (uint32_t c = 1; c < kCh; ++c) largest = _mm256_max_epu32(largest, symbols[c]);
   if (_mm256_testz_si256(_mm256_cmpeq_epi32(largest, escape), s.active)) [[likely]]
     return;
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     const auto escaped = _mm256_mask_cmpeq_epi32_mask(
         __mmask8(_mm256_movemask_ps(_mm256_castsi256_ps(s.active))), symbols[c], escape);
@@ -675,6 +684,7 @@ TESSERA_AVX512_INLINE __m256i stepValues(const Step& s, const __m256i* symbols,
                                          const __m256i* predicted) {
   const __m256i zero = _mm256_setzero_si256(), byte_mask = _mm256_set1_epi32(0xff);
   __m256i residual[kCh], coded = zero;
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     residual[c] = _mm256_xor_si256(
         _mm256_srli_epi32(symbols[c], 1),
@@ -692,12 +702,14 @@ TESSERA_AVX512_INLINE __m256i stepValues(const Step& s, const __m256i* symbols,
   if constexpr (kPredictor == LanePredictor::kCorrected ||
                 kPredictor == LanePredictor::kLeastSquares) {
     prediction = zero;
+#pragma GCC unroll 4
     for (uint32_t c = 0; c < kCh; ++c)
       prediction = _mm256_or_si256(prediction, _mm256_slli_epi32(predicted[c], int(8 * c)));
   }
   const __m256i values = _mm256_add_epi8(prediction, coded);
   if (s.derived_mask == 0) return values;
   __m256i remainders = zero;
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     const __m256i sum3 = _mm256_add_epi32(
         _mm256_add_epi32(channelOf(s.left, c), channelOf(s.up, c)), channelOf(s.up_left, c));
@@ -764,9 +776,10 @@ struct Scratch {
 };
 
 template <uint32_t kCh, LanePredictor kPredictor, bool kGreenLed>
-TESSERA_AVX512 bool decodeBands(const Geometry& g, const Scratch& scratch) {
+TESSERA_AVX512 bool decodeBands(const Geometry& geometry, const Scratch& scratch) {
   constexpr bool kCorrected = kPredictor == LanePredictor::kCorrected;
   // Locals, not the structures' fields, which every vector store may alias.
+  const Geometry g = geometry;
   Streams& streams = *scratch.streams;
   const ParentCopy parent = *scratch.parent;
   uint32_t* const diagonal = scratch.diagonal;
@@ -775,11 +788,13 @@ TESSERA_AVX512 bool decodeBands(const Geometry& g, const Scratch& scratch) {
   const int* const slot_tables = reinterpret_cast<const int*>(scratch.models->tables);
   const uint32_t steps = stepsPerBand(g.width);
   const size_t diagonal_words = size_t(steps + stepOf(1, kLanes - 1)) * kLanes;
-  TileConstants<kCh, kGreenLed> tc;
-  setUpTile(g, *scratch.models, kCorrected, tc);
+  TileTables<kCh, kGreenLed> tables;
+  TileConstants<kCh> tc;
+  setUpTile(g, *scratch.models, kCorrected, tables, tc);
   const uint8_t* words_at[kCh];
   const uint8_t* escapes_at[kCh];
   __m256i state[kCh];
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     words_at[c] = streams.words[c];
     escapes_at[c] = streams.escapes[c];
@@ -788,20 +803,22 @@ TESSERA_AVX512 bool decodeBands(const Geometry& g, const Scratch& scratch) {
   __m256i failed = _mm256_setzero_si256();
   for (uint32_t y0 = 0; y0 < g.height; y0 += kLanes) {
     BandConstants<kCh> band;
-    setUpBand<kCh, kPredictor>(g, parent, y0, band);
+    BandWeights<kCh> ls_pairs;
+    setUpBand<kCh, kPredictor>(g, parent, y0, band, ls_pairs);
     History<kCh> history{};
     for (uint32_t t = 0; t < steps; ++t) {
       // Lane 0's row above: the band before's last lane, whose steps lie ahead of this one's.
       const size_t above_at = size_t(stepOf(t, kLanes - 1)) * kLanes + (kLanes - 1);
-      const Step s = stepAt<kCh, kPredictor>(t, g, tc, band, history, diagonal + above_at, parent);
+      const Step s =
+          stepAt<kCh, kPredictor>(t, g, tables, tc, band, history, diagonal + above_at, parent);
       __m256i predicted[kCh], upsampled[kCh];
       if constexpr (kCorrected)
         correctedPredictions(s, g, tc, band, parent, shortfalls, detail_diagonal + above_at,
                              diagonal_words, history, upsampled, predicted);
       if constexpr (kPredictor == LanePredictor::kLeastSquares)
-        leastSquaresPredictions(s, tc, band, predicted);
+        leastSquaresPredictions(s, tc, ls_pairs, predicted);
       __m256i symbols[kCh];
-      decodeSymbols(s, g, tc, band, slot_tables, state, words_at, symbols);
+      decodeSymbols(s, g, tables, band, slot_tables, state, words_at, symbols);
       decodeEscapes<kCh>(s, escapes_at, symbols, failed);
       const __m256i values = stepValues<kCh, kPredictor>(s, symbols, predicted);
       history.back[2] = history.back[1];
@@ -809,6 +826,7 @@ TESSERA_AVX512 bool decodeBands(const Geometry& g, const Scratch& scratch) {
       history.back[0] = values;
       _mm256_storeu_si256(reinterpret_cast<__m256i*>(diagonal + size_t(t) * kLanes), values);
       if constexpr (kCorrected)
+#pragma GCC unroll 4
         for (uint32_t c = 0; c < kCh; ++c) {
           history.detail[2][c] = history.detail[1][c];
           history.detail[1][c] = history.detail[0][c];
@@ -820,12 +838,14 @@ TESSERA_AVX512 bool decodeBands(const Geometry& g, const Scratch& scratch) {
         }
       // A corrupt stream may run ahead: stop within kCheckSteps of passing its end.
       if (t % kCheckSteps == kCheckSteps - 1 || t + 1 == steps)
+#pragma GCC unroll 4
         for (uint32_t c = 0; c < kCh; ++c)
           if (words_at[c] > streams.words_end[c] || escapes_at[c] > streams.escapes_end[c])
             return false;
     }
     storeBand(g, band, diagonal);
   }
+#pragma GCC unroll 4
   for (uint32_t c = 0; c < kCh; ++c) {
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(streams.states[c]), state[c]);
     streams.words[c] = words_at[c];
