@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config git clang-format
+  build-essential cmake ninja-build pkg-config git clang-format clang-tidy clang libclang-rt-14-dev
   libtiff-dev libjpeg62-turbo-dev libturbojpeg0-dev libpng-dev libwebp-dev
   libzstd-dev liblz4-dev libxxhash-dev
   libcli11-dev libfmt-dev nlohmann-json3-dev libboost-dev libcurl4-openssl-dev
@@ -12,6 +12,9 @@ packages=(
   libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri libimgui-dev
   xvfb nginx-light openssl
   chromium
+  libtinygltf-dev
+  libassimp-dev
+  libmeshoptimizer-dev
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and

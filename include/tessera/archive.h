@@ -18,16 +18,6 @@
 
 namespace tessera {
 
-/// A tile's directory entry (docs/format.md, "Tile entries").
-struct TileEntry {
-  TileKind kind = TileKind::kEmpty;
-  Codec codec = Codec::kRaw;
-  uint64_t offset_bytes = 0;  ///< payload offset in the file; 0 unless kind is kEncoded
-  uint32_t length_bytes = 0;  ///< payload length; 0 unless kind is kEncoded
-  uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless kind is kEncoded
-  uint32_t uniform_rgba = 0;  ///< kUniform: channel c of the colour is byte c (little-endian)
-};
-
 /// What `Archive::verify` found.
 struct VerifyReport {
   uint64_t tiles_checked = 0;     ///< directory entries examined

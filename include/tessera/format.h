@@ -75,6 +75,16 @@ struct TileId {
   friend bool operator==(const TileId&, const TileId&) = default;
 };
 
+/// A tile's directory entry (docs/format.md, "Tile entries").
+struct TileEntry {
+  TileKind kind = TileKind::kEmpty;
+  Codec codec = Codec::kRaw;
+  uint64_t offset_bytes = 0;  ///< payload offset in the file; 0 unless kind is kEncoded
+  uint32_t length_bytes = 0;  ///< payload length; 0 unless kind is kEncoded
+  uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless kind is kEncoded
+  uint32_t uniform_rgba = 0;  ///< kUniform: channel c of the colour is byte c (little-endian)
+};
+
 /// Geometry of one image of an archive. Level dimensions follow from it:
 /// `levelWidthPx(L) = max(1, ceil(width_px / 2^L))`, and each level is padded to whole tiles
 /// (Backes et al., eq. 1). The coarsest level is the first that fits in one tile.

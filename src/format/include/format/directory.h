@@ -8,7 +8,6 @@
 #include <string>
 #include <vector>
 
-#include <tessera/archive.h>
 #include <tessera/format.h>
 #include <tessera/result.h>
 
