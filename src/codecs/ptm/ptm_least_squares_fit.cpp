@@ -1,5 +1,6 @@
-// ptm's predictor 5: the encoder's solve of the fitted normal equations (ptm_least_squares.h).
-#include "ptm/ptm_least_squares.h"
+// ptm's predictor 5: the encoder's solve of the fitted normal equations
+// (ptm_least_squares_fit.h).
+#include "ptm/ptm_least_squares_fit.h"
 
 #include <cmath>
 #include <utility>
@@ -39,7 +40,7 @@ void solveOne(const double (&gram)[kLsTerms][kLsTerms], const double (&moment)[k
     }
   }
   for (uint32_t i = 0; i < kLsTerms; ++i) {
-    const double weight = std::round(kLsWeightScale * a[i][kLsTerms] / a[i][i]);
+    const double weight = std::round(128 * a[i][kLsTerms] / a[i][i]);
     weights[i] = int8_t(std::clamp(weight, -128.0, 127.0));
   }
 }
