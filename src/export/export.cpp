@@ -132,10 +132,36 @@ Result<ExportReport> exportDeepZoom(const Archive& archive, const std::string& o
 
 }  // namespace
 
+Result<void> writeThroughPartialFile(const std::string& out_path,
+                                     const std::function<Result<void>(const std::string&)>& write) {
+  TESSERA_TRY(checkOutputPath(out_path));
+  const std::string partial = fmt::format("{}.partial-{}", out_path, ::getpid());
+  Result<void> written = write(partial);
+  if (written) {
+    const int fd = ::open(partial.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0 || ::fsync(fd) != 0)
+      written = fail(ErrorCode::kIo, fmt::format("{}: cannot sync {}: {}", out_path, partial,
+                                                 std::strerror(errno)));
+    if (fd >= 0) ::close(fd);
+  }
+  // Asked again: a FIFO or device node may have appeared at the path meanwhile.
+  if (written) written = checkOutputPath(out_path);
+  std::error_code error;
+  if (written) {
+    fs::rename(partial, out_path, error);
+    if (!error) return {};
+    written = fail(ErrorCode::kIo, fmt::format("{}: cannot rename {} into place: {}", out_path,
+                                               partial, error.message()));
+  }
+  fs::remove(partial, error);
+  return written;
+}
+
 std::optional<ExportFormat> parseExportFormat(std::string_view text) {
   if (text == "dzi" || text == "deepzoom") return ExportFormat::kDeepZoom;
   if (text == "pmtiles") return ExportFormat::kPmtiles;
   if (text == "mbtiles") return ExportFormat::kMbtiles;
+  if (text == "tiff" || text == "tif") return ExportFormat::kTiff;
   return std::nullopt;
 }
 
@@ -149,6 +175,7 @@ Result<ExportReport> exportArchive(const Archive& archive, const std::string& ou
     case ExportFormat::kDeepZoom: return exportDeepZoom(archive, out_path, options);
     case ExportFormat::kPmtiles: return exportPmtiles(archive, out_path, options);
     case ExportFormat::kMbtiles: return exportMbtiles(archive, out_path, options);
+    case ExportFormat::kTiff: return exportTiff(archive, out_path, options);
   }
   return fail(ErrorCode::kInvalidArgument, "unknown export format");
 }

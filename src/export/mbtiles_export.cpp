@@ -1,9 +1,5 @@
 // MBTiles 1.3: one SQLite file, tiles keyed by zoom, column and TMS row (y counted from the
 // bottom), written under a temporary name in one transaction and renamed into place.
-#include <fcntl.h>
-#include <unistd.h>
-
-#include <cstdio>
 #include <filesystem>
 #include <memory>
 
@@ -123,32 +119,15 @@ Result<void> writeDatabase(const std::string& path, const Archive& archive,
 
 Result<ExportReport> exportMbtiles(const Archive& archive, const std::string& out_path,
                                    const ExportOptions& options) {
-  TESSERA_TRY(checkOutputPath(out_path));
-  // SQLite writes through a path, so the file is built under a temporary name beside the
-  // output and renamed once complete and synced (journal off: the file is new either way).
-  const std::string partial = fmt::format("{}.partial-{}", out_path, ::getpid());
   ExportReport report;
-  Result<void> written = writeDatabase(partial, archive, options, report);
+  // SQLite writes through a path, so the file is built under a temporary name (journal off:
+  // the file is new either way).
+  TESSERA_TRY(writeThroughPartialFile(out_path, [&](const std::string& partial) {
+    return writeDatabase(partial, archive, options, report);
+  }));
   std::error_code error;
-  if (written) {
-    if (const int fd = ::open(partial.c_str(), O_RDONLY | O_CLOEXEC); fd >= 0) {
-      ::fsync(fd);
-      ::close(fd);
-    }
-    // Asked again: a FIFO or device node may have appeared at the path meanwhile.
-    written = checkOutputPath(out_path);
-  }
-  if (written) {
-    std::filesystem::rename(partial, out_path, error);
-    if (!error) {
-      report.bytes = std::filesystem::file_size(out_path, error);
-      return report;
-    }
-    written = fail(ErrorCode::kIo, fmt::format("{}: cannot rename {} into place: {}", out_path,
-                                               partial, error.message()));
-  }
-  std::filesystem::remove(partial, error);
-  return forwardError(written);
+  report.bytes = std::filesystem::file_size(out_path, error);
+  return report;
 }
 
 }  // namespace tessera::detail

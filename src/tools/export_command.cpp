@@ -29,7 +29,7 @@ int runExport(const ExportArgs& args) {
   const std::optional<detail::ExportFormat> format = detail::parseExportFormat(args.format);
   if (!format) {
     std::fprintf(stderr, "tessera: export: unknown --to '%s' (accepted: %s)\n", args.format.c_str(),
-                 listChoices({"dzi", "pmtiles", "mbtiles"}).c_str());
+                 listChoices({"dzi", "pmtiles", "mbtiles", "tiff"}).c_str());
     return kExitUsage;
   }
   Result<std::shared_ptr<Archive>> opened = openArchive(args.archive);
@@ -69,9 +69,10 @@ int runExport(const ExportArgs& args) {
 void registerExportCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ExportArgs>();
   CLI::App* cmd = app.add_subcommand(
-      "export", "Write an image of an archive as a Deep Zoom folder, PMTiles or MBTiles");
+      "export",
+      "Write an image of an archive as a Deep Zoom folder, PMTiles, MBTiles or a pyramidal TIFF");
   cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
-  cmd->add_option("--to", args->format, "Target: dzi, pmtiles or mbtiles")->required();
+  cmd->add_option("--to", args->format, "Target: dzi, pmtiles, mbtiles or tiff")->required();
   cmd->add_option("output", args->output,
                   "Output file (Deep Zoom: NAME.dzi, its tiles in NAME_files beside it)")
       ->required();

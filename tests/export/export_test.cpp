@@ -4,6 +4,7 @@
 #include "export/export.h"
 
 #include <sqlite3.h>
+#include <tiffio.h>
 #include <sys/stat.h>
 
 #include <filesystem>
@@ -198,7 +199,8 @@ TEST_F(ExportTest, DeepZoomFolderHoldsWhatTheServerSends) {
 TEST_F(ExportTest, SpecialFilesAtTheOutputAreRefusedAndKept) {
   const std::string fifo = dir_ + "pipe";
   ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
-  for (ExportFormat format : {ExportFormat::kPmtiles, ExportFormat::kMbtiles}) {
+  for (ExportFormat format :
+       {ExportFormat::kPmtiles, ExportFormat::kMbtiles, ExportFormat::kTiff}) {
     ExportOptions options;
     options.format = format;
     Result<ExportReport> report = exportArchive(*archive_, fifo, options);
@@ -217,6 +219,84 @@ TEST_F(ExportTest, SpecialFilesAtTheOutputAreRefusedAndKept) {
   EXPECT_TRUE(partials().empty());
 }
 
+// Reads every directory of a pyramidal TIFF back through libtiff (JPEG tiles decoded to RGB by
+// libtiff's own JPEG path) and compares each level with the archive's, within `tolerance`.
+void expectTiffMatchesArchive(const std::string& path, const Archive& archive, int tolerance) {
+  const ImageInfo& info = archive.images()[0];
+  TIFF* tiff = TIFFOpen(path.c_str(), "r");
+  ASSERT_NE(tiff, nullptr) << path;
+  uint32_t level = 0;
+  do {
+    ASSERT_LT(level, info.level_count);
+    uint32_t width = 0, height = 0, tile_w = 0, subfile = 0;
+    uint16_t compression = 0, samples = 0;
+    TIFFGetField(tiff, TIFFTAG_IMAGEWIDTH, &width);
+    TIFFGetField(tiff, TIFFTAG_IMAGELENGTH, &height);
+    TIFFGetField(tiff, TIFFTAG_TILEWIDTH, &tile_w);
+    TIFFGetFieldDefaulted(tiff, TIFFTAG_SUBFILETYPE, &subfile);
+    TIFFGetField(tiff, TIFFTAG_COMPRESSION, &compression);
+    TIFFGetField(tiff, TIFFTAG_SAMPLESPERPIXEL, &samples);
+    EXPECT_EQ(width, info.levelWidthPx(level));
+    EXPECT_EQ(height, info.levelHeightPx(level));
+    EXPECT_EQ(tile_w, info.tile_size_px);
+    EXPECT_EQ(subfile, level == 0 ? 0u : uint32_t(FILETYPE_REDUCEDIMAGE));
+    EXPECT_EQ(samples, info.channels);
+    if (compression == COMPRESSION_JPEG)
+      TIFFSetField(tiff, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
+    Result<Image> expected = archive.readRegion(0, level, {0, 0, width, height});
+    ASSERT_TRUE(expected) << expected.error().message;
+    std::vector<uint8_t> tile(size_t(TIFFTileSize(tiff)));
+    int worst = 0;
+    for (uint32_t ty = 0; ty < height; ty += tile_w) {
+      for (uint32_t tx = 0; tx < width; tx += tile_w) {
+        ASSERT_GT(TIFFReadTile(tiff, tile.data(), tx, ty, 0, 0), 0)
+            << level << " " << tx << "," << ty;
+        for (uint32_t y = ty; y < std::min(height, ty + tile_w); ++y)
+          for (uint32_t x = tx; x < std::min(width, tx + tile_w); ++x)
+            for (uint32_t c = 0; c < info.channels; ++c)
+              worst = std::max(
+                  worst,
+                  std::abs(int(tile[(size_t(y - ty) * tile_w + (x - tx)) * info.channels + c]) -
+                           int(expected->row(y)[size_t(x) * info.channels + c])));
+      }
+    }
+    EXPECT_LE(worst, tolerance) << "level " << level;
+    ++level;
+  } while (TIFFReadDirectory(tiff));
+  EXPECT_EQ(level, info.level_count);
+  TIFFClose(tiff);
+}
+
+TEST_F(ExportTest, TiffPyramidCopiesJpegTilesAndReadsBackThroughLibtiff) {
+  ExportOptions options;
+  options.format = ExportFormat::kTiff;
+  const std::string out = dir_ + "pyramid.tif";
+  Result<ExportReport> report = exportArchive(*archive_, out, options);
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->tile_format, "jpeg");
+  EXPECT_GT(report->tiles_copied, 0u);
+  // libtiff's JPEG path upsamples chroma its own way: within 2 of the archive's decoder.
+  expectTiffMatchesArchive(out, *archive_, 2);
+  EXPECT_TRUE(partials().empty());
+}
+
+TEST_F(ExportTest, TiffOfALosslessArchiveWithAlphaAndBorderIsExact) {
+  BuildOptions build;
+  build.codec = Codec::kWebp;
+  build.border_px = 2;
+  test::BuiltArchive rgba =
+      test::buildFromImage(test::makePatternImage(700, 300, 4, 3), build, dir_, "rgba.tess");
+  Result<std::shared_ptr<Archive>> opened = openArchive(rgba.path);
+  ASSERT_TRUE(opened) << opened.error().message;
+  ExportOptions options;
+  options.format = ExportFormat::kTiff;
+  Result<ExportReport> report = exportArchive(**opened, dir_ + "rgba.tif", options);
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->tile_format, "deflate");
+  EXPECT_EQ(report->tiles_copied, 0u);
+  expectTiffMatchesArchive(dir_ + "rgba.tif", **opened, 0);
+}
+
 // A payload that fails its checksum ends the export with the tile named; nothing is left at
 // the output, not even a partial file or folder.
 TEST_F(ExportTest, ACorruptTileFailsTheExportAndLeavesNothing) {
@@ -229,8 +309,8 @@ TEST_F(ExportTest, ACorruptTileFailsTheExportAndLeavesNothing) {
   ASSERT_TRUE(test::writeFileBytes(corrupt, bytes));
   Result<std::shared_ptr<Archive>> opened = openArchive(corrupt);
   ASSERT_TRUE(opened);
-  for (ExportFormat format :
-       {ExportFormat::kDeepZoom, ExportFormat::kPmtiles, ExportFormat::kMbtiles}) {
+  for (ExportFormat format : {ExportFormat::kDeepZoom, ExportFormat::kPmtiles,
+                              ExportFormat::kMbtiles, ExportFormat::kTiff}) {
     ExportOptions options;
     options.format = format;
     const std::string out = dir_ + (format == ExportFormat::kDeepZoom ? "c.dzi" : "c.out");

@@ -1,6 +1,7 @@
 #pragma once
 // `tessera export`: an archive's image as the pyramids other tools read (docs/export.md):
-// a Deep Zoom folder (OpenSeadragon, vips), PMTiles v3 and MBTiles (web maps). Tiles are
+// a Deep Zoom folder (OpenSeadragon, vips), PMTiles v3 and MBTiles (web maps), a tiled
+// pyramidal BigTIFF (GDAL, vips, QGIS). Tiles are
 // copied as stored wherever the target's tile grid and the stored codec allow, and cut,
 // scaled and encoded otherwise, by the same code that serves Deep Zoom and XYZ tiles.
 
@@ -15,9 +16,9 @@
 
 namespace tessera::detail {
 
-enum class ExportFormat : uint8_t { kDeepZoom, kPmtiles, kMbtiles };
+enum class ExportFormat : uint8_t { kDeepZoom, kPmtiles, kMbtiles, kTiff };
 
-/// "dzi" (or "deepzoom"), "pmtiles", "mbtiles"; nullopt for anything else.
+/// "dzi" (or "deepzoom"), "pmtiles", "mbtiles", "tiff" (or "tif"); nullopt for anything else.
 std::optional<ExportFormat> parseExportFormat(std::string_view text);
 
 struct ExportOptions {
@@ -39,7 +40,7 @@ struct ExportReport {
 };
 
 /// Writes the export to `out_path`. Nothing is visible at the output until it is complete:
-/// a PMTiles or MBTiles file is renamed into place, a Deep Zoom folder `NAME_files` is
+/// a PMTiles, MBTiles or TIFF file is renamed into place, a Deep Zoom folder `NAME_files` is
 /// written under a temporary name and renamed before `NAME.dzi` is committed. `out_path`
 /// must end in ".dzi" for Deep Zoom; an existing `NAME_files` is refused (never merged).
 /// Errors name the output and the tile.
