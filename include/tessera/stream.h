@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <tessera/archive.h>
@@ -134,6 +135,17 @@ struct FrameReport {
   uint64_t deferred_tiles = 0;       ///< wanted tiles not requested (beyond the budgets)
 };
 
+/// A load that failed (a read, a checksum, a decode): the loader retries it after a backoff
+/// while the tile is wanted, so one tile may fail many times.
+struct LoadFailure {
+  TileId id;
+  ErrorCode code = ErrorCode::kIo;
+  /// Names the archive, the tile and the problem; for a URL, the server's status and reason
+  /// ("http://h/s.tess: tile (0,3,7): bytes=81234-93000: HTTP 503 Service Unavailable (after
+  /// 4 attempts)").
+  std::string message;
+};
+
 /// What the renderer should do this frame.
 struct FrameUpdate {
   /// Tiles to upload now, parents before children, within the upload budget. Each is in
@@ -152,6 +164,9 @@ struct FrameUpdate {
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
   FrameReport report;
+  /// Loads that failed since the last update, in the order they failed
+  /// (FrameReport::load_failures_total counts them all).
+  std::vector<LoadFailure> failures;
 };
 
 /// A renderer's answer to a FrameUpdate (`Renderer::apply`), for `TileStreamer::acknowledge`.

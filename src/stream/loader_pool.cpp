@@ -65,6 +65,25 @@ class CachedParents final : public ParentStore {
 /// spends on hints before its own read.
 constexpr size_t kReadAheadTilesPerCall = 512;
 
+/// `error` as the failed load of tile `id`, its message naming the archive and the tile
+/// first: a byte source names only its file or URL and the range it read ("http://h/s.tess:
+/// bytes=0-99: HTTP 503 Service Unavailable" becomes "http://h/s.tess: tile (0,3,7):
+/// bytes=0-99: HTTP 503 Service Unavailable").
+LoadEvent failedLoad(const Archive& archive, const TileId& id, const Error& error) {
+  const std::string tile = archive.tileName(id);
+  std::string message = error.message;
+  if (message.find(tile) == std::string::npos) {
+    const std::string prefix = archive.name() + ": ";
+    if (message.starts_with(prefix)) message.erase(0, prefix.size());
+    message = tile + ": " + message;
+  }
+  LoadEvent event;
+  event.id = id;
+  event.error = std::move(message);
+  event.code = error.code;
+  return event;
+}
+
 }  // namespace
 
 struct LoaderPool::Batch {
@@ -535,7 +554,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   const Archive& archive = *archive_;
   Result<TileEntry> first_entry = archive.tileEntry(batch.first);
   if (!first_entry) {
-    finish(batch.first, {batch.first, false, false, first_entry.error().message}, true);
+    finish(batch.first, failedLoad(*archive_, batch.first, first_entry.error()), true);
     return;
   }
   batch.items.push_back({batch.first, *first_entry});
@@ -549,10 +568,10 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     Result<std::span<const uint8_t>> payload = payloadOf(item, reads, i);
     if (!payload) {
       // An abandoned read is no failure: its tiles left the wanted set.
-      const bool cancelled = payload.error().code == ErrorCode::kCancelled;
-      finish(item.id,
-             {item.id, false, cancelled, cancelled ? "" : payload.error().message, cancelled},
-             !cancelled);
+      if (payload.error().code == ErrorCode::kCancelled)
+        finish(item.id, {item.id, false, true, "", true}, false);
+      else
+        finish(item.id, failedLoad(archive, item.id, payload.error()), true);
       continue;
     }
     decodeAndDeliver(item, *payload, tile_bytes, scratch);
@@ -675,7 +694,12 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
   }
   // The budget counts buffers in flight: no room means try again later, not an error.
   if (!cache_.reserve(tile_bytes)) {
-    finish(item.id, {item.id, false, false, "tile cache full of pinned tiles"}, true);
+    finish(item.id,
+           failedLoad(*archive_, item.id,
+                      {ErrorCode::kTooLarge,
+                       fmt::format("tile cache full of pinned tiles ({} bytes budget)",
+                                   cache_.budgetBytes())}),
+           true);
     return;
   }
   const auto started = Clock::now();
@@ -687,7 +711,7 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
   cache_.unreserve(tile_bytes);
   if (!decoded) {
     texel_pool_->give(std::move(texels.texels));
-    finish(item.id, {item.id, false, false, decoded.error().message}, true);
+    finish(item.id, failedLoad(*archive_, item.id, decoded.error()), true);
     return;
   }
   bool wanted;

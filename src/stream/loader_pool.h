@@ -47,6 +47,7 @@ struct LoadEvent {
   bool stale = false;      ///< decoded but no longer wanted: dropped, not cached
   std::string error;       ///< names the archive, the tile and the problem
   bool cancelled = false;  ///< its read was abandoned in flight (also stale): not a failure
+  ErrorCode code = ErrorCode::kIo;  ///< a failure's kind (neither ok nor stale)
 };
 
 struct LoaderStats {

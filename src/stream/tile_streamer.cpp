@@ -52,7 +52,8 @@ struct TileStreamer::Impl {
   uint64_t payloadBytes(const TileId& id);
 
   // The steps of update(), in order.
-  /// Drains the loader's finished loads into `loaded` (failures counted).
+  /// Drains the loader's finished loads into `loaded`, and the failed ones into
+  /// update.failures.
   void pollLoads();
   /// The residency manager of `image`, made on first use.
   detail::ResidencyManager& residencyOf(uint32_t image);
@@ -138,11 +139,13 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
 void TileStreamer::Impl::pollLoads() {
   events.clear();
   loader->poll(events);
-  for (const detail::LoadEvent& event : events)
-    if (event.ok)
+  for (detail::LoadEvent& event : events)
+    if (event.ok) {
       loaded.insert(event.id);
-    else if (!event.stale)
+    } else if (!event.stale) {
       ++load_failures;
+      update.failures.push_back({event.id, event.code, std::move(event.error)});
+    }
 }
 
 detail::ResidencyManager& TileStreamer::Impl::residencyOf(uint32_t image) {
@@ -276,6 +279,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   out.uploads.clear();
   out.releases.clear();
   out.regions.clear();
+  out.failures.clear();
   s.pollLoads();
 
   const uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
