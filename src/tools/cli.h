@@ -19,6 +19,8 @@ enum ExitCode : int {
   kExitCorrupt = 3,     ///< verify found faults
   kExitCancelled = 130  ///< interrupted (SIGINT)
 };
+/// `fly`: the flight ran and wrote its outputs, but tiles failed to load (docs/fly.md).
+inline constexpr int kExitLoadFailures = 4;
 
 /// Prints "tessera: <message>" to stderr and returns the exit code for the error.
 int reportError(const Error& error);

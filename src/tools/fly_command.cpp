@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <thread>
+#include <unordered_map>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -33,6 +34,17 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// Bounds of --duration and --still-after (a day), --speed and --threads.
+constexpr double kMaxDurationS = 86400;
+constexpr double kMaxSpeedPxS = 1e9;
+constexpr uint32_t kMaxLoaderThreads = 1024;
+
+/// A flight that took this much longer than its path is noted as slower than real time.
+constexpr double kSlowdownNoted = 1.05;
+
+/// Failed loads whose messages summary.json keeps.
+constexpr size_t kFailuresKept = 10;
 
 /// Without --render, what a renderer with room for everything answers: every upload accepted.
 ApplyResult acceptEverything(const FrameUpdate& update) {
@@ -143,6 +155,34 @@ struct FlightSetup {
   CameraPath path;
 };
 
+/// The bounds of the numeric options (NaN fails every comparison, so each is written to
+/// reject it): a NaN speed made the pan's keyframe loop endless, a NaN or negative duration
+/// flew one frame and reported success.
+Result<void> checkFlyArgs(const FlyArgs& args) {
+  if (!(args.fps > 0 && args.fps <= 1000))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--fps {}: must be in (0, 1000]", args.fps));
+  if (!(args.speed_px_s > 0 && args.speed_px_s <= kMaxSpeedPxS))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--speed {}: must be in (0, {:g}] level-0 px/s", args.speed_px_s,
+                            kMaxSpeedPxS));
+  if (!(args.duration_s > 0 && args.duration_s <= kMaxDurationS))
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("--duration {}: must be in (0, {:g}] seconds", args.duration_s, kMaxDurationS));
+  if (!(args.still_after_s >= 0 && args.still_after_s <= kMaxDurationS))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--still-after {}: must be in [0, {:g}] seconds", args.still_after_s,
+                            kMaxDurationS));
+  if (args.upload_budget == 0)
+    return fail(ErrorCode::kInvalidArgument,
+                "--upload-budget 0: at least one tile a frame, or nothing is ever drawn");
+  if (args.threads > kMaxLoaderThreads)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--threads {}: at most {}", args.threads, kMaxLoaderThreads));
+  return {};
+}
+
 /// Checks `args`, opens the archive (through the simulated link with --link, the header too,
 /// as a remote client would read it) and builds the camera path.
 Result<FlightSetup> setUpFlight(const FlyArgs& args) {
@@ -151,8 +191,7 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
       setup.viewport_w == 0 || setup.viewport_h == 0 || setup.viewport_w > 16384 ||
       setup.viewport_h > 16384)
     return fail(ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080");
-  if (!(args.fps > 0 && args.fps <= 1000))
-    return fail(ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]");
+  TESSERA_TRY(checkFlyArgs(args));
   const auto open_start = Clock::now();
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
   if (!args.link.empty()) {
@@ -170,8 +209,6 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
   setup.open_ms = std::chrono::duration<double, std::milli>(Clock::now() - open_start).count();
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
-  if (!(args.still_after_s >= 0))
-    return fail(ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds");
   setup.remote = setup.link || isRemoteUri(args.archive);
   setup.adaptive = args.adaptive == "on" || (args.adaptive == "auto" && setup.remote);
   if (args.image >= setup.archive->images().size())
@@ -225,12 +262,35 @@ struct FlightLog {
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
   FrameReport last{};
+  /// Loads that failed, as the frames saw them: per tile whether it loaded on a later try,
+  /// and the first kFailuresKept failures with their messages.
+  uint64_t failures_seen = 0;
+  std::unordered_map<TileId, bool, TileIdHash> failed_tiles;
+  std::vector<LoadFailure> first_failures;
+  /// Wall time from the first frame to the last, against the path's own length: the flight
+  /// ran slower than real time when frames took longer than 1/fps.
+  double wall_s = 0;
+  size_t late_frames = 0;  ///< frames shown more than a frame interval after their time
+
+  /// Notes the frame's failed loads, and the uploads of tiles that had failed before.
+  void noteLoads(const FrameUpdate& update) {
+    for (const LoadFailure& failure : update.failures) {
+      ++failures_seen;
+      failed_tiles.try_emplace(failure.id, false).first->second = false;
+      if (first_failures.size() < kFailuresKept) first_failures.push_back(failure);
+    }
+    if (failed_tiles.empty()) return;
+    for (const auto& tile : update.uploads)
+      if (auto it = failed_tiles.find(tile->id); it != failed_tiles.end()) it->second = true;
+  }
 
   /// Records frame `k`, seen `now_s` after `start`.
   void record(uint64_t k, double now_s, Clock::time_point start, const View& view,
-              const FrameReport& r, double frame_render_ms) {
+              const FrameReport& r, double frame_render_ms, double fps) {
     last = r;
     update_ms.push_back(r.update_ms);
+    wall_s = now_s;
+    late_frames += now_s > double(k + 1) / fps;
     ++frames;
     frames_full_detail += r.coverage_desired >= 1.0;
     if (startup_ms < 0 && r.fully_covered) startup_ms = now_s * 1000;
@@ -339,7 +399,8 @@ Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStream
     } else {
       streamer.acknowledge(acceptEverything(update));  // no GPU: a renderer of infinite room
     }
-    log.record(k, now_s, start, view, update.report, frame_render_ms);
+    log.noteLoads(update);
+    log.record(k, now_s, start, view, update.report, frame_render_ms, args.fps);
     if (gpu) TESSERA_TRY(captureFlightPictures(args, setup, *gpu, view, k, t_s, log));
   }
   return {};
@@ -392,6 +453,19 @@ nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rende
   return jump_list;
 }
 
+/// summary.json's failures: the first ones, each naming its tile and the problem.
+nlohmann::json flightFailures(const FlightLog& log) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const LoadFailure& failure : log.first_failures)
+    list.push_back({{"image", failure.id.image},
+                    {"level", failure.id.level},
+                    {"x", failure.id.x},
+                    {"y", failure.id.y},
+                    {"code", errorCodeName(failure.code)},
+                    {"message", failure.message}});
+  return list;
+}
+
 /// summary.json (docs/fly.md, "summary.json").
 nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
                              const StreamerOptions& options, const FlightLog& log,
@@ -416,6 +490,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
+      {"path_s", setup.path.durationS()},
+      {"wall_s", log.wall_s},
+      {"slowdown", setup.path.durationS() > 0 ? log.wall_s / setup.path.durationS() : 1.0},
+      {"late_frames_pct", frames ? 100.0 * log.late_frames / frames : 0},
       {"frames_full_detail_pct", frames ? 100.0 * log.frames_full_detail / frames : 0},
       {"startup_frames", log.startup_frames},
       {"open_ms", setup.open_ms},
@@ -433,7 +511,11 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"read_amplification",
        log.uploaded_payload_bytes ? double(last.bytes_read_total) / log.uploaded_payload_bytes : 0},
       {"tiles_loaded", last.tiles_loaded_total},
-      {"load_failures", last.load_failures_total},
+      {"load_failures", std::max(last.load_failures_total, log.failures_seen)},
+      {"failed_tiles", log.failed_tiles.size()},
+      {"failed_tiles_loaded_later", std::count_if(log.failed_tiles.begin(), log.failed_tiles.end(),
+                                                  [](const auto& tile) { return tile.second; })},
+      {"failures", flightFailures(log)},
       {"decode_ms_total", last.decode_ms_total},
       {"cache",
        {{"hits", cache.hits},
@@ -493,15 +575,27 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
 void printFlightSummary(const FlyArgs& args, const FlightSetup& setup, const FlightLog& log,
                         const nlohmann::json& summary) {
   const FrameReport& last = log.last;
+  const double first_full_ms = log.jumps[0].full_detail_ms;
   std::printf(
       "%s: %zu frames, %.1f%% at full detail, %.1f%% covered; update p50 %.3f ms p99 "
-      "%.3f ms; read %s (amplification %.2f); first full detail after %.1f ms; wrote "
-      "%s/frames.csv and summary.json\n",
+      "%.3f ms; read %s (amplification %.2f); %s; wrote %s/frames.csv and summary.json\n",
       args.archive.c_str(), log.frames, summary["frames_full_detail_pct"].get<double>(),
       summary["frames_fully_covered_pct"].get<double>(), percentile(log.update_ms, 50),
       percentile(log.update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
-      summary["read_amplification"].get<double>(), log.jumps[0].full_detail_ms,
+      summary["read_amplification"].get<double>(),
+      first_full_ms < 0 ? "never at full detail before the first jump"
+                        : fmt::format("first full detail after {:.1f} ms", first_full_ms).c_str(),
       args.out_dir.c_str());
+  if (const uint64_t failures = summary["load_failures"].get<uint64_t>(); failures > 0)
+    std::printf("FAILED: %llu loads of %zu tiles failed (%lld loaded on a later try)\n",
+                (unsigned long long)failures, log.failed_tiles.size(),
+                (long long)summary["failed_tiles_loaded_later"].get<int64_t>());
+  if (const double slowdown = summary["slowdown"].get<double>(); slowdown > kSlowdownNoted)
+    std::printf(
+        "slower than real time: the %.1f-s path took %.1f s (%.0f%% of frames late); times "
+        "to full detail are wall-clock times\n",
+        summary["path_s"].get<double>(), summary["wall_s"].get<double>(),
+        summary["late_frames_pct"].get<double>());
   if (setup.link)
     std::printf(
         "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
@@ -526,8 +620,9 @@ Result<void> startFramesCsv(const FlyArgs& args) {
   return {};
 }
 
-/// runFly after the archive is open: fly, then write what the flight recorded.
-Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
+/// runFly after the archive is open: fly, then write what the flight recorded. Returns the
+/// summary (summary.json).
+Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) {
   const StreamerOptions options = flightStreamerOptions(args, setup);
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
   if (!streamer) return forwardError(streamer);
@@ -574,7 +669,7 @@ Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
     std::printf("%s\n", summary.dump(2).c_str());
   else if (!args.quiet)
     printFlightSummary(args, setup, log, summary);
-  return {};
+  return summary;
 }
 
 }  // namespace
@@ -582,9 +677,20 @@ Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
 int runFly(const FlyArgs& args) {
   Result<FlightSetup> setup = setUpFlight(args);
   if (!setup) return reportError(setup.error());
-  Result<void> flown = runFlight(args, *setup);
+  Result<nlohmann::json> flown = runFlight(args, *setup);
   if (!flown) return reportError(flown.error());
-  return kExitOk;
+  const nlohmann::json& summary = *flown;
+  const uint64_t failures = summary["load_failures"].get<uint64_t>();
+  if (failures == 0) return kExitOk;
+  // The flight ran and wrote its outputs, but the picture missed tiles: not a success.
+  const nlohmann::json& first = summary["failures"];
+  const size_t tiles = summary["failed_tiles"].get<size_t>();
+  std::fprintf(stderr, "tessera: %s: %s%s%s\n", args.archive.c_str(),
+               tiles ? fmt::format("{} tiles failed to load ({} failures)", tiles, failures).c_str()
+                     : fmt::format("{} loads failed", failures).c_str(),
+               first.empty() ? "" : "; the first: ",
+               first.empty() ? "" : first[0]["message"].get<std::string>().c_str());
+  return kExitLoadFailures;
 }
 
 void registerFlyCommand(CLI::App& app, int& exit_code) {
