@@ -121,6 +121,10 @@ struct FrameReport {
   uint64_t parents_queued_total = 0;
   uint64_t parent_fallbacks_total = 0;
   uint64_t children_read_early_total = 0;
+  /// LoaderPriority::kAuto: times the normal-priority helpers began loading because the
+  /// idle-priority loader threads got no core, and the batches they loaded.
+  uint64_t loader_rescues_total = 0;
+  uint64_t rescued_batches_total = 0;
 
   // Adaptive scheduling (StreamerOptions::adaptive; Marvie & Bouatouch, part III).
   bool adaptive = false;    ///< the adaptive policy chose this frame's requests
@@ -212,16 +216,31 @@ struct AdaptiveOptions {
   std::function<std::chrono::steady_clock::time_point()> clock;
 };
 
+/// How loader threads share the CPU with the render thread and the rest of the machine
+/// (docs/runtime.md, "Loader priority").
+enum class LoaderPriority : uint8_t {
+  /// The default: loader threads under SCHED_IDLE, which give way at once to any thread of
+  /// normal priority, the render thread first; and as many helper threads of normal priority
+  /// as cores (at most the loader threads), which sleep until ready work has waited 16 ms with
+  /// no idle-priority thread taking any, and then load until nothing is ready. On a free
+  /// machine the helpers never run; when other programs keep every core busy, where idle
+  /// threads would starve, the helpers load at their fair share of the cores.
+  kAuto,
+  /// Every loader thread under SCHED_IDLE, no helpers: a decode never delays a normal thread,
+  /// and nothing loads while other threads keep every core busy.
+  kIdle,
+  /// Every loader thread at niceness 5.
+  kNice,
+};
+
 /// Everything `TileStreamer::create` can set.
 struct StreamerOptions {
   size_t cache_budget_bytes = size_t(512) << 20;
   bool viewer_shift_eviction = true;  ///< else LRU
   uint32_t loader_threads = 0;        ///< 0 = all cores
-  /// Loader threads run under SCHED_IDLE: any thread of normal priority, the render thread
-  /// first, preempts a decode at once, so a frame never waits for one. Set false in a program
-  /// whose other threads keep every core busy, where idle-priority loaders would starve; they
-  /// then run at niceness 5 (docs/runtime.md, "Loader pool").
-  bool loader_idle_priority = true;
+  /// The loader threads' scheduling (LoaderPriority): by default idle-priority threads, so a
+  /// frame never waits for a decode, with normal-priority help when they starve.
+  LoaderPriority loader_priority = LoaderPriority::kAuto;
   /// Tile buffers kept idle for the next decodes: those of evicted tiles, and fresh ones the
   /// loaders fault in while they have nothing to do (only into room the cache budget still
   /// has), so the tiles after a jump skip the page faults of fresh memory (docs/runtime.md).

@@ -120,7 +120,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
       options.viewer_shift_eviction ? makeViewerShiftPolicy() : makeLruPolicy());
   detail::LoaderOptions loader_options;
   loader_options.threads = options.loader_threads;
-  loader_options.idle_priority = options.loader_idle_priority;
+  loader_options.priority = options.loader_priority;
   loader_options.recycled_bytes = options.recycled_buffer_bytes;
   loader_options.batch_gap_bytes = options.batch_gap_bytes;
   loader_options.merge_gap_bytes = options.merge_gap_bytes;
@@ -270,6 +270,8 @@ void TileStreamer::Impl::reportLoader(FrameReport& report) const {
   report.parents_queued_total = stats.parents_queued;
   report.parent_fallbacks_total = stats.parent_fallbacks;
   report.children_read_early_total = stats.children_read_early;
+  report.loader_rescues_total = stats.rescues;
+  report.rescued_batches_total = stats.rescued_batches;
 }
 
 const FrameUpdate& TileStreamer::update(const View& view) {

@@ -236,7 +236,9 @@ StreamerOptions flightStreamerOptions(const FlyArgs& args, const FlightSetup& se
   if (args.merge_gap_kib) options.merge_gap_bytes = *args.merge_gap_kib << 10;
   if (!setup.remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
     options.read_ahead_bytes = args.read_ahead_kib << 10;
-  options.loader_idle_priority = args.loader_priority == "idle";
+  options.loader_priority = args.loader_priority == "idle"   ? LoaderPriority::kIdle
+                            : args.loader_priority == "nice" ? LoaderPriority::kNice
+                                                             : LoaderPriority::kAuto;
   options.adaptive.enabled = setup.adaptive;
   options.adaptive.still_after_s = args.still_after_s;
   if (args.batch_gap_kib) options.batch_gap_bytes = *args.batch_gap_kib << 10;
@@ -533,7 +535,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"reads_cancelled", last.reads_cancelled_total},
       {"parents_queued", last.parents_queued_total},
       {"parent_fallbacks", last.parent_fallbacks_total},
-      {"children_read_early", last.children_read_early_total}};
+      {"children_read_early", last.children_read_early_total},
+      {"loader_priority", args.loader_priority},
+      {"loader_rescues", last.loader_rescues_total},
+      {"rescued_batches", last.rescued_batches_total}};
   if (setup.adaptive) summary["still_after_s"] = args.still_after_s;
   return summary;
 }
@@ -720,8 +725,9 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
                   "Most texel MiB uploaded per frame (0 = no byte limit)")
       ->capture_default_str();
   cmd->add_option("--loader-priority", args->loader_priority,
-                  "idle (SCHED_IDLE, the default) or nice (niceness 5)")
-      ->check(CLI::IsMember({"idle", "nice"}))
+                  "auto (SCHED_IDLE, with normal-priority helpers while those starve), idle "
+                  "(SCHED_IDLE only) or nice (niceness 5); docs/runtime.md")
+      ->check(CLI::IsMember({"auto", "idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
                   "Reads of tiles closer than this in the file are merged into one (default: 16 "

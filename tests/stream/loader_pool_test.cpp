@@ -3,10 +3,12 @@
 // ordering below is forced, not timed.
 #include "stream/loader_pool.h"
 
+#include <pthread.h>
 #include <sched.h>
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <filesystem>
 #include <future>
@@ -360,21 +362,134 @@ std::pair<int, int> idleAndNiceThreads() {
   return {idle, nice};
 }
 
-TEST_F(LoaderPoolTest, WorkersRunAtIdlePriorityOrNicenessFiveWhenAsked) {
+TEST_F(LoaderPoolTest, WorkersRunAtIdlePriorityOrNicenessFiveAsAsked) {
   const auto [idle_before, nice_before] = idleAndNiceThreads();
-  for (bool idle_priority : {true, false}) {
-    SCOPED_TRACE(idle_priority ? "idle" : "nice");
+  struct Case {
+    LoaderPriority priority;
+    int idle;  ///< workers under SCHED_IDLE, of two
+    int nice;  ///< workers at niceness 5
+  };
+  for (const Case& c : {Case{LoaderPriority::kAuto, 2, 0}, Case{LoaderPriority::kIdle, 2, 0},
+                        Case{LoaderPriority::kNice, 0, 2}}) {
+    SCOPED_TRACE(int(c.priority));
     LoaderOptions options;
-    options.threads = 1;
-    options.idle_priority = idle_priority;
+    options.threads = 2;
+    options.priority = c.priority;
     LoaderPool& pool = start(options);
-    holdWorkerOn(pool, encodedTiles(0).at(0));  // the worker has set its priority by now
+    // Two tiles, one per worker (a batch takes at most its share of the queue: none here):
+    // both workers have set their priority once both reads block.
+    const std::vector<TileId> tiles = encodedTiles(0);
+    ASSERT_GE(tiles.size(), 2u);
+    source_->closeGate();
+    pool.setWanted(requestsFor({tiles[0], tiles[tiles.size() - 1]}));
+    ASSERT_TRUE(source_->waitUntilBlocked(2)) << "the workers never reached their reads";
     const auto [idle, nice] = idleAndNiceThreads();
-    EXPECT_EQ(idle - idle_before, idle_priority ? 1 : 0);
-    EXPECT_EQ(nice - nice_before, idle_priority ? 0 : 1);
+    EXPECT_EQ(idle - idle_before, c.idle);
+    EXPECT_EQ(nice - nice_before, c.nice);
     source_->openGate();
     pool_.reset();
   }
+}
+
+/// Threads of normal priority spinning on every core, one pinned to each, for as long as the
+/// object lives: the machine as ordinary busy processes (a compile) leave it.
+class BusyCores {
+ public:
+  BusyCores() {
+    const unsigned cores = std::max(1u, std::thread::hardware_concurrency());
+    for (unsigned core = 0; core < cores; ++core)
+      threads_.emplace_back([this, core] {
+        cpu_set_t set;
+        CPU_ZERO(&set);
+        CPU_SET(core, &set);
+        ::pthread_setaffinity_np(::pthread_self(), sizeof set, &set);
+        ++spinning_;
+        while (!stop_.load(std::memory_order_relaxed)) {
+        }
+      });
+    while (spinning_.load() < cores) std::this_thread::yield();
+  }
+  ~BusyCores() {
+    stop_ = true;
+    for (std::thread& thread : threads_) thread.join();
+  }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::atomic<unsigned> spinning_{0};
+  std::vector<std::thread> threads_;
+};
+
+/// Waits for the pool to finish its work, at most `seconds`; false if it did not.
+bool waitIdleFor(LoaderPool& pool, double seconds) {
+  auto done = std::async(std::launch::async, [&pool] { pool.waitIdle(); });
+  return done.wait_for(std::chrono::duration<double>(seconds)) == std::future_status::ready;
+}
+
+TEST_F(LoaderPoolTest, HelpersLoadWhileEveryCoreIsBusy) {
+  // Under SCHED_IDLE alone nothing would load while the cores spin; the helpers see the idle
+  // workers wait for a core and load at their fair share.
+  LoaderOptions options;
+  options.threads = 2;
+  options.priority = LoaderPriority::kAuto;
+  LoaderPool& pool = start(options);
+  const std::vector<TileId> tiles = test::allTiles(*archive_);
+  {
+    BusyCores busy;
+    pool.setWanted(requestsFor(tiles));
+    ASSERT_TRUE(waitIdleFor(pool, 120)) << "the loads starved";
+    EXPECT_GE(pool.stats().rescues, 1u);
+    EXPECT_GE(pool.stats().rescued_batches, 1u);
+  }
+  for (const TileId& id : tiles) EXPECT_TRUE(cache_.contains(id));
+  expectCachedTilesAreClean();
+  std::unordered_map<TileId, int, TileIdHash> delivered;
+  for (const LoadEvent& event : drain(pool)) {
+    EXPECT_TRUE(event.ok) << event.error;
+    ++delivered[event.id];
+  }
+  EXPECT_EQ(delivered.size(), tiles.size());
+  for (const auto& [id, count] : delivered) EXPECT_EQ(count, 1);
+}
+
+TEST_F(LoaderPoolTest, AStarvingWorkersTilesAreLoadedAgainAndDeliveredOnce) {
+  // The idle worker takes its batch on a free machine and starves in the middle of it: the
+  // helpers load those tiles a second time, and each tile is delivered once. Whether the
+  // worker gets a slice before its tiles are old enough to load again is the scheduler's
+  // choice, so the scene is played until a tile was loaded twice (nearly always the first).
+  const std::vector<TileId> tiles = encodedTiles(0);
+  uint64_t loaded_twice = 0;
+  for (int attempt = 0; attempt < 10 && loaded_twice == 0; ++attempt) {
+    TileCache cache(size_t(64) << 20, makeLruPolicy());
+    LoaderOptions options;
+    options.threads = 1;
+    options.priority = LoaderPriority::kAuto;
+    LoaderPool pool(archive_, cache, options);
+    source_->closeGate();
+    pool.setWanted(requestsFor(tiles));
+    ASSERT_TRUE(source_->waitUntilBlocked(1)) << "the worker never reached its read";
+    {
+      BusyCores busy;
+      source_->openGate();
+      ASSERT_TRUE(waitIdleFor(pool, 120)) << "the loads starved";
+      loaded_twice = pool.stats().tiles_loaded_twice;
+    }
+    std::unordered_map<TileId, int, TileIdHash> delivered;
+    for (const LoadEvent& event : drain(pool)) {
+      EXPECT_TRUE(event.ok) << event.error;
+      ++delivered[event.id];
+    }
+    EXPECT_EQ(delivered.size(), tiles.size());
+    for (const auto& [id, count] : delivered) EXPECT_EQ(count, 1) << id.x << "," << id.y;
+    EXPECT_EQ(pool.stats().tiles_loaded, tiles.size());
+    for (const TileId& id : tiles) {
+      auto cached = cache.find(id);
+      auto reference = clean_->readTile(id);
+      ASSERT_TRUE(cached && reference);
+      EXPECT_TRUE(cached->texels.texels == reference->texels) << id.x << "," << id.y;
+    }
+  }
+  EXPECT_GE(loaded_twice, 1u) << "no attempt starved the worker long enough";
 }
 
 TEST_F(LoaderPoolTest, IdleWorkersPrewarmBuffersUpToTheCapAndWithinTheCacheBudget) {
