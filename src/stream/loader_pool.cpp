@@ -174,6 +174,7 @@ LoaderPool::~LoaderPool() {
   }
   work_ready_.notify_all();
   helpers_wake_.notify_all();
+  rescue_over_.notify_all();
   for (std::thread& worker : workers_) worker.join();
 }
 
@@ -404,7 +405,7 @@ void LoaderPool::run(uint32_t worker_index) {
     // While the helpers rescue, a starving worker would only hold tiles they must then load
     // again: it waits for the rescue to end.
     if (rescuing_) {
-      work_ready_.wait(lock);
+      rescue_over_.wait(lock);
       continue;
     }
     batch.idle_worker = idle ? int32_t(worker_index) : -1;
@@ -485,7 +486,7 @@ void LoaderPool::endRescueLocked() {
   rescuing_ = false;
   check_from_ = Clock::now();
   sampleIdleWaitLocked();
-  work_ready_.notify_all();  // the idle workers take work again
+  rescue_over_.notify_all();  // the idle workers take work again
 }
 
 void LoaderPool::sampleIdleWaitLocked() {
@@ -531,9 +532,11 @@ bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now) {
       continue;
     if (best && held.priority >= best_priority) continue;
     if (any_dependent_ && needsParent(id) && in_flight_.count(Archive::parentTile(id))) continue;
+    // A holder that sleeps waits on a read, or on the pool's lock that a starving thread
+    // holds: the latter is told by its age.
     int8_t& state = runnable[held.worker];
     if (state < 0) state = threadRunnable(idle_tids_[held.worker]) ? 1 : 0;
-    if (state == 0) continue;
+    if (state == 0 && held.taken_at + 4 * kStarvedAfter > now) continue;
     best = &id;
     best_priority = held.priority;
   }

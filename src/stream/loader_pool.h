@@ -273,8 +273,11 @@ class LoaderPool {
   std::condition_variable idle_;
   // LoaderPriority::kAuto's rescue (docs/runtime.md, "Loader priority").
   std::condition_variable helpers_wake_;  ///< the helpers wait on it, not on work_ready_
-  bool rescuing_ = false;                 ///< the helpers load; the idle workers take nothing
-  bool helpers_asleep_ = false;           ///< a helper waits for work (setWanted wakes it)
+  /// The idle workers wait on it during a rescue: woken every frame, a starving thread would
+  /// take the lock and, preempted holding it, stall the helpers and the render thread.
+  std::condition_variable rescue_over_;
+  bool rescuing_ = false;        ///< the helpers load; the idle workers take nothing
+  bool helpers_asleep_ = false;  ///< a helper waits for work (setWanted wakes it)
   std::chrono::steady_clock::time_point rescue_began_{};
   std::chrono::steady_clock::time_point check_from_{};    ///< the current window's start
   std::chrono::steady_clock::time_point idle_took_at_{};  ///< an idle worker's last batch
