@@ -358,16 +358,22 @@ Result<void> captureFlightPictures(const FlyArgs& args, const FlightSetup& setup
   if (!reference) return forwardError(reference);
   Result<PictureDifference> difference = comparePictures(picture, *reference);
   if (!difference) return forwardError(difference);
-  log.jumps.back().rest_psnr_db = difference->psnr_db;
+  // Identical pictures have an infinite PSNR: shown, stored and compared as kIdenticalPsnrDb.
+  const double psnr_db = std::min(difference->psnr_db, kIdenticalPsnrDb);
+  log.jumps.back().rest_psnr_db = psnr_db;
   log.jumps.back().rest_max_abs = difference->max_abs;
-  TESSERA_TRY(
-      saveFlightPicture(args, log, picture, fmt::format("rest-{}.png", index),
-                        fmt::format("at rest before jump {}: {:.1f} dB against the CPU reference",
-                                    index + 1, std::min(difference->psnr_db, 99.0))));
+  const std::string when = next_t > setup.path.durationS()
+                               ? std::string("at the end of the flight")
+                               : fmt::format("before jump {}", index + 1);
+  TESSERA_TRY(saveFlightPicture(
+      args, log, picture, fmt::format("rest-{}.png", index),
+      fmt::format("At rest {}: {} against the CPU reference", when, formatPsnr(psnr_db))));
   Result<Picture> tinted = levelOverlay(picture, *setup.archive, view, reference_options.available);
   if (!tinted) return forwardError(tinted);
-  return saveFlightPicture(args, log, *tinted, fmt::format("rest-{}-levels.png", index),
-                           "the same, tinted by the level that draws each pixel");
+  TESSERA_TRY(saveFlightPicture(args, log, *tinted, fmt::format("rest-{}-levels.png", index),
+                                "The same, each pixel tinted by the level that draws it"));
+  if (args.report) log.report_pictures.back().levels = true;
+  return {};
 }
 
 /// Flies the path in real time at args.fps, one streamer update (and with `gpu`, one apply and
@@ -440,9 +446,8 @@ nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rende
         {"clip_region_ms",
          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}};
     if (rendered) {
-      entry["rest_psnr_db"] = j.rest_psnr_db < 0           ? nlohmann::json()
-                              : std::isinf(j.rest_psnr_db) ? nlohmann::json(999.0)
-                                                           : nlohmann::json(j.rest_psnr_db);
+      entry["rest_psnr_db"] =
+          j.rest_psnr_db < 0 ? nlohmann::json() : nlohmann::json(j.rest_psnr_db);
       entry["rest_max_abs"] = j.rest_max_abs;
     }
     if (args.decode_bound) {
@@ -453,6 +458,16 @@ nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rende
     jump_list.push_back(std::move(entry));
   }
   return jump_list;
+}
+
+/// The median over the jumps (the start included) of the time to full detail, of those that
+/// got there; null when none did.
+nlohmann::json medianFullDetailMs(const FlightLog& log) {
+  std::vector<double> times;
+  for (const JumpTiming& jump : log.jumps)
+    if (jump.full_detail_ms >= 0) times.push_back(jump.full_detail_ms);
+  if (times.empty()) return nullptr;
+  return percentile(times, 50);
 }
 
 /// summary.json's failures: the first ones, each naming its tile and the problem.
@@ -479,6 +494,7 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"archive", args.archive},
       {"path", setup.path.name},
       {"codec", codecName(setup.info.default_codec)},
+      {"levels", setup.info.level_count},
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
@@ -505,6 +521,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
            ? 100.0 * log.frames_covered / double(frames - log.startup_frames)
            : 0},
       {"update_ms", flightPercentiles(log.update_ms)},
+      {"full_detail_ms_median", medianFullDetailMs(log)},
+      {"jumps_at_full_detail",
+       std::count_if(log.jumps.begin(), log.jumps.end(),
+                     [](const JumpTiming& jump) { return jump.full_detail_ms >= 0; })},
       {"jumps", std::move(jumps)},
       {"bytes_read", last.bytes_read_total},
       {"reads", last.reads_total},
@@ -574,6 +594,11 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
   summary["gl"] = gpu.description();
   summary["render_ms"] = flightPercentiles(log.render_ms);
   summary["gpu_ms"] = flightPercentiles(gpu_ms);
+  nlohmann::json psnr_min;  // null until a picture at rest was compared
+  for (const JumpTiming& jump : log.jumps)
+    if (jump.rest_psnr_db >= 0 && (psnr_min.is_null() || jump.rest_psnr_db < psnr_min))
+      psnr_min = jump.rest_psnr_db;
+  summary["rest_psnr_db_min"] = psnr_min;
 }
 
 /// The one or two lines `tessera fly` prints unless --json or --quiet.
