@@ -17,9 +17,11 @@
 
 #include "archive_writer.h"
 #include "band_reader.h"
+#include "build_budget.h"
 #include "output/output_file.h"
 #include "pyramid_builder.h"
 #include "tile_cutter.h"
+#include "uninitialized_buffer.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
 #include "codecs/encode.h"
@@ -32,9 +34,6 @@ using namespace detail;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-/// Each worker batches payloads into a chunk and writes it to the spool in one call.
-constexpr size_t kSpoolChunkBytes = 4u << 20;
 
 /// Recycled tile buffers. Their count bounds the tiles in flight between the cutter and the
 /// encoders (the builder's memory bound), and recycling avoids a fresh mmap per tile.
@@ -132,9 +131,9 @@ TileClass classifyTile(const uint8_t* texels, uint32_t side, uint32_t channels,
   return has_alpha && colour == 0 ? TileClass::kEmpty : TileClass::kUniform;
 }
 
-void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
-               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
-               const ParentTexels* parent = nullptr) {
+void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
+                      const uint8_t* texels, uint32_t side, uint32_t channels,
+                      const std::string& what, const ParentTexels* parent) {
   uint32_t colour = 0;
   switch (classifyTile(texels, side, channels, &colour)) {
     case TileClass::kEmpty:
@@ -173,6 +172,20 @@ void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
   }
 }
 
+// An exception (std::bad_alloc in a codec) must not leave the worker thread: it would end the
+// process, and the job's tile buffer would never return to the pool. It fails the build.
+void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
+               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
+               const ParentTexels* parent = nullptr) {
+  try {
+    encodeJobOrThrow(context, worker, entry, texels, side, channels, what, parent);
+  } catch (const std::bad_alloc&) {
+    context.recordError({ErrorCode::kTooLarge, what + ": out of memory while encoding"});
+  } catch (const std::exception& e) {
+    context.recordError({ErrorCode::kInternal, what + ": " + e.what()});
+  }
+}
+
 /// Summary statistics of an image, from its coarsest level (one tile: cheap, and the mean is
 /// exact up to rounding of the box filter).
 nlohmann::json coarsestLevelStatistics(const LevelRows& rows) {
@@ -207,6 +220,7 @@ class EncodingSink final : public TileSink {
         source_name_(source_name) {}
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    growEntries(level, tile_row);
     if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
     if (codecNeedsParent(context_.codec)) return holdRow(level, tile_row, rows);
     const uint32_t side = info_.storedTileSidePx();
@@ -228,6 +242,16 @@ class EncodingSink final : public TileSink {
   nlohmann::json statistics;
 
  private:
+  // A level's entries are reserved whole and come into being a tile row at a time, as the rows
+  // arrive: a reservation costs no resident memory, and within it a vector never moves, so
+  // the encoders' entry pointers stay valid.
+  void growEntries(uint32_t level, uint32_t tile_row) {
+    std::vector<SpoolEntry>& entries = spooled_.entries[level];
+    const size_t needed = size_t(tile_row + 1) * info_.tilesX(level);
+    TESSERA_CHECK(needed <= entries.capacity()) << "tile row past the level's reservation";
+    if (entries.size() < needed) entries.resize(needed);
+  }
+
   // Codecs that code a tile against its parent (ptm) need the parent's tile row, which the
   // streaming pyramid cuts after both of its child rows (or, without borders, between them).
   // So a row's raw tiles are held until its parent row exists, and a parent row until both
@@ -311,29 +335,6 @@ class EncodingSink final : public TileSink {
   TileBufferPool& buffers_;
   const std::string& source_name_;
 };
-
-Result<void> validateOptions(const BuildOptions& options) {
-  if (options.inputs.empty()) return fail(ErrorCode::kInvalidArgument, "no input given");
-  if (options.output.empty()) return fail(ErrorCode::kInvalidArgument, "no output path given");
-  if (options.quality < 1 || options.quality > 100)
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("quality {} out of 1..100", options.quality));
-  if (!findEncoder(options.codec))
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("codec {} is not available in this build", codecName(options.codec)));
-  if (options.codec == Codec::kPtm && options.srgb_downsample)
-    return fail(ErrorCode::kInvalidArgument,
-                "codec ptm stores the integer floor-average pyramid of Marvie & Bouatouch; it "
-                "cannot average in linear light (--srgb)");
-  if (options.image_names.size() > options.inputs.size())
-    return fail(ErrorCode::kInvalidArgument, "more image names than inputs");
-  for (const std::string& input : options.inputs) {
-    if (std::filesystem::path(input).lexically_normal() ==
-        std::filesystem::path(options.output).lexically_normal())
-      return fail(ErrorCode::kInvalidArgument, input + ": output would overwrite the input");
-  }
-  return {};
-}
 
 std::string displayName(const std::string& input) {
   if (input.rfind("synthetic:", 0) == 0) return input;
@@ -428,14 +429,12 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, co
   spooled.info = info;
   spooled.entries.resize(info.level_count);
   for (uint32_t l = 0; l < info.level_count; ++l)
-    spooled.entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
+    spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
   EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, options.inputs[index]);
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
-  const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
-  const uint32_t band_rows =
-      natural >= info.tile_size_px ? std::min(natural, 4 * info.tile_size_px) : info.tile_size_px;
+  const uint32_t band_rows = bandRowsFor(info, reader.info());
   const size_t row_bytes = size_t(info.width_px) * info.channels;
-  std::vector<uint8_t> band(row_bytes * std::min(band_rows, info.height_px));
+  UninitializedBuffer band(row_bytes * band_rows);
   PoolDrain drain{stage.pool};
   for (uint32_t y = 0; y < info.height_px;) {
     if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
@@ -447,6 +446,9 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, co
     stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
   }
   TESSERA_TRY(pyramid.finish());
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    TESSERA_CHECK(spooled.entries[l].size() == size_t(info.tilesX(l)) * info.tilesY(l))
+        << "level " << l << " has tile rows the pyramid never announced";
   stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
   return imageMetadata(info, options.inputs[index], reader.info(), sink.statistics);
 }
@@ -479,7 +481,9 @@ Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& 
                                     uint32_t threads, BuildProgressClock& progress,
                                     const std::atomic<bool>* cancel) {
   nlohmann::json image_metadata = nlohmann::json::array();
-  WorkerPool pool(threads, 2 * threads);
+  TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<WorkerPool> started,
+                           WorkerPool::start(threads, 2 * threads));
+  WorkerPool& pool = *started;
   size_t max_tile_bytes = 0;
   for (const ImageInfo& info : sources.infos)
     max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
@@ -499,19 +503,53 @@ Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& 
   return image_metadata;
 }
 
+/// What the build was checked to need before it started.
+struct BuildBudget {
+  MemoryEstimate memory;
+  uint64_t memory_limit_bytes = 0;
+  std::string spool_dir;  ///< where the spool goes: --spool-dir or the output's directory
+};
+
+/// The memory the sources' claimed sizes need, against the limit: before any row or tile is
+/// allocated.
+Result<BuildBudget> checkBudget(const BuildOptions& options, const OpenedSources& sources,
+                                uint32_t threads) {
+  BuildBudget budget;
+  std::vector<const SourceInfo*> source_infos;
+  for (const auto& reader : sources.readers) source_infos.push_back(&reader->info());
+  budget.memory = estimateBuildMemory(sources.infos, source_infos, options.codec, threads);
+  budget.memory_limit_bytes =
+      options.memory_limit_bytes ? options.memory_limit_bytes : defaultBuildMemoryLimitBytes();
+  const std::string origin = options.memory_limit_bytes
+                                 ? "--memory-limit"
+                                 : fmt::format("the default: half of the {} this machine has",
+                                               formatByteCount(usableMemoryBytes()));
+  TESSERA_TRY(checkMemoryBudget(budget.memory, budget.memory_limit_bytes, origin, sources.infos,
+                                options.inputs));
+  budget.spool_dir = options.spool_dir.empty() ? directoryOf(options.output) : options.spool_dir;
+  return budget;
+}
+
 }  // namespace
 
 Result<BuildReport> buildArchive(const BuildOptions& options,
                                  const std::function<void(const BuildProgress&)>& on_progress,
                                  const std::atomic<bool>* cancel) {
   const auto start = Clock::now();
-  TESSERA_TRY(validateOptions(options));
+  TESSERA_TRY(validateBuildOptions(options));
+  // An output that cannot be replaced fails before the inputs are read.
+  TESSERA_TRY(checkOutputPath(options.output));
   TESSERA_ASSIGN_OR_RETURN(OpenedSources sources, openSources(options));
-  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
-  TESSERA_ASSIGN_OR_RETURN(TempFile spool, TempFile::create(options.output));
-
-  uint32_t threads =
+  const uint32_t threads =
       options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  TESSERA_ASSIGN_OR_RETURN(const BuildBudget budget, checkBudget(options, sources, threads));
+  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
+  TESSERA_ASSIGN_OR_RETURN(TempFile spool,
+                           TempFile::createScratch(budget.spool_dir, options.output + ": spool"));
+  // The files exist but are still invisible: a build that cannot fit leaves nothing behind.
+  TESSERA_TRY(checkFreeSpace(options.output, directoryOf(options.output), budget.spool_dir,
+                             estimateArchiveBytes(sources.infos, options.codec, options.quality)));
+
   EncodeContext context;
   context.spool = &spool;
   context.codec = options.codec;
@@ -543,6 +581,8 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
   report.megapixels_per_s = sources.pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
   report.images = sources.infos;
+  report.memory_estimate_bytes = budget.memory.totalBytes();
+  report.memory_limit_bytes = budget.memory_limit_bytes;
   if (on_progress)
     on_progress(
         {sources.pixels_total, sources.pixels_total, report.tiles_encoded, report.elapsed_s});

@@ -170,6 +170,13 @@ Result<void> JpegReader::open() {
   // An MCU row: what libjpeg decodes at once for a baseline image.
   info_.natural_band_rows =
       std::min<uint32_t>(info_.height_px, uint32_t(std::max(1, cinfo_.max_v_samp_factor)) * 8);
+  // A progressive image's coefficients are held whole (2 bytes a sample, capped above); a
+  // baseline decoder holds an MCU row per component and its upsampling context.
+  info_.buffer_bytes = jpeg_has_multiple_scans(&cinfo_)
+                           ? samples * 2
+                           : 4 * uint64_t(info_.natural_band_rows) * cinfo_.output_width *
+                                 uint64_t(cinfo_.num_components);
+  info_.buffer_bytes += uint64_t(1) << 20;
   info_.format = "jpeg";
   info_.metadata["jpeg"] = {{"progressive", jpeg_has_multiple_scans(&cinfo_) != 0}};
   return {};

@@ -495,6 +495,10 @@ class SyntheticReader final : public BandReader {
     info_.height_px = spec.height_px;
     info_.channels = spec.channels;
     info_.natural_band_rows = std::min(kBandRows, spec.height_px);
+    // The generator's per-row fields and slopes (six of each), the grid row it computes and
+    // its lattice: a few dozen ints per grid column.
+    info_.buffer_bytes =
+        uint64_t(32) * (spec.width_px / kGridPx + 2) * sizeof(int32_t) + (uint64_t(1) << 20);
     info_.format = "synthetic";
     info_.metadata["synthetic"] = {{"source", name}, {"seed", spec.seed}};
   }

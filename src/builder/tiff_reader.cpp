@@ -27,6 +27,7 @@
 
 #include "band_reader.h"
 #include "file_reader.h"
+#include "uninitialized_buffer.h"
 
 namespace tessera::detail {
 namespace {
@@ -227,10 +228,10 @@ class TiffReader final : public BandReader {
   uint32_t next_row_ = 0;
   // Decoded rows [band_first_row_, band_first_row_ + band_rows_) in output channels, for
   // layouts that decode more rows at once than the caller may ask for.
-  std::vector<uint8_t> band_;
+  UninitializedBuffer band_;
   uint32_t band_first_row_ = 0;
   uint32_t band_rows_ = 0;
-  std::vector<uint8_t> unit_;  // one scanline, strip plane or tile as decoded
+  UninitializedBuffer unit_;  // one scanline, strip plane or tile as decoded
 };
 
 Unexpected TiffReader::tiffFailure(ErrorCode code, const std::string& what) {
@@ -276,6 +277,9 @@ Result<void> TiffReader::open() {
   info_.metadata["tiff"] = std::move(tiff);
   TESSERA_TRY(readGeoreference());
   messages_->warnings.clear();
+  // The unit, the band it is spread into, and libtiff's raw strip or tile (at most the size of
+  // the decoded unit for these codecs, plus its own slack).
+  info_.buffer_bytes = 2 * unit_bytes_ + row_bytes * info_.natural_band_rows + (uint64_t(1) << 20);
   unit_.resize(unit_bytes_);
   return {};
 }

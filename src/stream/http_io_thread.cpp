@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "content_range.h"
 #include "http_source_impl.h"
 
 namespace tessera::detail {
@@ -20,47 +21,6 @@ std::string trim(std::string_view text) {
   while (begin < end && std::isspace(static_cast<unsigned char>(text[begin]))) ++begin;
   while (end > begin && std::isspace(static_cast<unsigned char>(text[end - 1]))) --end;
   return std::string(text.substr(begin, end - begin));
-}
-
-/// "bytes A-B/T" (T may be "*"): the range a 206 carries, or the size a 416 reports
-/// ("bytes */T", has_range false).
-struct ContentRange {
-  bool has_range = false;
-  uint64_t first = 0, last = 0;
-  bool has_total = false;
-  uint64_t total = 0;
-};
-
-// Decimal digits only, the whole text, within 64 bits (from_chars takes no sign or space for
-// an unsigned type).
-bool parseUint(std::string_view text, uint64_t& out) {
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return error == std::errc() && end == text.data() + text.size();
-}
-
-bool parseContentRange(const std::string& header, ContentRange& out) {
-  std::string_view text = header;
-  if (lowercase(std::string(text.substr(0, 6))) != "bytes ") return false;
-  text.remove_prefix(6);
-  const size_t slash = text.find('/');
-  if (slash == std::string_view::npos) return false;
-  std::string_view range = text.substr(0, slash), total = text.substr(slash + 1);
-  if (total == "*") {
-    out.has_total = false;
-  } else {
-    if (!parseUint(total, out.total)) return false;
-    out.has_total = true;
-  }
-  if (range == "*") {
-    out.has_range = false;
-    return out.has_total;
-  }
-  const size_t dash = range.find('-');
-  if (dash == std::string_view::npos) return false;
-  if (!parseUint(range.substr(0, dash), out.first) || !parseUint(range.substr(dash + 1), out.last))
-    return false;
-  out.has_range = out.first <= out.last;
-  return out.has_range;
 }
 
 /// Statuses worth another attempt: the server or a proxy may answer the next one.
@@ -449,7 +409,7 @@ bool HttpSource::finishUnsatisfiable(Transfer& transfer, const std::string& what
 std::chrono::milliseconds HttpSource::retryAfter(const Transfer& transfer) const {
   if (transfer.retry_after.empty()) return std::chrono::milliseconds(0);
   uint64_t seconds = 0;
-  if (parseUint(transfer.retry_after, seconds))
+  if (parseHttpUint(transfer.retry_after, seconds))
     return std::chrono::milliseconds(std::min<uint64_t>(seconds, 86400) * 1000);
   const time_t when = curl_getdate(transfer.retry_after.c_str(), nullptr);
   if (when < 0) return std::chrono::milliseconds(0);
