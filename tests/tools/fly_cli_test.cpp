@@ -174,6 +174,11 @@ TEST_F(FlyCli, ExitsFourNamingTheTileWhenTilesFailToLoad) {
   RunResult clean = fly(archive_, dir_ + "clean-out", {"--path", "pan", "--duration", "0.5"});
   EXPECT_EQ(clean.exit_code, 0) << clean.err;
   EXPECT_EQ(clean.out.find("FAILED"), std::string::npos) << clean.out;
+
+  // --help lists the code with the others.
+  RunResult help = run({"--help"});
+  EXPECT_EQ(help.exit_code, 0);
+  EXPECT_NE(help.out.find("4 fly or demo: tiles failed to load"), std::string::npos) << help.out;
 }
 
 TEST_F(FlyCli, EveryArchiveWithAFailedTileExitsNonZero) {
