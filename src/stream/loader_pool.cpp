@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 
 #include <fmt/format.h>
 
@@ -469,7 +470,13 @@ void LoaderPool::runHelper(uint32_t helper_index) {
       continue;
     }
     batch.idle_worker = -1;
-    if (takeBatchLocked(batch, now, false) || takeHostageLocked(batch, now)) {
+    // A starving worker's tiles were the best of the queue when it took them (the view's
+    // tiles, after a jump): they go before queued tiles of lower priority, else the view
+    // waits for the whole queue, or for the starving worker.
+    constexpr double kAny = std::numeric_limits<double>::infinity();
+    const double queue_best = queue_.empty() ? kAny : queue_.front().priority;
+    if (takeHostageLocked(batch, now, queue_best) || takeBatchLocked(batch, now, false) ||
+        takeHostageLocked(batch, now, kAny)) {
       ++stats_.rescued_batches;
       loadTakenBatch(lock, batch, scratch, read_ahead);
       continue;
@@ -520,7 +527,7 @@ bool LoaderPool::idleWorkersStarvedLocked(Clock::time_point now) {
          now - std::max(idle_took_at_, ready_since) >= kStarvedAfter;
 }
 
-bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now) {
+bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now, double up_to) {
   // The best tile an idle worker took more than kStarvedAfter ago and still holds, not being
   // loaded again already, while that worker waits for a core (a worker waiting on a read is
   // not starving, and its read is not made twice).
@@ -528,7 +535,8 @@ bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now) {
   double best_priority = 0;
   std::vector<int8_t> runnable(idle_tids_.size(), -1);
   for (const auto& [id, held] : idle_held_) {
-    if (held.taken_at + kStarvedAfter > now || duplicated_.count(id) || !wanted_.count(id))
+    if (held.taken_at + kStarvedAfter > now || held.priority > up_to || duplicated_.count(id) ||
+        !wanted_.count(id))
       continue;
     if (best && held.priority >= best_priority) continue;
     if (any_dependent_ && needsParent(id) && in_flight_.count(Archive::parentTile(id))) continue;

@@ -167,8 +167,9 @@ class LoaderPool {
   /// starts the next window. Under mutex_.
   bool idleWorkersStarvedLocked(std::chrono::steady_clock::time_point now);
   /// Takes, as a batch of its own, the best tile a starving idle worker has held for
-  /// kStarvedAfter, to load it a second time. Under mutex_.
-  bool takeHostageLocked(Batch& batch, std::chrono::steady_clock::time_point now);
+  /// kStarvedAfter, of priority `up_to` or better (lower), to load it a second time. Under
+  /// mutex_.
+  bool takeHostageLocked(Batch& batch, std::chrono::steady_clock::time_point now, double up_to);
   /// Whether a finished load of `id` counts: false for the later of a duplicated tile's two
   /// loads, which is dropped unseen. Under mutex_.
   bool claimLocked(const TileId& id);

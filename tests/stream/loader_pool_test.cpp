@@ -499,6 +499,44 @@ TEST_F(LoaderPoolTest, AStarvingWorkersTilesAreLoadedAgainAndDeliveredOnce) {
   EXPECT_GE(loaded_twice, 1u) << "no attempt starved the worker long enough";
 }
 
+TEST_F(LoaderPoolTest, AStarvingWorkersTilesGoBeforeTheRestOfTheQueue) {
+  // The idle worker took the best tile (the view's, after a jump) and starves holding it: the
+  // helper loads that tile again first, not after every other queued tile (the view stayed
+  // coarse until the queue was empty), nor when the starving worker gets a slice.
+  std::vector<TileId> tiles;
+  for (const TileId& id : test::allTiles(*archive_))
+    if (auto entry = archive_->tileEntry(id); entry && entry->kind == TileKind::kEncoded)
+      tiles.push_back(id);
+  ASSERT_GE(tiles.size(), 16u);
+  LoaderOptions options;
+  options.threads = 1;
+  options.priority = LoaderPriority::kAuto;
+  options.batch_gap_bytes = 0;  // one tile a batch: the worker holds the best tile only
+  options.max_merged_read_bytes = 1;
+  options.read_ahead_bytes = 0;
+  LoaderPool& pool = start(options);
+  source_->closeGate();
+  pool.setWanted(requestsFor(tiles));
+  ASSERT_TRUE(source_->waitUntilBlocked(1)) << "the worker never reached its read";
+  std::vector<LoadEvent> events;
+  {
+    BusyCores busy;
+    source_->openGate();
+    ASSERT_TRUE(waitIdleFor(pool, 120)) << "the loads starved";
+    events = drain(pool);
+  }
+  ASSERT_EQ(events.size(), tiles.size());
+  size_t best_at = events.size();
+  for (size_t i = 0; i < events.size(); ++i)
+    if (events[i].id == tiles[0]) best_at = i;
+  // Among the first (a worker that sleeps, perhaps on a lock, is trusted for 64 ms before its
+  // tile is loaded again: the helper may take a few queued tiles meanwhile); without the rule
+  // it came last.
+  EXPECT_LT(best_at, events.size() / 4)
+      << "the best tile arrived " << best_at + 1 << "th of " << events.size()
+      << "; rescued batches " << pool.stats().rescued_batches;
+}
+
 TEST_F(LoaderPoolTest, IdleWorkersPrewarmBuffersUpToTheCapAndWithinTheCacheBudget) {
   const size_t tile_bytes = info().storedTileBytes();
   LoaderOptions options;
