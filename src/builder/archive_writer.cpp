@@ -10,47 +10,11 @@
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/tile_order.h"
+#include "output/file_appender.h"
 
 namespace tessera::detail {
 
 namespace {
-
-constexpr size_t kWriteBufferBytes = 8u << 20;
-
-// Appends bytes at the end of the output through a large buffer, so thousands of small
-// payloads cost a few large writes.
-class Appender {
- public:
-  Appender(const TempFile& out, uint64_t start) : out_(out), end_(start), flushed_(start) {
-    buffer_.reserve(kWriteBufferBytes);
-  }
-  Result<uint64_t> append(std::span<const uint8_t> bytes) {
-    uint64_t offset = end_;
-    if (buffer_.size() + bytes.size() > kWriteBufferBytes) TESSERA_TRY(flush());
-    if (bytes.size() > kWriteBufferBytes) {
-      TESSERA_TRY(out_.pwrite(flushed_, bytes));
-      flushed_ += bytes.size();
-    } else {
-      buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
-    }
-    end_ += bytes.size();
-    return offset;
-  }
-  Result<void> flush() {
-    if (buffer_.empty()) return {};
-    TESSERA_TRY(out_.pwrite(flushed_, buffer_));
-    flushed_ += buffer_.size();
-    buffer_.clear();
-    return {};
-  }
-  uint64_t end() const { return end_; }
-
- private:
-  const TempFile& out_;
-  uint64_t end_;
-  uint64_t flushed_;
-  std::vector<uint8_t> buffer_;
-};
 
 struct PlacedBlock {
   BlockRef ref;
@@ -80,7 +44,7 @@ class HeaderRegion {
   explicit HeaderRegion(uint64_t root_bytes)
       : bytes_(kHeaderRegionBytes, 0), used_(kHeaderBytes + root_bytes) {}
   /// Places `block` in the region while it fits, else at the end of the file.
-  Result<void> place(PlacedBlock& block, Appender& appender) {
+  Result<void> place(PlacedBlock& block, FileAppender& appender) {
     if (block.bytes.empty()) return {};
     if (used_ + block.bytes.size() <= kHeaderRegionBytes) {
       block.ref.offset_bytes = used_;
@@ -122,7 +86,7 @@ std::vector<std::vector<TileEntry>> entriesOf(const SpooledImage& image) {
 /// copies, so the caller's spool offsets stay intact.
 Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
                                     std::span<const SpooledImage> images, TileOrder order,
-                                    Appender& appender) {
+                                    FileAppender& appender) {
   // pread, not a mapping: mapped spool pages count in the process's resident set, which would
   // then grow with the archive.
   std::vector<uint8_t> payload;
@@ -150,7 +114,7 @@ Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
 /// Writes the non-empty directory pages of one level and returns its page index (no bytes
 /// when every page is empty).
 Result<PlacedBlock> writeLevelPages(const ImageInfo& info, uint32_t level,
-                                    const std::vector<TileEntry>& entries, Appender& appender) {
+                                    const std::vector<TileEntry>& entries, FileAppender& appender) {
   uint32_t pages_x = pagesX(info, level), pages_y = pagesY(info, level);
   std::vector<PageRef> refs(size_t(pages_x) * pages_y);
   bool any_page = false;
@@ -187,7 +151,8 @@ Result<PlacedBlock> writeLevelPages(const ImageInfo& info, uint32_t level,
 
 /// Directory pages, coarse levels first like the payloads, and each level's page index.
 Result<WrittenDirectory> writeDirectoryPages(std::span<const SpooledImage> images,
-                                             const ArchiveEntries& entries, Appender& appender) {
+                                             const ArchiveEntries& entries,
+                                             FileAppender& appender) {
   WrittenDirectory directory;
   directory.records.resize(images.size());
   for (uint32_t i = 0; i < images.size(); ++i) {
@@ -245,7 +210,7 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     const nlohmann::json& metadata, const TempFile& out) {
   const std::string& name = out.finalPath();
-  Appender appender(out, kHeaderRegionBytes);
+  FileAppender appender(out, kHeaderRegionBytes);
   TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads,
                            copyPayloads(spool, spool_bytes, images, order, appender));
   TESSERA_ASSIGN_OR_RETURN(WrittenDirectory directory,

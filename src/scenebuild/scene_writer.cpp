@@ -9,57 +9,16 @@
 #include "format/directory.h"
 #include "format/header.h"
 #include "geometry_encode.h"
+#include "output/file_appender.h"
 
 namespace tessera::detail {
 
 namespace {
 
-constexpr size_t kWriteBufferBytes = 8u << 20;
-
-// Appends at the end of the output through a large buffer; skip() leaves a hole that is
-// filled later with pwrite (a node's head and pages, known only after its body).
-class Appender {
- public:
-  Appender(const TempFile& out, uint64_t start) : out_(out), end_(start), flushed_(start) {}
-  Result<uint64_t> append(std::span<const uint8_t> bytes) {
-    const uint64_t offset = end_;
-    if (buffer_.size() + bytes.size() > kWriteBufferBytes) TESSERA_TRY(flush());
-    if (bytes.size() > kWriteBufferBytes) {
-      TESSERA_TRY(out_.pwrite(flushed_, bytes));
-      flushed_ += bytes.size();
-    } else {
-      buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
-    }
-    end_ += bytes.size();
-    return offset;
-  }
-  Result<uint64_t> skip(uint64_t bytes) {
-    TESSERA_TRY(flush());
-    const uint64_t offset = end_;
-    end_ += bytes;
-    flushed_ = end_;
-    return offset;
-  }
-  Result<void> flush() {
-    if (buffer_.empty()) return {};
-    TESSERA_TRY(out_.pwrite(flushed_, buffer_));
-    flushed_ += buffer_.size();
-    buffer_.clear();
-    return {};
-  }
-  uint64_t end() const { return end_; }
-
- private:
-  const TempFile& out_;
-  uint64_t end_;
-  uint64_t flushed_;
-  std::vector<uint8_t> buffer_;
-};
-
 struct LayoutState {
   const SceneLayoutInput& in;
   const TempFile& out;
-  Appender appender;
+  FileAppender appender;
   /// Final tile entries per texture, payload offsets in the output.
   std::vector<std::vector<std::vector<TileEntry>>> entries;
   std::vector<NodeRecord> nodes;
@@ -255,7 +214,7 @@ std::vector<ImageRecord> imageRecords(LayoutState& s, std::vector<PlacedBlock>& 
 
 Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const TempFile& out) {
   const std::string& name = out.finalPath();
-  LayoutState s{in, out, Appender(out, kHeaderRegionBytes), {}, {}, {}, {}, {}, {}};
+  LayoutState s{in, out, FileAppender(out, kHeaderRegionBytes), {}, {}, {}, {}, {}, {}};
   s.final_mesh.assign(in.scene->meshes.size(), kNoNode);
   for (uint32_t m = 0; m < in.mesh_order.size(); ++m) s.final_mesh[in.mesh_order[m]] = m;
   s.final_texture.assign(in.scene->textures.size(), kNoSceneTexture);

@@ -755,8 +755,8 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"auto", "idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
-                  "Reads of tiles closer than this in the file are merged into one (default: 16 "
-                  "for a file, 64 for a URL)");
+                  "Reads of tiles closer than this in the file are merged into one (default: 16, "
+                  "for a file and a URL alike)");
   cmd->add_option("--batch-gap-kib", args->batch_gap_kib,
                   "Queued tiles whose payloads are closer than this are loaded as one batch "
                   "(StreamerOptions::batch_gap_bytes)");
