@@ -23,6 +23,8 @@ enum ExitCode : int {
   kExitCancelled = 130,   ///< interrupted by SIGINT (128 + 2)
   kExitTerminated = 143,  ///< stopped by SIGTERM (128 + 15)
 };
+/// `fly`: the flight ran and wrote its outputs, but tiles failed to load (docs/fly.md).
+inline constexpr int kExitLoadFailures = 4;
 
 /// Prints "tessera: <message>" to stderr and returns the exit code for the error.
 int reportError(const Error& error);

@@ -164,7 +164,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "tessera: streams textures far larger than memory.\n"
       "Exit codes: 0 success, 1 failure, 2 usage error (a bad option or value), 3 verify found "
-      "faults, 130 interrupted by SIGINT, 143 stopped by SIGTERM (docs/cli.md)."};
+      "faults, 4 fly or demo: tiles failed to load, 130 interrupted by SIGINT, 143 stopped by "
+      "SIGTERM (docs/cli.md)."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tessera 0.1.0 (archive format 1.0)");
   int exit_code = kExitOk;
