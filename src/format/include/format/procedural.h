@@ -1,0 +1,113 @@
+#pragma once
+// Procedural tiles in the archive (docs/format.md, "Procedural tiles", format 1.1): the
+// procedural directory that the header's bytes 80..103 point to (brush images stored once,
+// brush records, the underlying height layer), the instance page that a procedural tile entry
+// points to, and the entry itself. Pure: bytes in, structs out.
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <tessera/format.h>
+#include <tessera/procedural.h>
+#include <tessera/result.h>
+
+#include "format/header.h"
+
+namespace tessera::detail {
+
+/// The minor version that gives the header's bytes 80..103 and tile kind 3 their meaning.
+inline constexpr uint16_t kProceduralMinorVersion = 1;
+/// Where the procedural directory's BlockRef sits in the header.
+inline constexpr uint32_t kProceduralHeaderOffset = 80;
+
+inline constexpr uint8_t kProceduralDirectoryMagic[4] = {'T', 'P', 'R', 'C'};
+inline constexpr uint8_t kInstancePageMagic[4] = {'T', 'I', 'P', 'G'};
+inline constexpr uint16_t kProceduralDirectoryVersion = 1;
+inline constexpr uint32_t kProceduralDirectoryFixedBytes = 64;
+inline constexpr uint32_t kProceduralImageRecordBytes = 40;
+inline constexpr uint32_t kBrushRecordBytes = 16;
+inline constexpr uint32_t kInstancePageHeaderBytes = 8;
+inline constexpr uint32_t kInstanceRecordBytes = 40;
+/// Bounds that keep a hostile directory from driving allocations.
+inline constexpr uint32_t kMaxProceduralBrushes = 65535;
+inline constexpr uint32_t kMaxProceduralImages = 65535;
+/// Instances in one tile's page: far above what the analysis lets through any time budget.
+inline constexpr uint32_t kMaxPageInstances = 1u << 20;
+/// The height layer's largest side.
+inline constexpr uint32_t kMaxLayerSidePx = 1u << 16;
+
+/// A stored picture: a brush image (4 channels) or the height layer (1 channel), coded with a
+/// lossless codec as one rectangle of width x height texels.
+struct ProceduralImageRecord {
+  BlockRef block;  ///< payload; length 0 only for an absent layer
+  uint32_t width_px = 0;
+  uint32_t height_px = 0;
+  uint32_t channels = 0;  ///< 4 for brush images, 1 for the height layer
+  Codec codec = Codec::kZstd;
+  friend bool operator==(const ProceduralImageRecord&, const ProceduralImageRecord&) = default;
+};
+
+/// A brush: its images are images[image_first, image_first + image_count).
+struct ProceduralBrushRecord {
+  uint32_t image_first = 0;
+  uint32_t image_count = 0;  ///< 1..kMaxBrushImages
+  BlendMode blend = BlendMode::kNormal;
+  MaskSource mask = MaskSource::kNone;
+  uint8_t mask_low = 0;
+  uint8_t mask_high = 255;
+  friend bool operator==(const ProceduralBrushRecord&, const ProceduralBrushRecord&) = default;
+};
+
+/// The procedural directory: what every procedural tile of one image needs besides its page.
+struct ProceduralDirectory {
+  uint32_t image = 0;                  ///< the archive image whose tiles may be procedural
+  ProceduralImageRecord height_layer;  ///< width 0 when the archive has none
+  std::vector<ProceduralImageRecord> images;
+  std::vector<ProceduralBrushRecord> brushes;
+  friend bool operator==(const ProceduralDirectory&, const ProceduralDirectory&) = default;
+};
+
+std::vector<uint8_t> encodeProceduralDirectory(const ProceduralDirectory& directory);
+/// Checks magic, version, counts against the length (no trailing bytes), reserved bytes, every
+/// block inside [header_region_bytes, file_bytes), codecs lossless and known, sizes in bounds,
+/// brushes' image ranges inside the image table. `what` prefixes messages.
+Result<ProceduralDirectory> decodeProceduralDirectory(std::span<const uint8_t> bytes,
+                                                      const FileHeader& header,
+                                                      uint32_t image_count,
+                                                      const std::string& what);
+
+/// One instance as a page stores it: the page's order is the drawing order, so neither the
+/// database id nor the layer is stored.
+std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances);
+/// Checks magic, count against length, every instance's fields (finite, radius and scale > 0,
+/// brush below `brush_count`, reserved zero). Instances come back with id = their position in
+/// the page and layer 0.
+Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> bytes,
+                                                      uint32_t brush_count,
+                                                      const std::string& what);
+inline uint64_t instancePageBytes(size_t instances) {
+  return kInstancePageHeaderBytes + uint64_t(instances) * kInstanceRecordBytes;
+}
+
+/// Writes the procedural directory's reference into an encoded 128-byte header (bytes
+/// 80..103), sets its minor version to 1 and recomputes its checksum.
+void stampProceduralHeader(std::span<uint8_t> header_bytes, const BlockRef& directory);
+/// The procedural directory's reference of a decoded header's bytes: absent (length 0) in files
+/// of minor 0; in minor 1 checked against the file like every block, bytes 104..119 zero.
+Result<BlockRef> decodeProceduralHeader(std::span<const uint8_t> header_bytes,
+                                        const FileHeader& header, const std::string& name);
+
+/// A procedural tile entry (kind 3): the page's offset, length and checksum in the encoded
+/// entry's fields, codec 0. encodeTileEntries writes it as it is.
+TileEntry proceduralEntry(uint64_t offset_bytes, uint32_t length_bytes, uint64_t checksum);
+/// Decodes a page's entries like decodeTileEntries, and in files of minor >= 1 accepts kind 3
+/// entries: page inside the payload area, length of a whole page (8 + 40 n bytes, n >= 0) up to
+/// maxPayloadBytes, codec and reserved zero. The reader calls this for 1.1 files.
+Result<std::vector<TileEntry>> decodeTileEntriesProcedural(std::span<const uint8_t> bytes,
+                                                           const ImageInfo& info,
+                                                           const FileHeader& header,
+                                                           const std::string& what);
+
+}  // namespace tessera::detail
