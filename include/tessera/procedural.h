@@ -17,6 +17,10 @@
 #include <tessera/result.h>
 
 namespace tessera {
+class Archive;
+}
+
+namespace tessera {
 
 /// How a brush texel combines with what lies below it (the W3C compositing formulas,
 /// docs/procedural.md, "Blend modes"). Values are stable on disk.
@@ -164,5 +168,48 @@ BoxPx tileQueryBox(const TileGeometry& tile);
                                                   const TileGeometry& tile,
                                                   std::span<const BrushInstance> instances,
                                                   Image& out);
+
+/// The procedural side of an archive of format 1.1 (docs/format.md, "Procedural tiles"): its
+/// brush set, loaded once, and the compositing of procedural tiles from their instance pages.
+/// Immutable after `open`: thread-safe, any thread may composite. Until the reader learns
+/// format 1.1 (docs/procedural.md, "Status"), `tileEntry` reads directory pages itself.
+class ProceduralTiles {
+ public:
+  /// Reads the header's procedural directory, every brush image and the height layer (each
+  /// checksummed and decoded), and prepares the brush set. kNotFound when the archive has no
+  /// procedural tiles (format 1.0, or a 1.1 file without the directory); errors name the
+  /// archive and the block.
+  [[nodiscard]] static Result<std::shared_ptr<const ProceduralTiles>> open(const Archive& archive);
+  ~ProceduralTiles();
+  ProceduralTiles(const ProceduralTiles&) = delete;
+  ProceduralTiles& operator=(const ProceduralTiles&) = delete;
+
+  /// The archive image whose tiles may be procedural.
+  uint32_t image() const;
+  const BrushSet& brushSet() const;
+  /// Bytes of the brush images and layer as stored (the "stored once" cost).
+  uint64_t storedBrushBytes() const;
+
+  /// A tile's entry, procedural entries included (format 1.1 rules), read from its directory
+  /// page through the archive's byte source and checked like Archive::tileEntry does.
+  [[nodiscard]] Result<TileEntry> tileEntry(const Archive& archive, const TileId& tile) const;
+
+  /// Reads a procedural tile's instance page, verifies its checksum, decodes it and composites
+  /// the stored tile (4 channels). A page that fails its checksum or structure, or an instance
+  /// naming a brush the archive lacks, fails this tile (kCorrupt, naming it): never a picture.
+  [[nodiscard]] Result<void> compositeTile(const Archive& archive, const TileId& tile,
+                                           const TileEntry& entry, Image& out) const;
+  /// The same from page bytes the caller read (and has not verified): checks length and
+  /// checksum against `entry` first.
+  [[nodiscard]] Result<void> compositePage(const Archive& archive, const TileId& tile,
+                                           const TileEntry& entry, std::span<const uint8_t> page,
+                                           Image& out) const;
+
+  struct Impl;
+
+ private:
+  explicit ProceduralTiles(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace tessera
