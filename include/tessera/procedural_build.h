@@ -98,4 +98,9 @@ struct ProceduralBuildReport {
     const std::function<void(const ProceduralBuildProgress&)>& on_progress = {},
     const std::atomic<bool>* cancel = nullptr);
 
+/// Reads a whole picture (TIFF, PNG, JPEG) as RGBA (alpha 255 where it has none), with the
+/// builder's readers: for brush images, which are small (at most kMaxBrushSidePx a side, else
+/// kTooLarge). A temporary archive goes to `scratch_dir` and is removed. Errors name `path`.
+[[nodiscard]] Result<Image> readImageRgba(const std::string& path, const std::string& scratch_dir);
+
 }  // namespace tessera

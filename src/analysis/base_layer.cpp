@@ -8,6 +8,7 @@
 
 #include <tessera/archive.h>
 #include <tessera/build.h>
+#include <tessera/procedural_build.h>
 
 namespace tessera::detail {
 
@@ -15,28 +16,44 @@ namespace {
 
 constexpr uint32_t kMaxLayerSide = 4096;
 
-}  // namespace
+/// A picture as a temporary zstd archive, removed with this object.
+struct TemporaryArchive {
+  std::string path;
+  std::shared_ptr<Archive> archive;
+  ~TemporaryArchive() {
+    archive.reset();
+    std::error_code ec;
+    if (!path.empty()) std::filesystem::remove(path, ec);
+  }
+};
 
-Result<BaseLayer> loadBaseLayer(const std::string& path, const std::string& scratch_dir) {
-  const std::string temporary =
+Result<void> openAsArchive(const std::string& path, const std::string& scratch_dir,
+                           TemporaryArchive& temporary) {
+  temporary.path =
       (std::filesystem::path(scratch_dir.empty() ? "." : scratch_dir) /
-       fmt::format(".tessera-base-{}-{}.tess", ::getpid(), std::hash<std::string>{}(path)))
+       fmt::format(".tessera-picture-{}-{}.tess", ::getpid(), std::hash<std::string>{}(path)))
           .string();
   BuildOptions options;
   options.inputs = {path};
-  options.output = temporary;
+  options.output = temporary.path;
   options.codec = Codec::kZstd;
   options.threads = 1;
   Result<BuildReport> built = buildArchive(options);
-  if (!built) return fail(built.error().code, "base layer: " + built.error().message);
-  struct Remove {
-    std::string path;
-    ~Remove() {
-      std::error_code ec;
-      std::filesystem::remove(path, ec);
-    }
-  } remove{temporary};
-  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<Archive> archive, Archive::openFile(temporary));
+  if (!built) {
+    temporary.path.clear();
+    return fail(built.error().code, built.error().message);
+  }
+  TESSERA_ASSIGN_OR_RETURN(temporary.archive, Archive::openFile(temporary.path));
+  return {};
+}
+
+}  // namespace
+
+Result<BaseLayer> loadBaseLayer(const std::string& path, const std::string& scratch_dir) {
+  TemporaryArchive temporary;
+  Result<void> opened = openAsArchive(path, scratch_dir, temporary);
+  if (!opened) return fail(opened.error().code, "base layer: " + opened.error().message);
+  const std::shared_ptr<Archive>& archive = temporary.archive;
   const ImageInfo& info = archive->images()[0];
   uint32_t level = 0;
   while (level + 1 < info.level_count &&
@@ -54,3 +71,19 @@ Result<BaseLayer> loadBaseLayer(const std::string& path, const std::string& scra
 }
 
 }  // namespace tessera::detail
+
+namespace tessera {
+
+Result<Image> readImageRgba(const std::string& path, const std::string& scratch_dir) {
+  detail::TemporaryArchive temporary;
+  TESSERA_TRY(detail::openAsArchive(path, scratch_dir, temporary));
+  const ImageInfo& info = temporary.archive->images()[0];
+  if (info.width_px > kMaxBrushSidePx || info.height_px > kMaxBrushSidePx)
+    return fail(ErrorCode::kTooLarge, fmt::format("{}: {}x{} is larger than a brush may be ({} a "
+                                                  "side)",
+                                                  path, info.width_px, info.height_px,
+                                                  kMaxBrushSidePx));
+  return temporary.archive->readRegionRgba(0, 0, {0, 0, info.width_px, info.height_px});
+}
+
+}  // namespace tessera

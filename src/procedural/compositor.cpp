@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "procedural/kernel.h"
+#include "row_kernel.h"
 
 namespace tessera {
 
@@ -115,20 +116,17 @@ Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,
     if (i_lo >= i_hi || j_lo >= j_hi) continue;
     const uint8_t* mask_values =
         setup.brush->mask == MaskSource::kNone ? nullptr : layers.values(setup.brush->mask);
-    const BlendMode mode = setup.brush->blend;
     for (int64_t j = j_lo; j < j_hi; ++j) {
-      uint8_t* row = out.texels.data() + size_t(j) * side * 4;
-      for (int64_t i = i_lo; i < i_hi; ++i) {
-        uint8_t source[4];
-        uint32_t alpha = sampleInstance(setup, rect.x0 + i, rect.y0 + j, source);
-        if (alpha == 0) continue;
-        if (mask_values) {
-          alpha = div255(alpha * setup.brush->mask_lut[mask_values[size_t(j - rect.j0) * layer_w +
-                                                                   size_t(i - rect.i0)]]);
-          if (alpha == 0) continue;
-        }
-        blendTexel(mode, source, alpha, row + i * 4);
-      }
+      const int64_t y = rect.y0 + j;
+      const RowSpan span = instanceRowSpan(setup, y);
+      const int64_t first = std::max(span.first, rect.x0 + i_lo);
+      const int64_t last = std::min(span.last, rect.x0 + i_hi - 1);
+      if (first > last) continue;
+      const int64_t i = first - rect.x0;
+      drawInstanceRow(setup, y, first, last,
+                      mask_values ? mask_values + size_t(j - rect.j0) * layer_w + size_t(i - rect.i0)
+                                  : nullptr,
+                      out.texels.data() + (size_t(j) * side + size_t(i)) * 4);
     }
   }
   replicateEdges(rect, side, out);

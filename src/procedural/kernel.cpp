@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include <fmt/format.h>
 
@@ -96,14 +97,10 @@ uint32_t sampleInstance(const InstanceSetup& setup, int64_t x, int64_t y, uint8_
   const uint8_t* t11 = texels + (cy1 * w + cx1) * 4;
   const uint32_t a00 = in_x0 && in_y0 ? t00[3] : 0, a10 = in_x1 && in_y0 ? t10[3] : 0;
   const uint32_t a01 = in_x0 && in_y1 ? t01[3] : 0, a11 = in_x1 && in_y1 ? t11[3] : 0;
-  const uint32_t gx = 256 - fx, gy = 256 - fy;
-  uint32_t alpha = ((a00 * gx + a10 * fx) * gy + (a01 * gx + a11 * fx) * fy + 32768) >> 16;
+  uint32_t alpha = bilinear(a00, a10, a01, a11, fx, fy);
   if (alpha == 0) return 0;
-  for (int c = 0; c < 3; ++c) {
-    uint32_t value =
-        ((t00[c] * gx + t10[c] * fx) * gy + (t01[c] * gx + t11[c] * fx) * fy + 32768) >> 16;
-    rgba[c] = uint8_t(div255(value * setup.tint[c]));
-  }
+  for (int c = 0; c < 3; ++c)
+    rgba[c] = uint8_t(div255(bilinear(t00[c], t10[c], t01[c], t11[c], fx, fy) * setup.tint[c]));
   alpha = div255(div255(alpha * setup.tint[3]) * setup.opacity);
   rgba[3] = uint8_t(alpha);
   return alpha;
@@ -155,6 +152,12 @@ void blendTexel(BlendMode mode, const uint8_t s[4], uint32_t sa, uint8_t dst[4])
     // division by ao is the rounded division by 255.
     for (int c = 0; c < 3; ++c)
       dst[c] = uint8_t(div255(sa * blendChannel(mode, dst[c], s[c]) + (255 - sa) * dst[c]));
+    return;
+  }
+  if (ab == 0) {
+    // Nothing below: s' = s, ao = as and co = (as s + as / 2) / as = s exactly.
+    std::memcpy(dst, s, 3);
+    dst[3] = uint8_t(sa);
     return;
   }
   const uint32_t backdrop_weight = div255(ab * (255 - sa));

@@ -9,6 +9,7 @@
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "procedural_cli.h"
 
 namespace tessera::cli {
 
@@ -77,6 +78,7 @@ int main(int argc, char** argv) {
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
   registerServeCommand(app, exit_code);
+  registerBrushesCommand(app, exit_code);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

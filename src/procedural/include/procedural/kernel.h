@@ -16,7 +16,18 @@ namespace tessera::detail {
 /// Round-to-nearest x / 255 for 0 <= x <= 255 * 255 (exhaustively tested), every product of
 /// two 8-bit values the compositor divides.
 inline uint32_t div255(uint32_t x) {
-  return ((x + 128) * 257) >> 16;
+  const uint32_t t = x + 128;
+  return (t + (t >> 8)) >> 8;  // stays within 16 bits, so 16-bit lanes can compute it too
+}
+
+/// The bilinear filter of one 8-bit channel with 8-bit weights fx, fy (0..255), rounding after
+/// each direction so that every intermediate fits 16 bits:
+/// h = (a (256 - fx) + b fx + 128) >> 8 per row, then the same between the rows.
+inline uint32_t bilinear(uint32_t t00, uint32_t t10, uint32_t t01, uint32_t t11, uint32_t fx,
+                         uint32_t fy) {
+  const uint32_t h0 = (t00 * (256 - fx) + t10 * fx + 128) >> 8;
+  const uint32_t h1 = (t01 * (256 - fx) + t11 * fx + 128) >> 8;
+  return (h0 * (256 - fy) + h1 * fy + 128) >> 8;
 }
 
 /// One level of a mip pyramid: RGBA (brush images) or gray (layers), rows packed.
