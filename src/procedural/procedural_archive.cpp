@@ -85,6 +85,11 @@ Result<std::shared_ptr<const ProceduralTiles>> ProceduralTiles::open(const Archi
                            decodeProceduralDirectory(bytes, impl->header, impl->header.image_count,
                                                      archive.name()));
   const ProceduralDirectory& directory = impl->directory;
+  if (impl->records[directory.image].info.channels != 4)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: procedural image {} has {} channels; procedural tiles are RGBA",
+                            archive.name(), directory.image,
+                            impl->records[directory.image].info.channels));
   std::vector<Brush> brushes;
   for (size_t b = 0; b < directory.brushes.size(); ++b) {
     const ProceduralBrushRecord& record = directory.brushes[b];
