@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "procedural/kernel.h"
+#include "procedural/row_kernel.h"
 
 namespace tessera::detail {
 
@@ -76,6 +77,7 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
   };
 
   TileAnalysis analysis;
+  std::vector<uint8_t> row_alpha;
   std::vector<bool> keep(candidates.size(), false);
   std::vector<Span> spans(candidates.size());
   // From the top down: an instance contributes when some texel where it draws is not yet
@@ -102,11 +104,19 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
     const bool can_cover = setup.brush->blend == BlendMode::kNormal;
     bool contributes = false;
     for (int64_t j = span.j_lo; j < span.j_hi; ++j) {
-      for (int64_t i = span.i_lo; i < span.i_hi; ++i) {
-        uint8_t source[4];
-        uint32_t alpha = sampleInstance(setup, x0 + i, y0 + j, source);
+      // Once the instance is known to contribute, only its covering texels still matter.
+      if (contributes && !can_cover) break;
+      const RowSpan row = instanceRowSpan(setup, y0 + j);
+      const int64_t first = std::max(row.first, x0 + span.i_lo);
+      const int64_t last = std::min(row.last, x0 + span.i_hi - 1);
+      if (first > last) continue;
+      row_alpha.resize(size_t(last - first + 1));
+      instanceRowAlpha(setup, y0 + j, first, last, row_alpha.data());
+      const size_t base = size_t(j - j0) * size_t(width) + size_t(first - x0 - i0);
+      for (int64_t i = 0; i <= last - first; ++i) {
+        uint32_t alpha = row_alpha[size_t(i)];
         if (alpha == 0) continue;
-        const size_t index = size_t(j - j0) * size_t(width) + size_t(i - i0);
+        const size_t index = base + size_t(i);
         if (mask) {
           alpha = div255(alpha * setup.brush->mask_lut[(*mask)[index]]);
           if (alpha == 0) continue;

@@ -5,7 +5,7 @@
 #include <cstring>
 
 #include "procedural/kernel.h"
-#include "row_kernel.h"
+#include "procedural/row_kernel.h"
 
 namespace tessera {
 

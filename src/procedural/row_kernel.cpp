@@ -1,4 +1,4 @@
-#include "row_kernel.h"
+#include "procedural/row_kernel.h"
 
 #include <algorithm>
 #include <cstring>
@@ -311,6 +311,33 @@ void drawInstanceRow(const InstanceSetup& setup, int64_t y, int64_t first, int64
     case BlendMode::kMultiply: drawRow<BlendMode::kMultiply>(setup, dy, first, last, mask_values, row); break;
     case BlendMode::kAdd: drawRow<BlendMode::kAdd>(setup, dy, first, last, mask_values, row); break;
     case BlendMode::kOverlay: drawRow<BlendMode::kOverlay>(setup, dy, first, last, mask_values, row); break;
+  }
+}
+
+void instanceRowAlpha(const InstanceSetup& setup, int64_t y, int64_t first, int64_t last,
+                      uint8_t* alpha) {
+  const MipLevel& mip = *setup.mip;
+  const int64_t w = mip.width_px, h = mip.height_px;
+  const uint8_t* texels = mip.texels.data();
+  const int64_t dy = y - setup.y_c, dx0 = first - setup.x_c;
+  int64_t u = setup.u_c + setup.du_dx * dx0 + setup.du_dy * dy;
+  int64_t v = setup.v_c + setup.dv_dx * dx0 + setup.dv_dy * dy;
+  const bool plain = setup.tint[3] == 255 && setup.opacity == 255;
+  auto at = [&](int64_t x, int64_t yy) -> uint32_t {
+    return x >= 0 && x < w && yy >= 0 && yy < h ? texels[(yy * w + x) * 4 + 3] : 0;
+  };
+  for (int64_t k = 0; k <= last - first; ++k, u += setup.du_dx, v += setup.dv_dx) {
+    const int64_t x0 = u >> 16, y0 = v >> 16;
+    const uint32_t fx = uint32_t(u >> 8) & 0xFF, fy = uint32_t(v >> 8) & 0xFF;
+    uint32_t a;
+    if (x0 >= 0 && x0 + 1 < w && y0 >= 0 && y0 + 1 < h) {
+      const uint8_t* p = texels + (y0 * w + x0) * 4 + 3;
+      a = bilinear(p[0], p[4], p[w * 4], p[w * 4 + 4], fx, fy);
+    } else {
+      a = bilinear(at(x0, y0), at(x0 + 1, y0), at(x0, y0 + 1), at(x0 + 1, y0 + 1), fx, fy);
+    }
+    if (a != 0 && !plain) a = div255(div255(a * setup.tint[3]) * setup.opacity);
+    alpha[k] = uint8_t(a);
   }
 }
 

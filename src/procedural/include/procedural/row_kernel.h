@@ -25,4 +25,10 @@ RowSpan instanceRowSpan(const InstanceSetup& setup, int64_t y);
 void drawInstanceRow(const InstanceSetup& setup, int64_t y, int64_t first, int64_t last,
                      const uint8_t* mask_values, uint8_t* row);
 
+/// The alpha sampleInstance gives (tinted, with opacity, before any mask) for level texels
+/// [first, last] of row `y`, which must lie inside instanceRowSpan(setup, y): for the analysis
+/// phase's coverage, which needs no colour.
+void instanceRowAlpha(const InstanceSetup& setup, int64_t y, int64_t first, int64_t last,
+                      uint8_t* alpha);
+
 }  // namespace tessera::detail
