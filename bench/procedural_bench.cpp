@@ -64,7 +64,8 @@ Image cutBrush(const Image& picture, uint32_t side, bool square) {
       uint32_t sum[3] = {0, 0, 0}, n = 0;
       for (uint32_t sy = sy0; sy < sy1; ++sy)
         for (uint32_t sx = sx0; sx < sx1; ++sx, ++n)
-          for (int c = 0; c < 3; ++c) sum[c] += picture.texels[(size_t(sy) * picture.width_px + sx) * 4 + c];
+          for (int c = 0; c < 3; ++c)
+            sum[c] += picture.texels[(size_t(sy) * picture.width_px + sx) * 4 + c];
       uint8_t* t = &brush.texels[(size_t(y) * side + x) * 4];
       for (int c = 0; c < 3; ++c) t[c] = uint8_t(sum[c] / n);
       double d = std::hypot(x + 0.5 - side / 2.0, y + 0.5 - side / 2.0) / (side / 2.0);
@@ -75,9 +76,7 @@ Image cutBrush(const Image& picture, uint32_t side, bool square) {
 }
 
 std::vector<Brush> realBrushes(const std::string& dir) {
-  auto load = [&](const char* name) {
-    return check(readImageRgba(dir + "/" + name, "/tmp"));
-  };
+  auto load = [&](const char* name) { return check(readImageRgba(dir + "/" + name, "/tmp")); };
   const Image grass = load("grass.png"), gravel = load("gravel.png"), brick = load("brick.png"),
               coffee = load("coffee.png"), chelsea = load("chelsea.png");
   auto brush = [](const char* name, BlendMode mode, std::vector<Image> images) {
@@ -88,7 +87,8 @@ std::vector<Brush> realBrushes(const std::string& dir) {
     return b;
   };
   return {brush("meadow", BlendMode::kNormal, {cutBrush(grass, 256, true)}),
-          brush("gravel", BlendMode::kNormal, {cutBrush(gravel, 128, false), cutBrush(gravel, 96, false)}),
+          brush("gravel", BlendMode::kNormal,
+                {cutBrush(gravel, 128, false), cutBrush(gravel, 96, false)}),
           brush("brick", BlendMode::kMultiply, {cutBrush(brick, 96, false)}),
           brush("pebbles", BlendMode::kNormal, {cutBrush(coffee, 64, false)}),
           brush("moss", BlendMode::kOverlay, {cutBrush(grass, 64, false)}),
@@ -148,11 +148,11 @@ std::vector<BrushInstance> tileInstances(uint32_t n, uint32_t brush_count, std::
 
 int runComposite(int argc, char** argv) {
   const double seconds = std::stod(argument(argc, argv, "--seconds", "2"));
-  auto set = check(BrushSet::prepare(realBrushes(argument(argc, argv, "--images", nullptr)), {},
-                                     256, 256));
+  auto set = check(
+      BrushSet::prepare(realBrushes(argument(argc, argv, "--images", nullptr)), {}, 256, 256));
   std::mt19937_64 rng(1);
-  std::printf("%-22s %12s %12s %12s %8s\n", "instances per tile", "tiles/s", "JPEG dec/s",
-              "ratio", "us/tile");
+  std::printf("%-22s %12s %12s %12s %8s\n", "instances per tile", "tiles/s", "JPEG dec/s", "ratio",
+              "us/tile");
   for (uint32_t n : {10u, 100u, 1000u}) {
     std::vector<std::vector<BrushInstance>> tiles;
     for (int t = 0; t < 8; ++t) tiles.push_back(tileInstances(n, 6, rng));
@@ -202,9 +202,13 @@ int runQuery(int argc, char** argv) {
   std::vector<BrushInstance> found;
   for (uint32_t i = 0; i < tiles; ++i) {
     const uint32_t side = 256u << level;
-    TileGeometry tile{level, uint32_t(rng() % std::max(1u, extent.width_px / side)),
-                      uint32_t(rng() % std::max(1u, extent.height_px / side)), 256, 0,
-                      extent.width_px, extent.height_px};
+    TileGeometry tile{level,
+                      uint32_t(rng() % std::max(1u, extent.width_px / side)),
+                      uint32_t(rng() % std::max(1u, extent.height_px / side)),
+                      256,
+                      0,
+                      extent.width_px,
+                      extent.height_px};
     found.clear();
     const auto start = Clock::now();
     check(db->query(tileQueryBox(tile), found));
@@ -215,11 +219,11 @@ int runQuery(int argc, char** argv) {
   double mean = 0;
   for (double m : micros) mean += m;
   mean /= micros.size();
-  std::printf("%s (%s): %llu instances, level %u, %u tiles: mean %.1f us, median %.1f us, p99 %.1f "
-              "us, %.1f instances per tile\n",
-              argv[2], db->backend(), (unsigned long long)check(db->instanceCount()), level, tiles,
-              mean, micros[micros.size() / 2], micros[micros.size() * 99 / 100],
-              double(found_total) / tiles);
+  std::printf(
+      "%s (%s): %llu instances, level %u, %u tiles: mean %.1f us, median %.1f us, p99 %.1f "
+      "us, %.1f instances per tile\n",
+      argv[2], db->backend(), (unsigned long long)check(db->instanceCount()), level, tiles, mean,
+      micros[micros.size() / 2], micros[micros.size() * 99 / 100], double(found_total) / tiles);
   return 0;
 }
 
@@ -231,8 +235,9 @@ int main(int argc, char** argv) {
   if (command == "setup" && argc > 2) return tessera::runSetup(argc, argv);
   if (command == "composite") return tessera::runComposite(argc, argv);
   if (command == "query" && argc > 2) return tessera::runQuery(argc, argv);
-  std::fprintf(stderr, "usage: tessera-procedural-bench setup DB --images DIR --size WxH --count N "
-                       "[--seed S] | composite --images DIR [--seconds S] | query DB [--tiles N] "
-                       "[--level L]\n");
+  std::fprintf(stderr,
+               "usage: tessera-procedural-bench setup DB --images DIR --size WxH --count N "
+               "[--seed S] | composite --images DIR [--seconds S] | query DB [--tiles N] "
+               "[--level L]\n");
   return 2;
 }

@@ -69,8 +69,8 @@ class BrushDatabase {
 
 /// Opens (and with `create`, creates) an SQLite brush database file. Fails naming the file:
 /// not a brush database, a newer schema version, SQLite without R*Tree.
-[[nodiscard]] Result<std::unique_ptr<BrushDatabase>> openSqliteBrushDatabase(const std::string& path,
-                                                                             bool create);
+[[nodiscard]] Result<std::unique_ptr<BrushDatabase>> openSqliteBrushDatabase(
+    const std::string& path, bool create);
 /// Connects to PostgreSQL with a libpq connection string ("host=/tmp/x dbname=world" or a
 /// postgresql:// URI) and, with `create`, creates the schema (and the postgis extension) when
 /// missing. Fails naming the connection and the server's message.
@@ -102,7 +102,8 @@ struct ImportReport {
 };
 /// Reads and parses the whole file, then adds every instance in one transaction: a bad row or
 /// a failed write leaves the database as it was.
-[[nodiscard]] Result<ImportReport> importInstances(BrushDatabase& database, const std::string& path);
+[[nodiscard]] Result<ImportReport> importInstances(BrushDatabase& database,
+                                                   const std::string& path);
 
 /// Instance sets for tests and benchmarks, deterministic for a seed: a realistic mix of large
 /// base-layer instances, many small detail stamps and heavy overlap over a texture of

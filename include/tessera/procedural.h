@@ -70,15 +70,15 @@ struct Brush {
 /// texture space, and a set of parameters"). Coordinates in level-0 texels, (0, 0) the image's
 /// top-left corner.
 struct BrushInstance {
-  uint64_t id = 0;      ///< the database's id; breaks ties in layer order
-  uint32_t brush = 0;   ///< index of the brush in the brush set (database: its id)
-  double x_px = 0;      ///< centre
-  double y_px = 0;      ///< centre
-  float radius_px = 1;  ///< half of the image's longer side at scale 1, > 0
-  float rotation_rad = 0;  ///< counter-clockwise on screen (y down), finite
-  float scale = 1;         ///< multiplies the radius, > 0
-  uint8_t opacity = 255;   ///< multiplies the image's alpha
-  uint8_t variant = 0;     ///< which of the brush's images (modulo their count)
+  uint64_t id = 0;                   ///< the database's id; breaks ties in layer order
+  uint32_t brush = 0;                ///< index of the brush in the brush set (database: its id)
+  double x_px = 0;                   ///< centre
+  double y_px = 0;                   ///< centre
+  float radius_px = 1;               ///< half of the image's longer side at scale 1, > 0
+  float rotation_rad = 0;            ///< counter-clockwise on screen (y down), finite
+  float scale = 1;                   ///< multiplies the radius, > 0
+  uint8_t opacity = 255;             ///< multiplies the image's alpha
+  uint8_t variant = 0;               ///< which of the brush's images (modulo their count)
   uint32_t tint_rgba = 0xFFFFFFFFu;  ///< multiplies colour and alpha; byte c is channel c
   int32_t layer = 0;                 ///< drawing order: lower first; ties by id
 };
@@ -88,7 +88,9 @@ struct BrushInstance {
 /// whatever its rotation or aspect). The spatial database indexes this box.
 struct BoxPx {
   double x0 = 0, y0 = 0, x1 = 0, y1 = 0;  ///< [x0, x1] x [y0, y1]
-  bool intersects(const BoxPx& o) const { return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1; }
+  bool intersects(const BoxPx& o) const {
+    return x0 <= o.x1 && o.x0 <= x1 && y0 <= o.y1 && o.y0 <= y1;
+  }
 };
 BoxPx instanceBounds(const BrushInstance& instance);
 
@@ -115,9 +117,10 @@ class BrushSet {
  public:
   /// Builds each brush image's mip pyramid (alpha-weighted 2x2 means, colour bled into
   /// transparent texels) and the height and slope pyramids. Fails naming the brush.
-  [[nodiscard]] static Result<std::shared_ptr<const BrushSet>> prepare(
-      std::vector<Brush> brushes, UnderlyingLayer layer, uint32_t texture_width_px,
-      uint32_t texture_height_px);
+  [[nodiscard]] static Result<std::shared_ptr<const BrushSet>> prepare(std::vector<Brush> brushes,
+                                                                       UnderlyingLayer layer,
+                                                                       uint32_t texture_width_px,
+                                                                       uint32_t texture_height_px);
   ~BrushSet();
   BrushSet(const BrushSet&) = delete;
   BrushSet& operator=(const BrushSet&) = delete;
@@ -164,8 +167,7 @@ BoxPx tileQueryBox(const TileGeometry& tile);
 
 /// The same, by brute force: every instance at every texel of the tile, no bounding boxes,
 /// no spans. The test oracle for compositeTile and culling.
-[[nodiscard]] Result<void> compositeTileReference(const BrushSet& brushes,
-                                                  const TileGeometry& tile,
+[[nodiscard]] Result<void> compositeTileReference(const BrushSet& brushes, const TileGeometry& tile,
                                                   std::span<const BrushInstance> instances,
                                                   Image& out);
 

@@ -67,10 +67,10 @@ struct ProceduralBuildProgress {
 struct ProceduralBuildReport {
   uint64_t tiles_total = 0;
   uint64_t tiles_procedural = 0;
-  uint64_t tiles_baked = 0;    ///< encoded payloads
-  uint64_t tiles_uniform = 0;  ///< baked as one colour (no payload)
-  uint64_t tiles_empty = 0;    ///< nothing drawn, or dropped by a detail region
-  uint64_t tiles_dropped = 0;  ///< of tiles_empty: levels a detail region does not store
+  uint64_t tiles_baked = 0;        ///< encoded payloads
+  uint64_t tiles_uniform = 0;      ///< baked as one colour (no payload)
+  uint64_t tiles_empty = 0;        ///< nothing drawn, or dropped by a detail region
+  uint64_t tiles_dropped = 0;      ///< of tiles_empty: levels a detail region does not store
   uint64_t tiles_over_budget = 0;  ///< would have been procedural but composite too slowly
   uint64_t instances = 0;          ///< in the database
   uint64_t instances_queried = 0;  ///< summed over tiles

@@ -79,10 +79,10 @@ Result<Image> readImageRgba(const std::string& path, const std::string& scratch_
   TESSERA_TRY(detail::openAsArchive(path, scratch_dir, temporary));
   const ImageInfo& info = temporary.archive->images()[0];
   if (info.width_px > kMaxBrushSidePx || info.height_px > kMaxBrushSidePx)
-    return fail(ErrorCode::kTooLarge, fmt::format("{}: {}x{} is larger than a brush may be ({} a "
-                                                  "side)",
-                                                  path, info.width_px, info.height_px,
-                                                  kMaxBrushSidePx));
+    return fail(ErrorCode::kTooLarge,
+                fmt::format("{}: {}x{} is larger than a brush may be ({} a "
+                            "side)",
+                            path, info.width_px, info.height_px, kMaxBrushSidePx));
   return temporary.archive->readRegionRgba(0, 0, {0, 0, info.width_px, info.height_px});
 }
 

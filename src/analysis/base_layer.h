@@ -18,6 +18,7 @@ struct BaseLayer {
 };
 
 /// Fails naming `path`. `scratch_dir` holds the temporary archive, removed before returning.
-[[nodiscard]] Result<BaseLayer> loadBaseLayer(const std::string& path, const std::string& scratch_dir);
+[[nodiscard]] Result<BaseLayer> loadBaseLayer(const std::string& path,
+                                              const std::string& scratch_dir);
 
 }  // namespace tessera::detail

@@ -93,10 +93,10 @@ Result<void> placeTiles(const TempFile& spool, const ImageInfo& info,
           std::vector<uint8_t> page,
           storedPage(spool, tile, brushes, fmt::format("tile ({},{},{})", id.level, id.x, id.y)));
       const uint64_t checksum = checksum64(page);
-      PageKey key{checksum,
-                  std::hash<std::string_view>{}(
-                      {reinterpret_cast<const char*>(page.data()), page.size()}),
-                  page.size()};
+      PageKey key{
+          checksum,
+          std::hash<std::string_view>{}({reinterpret_cast<const char*>(page.data()), page.size()}),
+          page.size()};
       auto it = pages.find(key);
       if (it == pages.end()) {
         TESSERA_ASSIGN_OR_RETURN(uint64_t offset, appender.append(page));
@@ -228,7 +228,8 @@ Result<MixedWritten> writeMixedArchive(const TempFile& spool, const ImageInfo& i
   const std::string text = metadata.dump();
   if (text.size() > kMaxMetadataBytes)
     return fail(ErrorCode::kTooLarge, out.finalPath() + ": metadata exceeds 16 MiB");
-  TESSERA_ASSIGN_OR_RETURN(BlockRef metadata_ref, place(std::vector<uint8_t>(text.begin(), text.end())));
+  TESSERA_ASSIGN_OR_RETURN(BlockRef metadata_ref,
+                           place(std::vector<uint8_t>(text.begin(), text.end())));
   TESSERA_TRY(appender.flush());
 
   const std::vector<uint8_t> root = encodeRootDirectory(records);

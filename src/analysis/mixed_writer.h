@@ -57,10 +57,9 @@ struct MixedWritten {
 };
 
 /// Writes into `out` (not committed). `tiles[level][y * tilesX + x]`.
-[[nodiscard]] Result<MixedWritten> writeMixedArchive(const TempFile& spool, const ImageInfo& info,
-                                                     const std::vector<std::vector<MixedTile>>& tiles,
-                                                     const MixedBrushes& brushes, TileOrder order,
-                                                     const nlohmann::json& metadata,
-                                                     const TempFile& out);
+[[nodiscard]] Result<MixedWritten> writeMixedArchive(
+    const TempFile& spool, const ImageInfo& info, const std::vector<std::vector<MixedTile>>& tiles,
+    const MixedBrushes& brushes, TileOrder order, const nlohmann::json& metadata,
+    const TempFile& out);
 
 }  // namespace tessera::detail

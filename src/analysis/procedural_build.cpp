@@ -37,7 +37,8 @@ Result<void> validateOptions(const ProceduralBuildOptions& options) {
   if (!findEncoder(options.codec) || !findEncoder(options.brush_codec))
     return fail(ErrorCode::kUnsupported, "codec not available in this build");
   if (options.quality < 1 || options.quality > 100)
-    return fail(ErrorCode::kInvalidArgument, fmt::format("quality {} out of 1..100", options.quality));
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("quality {} out of 1..100", options.quality));
   if (!(options.frame_budget_ms > 0) || options.max_new_tiles_per_frame == 0)
     return fail(ErrorCode::kInvalidArgument,
                 "the frame budget and the new tiles per frame must be positive");
@@ -71,9 +72,8 @@ DetailMap detailMapOf(const ProceduralBuildOptions& options, const ImageInfo& in
         // A cell takes a region's level only when the region covers it whole.
         if (region.area.x0 <= cell.x0 && region.area.y0 <= cell.y0 && region.area.x1 >= cell.x1 &&
             region.area.y1 >= cell.y1)
-          map.finest_level[size_t(y) * map.columns + x] =
-              uint8_t(std::max<uint32_t>(map.finest_level[size_t(y) * map.columns + x],
-                                         std::min(region.finest_level, 255u)));
+          map.finest_level[size_t(y) * map.columns + x] = uint8_t(std::max<uint32_t>(
+              map.finest_level[size_t(y) * map.columns + x], std::min(region.finest_level, 255u)));
     }
   }
   return map;
@@ -110,17 +110,18 @@ Result<PreparedInputs> prepareInputs(const ProceduralBuildOptions& options, Imag
   }
   if (extent.width_px == 0 || extent.height_px == 0)
     return fail(ErrorCode::kInvalidArgument,
-                options.database + ": no texture size (set it with tessera brushes init --size, or "
-                                   "give --base)");
+                options.database +
+                    ": no texture size (set it with tessera brushes init --size, or "
+                    "give --base)");
   info.width_px = extent.width_px;
   info.height_px = extent.height_px;
   for (size_t b = 0; b < brushes.size(); ++b) {
     std::vector<MixedPicture> pictures;
     for (size_t v = 0; v < brushes[b].images.size(); ++v) {
-      TESSERA_ASSIGN_OR_RETURN(
-          MixedPicture picture,
-          encodePicture(brushes[b].images[v], options.brush_codec,
-                        fmt::format("{}: brush {} image {}", options.database, brushes[b].name, v)));
+      TESSERA_ASSIGN_OR_RETURN(MixedPicture picture,
+                               encodePicture(brushes[b].images[v], options.brush_codec,
+                                             fmt::format("{}: brush {} image {}", options.database,
+                                                         brushes[b].name, v)));
       pictures.push_back(std::move(picture));
     }
     inputs.pictures.push_back(std::move(pictures));
@@ -172,8 +173,9 @@ MixedBrushes applyChoice(BuildContext& context, const StorageChoice& choice,
   return stored;
 }
 
-nlohmann::json metadataOf(const ProceduralBuildOptions& options, const ProceduralBuildReport& report,
-                          const std::vector<Brush>& brushes, bool procedural) {
+nlohmann::json metadataOf(const ProceduralBuildOptions& options,
+                          const ProceduralBuildReport& report, const std::vector<Brush>& brushes,
+                          bool procedural) {
   nlohmann::json names = nlohmann::json::array();
   for (const Brush& brush : brushes) names.push_back(brush.name);
   return {{"format", "tessera"},
@@ -296,13 +298,15 @@ Result<ProceduralBuildReport> buildProceduralArchive(
       MixedWritten written,
       writeMixedArchive(spool, context.info, context.tiles, stored, options.order,
                         metadataOf(options, report, brush_list, procedural), out));
-  if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+  if (cancel && cancel->load())
+    return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
   TESSERA_TRY(out.commit());
   report.baked_payload_bytes = written.baked_payload_bytes;
   report.procedural_page_bytes = written.page_bytes;
   report.brush_bytes = written.brush_bytes;
-  report.bytes_saved = int64_t(report.all_baked_payload_bytes) -
-                       int64_t(written.baked_payload_bytes + written.page_bytes + written.brush_bytes);
+  report.bytes_saved =
+      int64_t(report.all_baked_payload_bytes) -
+      int64_t(written.baked_payload_bytes + written.page_bytes + written.brush_bytes);
   report.output_bytes = written.file_bytes;
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
   return report;

@@ -49,17 +49,19 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
                                  std::span<const BrushInstance> candidates,
                                  const AnalysisRules& rules) {
   const BrushSet::Impl& set = brushes.impl();
-  const int64_t level_w =
-      std::max<int64_t>(1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
-  const int64_t level_h =
-      std::max<int64_t>(1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_w = std::max<int64_t>(
+      1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_h = std::max<int64_t>(
+      1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
   const int64_t side = tile.sidePx();
   const int64_t x0 = levelTexel(tile.x, tile.tile_size_px, tile.border_px, 0);
   const int64_t y0 = levelTexel(tile.y, tile.tile_size_px, tile.border_px, 0);
   // The stored texels whose level texel is inside the level (the compositor's valid rectangle);
   // the others repeat them.
-  const int64_t i0 = std::clamp<int64_t>(-x0, 0, side), i1 = std::clamp<int64_t>(level_w - x0, i0, side);
-  const int64_t j0 = std::clamp<int64_t>(-y0, 0, side), j1 = std::clamp<int64_t>(level_h - y0, j0, side);
+  const int64_t i0 = std::clamp<int64_t>(-x0, 0, side),
+                i1 = std::clamp<int64_t>(level_w - x0, i0, side);
+  const int64_t j0 = std::clamp<int64_t>(-y0, 0, side),
+                j1 = std::clamp<int64_t>(level_h - y0, j0, side);
   const int64_t width = i1 - i0;
   std::vector<uint8_t> covered(size_t(width) * size_t(j1 - j0), 0);
   std::vector<uint8_t> height_values, slope_values;
@@ -98,9 +100,8 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
       ++analysis.covered;  // touches no texel of this tile
       continue;
     }
-    const std::vector<uint8_t>* mask = setup.brush->mask == MaskSource::kNone
-                                           ? nullptr
-                                           : &layerValues(setup.brush->mask);
+    const std::vector<uint8_t>* mask =
+        setup.brush->mask == MaskSource::kNone ? nullptr : &layerValues(setup.brush->mask);
     const bool can_cover = setup.brush->blend == BlendMode::kNormal;
     bool contributes = false;
     for (int64_t j = span.j_lo; j < span.j_hi; ++j) {

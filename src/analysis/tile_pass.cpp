@@ -57,9 +57,9 @@ struct WorkerState {
 
 // One tile: query, analyse, composite, encode the baked form and spool the page.
 Result<void> processTile(BuildContext& context, WorkerState& worker, uint64_t flat) {
-  const uint32_t level = uint32_t(std::upper_bound(context.level_first.begin(),
-                                                   context.level_first.end(), flat) -
-                                  context.level_first.begin() - 1);
+  const uint32_t level =
+      uint32_t(std::upper_bound(context.level_first.begin(), context.level_first.end(), flat) -
+               context.level_first.begin() - 1);
   const uint64_t in_level = flat - context.level_first[level];
   const uint32_t x = uint32_t(in_level % context.info.tilesX(level));
   const uint32_t y = uint32_t(in_level / context.info.tilesX(level));
@@ -69,15 +69,21 @@ Result<void> processTile(BuildContext& context, WorkerState& worker, uint64_t fl
     ++context.dropped;
     return {};
   }
-  const TileGeometry geometry{level, x, y, context.info.tile_size_px, context.info.border_px,
-                              context.info.width_px, context.info.height_px};
+  const TileGeometry geometry{level,
+                              x,
+                              y,
+                              context.info.tile_size_px,
+                              context.info.border_px,
+                              context.info.width_px,
+                              context.info.height_px};
   const std::string what = fmt::format("{}: tile ({},{},{})", context.options->output, level, x, y);
   worker.candidates.clear();
   const auto query_start = Clock::now();
   TESSERA_TRY(worker.database->query(tileQueryBox(geometry), worker.candidates));
   context.query_ns += uint64_t(millisecondsSince(query_start) * 1e6);
   context.queried += worker.candidates.size();
-  Result<TileAnalysis> analysed = analyseTile(*context.set, geometry, worker.candidates, context.rules);
+  Result<TileAnalysis> analysed =
+      analyseTile(*context.set, geometry, worker.candidates, context.rules);
   if (!analysed) return fail(analysed.error().code, what + ": " + analysed.error().message);
   const TileAnalysis& analysis = *analysed;
   context.covered += analysis.covered;
@@ -92,9 +98,8 @@ Result<void> processTile(BuildContext& context, WorkerState& worker, uint64_t fl
     EncodeOptions encode;
     encode.quality = context.options->quality;
     encode.effort = context.options->effort;
-    Result<std::vector<uint8_t>> payload = encodeTile(context.info.default_codec,
-                                                      worker.texels.view(), encode, nullptr,
-                                                      &worker.scratch);
+    Result<std::vector<uint8_t>> payload = encodeTile(
+        context.info.default_codec, worker.texels.view(), encode, nullptr, &worker.scratch);
     if (!payload) return fail(payload.error().code, what + ": " + payload.error().message);
     TESSERA_ASSIGN_OR_RETURN(tile.payload_offset, spoolBytes(context, *payload));
     tile.payload_length = uint32_t(payload->size());

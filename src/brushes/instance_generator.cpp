@@ -52,8 +52,8 @@ std::vector<BrushInstance> generateInstances(uint64_t count, const TextureExtent
     detail.rotation_rad = float(unit() * 6.283185307179586);
     detail.scale = float(0.75 + unit() * 0.5);
     detail.opacity = uint8_t(rng() % 4 == 0 ? 160 + rng() % 96 : 255);
-    detail.tint_rgba = rng() % 3 == 0 ? 0xFF000000u | uint32_t(rng() & 0xFFFFFF) | 0x808080u
-                                      : 0xFFFFFFFFu;
+    detail.tint_rgba =
+        rng() % 3 == 0 ? 0xFF000000u | uint32_t(rng() & 0xFFFFFF) | 0x808080u : 0xFFFFFFFFu;
     detail.variant = uint8_t(rng() & 0xFF);
     detail.layer = medium ? 1 : 2 + int32_t(rng() % 3);
     instances.push_back(detail);

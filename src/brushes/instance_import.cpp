@@ -53,7 +53,8 @@ Result<void> setField(BrushInstance& instance, std::string_view name, const std:
                       const std::string& where, const BrushIds& brush_ids) {
   if (name == "brush") {
     if (!brush_ids(text, &instance.brush))
-      return fail(ErrorCode::kInvalidArgument, fmt::format("{}: brush: no brush '{}'", where, text));
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: brush: no brush '{}'", where, text));
     return {};
   }
   if (name == "tint") {
@@ -63,8 +64,8 @@ Result<void> setField(BrushInstance& instance, std::string_view name, const std:
   TESSERA_ASSIGN_OR_RETURN(double value, parseNumber(text, where, name));
   auto integer_in = [&](double low, double high) -> Result<void> {
     if (value != std::floor(value) || value < low || value > high)
-      return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{}: {}: {} is not an integer in {}..{}", where, name, text, low, high));
+      return fail(ErrorCode::kInvalidArgument, fmt::format("{}: {}: {} is not an integer in {}..{}",
+                                                           where, name, text, low, high));
     return {};
   };
   if (name == "x") {
@@ -80,7 +81,8 @@ Result<void> setField(BrushInstance& instance, std::string_view name, const std:
     instance.rotation_rad = float(value * kDegreesToRadians);
   } else if (name == "scale") {
     if (!(value > 0))
-      return fail(ErrorCode::kInvalidArgument, fmt::format("{}: scale: {} is not positive", where, text));
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: scale: {} is not positive", where, text));
     instance.scale = float(value);
   } else if (name == "opacity") {
     if (value < 0 || value > 1)
@@ -154,16 +156,15 @@ Result<std::vector<BrushInstance>> parseCsv(std::string_view text, const std::st
       continue;
     }
     if (fields.size() != header.size())
-      return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{}: {} columns, the header has {}", where, fields.size(),
-                              header.size()));
+      return fail(ErrorCode::kInvalidArgument, fmt::format("{}: {} columns, the header has {}",
+                                                           where, fields.size(), header.size()));
     BrushInstance instance;
     for (size_t column = 0; column < fields.size(); ++column) {
       if (fields[column].empty()) {
         if (header[column] == "brush" || header[column] == "x" || header[column] == "y" ||
             header[column] == "radius")
-          return fail(ErrorCode::kInvalidArgument, fmt::format("{}:{}: {}: missing", where,
-                                                               column + 1, header[column]));
+          return fail(ErrorCode::kInvalidArgument,
+                      fmt::format("{}:{}: {}: missing", where, column + 1, header[column]));
         continue;
       }
       TESSERA_TRY(setField(instance, header[column], fields[column],
@@ -185,8 +186,7 @@ Result<std::string> jsonText(const nlohmann::json& value, const std::string& whe
 
 Result<BrushInstance> instanceFromJson(const nlohmann::json& object, const std::string& where,
                                        const BrushIds& brush_ids, const nlohmann::json* point) {
-  if (!object.is_object())
-    return fail(ErrorCode::kInvalidArgument, where + ": expected an object");
+  if (!object.is_object()) return fail(ErrorCode::kInvalidArgument, where + ": expected an object");
   BrushInstance instance;
   for (const char* required : {"brush", "radius"})
     if (!object.contains(required))
@@ -263,9 +263,9 @@ Result<std::vector<BrushInstance>> parseJson(std::string_view text, InstanceFile
                 name + ": expected an array of instances or {\"instances\": [...]}");
   const char* prefix = list == &document ? "" : "/instances";
   for (size_t i = 0; i < list->size(); ++i) {
-    TESSERA_ASSIGN_OR_RETURN(
-        BrushInstance instance,
-        instanceFromJson((*list)[i], fmt::format("{}: {}/{}", name, prefix, i), brush_ids, nullptr));
+    TESSERA_ASSIGN_OR_RETURN(BrushInstance instance,
+                             instanceFromJson((*list)[i], fmt::format("{}: {}/{}", name, prefix, i),
+                                              brush_ids, nullptr));
     instance.id = i + 1;
     instances.push_back(instance);
   }
@@ -278,10 +278,14 @@ bool instanceFileFormatFor(std::string_view path, InstanceFileFormat* format) {
   auto ends = [&](std::string_view suffix) {
     return path.size() >= suffix.size() && path.substr(path.size() - suffix.size()) == suffix;
   };
-  if (ends(".csv")) *format = InstanceFileFormat::kCsv;
-  else if (ends(".geojson")) *format = InstanceFileFormat::kGeoJson;
-  else if (ends(".json")) *format = InstanceFileFormat::kJson;
-  else return false;
+  if (ends(".csv"))
+    *format = InstanceFileFormat::kCsv;
+  else if (ends(".geojson"))
+    *format = InstanceFileFormat::kGeoJson;
+  else if (ends(".json"))
+    *format = InstanceFileFormat::kJson;
+  else
+    return false;
   return true;
 }
 

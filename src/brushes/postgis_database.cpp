@@ -80,7 +80,8 @@ class PostgisBrushDatabase final : public BrushDatabase {
 
   Unexpected error(const std::string& what) {
     std::string message = PQerrorMessage(connection_);
-    while (!message.empty() && (message.back() == '\n' || message.back() == ' ')) message.pop_back();
+    while (!message.empty() && (message.back() == '\n' || message.back() == ' '))
+      message.pop_back();
     return fail(ErrorCode::kIo, fmt::format("{}: {}: {}", name_, what, message));
   }
 
@@ -134,9 +135,10 @@ class PostgisBrushDatabase final : public BrushDatabase {
   }
 
   Result<void> setTextureExtent(const TextureExtent& extent) override {
-    TESSERA_TRY(run("INSERT INTO tessera_meta VALUES('texture_width', $1), ('texture_height', $2) "
-                    "ON CONFLICT(key) DO UPDATE SET value = EXCLUDED.value",
-                    {std::to_string(extent.width_px), std::to_string(extent.height_px)}));
+    TESSERA_TRY(
+        run("INSERT INTO tessera_meta VALUES('texture_width', $1), ('texture_height', $2) "
+            "ON CONFLICT(key) DO UPDATE SET value = EXCLUDED.value",
+            {std::to_string(extent.width_px), std::to_string(extent.height_px)}));
     return {};
   }
 
@@ -155,7 +157,8 @@ class PostgisBrushDatabase final : public BrushDatabase {
     TESSERA_TRY(validateBrush(brush, name_ + ": brush " + brush.name));
     return transaction<uint32_t>([&]() -> Result<uint32_t> {
       TESSERA_TRY(run("LOCK TABLE brushes IN EXCLUSIVE MODE"));
-      TESSERA_ASSIGN_OR_RETURN(auto same, run("SELECT 1 FROM brushes WHERE name = $1", {brush.name}));
+      TESSERA_ASSIGN_OR_RETURN(auto same,
+                               run("SELECT 1 FROM brushes WHERE name = $1", {brush.name}));
       if (same->rows())
         return fail(ErrorCode::kInvalidArgument,
                     fmt::format("{}: a brush named '{}' exists", name_, brush.name));
@@ -169,7 +172,8 @@ class PostgisBrushDatabase final : public BrushDatabase {
         const Image& image = brush.images[v];
         const char* values[5];
         std::string id_text = std::to_string(id), variant = std::to_string(v),
-                    width = std::to_string(image.width_px), height = std::to_string(image.height_px);
+                    width = std::to_string(image.width_px),
+                    height = std::to_string(image.height_px);
         values[0] = id_text.c_str();
         values[1] = variant.c_str();
         values[2] = width.c_str();
@@ -177,8 +181,9 @@ class PostgisBrushDatabase final : public BrushDatabase {
         values[4] = reinterpret_cast<const char*>(image.texels.data());
         const int lengths[5] = {0, 0, 0, 0, int(image.texels.size())};
         const int formats[5] = {0, 0, 0, 0, 1};  // the blob as binary
-        PgResult result(PQexecParams(connection_, "INSERT INTO brush_images VALUES($1, $2, $3, $4, $5)",
-                                     5, nullptr, values, lengths, formats, 0));
+        PgResult result(PQexecParams(connection_,
+                                     "INSERT INTO brush_images VALUES($1, $2, $3, $4, $5)", 5,
+                                     nullptr, values, lengths, formats, 0));
         if (PQresultStatus(result.get()) != PGRES_COMMAND_OK) return error("add brush image");
       }
       return id;
@@ -187,7 +192,8 @@ class PostgisBrushDatabase final : public BrushDatabase {
 
   Result<std::vector<Brush>> brushes() override {
     TESSERA_ASSIGN_OR_RETURN(
-        auto rows, run("SELECT id, name, blend, mask, mask_low, mask_high FROM brushes ORDER BY id"));
+        auto rows,
+        run("SELECT id, name, blend, mask, mask_low, mask_high FROM brushes ORDER BY id"));
     std::vector<Brush> result(size_t(rows->rows()));
     for (int r = 0; r < rows->rows(); ++r) {
       Brush& brush = result[size_t(r)];
@@ -210,11 +216,11 @@ class PostgisBrushDatabase final : public BrushDatabase {
       uint32_t id = be32(r, 0);
       if (id >= result.size())
         return fail(ErrorCode::kCorrupt, fmt::format("{}: image of unknown brush {}", name_, id));
-      TESSERA_ASSIGN_OR_RETURN(
-          Image image, decodeBrushImage(be32(r, 1), be32(r, 2),
-                                        reinterpret_cast<const uint8_t*>(images.at(r, 3)),
-                                        size_t(PQgetlength(images.get(), r, 3)),
-                                        name_ + ": brush " + result[id].name));
+      TESSERA_ASSIGN_OR_RETURN(Image image,
+                               decodeBrushImage(be32(r, 1), be32(r, 2),
+                                                reinterpret_cast<const uint8_t*>(images.at(r, 3)),
+                                                size_t(PQgetlength(images.get(), r, 3)),
+                                                name_ + ": brush " + result[id].name));
       result[id].images.push_back(std::move(image));
     }
     for (const Brush& brush : result)
@@ -235,9 +241,9 @@ class PostgisBrushDatabase final : public BrushDatabase {
     TESSERA_ASSIGN_OR_RETURN(auto max_id, run("SELECT COALESCE(MAX(id), 0) FROM instances"));
     uint64_t next = std::strtoull(max_id->at(0, 0), nullptr, 10) + 1;
     {
-      PgResult copy(PQexec(connection_, fmt::format("COPY instances({}, bounds) FROM STDIN",
-                                                    kInstanceColumns)
-                                            .c_str()));
+      PgResult copy(
+          PQexec(connection_,
+                 fmt::format("COPY instances({}, bounds) FROM STDIN", kInstanceColumns).c_str()));
       if (PQresultStatus(copy.get()) != PGRES_COPY_IN) return error("copy");
     }
     std::vector<uint64_t> ids;
@@ -246,12 +252,13 @@ class PostgisBrushDatabase final : public BrushDatabase {
     for (size_t i = 0; i < instances.size(); ++i) {
       const BrushInstance& s = instances[i];
       const BoxPx b = instanceBounds(s);
-      fmt::format_to(std::back_inserter(buffer),
-                     "{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\tPOLYGON(({} {},{} {},{} {},{} {},{} "
-                     "{}))\n",
-                     next, s.brush, s.x_px, s.y_px, s.radius_px, s.rotation_rad, s.scale,
-                     int(s.opacity), s.tint_rgba, s.layer, int(s.variant), b.x0, b.y0, b.x1, b.y0,
-                     b.x1, b.y1, b.x0, b.y1, b.x0, b.y0);
+      fmt::format_to(
+          std::back_inserter(buffer),
+          "{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\t{}\tPOLYGON(({} {},{} {},{} {},{} {},{} "
+          "{}))\n",
+          next, s.brush, s.x_px, s.y_px, s.radius_px, s.rotation_rad, s.scale, int(s.opacity),
+          s.tint_rgba, s.layer, int(s.variant), b.x0, b.y0, b.x1, b.y0, b.x1, b.y1, b.x0, b.y1,
+          b.x0, b.y0);
       ids.push_back(next++);
       if (buffer.size() > (1u << 20) || i + 1 == instances.size()) {
         if (PQputCopyData(connection_, buffer.data(), int(buffer.size())) != 1)
@@ -319,9 +326,10 @@ class PostgisBrushDatabase final : public BrushDatabase {
 
   Result<void> forEachInstance(const std::function<bool(const BrushInstance&)>& visit) override {
     Result<bool> listed = transaction<bool>([&]() -> Result<bool> {
-      TESSERA_TRY(run(fmt::format("DECLARE tessera_all NO SCROLL CURSOR FOR SELECT {} FROM "
-                                  "instances ORDER BY id",
-                                  kInstanceColumns)));
+      TESSERA_TRY(
+          run(fmt::format("DECLARE tessera_all NO SCROLL CURSOR FOR SELECT {} FROM "
+                          "instances ORDER BY id",
+                          kInstanceColumns)));
       while (true) {
         TESSERA_ASSIGN_OR_RETURN(auto rows, run("FETCH 10000 FROM tessera_all"));
         if (rows->rows() == 0) break;
@@ -358,9 +366,9 @@ Result<std::unique_ptr<BrushDatabase>> openPostgisBrushDatabase(const std::strin
 }
 
 Result<std::unique_ptr<BrushDatabase>> openBrushDatabase(const std::string& location, bool create) {
-  bool postgres = location.rfind("postgresql://", 0) == 0 || location.rfind("postgres://", 0) == 0 ||
-                  location.find("dbname=") != std::string::npos ||
-                  location.find("host=") != std::string::npos;
+  bool postgres =
+      location.rfind("postgresql://", 0) == 0 || location.rfind("postgres://", 0) == 0 ||
+      location.find("dbname=") != std::string::npos || location.find("host=") != std::string::npos;
   return postgres ? openPostgisBrushDatabase(location, create)
                   : openSqliteBrushDatabase(location, create);
 }

@@ -97,25 +97,27 @@ class SqliteBrushDatabase final : public BrushDatabase {
   Result<void> initialise(bool create) {
     // WAL lets one writer and many readers (the build's workers) share the file; a large page
     // cache and a memory map keep tile queries off the read() path.
-    TESSERA_TRY(exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL; "
-                     "PRAGMA cache_size=-131072; PRAGMA mmap_size=17179869184;"));
+    TESSERA_TRY(
+        exec("PRAGMA journal_mode=WAL; PRAGMA synchronous=NORMAL; "
+             "PRAGMA cache_size=-131072; PRAGMA mmap_size=17179869184;"));
     Statement has_meta;
-    TESSERA_TRY(prepare("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = "
-                        "'tessera_meta'",
-                        has_meta));
+    TESSERA_TRY(
+        prepare("SELECT COUNT(*) FROM sqlite_master WHERE type = 'table' AND name = "
+                "'tessera_meta'",
+                has_meta));
     if (sqlite3_step(has_meta.get()) != SQLITE_ROW) return error("open");
     if (sqlite3_column_int(has_meta.get(), 0) == 1) {
       Statement check;
       TESSERA_TRY(prepare("SELECT value FROM tessera_meta WHERE key = 'schema_version'", check));
-      int version = sqlite3_step(check.get()) == SQLITE_ROW ? sqlite3_column_int(check.get(), 0) : 0;
+      int version =
+          sqlite3_step(check.get()) == SQLITE_ROW ? sqlite3_column_int(check.get(), 0) : 0;
       if (version != kBrushSchemaVersion)
         return fail(ErrorCode::kUnsupported,
-                    fmt::format("{}: brush database schema version {} (this build reads {})",
-                                name_, version, kBrushSchemaVersion));
+                    fmt::format("{}: brush database schema version {} (this build reads {})", name_,
+                                version, kBrushSchemaVersion));
       return {};
     }
-    if (!create)
-      return fail(ErrorCode::kNotFound, name_ + ": not a Tessera brush database");
+    if (!create) return fail(ErrorCode::kNotFound, name_ + ": not a Tessera brush database");
     TESSERA_TRY(exec("BEGIN"));
     Result<void> created = exec(kSchema);
     if (created)
@@ -138,9 +140,10 @@ class SqliteBrushDatabase final : public BrushDatabase {
 
   Result<TextureExtent> textureExtent() override {
     Statement statement;
-    TESSERA_TRY(prepare("SELECT key, value FROM tessera_meta WHERE key IN ('texture_width', "
-                        "'texture_height')",
-                        statement));
+    TESSERA_TRY(
+        prepare("SELECT key, value FROM tessera_meta WHERE key IN ('texture_width', "
+                "'texture_height')",
+                statement));
     TextureExtent extent;
     while (sqlite3_step(statement.get()) == SQLITE_ROW) {
       std::string key = reinterpret_cast<const char*>(sqlite3_column_text(statement.get(), 0));
@@ -198,21 +201,21 @@ class SqliteBrushDatabase final : public BrushDatabase {
 
   Result<std::vector<Brush>> brushes() override {
     Statement list, images;
-    TESSERA_TRY(prepare("SELECT id, name, blend, mask, mask_low, mask_high FROM brushes ORDER BY id",
-                        list));
+    TESSERA_TRY(prepare(
+        "SELECT id, name, blend, mask, mask_low, mask_high FROM brushes ORDER BY id", list));
     std::vector<Brush> result;
     while (sqlite3_step(list.get()) == SQLITE_ROW) {
       Brush brush;
       brush.name = reinterpret_cast<const char*>(sqlite3_column_text(list.get(), 1));
-      TESSERA_TRY(decodeBrushFields(sqlite3_column_int(list.get(), 2),
-                                    sqlite3_column_int(list.get(), 3),
-                                    sqlite3_column_int(list.get(), 4),
-                                    sqlite3_column_int(list.get(), 5), name_, brush));
+      TESSERA_TRY(decodeBrushFields(
+          sqlite3_column_int(list.get(), 2), sqlite3_column_int(list.get(), 3),
+          sqlite3_column_int(list.get(), 4), sqlite3_column_int(list.get(), 5), name_, brush));
       result.push_back(std::move(brush));
     }
-    TESSERA_TRY(prepare("SELECT brush_id, width, height, rgba FROM brush_images ORDER BY brush_id, "
-                        "variant",
-                        images));
+    TESSERA_TRY(
+        prepare("SELECT brush_id, width, height, rgba FROM brush_images ORDER BY brush_id, "
+                "variant",
+                images));
     while (sqlite3_step(images.get()) == SQLITE_ROW) {
       uint64_t id = uint64_t(sqlite3_column_int64(images.get(), 0));
       if (id >= result.size())
@@ -291,11 +294,12 @@ class SqliteBrushDatabase final : public BrushDatabase {
 
   Result<void> query(const BoxPx& box, std::vector<BrushInstance>& out) override {
     if (!query_.get()) {
-      TESSERA_TRY(prepare("SELECT i.id, brush_id, x, y, radius, rotation, scale, opacity, tint, "
-                          "layer, variant FROM instance_bounds b JOIN instances i ON i.id = b.id "
-                          "WHERE b.min_x <= ?1 AND b.max_x >= ?2 AND b.min_y <= ?3 AND "
-                          "b.max_y >= ?4",
-                          query_));
+      TESSERA_TRY(
+          prepare("SELECT i.id, brush_id, x, y, radius, rotation, scale, opacity, tint, "
+                  "layer, variant FROM instance_bounds b JOIN instances i ON i.id = b.id "
+                  "WHERE b.min_x <= ?1 AND b.max_x >= ?2 AND b.min_y <= ?3 AND "
+                  "b.max_y >= ?4",
+                  query_));
     }
     sqlite3_stmt* s = query_.get();
     sqlite3_reset(s);
@@ -363,8 +367,8 @@ class SqliteBrushDatabase final : public BrushDatabase {
 
   Result<void> forEachInstance(const std::function<bool(const BrushInstance&)>& visit) override {
     Statement all;
-    TESSERA_TRY(prepare(fmt::format("SELECT {} FROM instances ORDER BY id", kInstanceColumns).c_str(),
-                        all));
+    TESSERA_TRY(prepare(
+        fmt::format("SELECT {} FROM instances ORDER BY id", kInstanceColumns).c_str(), all));
     int rc;
     while ((rc = sqlite3_step(all.get())) == SQLITE_ROW)
       if (!visit(readInstance(all.get()))) return {};

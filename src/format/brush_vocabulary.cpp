@@ -69,22 +69,21 @@ Result<void> validateInstance(const BrushInstance& instance, const std::string& 
 
 Result<void> validateBrush(const Brush& brush, const std::string& what) {
   if (brush.images.empty() || brush.images.size() > kMaxBrushImages)
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("{}: {} images (1..{} allowed)", what, brush.images.size(),
-                            kMaxBrushImages));
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: {} images (1..{} allowed)", what,
+                                                         brush.images.size(), kMaxBrushImages));
   if (uint8_t(brush.blend) >= kBlendModeCount || uint8_t(brush.mask) > 2)
     return fail(ErrorCode::kInvalidArgument, what + ": unknown blend mode or mask source");
   for (size_t i = 0; i < brush.images.size(); ++i) {
     const Image& image = brush.images[i];
     if (image.channels != 4)
-      return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{}: image {} has {} channels, brushes are RGBA", what, i,
-                              image.channels));
+      return fail(
+          ErrorCode::kInvalidArgument,
+          fmt::format("{}: image {} has {} channels, brushes are RGBA", what, i, image.channels));
     if (image.width_px == 0 || image.height_px == 0 || image.width_px > kMaxBrushSidePx ||
         image.height_px > kMaxBrushSidePx)
       return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{}: image {} is {}x{}, sides must be 1..{}", what, i,
-                              image.width_px, image.height_px, kMaxBrushSidePx));
+                  fmt::format("{}: image {} is {}x{}, sides must be 1..{}", what, i, image.width_px,
+                              image.height_px, kMaxBrushSidePx));
     if (image.texels.size() != size_t(image.width_px) * image.height_px * 4)
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}: image {} holds {} bytes for {}x{} RGBA", what, i,

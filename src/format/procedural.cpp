@@ -28,13 +28,11 @@ BlockRef loadBlockRef(const uint8_t* p) {
 
 Result<void> checkPayloadBlock(const BlockRef& block, const FileHeader& header,
                                const std::string& what) {
-  if (block.length_bytes == 0)
-    return fail(ErrorCode::kCorrupt, what + ": empty block");
+  if (block.length_bytes == 0) return fail(ErrorCode::kCorrupt, what + ": empty block");
   if (block.offset_bytes < header.header_region_bytes || block.offset_bytes > header.file_bytes ||
       block.length_bytes > header.file_bytes - block.offset_bytes)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: block [{}, +{}) outside the payload area", what,
-                            block.offset_bytes, block.length_bytes));
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: block [{}, +{}) outside the payload area",
+                                                 what, block.offset_bytes, block.length_bytes));
   return {};
 }
 
@@ -54,11 +52,11 @@ Result<ProceduralImageRecord> loadImageRecord(const uint8_t* p, const FileHeader
   record.width_px = loadU32(p + 24);
   record.height_px = loadU32(p + 28);
   record.channels = p[32];
-  if (!allZero(p + 34, 6))
-    return fail(ErrorCode::kCorrupt, what + ": reserved bytes are not zero");
-  if (p[33] > uint8_t(Codec::kPtm) || !codecIsLossless(Codec(p[33])) || p[33] == uint8_t(Codec::kPtm))
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: codec {} is not a lossless picture codec",
-                                                 what, p[33]));
+  if (!allZero(p + 34, 6)) return fail(ErrorCode::kCorrupt, what + ": reserved bytes are not zero");
+  if (p[33] > uint8_t(Codec::kPtm) || !codecIsLossless(Codec(p[33])) ||
+      p[33] == uint8_t(Codec::kPtm))
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: codec {} is not a lossless picture codec", what, p[33]));
   record.codec = Codec(p[33]);
   if (record.channels != channels)
     return fail(ErrorCode::kCorrupt,
@@ -71,12 +69,14 @@ Result<ProceduralImageRecord> loadImageRecord(const uint8_t* p, const FileHeader
   // A lossless codec never needs more than this for a picture (the same bound as tiles).
   uint64_t raw = uint64_t(record.width_px) * record.height_px * channels;
   if (record.block.length_bytes > 2 * raw + 65536)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: payload of {} bytes for {} texel bytes",
-                                                 what, record.block.length_bytes, raw));
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: payload of {} bytes for {} texel bytes", what,
+                                                 record.block.length_bytes, raw));
   return record;
 }
 
-bool finite(float v) { return std::isfinite(v); }
+bool finite(float v) {
+  return std::isfinite(v);
+}
 
 }  // namespace
 
@@ -114,9 +114,10 @@ Result<ProceduralDirectory> decodeProceduralDirectory(std::span<const uint8_t> b
                                                       uint32_t image_count,
                                                       const std::string& what) {
   if (bytes.size() < kProceduralDirectoryFixedBytes)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: procedural directory of {} bytes is "
-                                                 "shorter than its {}-byte header",
-                                                 what, bytes.size(), kProceduralDirectoryFixedBytes));
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: procedural directory of {} bytes is "
+                            "shorter than its {}-byte header",
+                            what, bytes.size(), kProceduralDirectoryFixedBytes));
   const uint8_t* p = bytes.data();
   if (std::memcmp(p, kProceduralDirectoryMagic, 4) != 0)
     return fail(ErrorCode::kCorrupt, what + ": procedural directory has a bad magic");
@@ -145,16 +146,16 @@ Result<ProceduralDirectory> decodeProceduralDirectory(std::span<const uint8_t> b
                 fmt::format("{}: procedural directory of {} bytes, its counts need {}", what,
                             bytes.size(), expected));
   if (!allZero(p + 24, kProceduralImageRecordBytes)) {
-    TESSERA_ASSIGN_OR_RETURN(directory.height_layer,
-                             loadImageRecord(p + 24, header, 1, kMaxLayerSidePx,
-                                             what + ": height layer"));
+    TESSERA_ASSIGN_OR_RETURN(
+        directory.height_layer,
+        loadImageRecord(p + 24, header, 1, kMaxLayerSidePx, what + ": height layer"));
   }
   const uint8_t* q = p + kProceduralDirectoryFixedBytes;
   directory.images.reserve(images);
   for (uint32_t i = 0; i < images; ++i, q += kProceduralImageRecordBytes) {
-    TESSERA_ASSIGN_OR_RETURN(ProceduralImageRecord record,
-                             loadImageRecord(q, header, 4, kMaxBrushSidePx,
-                                             fmt::format("{}: brush image {}", what, i)));
+    TESSERA_ASSIGN_OR_RETURN(
+        ProceduralImageRecord record,
+        loadImageRecord(q, header, 4, kMaxBrushSidePx, fmt::format("{}: brush image {}", what, i)));
     directory.images.push_back(record);
   }
   directory.brushes.reserve(brush_count);
@@ -232,11 +233,11 @@ Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> b
     instance.opacity = p[36];
     instance.variant = p[37];
     if (loadU16(p + 38) != 0)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: instance {} reserved bytes not zero",
-                                                   what, i));
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("{}: instance {} reserved bytes not zero", what, i));
     if (instance.brush >= brush_count)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: instance {} names brush {} of {}", what,
-                                                   i, instance.brush, brush_count));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: instance {} names brush {} of {}", what, i,
+                                                   instance.brush, brush_count));
     if (!std::isfinite(instance.x_px) || !std::isfinite(instance.y_px) ||
         !finite(instance.radius_px) || !(instance.radius_px > 0) ||
         !finite(instance.rotation_rad) || !finite(instance.scale) || !(instance.scale > 0))
@@ -274,8 +275,8 @@ Result<BlockRef> decodeProceduralHeader(std::span<const uint8_t> header_bytes,
                 fmt::format("{}: procedural directory [{}, +{}) outside the file", name,
                             block.offset_bytes, block.length_bytes));
   if (block.length_bytes > kMaxMetadataBytes)
-    return fail(ErrorCode::kTooLarge, fmt::format("{}: procedural directory of {} bytes", name,
-                                                  block.length_bytes));
+    return fail(ErrorCode::kTooLarge,
+                fmt::format("{}: procedural directory of {} bytes", name, block.length_bytes));
   return block;
 }
 
@@ -321,8 +322,8 @@ Result<std::vector<TileEntry>> decodeTileEntriesProcedural(std::span<const uint8
     if (entry.length_bytes < kInstancePageHeaderBytes || entry.length_bytes > max_payload ||
         (entry.length_bytes - kInstancePageHeaderBytes) % kInstanceRecordBytes)
       return fail(ErrorCode::kCorrupt,
-                  fmt::format("{}: procedural entry {} page length {} is not 8 + 40 n <= {}",
-                              what, i, entry.length_bytes, max_payload));
+                  fmt::format("{}: procedural entry {} page length {} is not 8 + 40 n <= {}", what,
+                              i, entry.length_bytes, max_payload));
     if (entry.offset_bytes < header.header_region_bytes || entry.offset_bytes > header.file_bytes ||
         entry.length_bytes > header.file_bytes - entry.offset_bytes)
       return fail(ErrorCode::kCorrupt,

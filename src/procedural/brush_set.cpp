@@ -55,10 +55,9 @@ MipLevel halveGray(const MipLevel& in) {
     uint32_t y0 = 2 * y, y1 = std::min(2 * y + 1, in.height_px - 1);
     for (uint32_t x = 0; x < out.width_px; ++x) {
       uint32_t x0 = 2 * x, x1 = std::min(2 * x + 1, in.width_px - 1);
-      uint32_t sum = in.texels[size_t(y0) * in.width_px + x0] +
-                     in.texels[size_t(y0) * in.width_px + x1] +
-                     in.texels[size_t(y1) * in.width_px + x0] +
-                     in.texels[size_t(y1) * in.width_px + x1];
+      uint32_t sum =
+          in.texels[size_t(y0) * in.width_px + x0] + in.texels[size_t(y0) * in.width_px + x1] +
+          in.texels[size_t(y1) * in.width_px + x0] + in.texels[size_t(y1) * in.width_px + x1];
       out.texels[size_t(y) * out.width_px + x] = uint8_t((sum + 2) >> 2);
     }
   }
@@ -176,8 +175,8 @@ Result<std::shared_ptr<const BrushSet>> BrushSet::prepare(std::vector<Brush> bru
   if (texture_width_px == 0 || texture_height_px == 0 || texture_width_px > kMaxImageSidePx ||
       texture_height_px > kMaxImageSidePx)
     return fail(ErrorCode::kInvalidArgument,
-                fmt::format("texture size {}x{} out of 1..{}", texture_width_px,
-                            texture_height_px, kMaxImageSidePx));
+                fmt::format("texture size {}x{} out of 1..{}", texture_width_px, texture_height_px,
+                            kMaxImageSidePx));
   auto impl = std::make_unique<Impl>();
   impl->texture_width_px = texture_width_px;
   impl->texture_height_px = texture_height_px;
@@ -196,9 +195,8 @@ Result<std::shared_ptr<const BrushSet>> BrushSet::prepare(std::vector<Brush> bru
     std::string what = fmt::format("brush {} ({})", b, brush.name);
     TESSERA_TRY(validateBrush(brush, what));
     if (brush.mask != MaskSource::kNone && !has_layer)
-      return fail(ErrorCode::kInvalidArgument,
-                  what + ": masked by " + maskSourceName(brush.mask) +
-                      " but no underlying layer was given");
+      return fail(ErrorCode::kInvalidArgument, what + ": masked by " + maskSourceName(brush.mask) +
+                                                   " but no underlying layer was given");
     PreparedBrush prepared;
     prepared.blend = brush.blend;
     prepared.mask = brush.mask;

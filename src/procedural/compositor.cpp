@@ -21,8 +21,10 @@ struct ValidRect {
 };
 
 ValidRect validRect(const TileGeometry& tile) {
-  const int64_t level_w = std::max<int64_t>(1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
-  const int64_t level_h = std::max<int64_t>(1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_w = std::max<int64_t>(
+      1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_h = std::max<int64_t>(
+      1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
   ValidRect rect;
   rect.x0 = levelTexel(tile.x, tile.tile_size_px, tile.border_px, 0);
   rect.y0 = levelTexel(tile.y, tile.tile_size_px, tile.border_px, 0);
@@ -123,10 +125,10 @@ Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,
       const int64_t last = std::min(span.last, rect.x0 + i_hi - 1);
       if (first > last) continue;
       const int64_t i = first - rect.x0;
-      drawInstanceRow(setup, y, first, last,
-                      mask_values ? mask_values + size_t(j - rect.j0) * layer_w + size_t(i - rect.i0)
-                                  : nullptr,
-                      out.texels.data() + (size_t(j) * side + size_t(i)) * 4);
+      drawInstanceRow(
+          setup, y, first, last,
+          mask_values ? mask_values + size_t(j - rect.j0) * layer_w + size_t(i - rect.i0) : nullptr,
+          out.texels.data() + (size_t(j) * side + size_t(i)) * 4);
     }
   }
   replicateEdges(rect, side, out);
@@ -138,26 +140,31 @@ Result<void> compositeTileReference(const BrushSet& brushes, const TileGeometry&
   const BrushSet::Impl& set = brushes.impl();
   const uint32_t side = tile.sidePx();
   resetTile(side, out);
-  const int64_t level_w = std::max<int64_t>(1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
-  const int64_t level_h = std::max<int64_t>(1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_w = std::max<int64_t>(
+      1, (int64_t(tile.image_width_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
+  const int64_t level_h = std::max<int64_t>(
+      1, (int64_t(tile.image_height_px) + (int64_t(1) << tile.level) - 1) >> tile.level);
   for (const BrushInstance& instance : instances) {
     TESSERA_ASSIGN_OR_RETURN(InstanceSetup setup, setupInstance(set, instance, tile.level));
     for (uint32_t j = 0; j < side; ++j) {
-      const int64_t y = std::clamp<int64_t>(levelTexel(tile.y, tile.tile_size_px, tile.border_px, j), 0, level_h - 1);
+      const int64_t y = std::clamp<int64_t>(
+          levelTexel(tile.y, tile.tile_size_px, tile.border_px, j), 0, level_h - 1);
       for (uint32_t i = 0; i < side; ++i) {
-        const int64_t x = std::clamp<int64_t>(levelTexel(tile.x, tile.tile_size_px, tile.border_px, i), 0, level_w - 1);
+        const int64_t x = std::clamp<int64_t>(
+            levelTexel(tile.x, tile.tile_size_px, tile.border_px, i), 0, level_w - 1);
         uint8_t source[4];
         uint32_t alpha = sampleInstance(setup, x, y, source);
         if (alpha == 0) continue;
         if (setup.brush->mask != MaskSource::kNone) {
           const LayerPyramid& layer =
               setup.brush->mask == MaskSource::kHeight ? set.height : set.slope;
-          alpha = div255(alpha * setup.brush->mask_lut[sampleLayer(
-                                     layer, set.texture_width_px, set.texture_height_px,
-                                     tile.level, x, y)]);
+          alpha = div255(
+              alpha * setup.brush->mask_lut[sampleLayer(layer, set.texture_width_px,
+                                                        set.texture_height_px, tile.level, x, y)]);
           if (alpha == 0) continue;
         }
-        blendTexel(setup.brush->blend, source, alpha, out.texels.data() + (size_t(j) * side + i) * 4);
+        blendTexel(setup.brush->blend, source, alpha,
+                   out.texels.data() + (size_t(j) * side + i) * 4);
       }
     }
   }

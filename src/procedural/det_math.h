@@ -17,19 +17,44 @@ inline void detSinCos(double angle, double* sine, double* cosine) {
   double r = (angle - k * kHalfPiHigh) - k * kHalfPiLow;
   double r2 = r * r;
   // Taylor series to r^17 / r^18: |r| <= pi/4 makes the next term < 1e-17.
-  double s = r * (1 + r2 * (-1.0 / 6 + r2 * (1.0 / 120 + r2 * (-1.0 / 5040 + r2 * (1.0 / 362880 +
-             r2 * (-1.0 / 39916800 + r2 * (1.0 / 6227020800.0 + r2 * (-1.0 / 1307674368000.0 +
-             r2 * (1.0 / 355687428096000.0)))))))));
-  double c = 1 + r2 * (-1.0 / 2 + r2 * (1.0 / 24 + r2 * (-1.0 / 720 + r2 * (1.0 / 40320 +
-             r2 * (-1.0 / 3628800 + r2 * (1.0 / 479001600 + r2 * (-1.0 / 87178291200.0 +
-             r2 * (1.0 / 20922789888000.0 + r2 * (-1.0 / 6402373705728000.0)))))))));
+  double s =
+      r * (1 + r2 * (-1.0 / 6 +
+                     r2 * (1.0 / 120 +
+                           r2 * (-1.0 / 5040 +
+                                 r2 * (1.0 / 362880 +
+                                       r2 * (-1.0 / 39916800 +
+                                             r2 * (1.0 / 6227020800.0 +
+                                                   r2 * (-1.0 / 1307674368000.0 +
+                                                         r2 * (1.0 / 355687428096000.0)))))))));
+  double c =
+      1 + r2 * (-1.0 / 2 +
+                r2 * (1.0 / 24 +
+                      r2 * (-1.0 / 720 +
+                            r2 * (1.0 / 40320 +
+                                  r2 * (-1.0 / 3628800 +
+                                        r2 * (1.0 / 479001600 +
+                                              r2 * (-1.0 / 87178291200.0 +
+                                                    r2 * (1.0 / 20922789888000.0 +
+                                                          r2 * (-1.0 / 6402373705728000.0)))))))));
   long quadrant = long(std::fmod(k, 4.0));
   if (quadrant < 0) quadrant += 4;
   switch (quadrant) {
-    case 0: *sine = s; *cosine = c; break;
-    case 1: *sine = c; *cosine = -s; break;
-    case 2: *sine = -s; *cosine = -c; break;
-    default: *sine = -c; *cosine = s; break;
+    case 0:
+      *sine = s;
+      *cosine = c;
+      break;
+    case 1:
+      *sine = c;
+      *cosine = -s;
+      break;
+    case 2:
+      *sine = -s;
+      *cosine = -c;
+      break;
+    default:
+      *sine = -c;
+      *cosine = s;
+      break;
   }
 }
 

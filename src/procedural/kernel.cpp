@@ -35,23 +35,21 @@ uint32_t chooseMip(double texels_per_target, size_t mip_count) {
 Result<InstanceSetup> setupInstance(const BrushSet::Impl& set, const BrushInstance& instance,
                                     uint32_t level) {
   if (instance.brush >= set.prepared.size())
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("instance {} names brush {}, the brush set has {}", instance.id,
-                            instance.brush, set.prepared.size()));
+    return fail(ErrorCode::kCorrupt, fmt::format("instance {} names brush {}, the brush set has {}",
+                                                 instance.id, instance.brush, set.prepared.size()));
   InstanceSetup setup;
   setup.brush = &set.prepared[instance.brush];
   if (setup.brush->mask != MaskSource::kNone &&
       (setup.brush->mask == MaskSource::kHeight ? set.height.empty() : set.slope.empty()))
     return fail(ErrorCode::kCorrupt,
-                fmt::format("instance {}: brush {} is masked by a layer the set lacks",
-                            instance.id, instance.brush));
-  const ImagePyramid& image =
-      setup.brush->images[instance.variant % setup.brush->images.size()];
+                fmt::format("instance {}: brush {} is masked by a layer the set lacks", instance.id,
+                            instance.brush));
+  const ImagePyramid& image = setup.brush->images[instance.variant % setup.brush->images.size()];
   const MipLevel& base = image.mips[0];
   const double w = base.width_px, h = base.height_px;
   const double extent = double(instance.radius_px) * double(instance.scale);
   const double per_px = std::max(w, h) / (2 * extent);  // brush texels per level-0 texel
-  const double level_px = std::ldexp(1.0, int(level));   // level-0 texels per level texel
+  const double level_px = std::ldexp(1.0, int(level));  // level-0 texels per level texel
   setup.mip_index = chooseMip(per_px * level_px, image.mips.size());
   setup.mip = &image.mips[setup.mip_index];
   const double sx = setup.mip->width_px / w, sy = setup.mip->height_px / h;
@@ -117,8 +115,10 @@ uint8_t sampleLayer(const LayerPyramid& layer, uint32_t texture_width_px,
   const int64_t u = toFixed((double(x) + 0.5) * level_px * mip.width_px / texture_width_px - 0.5);
   const int64_t v = toFixed((double(y) + 0.5) * level_px * mip.height_px / texture_height_px - 0.5);
   const int64_t w = mip.width_px, h = mip.height_px;
-  const int64_t x0 = std::clamp<int64_t>(u >> 16, 0, w - 1), x1 = std::clamp<int64_t>((u >> 16) + 1, 0, w - 1);
-  const int64_t y0 = std::clamp<int64_t>(v >> 16, 0, h - 1), y1 = std::clamp<int64_t>((v >> 16) + 1, 0, h - 1);
+  const int64_t x0 = std::clamp<int64_t>(u >> 16, 0, w - 1),
+                x1 = std::clamp<int64_t>((u >> 16) + 1, 0, w - 1);
+  const int64_t y0 = std::clamp<int64_t>(v >> 16, 0, h - 1),
+                y1 = std::clamp<int64_t>((v >> 16) + 1, 0, h - 1);
   const uint32_t fx = uint32_t(u >> 8) & 0xFF, fy = uint32_t(v >> 8) & 0xFF;
   const uint8_t* t = mip.texels.data();
   const uint32_t gx = 256 - fx, gy = 256 - fy;

@@ -75,21 +75,21 @@ Result<std::shared_ptr<const ProceduralTiles>> ProceduralTiles::open(const Archi
                            decodeProceduralHeader(header_bytes, impl->header, archive.name()));
   if (block.length_bytes == 0)
     return fail(ErrorCode::kNotFound, archive.name() + ": the archive has no procedural tiles");
-  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> root,
-                           readVerified(source, impl->header.root, archive.name() + ": root directory"));
-  TESSERA_ASSIGN_OR_RETURN(impl->records, decodeRootDirectory(root, impl->header, archive.name()));
   TESSERA_ASSIGN_OR_RETURN(
-      std::vector<uint8_t> bytes,
-      readVerified(source, block, archive.name() + ": procedural directory"));
-  TESSERA_ASSIGN_OR_RETURN(impl->directory,
-                           decodeProceduralDirectory(bytes, impl->header, impl->header.image_count,
-                                                     archive.name()));
+      std::vector<uint8_t> root,
+      readVerified(source, impl->header.root, archive.name() + ": root directory"));
+  TESSERA_ASSIGN_OR_RETURN(impl->records, decodeRootDirectory(root, impl->header, archive.name()));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes,
+                           readVerified(source, block, archive.name() + ": procedural directory"));
+  TESSERA_ASSIGN_OR_RETURN(
+      impl->directory,
+      decodeProceduralDirectory(bytes, impl->header, impl->header.image_count, archive.name()));
   const ProceduralDirectory& directory = impl->directory;
   if (impl->records[directory.image].info.channels != 4)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: procedural image {} has {} channels; procedural tiles are RGBA",
-                            archive.name(), directory.image,
-                            impl->records[directory.image].info.channels));
+    return fail(
+        ErrorCode::kCorrupt,
+        fmt::format("{}: procedural image {} has {} channels; procedural tiles are RGBA",
+                    archive.name(), directory.image, impl->records[directory.image].info.channels));
   std::vector<Brush> brushes;
   for (size_t b = 0; b < directory.brushes.size(); ++b) {
     const ProceduralBrushRecord& record = directory.brushes[b];
@@ -111,9 +111,8 @@ Result<std::shared_ptr<const ProceduralTiles>> ProceduralTiles::open(const Archi
     impl->stored_bytes += image.block.length_bytes;
   UnderlyingLayer layer;
   if (directory.height_layer.width_px != 0) {
-    TESSERA_ASSIGN_OR_RETURN(layer.height,
-                             readPicture(source, directory.height_layer,
-                                         archive.name() + ": height layer"));
+    TESSERA_ASSIGN_OR_RETURN(layer.height, readPicture(source, directory.height_layer,
+                                                       archive.name() + ": height layer"));
     impl->stored_bytes += directory.height_layer.block.length_bytes;
   }
   const ImageInfo& info = impl->records[directory.image].info;
@@ -137,17 +136,17 @@ Result<TileEntry> ProceduralTiles::tileEntry(const Archive& archive, const TileI
   const uint32_t page_x = tile.x >> info.page_tiles_log2, page_y = tile.y >> info.page_tiles_log2;
   const uint32_t page_index = page_y * pagesX(info, tile.level) + page_x;
   std::vector<uint8_t> ref_bytes(kPageRefBytes);
-  TESSERA_TRY(archive.source().read(index.offset_bytes + uint64_t(page_index) * kPageRefBytes,
-                                    ref_bytes));
-  TESSERA_ASSIGN_OR_RETURN(PageRef ref, decodePageRef(ref_bytes, info, tile.level, page_index,
-                                                      impl_->header.file_bytes,
-                                                      archive.tileName(tile)));
+  TESSERA_TRY(
+      archive.source().read(index.offset_bytes + uint64_t(page_index) * kPageRefBytes, ref_bytes));
+  TESSERA_ASSIGN_OR_RETURN(
+      PageRef ref, decodePageRef(ref_bytes, info, tile.level, page_index, impl_->header.file_bytes,
+                                 archive.tileName(tile)));
   if (ref.length_bytes == 0) return TileEntry{};
   TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> page,
                            readVerified(archive.source(), ref, archive.tileName(tile) + ": page"));
-  TESSERA_ASSIGN_OR_RETURN(std::vector<TileEntry> entries,
-                           decodeTileEntriesProcedural(page, info, impl_->header,
-                                                       archive.tileName(tile) + ": page"));
+  TESSERA_ASSIGN_OR_RETURN(
+      std::vector<TileEntry> entries,
+      decodeTileEntriesProcedural(page, info, impl_->header, archive.tileName(tile) + ": page"));
   PageGeometry geometry = pageGeometry(info, tile.level, page_x, page_y);
   return entries[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
                  (tile.x - geometry.first_tile_x)];
@@ -169,15 +168,14 @@ Result<void> ProceduralTiles::compositePage(const Archive& archive, const TileId
   if (tile.image != impl_->directory.image)
     return fail(ErrorCode::kCorrupt, what + ": procedural, but its image has no brush set");
   if (page.size() != entry.length_bytes || checksum64(page) != entry.checksum)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: instance page checksum mismatch at offset {}", what,
-                            entry.offset_bytes));
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: instance page checksum mismatch at offset {}",
+                                                 what, entry.offset_bytes));
   TESSERA_ASSIGN_OR_RETURN(
       std::vector<BrushInstance> instances,
       decodeInstancePage(page, uint32_t(impl_->directory.brushes.size()), what));
   const ImageInfo& info = impl_->records[tile.image].info;
-  TileGeometry geometry{tile.level,       tile.x,        tile.y,        info.tile_size_px,
-                        info.border_px,   info.width_px, info.height_px};
+  TileGeometry geometry{tile.level,     tile.x,        tile.y,        info.tile_size_px,
+                        info.border_px, info.width_px, info.height_px};
   Result<void> composited = tessera::compositeTile(*impl_->brushes, geometry, instances, out);
   if (!composited) return fail(ErrorCode::kCorrupt, what + ": " + composited.error().message);
   return {};

@@ -137,7 +137,8 @@ template <BlendMode kMode>
 inline __m128i blended16(__m128i b, __m128i s) {
   if constexpr (kMode == BlendMode::kNormal) return s;
   if constexpr (kMode == BlendMode::kMultiply) return div255x16(_mm_mullo_epi16(b, s));
-  if constexpr (kMode == BlendMode::kAdd) return _mm_min_epi16(_mm_add_epi16(b, s), _mm_set1_epi16(255));
+  if constexpr (kMode == BlendMode::kAdd)
+    return _mm_min_epi16(_mm_add_epi16(b, s), _mm_set1_epi16(255));
   const __m128i full = _mm_set1_epi16(255);
   const __m128i low = _mm_cmplt_epi16(b, _mm_set1_epi16(128));
   const __m128i dark = div255x16(_mm_mullo_epi16(_mm_add_epi16(b, b), s));
@@ -224,12 +225,11 @@ inline void drawPair(const InstanceSetup& setup, bool plain, int64_t u, int64_t 
                           lerp16(pairOf(a[2], b[2]), pairOf(a[3], b[3]), fx), fy);
   if (!plain) {
     // Colour lanes: div255(c t); alpha: div255(div255(a t) opacity); div255(x 255) = x.
-    const __m128i tint = _mm_setr_epi16(short(setup.tint[0]), short(setup.tint[1]),
-                                        short(setup.tint[2]), short(setup.tint[3]),
-                                        short(setup.tint[0]), short(setup.tint[1]),
-                                        short(setup.tint[2]), short(setup.tint[3]));
-    const __m128i opacity = _mm_setr_epi16(255, 255, 255, short(setup.opacity), 255, 255, 255,
-                                           short(setup.opacity));
+    const __m128i tint = _mm_setr_epi16(
+        short(setup.tint[0]), short(setup.tint[1]), short(setup.tint[2]), short(setup.tint[3]),
+        short(setup.tint[0]), short(setup.tint[1]), short(setup.tint[2]), short(setup.tint[3]));
+    const __m128i opacity =
+        _mm_setr_epi16(255, 255, 255, short(setup.opacity), 255, 255, 255, short(setup.opacity));
     colour = div255x16(_mm_mullo_epi16(div255x16(_mm_mullo_epi16(colour, tint)), opacity));
   }
   uint32_t alpha_a = uint32_t(_mm_extract_epi16(colour, 3));
@@ -239,19 +239,20 @@ inline void drawPair(const InstanceSetup& setup, bool plain, int64_t u, int64_t 
     alpha_b = div255(alpha_b * setup.brush->mask_lut[mask_values[1]]);
   }
   if (alpha_a && alpha_b && d[3] == 255 && d[7] == 255) {
-    const __m128i backdrop =
-        _mm_unpacklo_epi8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(d)), _mm_setzero_si128());
+    const __m128i backdrop = _mm_unpacklo_epi8(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(d)),
+                                               _mm_setzero_si128());
     const __m128i sa = weightsOf(alpha_a, alpha_b);
-    const __m128i out = div255x16(
-        _mm_add_epi16(_mm_mullo_epi16(blended16<kMode>(backdrop, colour), sa),
-                      _mm_mullo_epi16(backdrop, _mm_sub_epi16(_mm_set1_epi16(255), sa))));
+    const __m128i out =
+        div255x16(_mm_add_epi16(_mm_mullo_epi16(blended16<kMode>(backdrop, colour), sa),
+                                _mm_mullo_epi16(backdrop, _mm_sub_epi16(_mm_set1_epi16(255), sa))));
     _mm_storel_epi64(reinterpret_cast<__m128i*>(d), _mm_packus_epi16(out, out));
     d[3] = d[7] = 255;
     return;
   }
   if (alpha_a && alpha_b && d[3] == 0 && d[7] == 0) {
     // Nothing below either: the source as it is (see finishTexel).
-    const __m128i out = _mm_insert_epi16(_mm_insert_epi16(colour, int(alpha_a), 3), int(alpha_b), 7);
+    const __m128i out =
+        _mm_insert_epi16(_mm_insert_epi16(colour, int(alpha_a), 3), int(alpha_b), 7);
     _mm_storel_epi64(reinterpret_cast<__m128i*>(d), _mm_packus_epi16(out, out));
     return;
   }
@@ -307,10 +308,16 @@ void drawInstanceRow(const InstanceSetup& setup, int64_t y, int64_t first, int64
                      const uint8_t* mask_values, uint8_t* row) {
   const int64_t dy = y - setup.y_c;
   switch (setup.brush->blend) {
-    case BlendMode::kNormal: drawRow<BlendMode::kNormal>(setup, dy, first, last, mask_values, row); break;
-    case BlendMode::kMultiply: drawRow<BlendMode::kMultiply>(setup, dy, first, last, mask_values, row); break;
+    case BlendMode::kNormal:
+      drawRow<BlendMode::kNormal>(setup, dy, first, last, mask_values, row);
+      break;
+    case BlendMode::kMultiply:
+      drawRow<BlendMode::kMultiply>(setup, dy, first, last, mask_values, row);
+      break;
     case BlendMode::kAdd: drawRow<BlendMode::kAdd>(setup, dy, first, last, mask_values, row); break;
-    case BlendMode::kOverlay: drawRow<BlendMode::kOverlay>(setup, dy, first, last, mask_values, row); break;
+    case BlendMode::kOverlay:
+      drawRow<BlendMode::kOverlay>(setup, dy, first, last, mask_values, row);
+      break;
   }
 }
 

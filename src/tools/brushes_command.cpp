@@ -18,8 +18,8 @@ namespace {
 
 struct BrushesArgs {
   std::string database;
-  std::string size;                ///< init: WxH
-  std::string name;                ///< add-brush
+  std::string size;  ///< init: WxH
+  std::string name;  ///< add-brush
   std::vector<std::string> images;
   std::string blend = "normal";
   std::string mask = "none";
@@ -27,9 +27,9 @@ struct BrushesArgs {
   std::vector<std::string> files;  ///< import
   uint64_t count = 0;              ///< generate
   uint64_t seed = 1;
-  std::string box;                 ///< query, delete
-  std::vector<uint64_t> ids;       ///< delete
-  uint64_t limit = 20;             ///< list
+  std::string box;            ///< query, delete
+  std::vector<uint64_t> ids;  ///< delete
+  uint64_t limit = 20;        ///< list
   bool json = false;
 };
 
@@ -40,20 +40,26 @@ Result<std::unique_ptr<BrushDatabase>> openDatabase(const BrushesArgs& args, boo
 Result<BoxPx> parseBox(const std::string& text) {
   BoxPx box;
   char tail = 0;
-  if (std::sscanf(text.c_str(), "%lf,%lf,%lf,%lf%c", &box.x0, &box.y0, &box.x1, &box.y1, &tail) != 4)
+  if (std::sscanf(text.c_str(), "%lf,%lf,%lf,%lf%c", &box.x0, &box.y0, &box.x1, &box.y1, &tail) !=
+      4)
     return fail(ErrorCode::kInvalidArgument, "--box " + text + ": expected x0,y0,x1,y1");
   return box;
 }
 
 nlohmann::json instanceJson(const BrushInstance& i) {
-  return {{"id", i.id},           {"brush", i.brush}, {"x", i.x_px},
-          {"y", i.y_px},          {"radius", i.radius_px},
+  return {{"id", i.id},
+          {"brush", i.brush},
+          {"x", i.x_px},
+          {"y", i.y_px},
+          {"radius", i.radius_px},
           {"rotation", i.rotation_rad * 57.29577951308232},
-          {"scale", i.scale},     {"opacity", i.opacity / 255.0},
-          {"tint", fmt::format("#{:02X}{:02X}{:02X}{:02X}", i.tint_rgba & 0xFF,
-                               (i.tint_rgba >> 8) & 0xFF, (i.tint_rgba >> 16) & 0xFF,
-                               i.tint_rgba >> 24)},
-          {"layer", i.layer},     {"variant", i.variant}};
+          {"scale", i.scale},
+          {"opacity", i.opacity / 255.0},
+          {"tint",
+           fmt::format("#{:02X}{:02X}{:02X}{:02X}", i.tint_rgba & 0xFF, (i.tint_rgba >> 8) & 0xFF,
+                       (i.tint_rgba >> 16) & 0xFF, i.tint_rgba >> 24)},
+          {"layer", i.layer},
+          {"variant", i.variant}};
 }
 
 void printInstances(const std::vector<BrushInstance>& instances, bool json) {
@@ -67,7 +73,8 @@ void printInstances(const std::vector<BrushInstance>& instances, bool json) {
               "layer", "opac");
   for (const BrushInstance& i : instances)
     std::printf("%10llu %6u %12.2f %12.2f %9.2f %8.1f %6d %5u\n", (unsigned long long)i.id, i.brush,
-                i.x_px, i.y_px, i.radius_px, i.rotation_rad * 57.29577951308232, i.layer, i.opacity);
+                i.x_px, i.y_px, i.radius_px, i.rotation_rad * 57.29577951308232, i.layer,
+                i.opacity);
 }
 
 int runInit(const BrushesArgs& args) {
@@ -95,8 +102,8 @@ int runAddBrush(const BrushesArgs& args) {
   char tail = 0;
   if (std::sscanf(args.mask_range.c_str(), "%u:%u%c", &low, &high, &tail) != 2 || low > 255 ||
       high > 255)
-    return reportError({ErrorCode::kInvalidArgument, "--mask-range " + args.mask_range +
-                                                         ": expected LOW:HIGH in 0..255"});
+    return reportError({ErrorCode::kInvalidArgument,
+                        "--mask-range " + args.mask_range + ": expected LOW:HIGH in 0..255"});
   brush.mask_low = uint8_t(low);
   brush.mask_high = uint8_t(high);
   const std::string scratch = std::filesystem::temp_directory_path().string();
@@ -170,9 +177,10 @@ int runList(const BrushesArgs& args) {
                 (*db)->backend(), extent->width_px, extent->height_px, brushes->size(),
                 (unsigned long long)*count);
     for (size_t b = 0; b < brushes->size(); ++b)
-      std::printf("  brush %zu: %s, %s, mask %s %u:%u, %zu image(s)\n", b, (*brushes)[b].name.c_str(),
-                  blendModeName((*brushes)[b].blend), maskSourceName((*brushes)[b].mask),
-                  (*brushes)[b].mask_low, (*brushes)[b].mask_high, (*brushes)[b].images.size());
+      std::printf("  brush %zu: %s, %s, mask %s %u:%u, %zu image(s)\n", b,
+                  (*brushes)[b].name.c_str(), blendModeName((*brushes)[b].blend),
+                  maskSourceName((*brushes)[b].mask), (*brushes)[b].mask_low,
+                  (*brushes)[b].mask_high, (*brushes)[b].images.size());
   }
   printInstances(first, args.json);
   return kExitOk;
@@ -210,7 +218,7 @@ int runDelete(const BrushesArgs& args) {
 }
 
 CLI::App* brushesSubcommand(CLI::App* parent, const char* name, const char* help,
-                     const std::shared_ptr<BrushesArgs>& args) {
+                            const std::shared_ptr<BrushesArgs>& args) {
   CLI::App* cmd = parent->add_subcommand(name, help);
   cmd->add_option("database", args->database, "SQLite file or PostGIS connection string")
       ->required();
@@ -223,28 +231,34 @@ void registerBrushesCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<BrushesArgs>();
   CLI::App* brushes = app.add_subcommand("brushes", "Edit a brush database (procedural tiles)");
   brushes->require_subcommand(1);
-  CLI::App* init = brushesSubcommand(brushes, "init", "Create a database for a texture of a size", args);
+  CLI::App* init =
+      brushesSubcommand(brushes, "init", "Create a database for a texture of a size", args);
   init->add_option("--size", args->size, "Texture size WxH in level-0 texels")->required();
   init->callback([args, &exit_code] { exit_code = runInit(*args); });
-  CLI::App* add_brush = brushesSubcommand(brushes, "add-brush", "Add a brush from RGBA image(s)", args);
+  CLI::App* add_brush =
+      brushesSubcommand(brushes, "add-brush", "Add a brush from RGBA image(s)", args);
   add_brush->add_option("--name", args->name, "Unique name")->required();
   add_brush->add_option("--image", args->images, "Image(s) (PNG, TIFF, JPEG), one per variant")
       ->required();
   add_brush->add_option("--blend", args->blend, "normal, multiply, add or overlay")
       ->capture_default_str();
   add_brush->add_option("--mask", args->mask, "none, height or slope")->capture_default_str();
-  add_brush->add_option("--mask-range", args->mask_range,
-                        "LOW:HIGH layer values where the mask ramps from 0 to full")
+  add_brush
+      ->add_option("--mask-range", args->mask_range,
+                   "LOW:HIGH layer values where the mask ramps from 0 to full")
       ->capture_default_str();
   add_brush->callback([args, &exit_code] { exit_code = runAddBrush(*args); });
-  CLI::App* add = brushesSubcommand(brushes, "add", "Import instances from .csv, .json or .geojson", args);
+  CLI::App* add =
+      brushesSubcommand(brushes, "add", "Import instances from .csv, .json or .geojson", args);
   add->add_option("files", args->files, "Instance files; each is one transaction")->required();
   add->callback([args, &exit_code] { exit_code = runImport(*args); });
-  CLI::App* generate = brushesSubcommand(brushes, "generate", "Add a deterministic test instance set", args);
+  CLI::App* generate =
+      brushesSubcommand(brushes, "generate", "Add a deterministic test instance set", args);
   generate->add_option("--count", args->count, "Instances")->required();
   generate->add_option("--seed", args->seed, "Seed")->capture_default_str();
   generate->callback([args, &exit_code] { exit_code = runGenerate(*args); });
-  CLI::App* list = brushesSubcommand(brushes, "list", "Brushes, counts and the first instances", args);
+  CLI::App* list =
+      brushesSubcommand(brushes, "list", "Brushes, counts and the first instances", args);
   list->add_option("--limit", args->limit, "Instances to show")->capture_default_str();
   list->add_flag("--json", args->json, "Instances as JSON");
   list->callback([args, &exit_code] { exit_code = runList(*args); });

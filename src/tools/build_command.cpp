@@ -119,8 +119,8 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   cmd->add_flag("--json", args->json, "Print the build report as JSON");
   auto procedural = addProceduralBuildOptions(cmd);
   cmd->callback([args, procedural, &exit_code] {
-    exit_code = procedural->requested() ? runProceduralBuild(*procedural, args->options, args->codec,
-                                                             args->quiet, args->json)
+    exit_code = procedural->requested() ? runProceduralBuild(*procedural, args->options,
+                                                             args->codec, args->quiet, args->json)
                                         : runBuild(*args);
   });
 }

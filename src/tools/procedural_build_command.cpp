@@ -62,25 +62,29 @@ nlohmann::json reportJson(const ProceduralBuildReport& r, const std::string& out
 void printReport(const ProceduralBuildReport& r, const std::string& output) {
   std::printf("%s: %ux%u, %s in %.1f s\n", output.c_str(), r.image.width_px, r.image.height_px,
               formatBytes(r.output_bytes).c_str(), r.elapsed_s);
-  std::printf("  tiles: %llu procedural, %llu baked (%llu over the %.3f ms budget), %llu uniform, "
-              "%llu empty (%llu dropped levels)\n",
-              (unsigned long long)r.tiles_procedural, (unsigned long long)r.tiles_baked,
-              (unsigned long long)r.tiles_over_budget, r.tile_budget_ms,
-              (unsigned long long)r.tiles_uniform, (unsigned long long)r.tiles_empty,
-              (unsigned long long)r.tiles_dropped);
-  std::printf("  bytes: %s baked payloads + %s instance pages + %s brushes, against %s all "
-              "baked: %s saved\n",
-              formatBytes(r.baked_payload_bytes).c_str(), formatBytes(r.procedural_page_bytes).c_str(),
-              formatBytes(r.brush_bytes).c_str(), formatBytes(r.all_baked_payload_bytes).c_str(),
-              r.bytes_saved >= 0 ? formatBytes(uint64_t(r.bytes_saved)).c_str()
-                                 : ("-" + formatBytes(uint64_t(-r.bytes_saved))).c_str());
-  std::printf("  worst compositing time of a procedural tile: %.3f ms estimated, %.3f ms measured\n",
-              r.worst_estimated_ms, r.worst_measured_ms);
-  std::printf("  instances: %llu in the database; per tile %llu queried, %llu covered, %llu too "
-              "small; %.1f us per query\n",
-              (unsigned long long)r.instances, (unsigned long long)r.instances_queried,
-              (unsigned long long)r.instances_covered, (unsigned long long)r.instances_small,
-              r.mean_query_us);
+  std::printf(
+      "  tiles: %llu procedural, %llu baked (%llu over the %.3f ms budget), %llu uniform, "
+      "%llu empty (%llu dropped levels)\n",
+      (unsigned long long)r.tiles_procedural, (unsigned long long)r.tiles_baked,
+      (unsigned long long)r.tiles_over_budget, r.tile_budget_ms,
+      (unsigned long long)r.tiles_uniform, (unsigned long long)r.tiles_empty,
+      (unsigned long long)r.tiles_dropped);
+  std::printf(
+      "  bytes: %s baked payloads + %s instance pages + %s brushes, against %s all "
+      "baked: %s saved\n",
+      formatBytes(r.baked_payload_bytes).c_str(), formatBytes(r.procedural_page_bytes).c_str(),
+      formatBytes(r.brush_bytes).c_str(), formatBytes(r.all_baked_payload_bytes).c_str(),
+      r.bytes_saved >= 0 ? formatBytes(uint64_t(r.bytes_saved)).c_str()
+                         : ("-" + formatBytes(uint64_t(-r.bytes_saved))).c_str());
+  std::printf(
+      "  worst compositing time of a procedural tile: %.3f ms estimated, %.3f ms measured\n",
+      r.worst_estimated_ms, r.worst_measured_ms);
+  std::printf(
+      "  instances: %llu in the database; per tile %llu queried, %llu covered, %llu too "
+      "small; %.1f us per query\n",
+      (unsigned long long)r.instances, (unsigned long long)r.instances_queried,
+      (unsigned long long)r.instances_covered, (unsigned long long)r.instances_small,
+      r.mean_query_us);
 }
 
 }  // namespace
@@ -92,21 +96,26 @@ std::shared_ptr<ProceduralBuildFlags> addProceduralBuildOptions(CLI::App* build)
                     "connection) instead of inputs");
   build->add_option("--base", flags->base,
                     "With --procedural: the underlying height image read by masked brushes");
-  build->add_option("--frame-budget-ms", flags->frame_budget_ms,
-                    "With --procedural: compositing time allowed per frame")
+  build
+      ->add_option("--frame-budget-ms", flags->frame_budget_ms,
+                   "With --procedural: compositing time allowed per frame")
       ->capture_default_str();
-  build->add_option("--max-new-tiles", flags->max_new_tiles,
-                    "With --procedural: most tiles a frame brings into view")
+  build
+      ->add_option("--max-new-tiles", flags->max_new_tiles,
+                   "With --procedural: most tiles a frame brings into view")
       ->capture_default_str();
-  build->add_option("--small-instance-texels", flags->small_instance_texels,
-                    "With --procedural: drop instances narrower than this fraction of a texel of "
-                    "the finest stored level (0 keeps all)")
+  build
+      ->add_option("--small-instance-texels", flags->small_instance_texels,
+                   "With --procedural: drop instances narrower than this fraction of a texel of "
+                   "the finest stored level (0 keeps all)")
       ->capture_default_str();
-  build->add_option("--cost-texel-ns", flags->cost_texel_ns,
-                    "With --procedural: the cost model's time per texel visited")
+  build
+      ->add_option("--cost-texel-ns", flags->cost_texel_ns,
+                   "With --procedural: the cost model's time per texel visited")
       ->capture_default_str();
-  build->add_option("--detail-region", flags->detail_regions,
-                    "With --procedural: x0,y0,x1,y1:LEVEL, levels finer than LEVEL not stored there");
+  build->add_option(
+      "--detail-region", flags->detail_regions,
+      "With --procedural: x0,y0,x1,y1:LEVEL, levels finer than LEVEL not stored there");
   build->add_flag("--bake-all", flags->bake_all,
                   "With --procedural: store every tile baked (for comparison)");
   return flags;

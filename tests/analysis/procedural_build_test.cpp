@@ -108,8 +108,8 @@ TEST_F(ProceduralBuildTest, EveryTileEqualsTheBruteForceCompositor) {
         Image expected;
         ASSERT_TRUE(compositeTileReference(*reference_set_, {level, x, y, 128, 1, kWidth, kHeight},
                                            instances_, expected));
-        ASSERT_EQ(got.texels, expected.texels) << "tile " << level << "," << x << "," << y << " "
-                                               << tileKindName(entry->kind);
+        ASSERT_EQ(got.texels, expected.texels)
+            << "tile " << level << "," << x << "," << y << " " << tileKindName(entry->kind);
       }
     }
   }
@@ -151,13 +151,15 @@ TEST_F(ProceduralBuildTest, CorruptPagesAndMissingBrushesFailTheirTile) {
   auto no_brush = (*procedural)->compositePage(**archive, id, forged, missing, out);
   ASSERT_FALSE(no_brush);
   EXPECT_EQ(no_brush.error().code, ErrorCode::kCorrupt);
-  EXPECT_NE(no_brush.error().message.find("brush 999"), std::string::npos) << no_brush.error().message;
+  EXPECT_NE(no_brush.error().message.find("brush 999"), std::string::npos)
+      << no_brush.error().message;
   // Truncated pages.
   for (size_t n = 0; n < page.size(); n += 7) {
     TileEntry short_entry = *entry;
     short_entry.length_bytes = uint32_t(n);
     short_entry.checksum = detail::checksum64({page.data(), n});
-    EXPECT_FALSE((*procedural)->compositePage(**archive, id, short_entry, {page.data(), n}, out)) << n;
+    EXPECT_FALSE((*procedural)->compositePage(**archive, id, short_entry, {page.data(), n}, out))
+        << n;
   }
 }
 

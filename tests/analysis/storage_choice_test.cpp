@@ -61,7 +61,9 @@ TEST(StorageChoice, EqualsExhaustiveSearchOnSmallInputs) {
 TEST(StorageChoice, ABrushUsedByOneTileIsNotWorthStoring) {
   StorageProblem problem;
   problem.resource_bytes = {10000, 100};
-  problem.tiles = {{2000, 100, true, {0}}, {2000, 100, true, {1}}, {2000, 100, true, {1}},
+  problem.tiles = {{2000, 100, true, {0}},
+                   {2000, 100, true, {1}},
+                   {2000, 100, true, {1}},
                    {2000, 100, false, {1}}};
   StorageChoice choice = chooseStorage(problem);
   EXPECT_EQ(choice.procedural, (std::vector<bool>{false, true, true, false}));

@@ -54,8 +54,8 @@ TEST(TileAnalysis, CullingNeverChangesAPixel) {
           Image culled, reference;
           ASSERT_TRUE(compositeTile(*set, tile, analysis->kept, culled));
           ASSERT_TRUE(compositeTileReference(*set, tile, all, reference));
-          ASSERT_EQ(culled.texels, reference.texels) << "seed " << seed << " level " << level
-                                                     << " tile " << tx << "," << ty;
+          ASSERT_EQ(culled.texels, reference.texels)
+              << "seed " << seed << " level " << level << " tile " << tx << "," << ty;
           covered += analysis->covered;
           candidates_total += candidates.size();
         }
@@ -74,7 +74,8 @@ TEST(TileAnalysis, SmallInstancesVanishFromEveryStoredLevelOrFromNone) {
   detail.columns = w / 64;
   detail.rows = h / 64;
   for (uint32_t y = 0; y < detail.rows; ++y)
-    for (uint32_t x = 0; x < detail.columns; ++x) detail.finest_level.push_back(x < detail.columns / 2 ? 2 : 0);
+    for (uint32_t x = 0; x < detail.columns; ++x)
+      detail.finest_level.push_back(x < detail.columns / 2 ? 2 : 0);
   AnalysisRules rules;
   rules.detail = &detail;
   rules.small_instance_texels = 0.5;
@@ -96,8 +97,13 @@ TEST(TileAnalysis, SmallInstancesVanishFromEveryStoredLevelOrFromNone) {
     const uint32_t finest = detail.finestLevelIn(instanceBounds(instance));
     int present = 0, stored_levels = 0;
     for (uint32_t level = finest; level < levels; ++level) {
-      TileGeometry tile{level, uint32_t(instance.x_px) >> level >> 6,
-                        uint32_t(instance.y_px) >> level >> 6, 64, 0, w, h};
+      TileGeometry tile{level,
+                        uint32_t(instance.x_px) >> level >> 6,
+                        uint32_t(instance.y_px) >> level >> 6,
+                        64,
+                        0,
+                        w,
+                        h};
       auto analysis = analyseTile(*set, tile, {&instance, 1}, rules);
       ASSERT_TRUE(analysis);
       ++stored_levels;

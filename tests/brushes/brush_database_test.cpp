@@ -26,9 +26,7 @@ std::string& clusterProblem() {
 
 class BrushDatabaseTest : public ::testing::TestWithParam<std::string> {
  public:
-  static void SetUpTestSuite() {
-    cluster() = testing::PostgresCluster::start(&clusterProblem());
-  }
+  static void SetUpTestSuite() { cluster() = testing::PostgresCluster::start(&clusterProblem()); }
   static void TearDownTestSuite() { cluster().reset(); }
 
  protected:

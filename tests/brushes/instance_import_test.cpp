@@ -14,9 +14,12 @@ namespace tessera {
 namespace {
 
 bool brushIds(std::string_view name, uint32_t* id) {
-  if (name == "rock") *id = 0;
-  else if (name == "grass" || name == "1") *id = 1;
-  else return false;
+  if (name == "rock")
+    *id = 0;
+  else if (name == "grass" || name == "1")
+    *id = 1;
+  else
+    return false;
   return true;
 }
 
@@ -48,8 +51,9 @@ TEST(InstanceImport, TheThreeFormatsAgree) {
                       "tint": "#FF800040", "layer": 3, "variant": 2}},
       {"type": "Feature", "geometry": {"type": "Point", "coordinates": [1, 2]},
        "properties": {"brush": 1, "radius": 3}}]})";
-  for (const auto& list : {parse(csv, InstanceFileFormat::kCsv), parse(json, InstanceFileFormat::kJson),
-                           parse(geojson, InstanceFileFormat::kGeoJson)}) {
+  for (const auto& list :
+       {parse(csv, InstanceFileFormat::kCsv), parse(json, InstanceFileFormat::kJson),
+        parse(geojson, InstanceFileFormat::kGeoJson)}) {
     ASSERT_EQ(list.size(), 2u);
     const BrushInstance& a = list[0];
     EXPECT_EQ(a.brush, 0u);
@@ -69,8 +73,9 @@ TEST(InstanceImport, TheThreeFormatsAgree) {
 
 TEST(InstanceImport, CsvErrorsNameLineAndColumn) {
   const char* header = "brush,x,y,radius\n";
-  EXPECT_EQ(parseError(std::string(header) + "rock,1,2,3\nrock,1,abc,3\n", InstanceFileFormat::kCsv),
-            "in:3:3: y: 'abc' is not a number");
+  EXPECT_EQ(
+      parseError(std::string(header) + "rock,1,2,3\nrock,1,abc,3\n", InstanceFileFormat::kCsv),
+      "in:3:3: y: 'abc' is not a number");
   EXPECT_EQ(parseError(std::string(header) + "moss,1,2,3\n", InstanceFileFormat::kCsv),
             "in:2:1: brush: no brush 'moss'");
   EXPECT_EQ(parseError(std::string(header) + "rock,1,2,-3\n", InstanceFileFormat::kCsv),
@@ -81,14 +86,16 @@ TEST(InstanceImport, CsvErrorsNameLineAndColumn) {
             "in:1: header lacks the column 'y'");
   EXPECT_EQ(parseError("brush,x,y,radius,size\nrock,1,2,3,4\n", InstanceFileFormat::kCsv),
             "in:2:5: unknown field 'size'");
-  EXPECT_EQ(parseError(std::string(header) + "rock,1,2,3\nrock,\"1,2,3\n", InstanceFileFormat::kCsv),
-            "in:3: unterminated quote");
+  EXPECT_EQ(
+      parseError(std::string(header) + "rock,1,2,3\nrock,\"1,2,3\n", InstanceFileFormat::kCsv),
+      "in:3: unterminated quote");
   EXPECT_EQ(parseError("brush,x,y,radius,tint\nrock,1,2,3,#12345\n", InstanceFileFormat::kCsv),
             "in:2:5: tint: '#12345' is not #RRGGBB or #RRGGBBAA");
 }
 
 TEST(InstanceImport, JsonErrorsNameLineColumnOrPath) {
-  std::string syntax = parseError("[\n  {\"brush\": \"rock\",\n   \"x\": 1,, }\n]", InstanceFileFormat::kJson);
+  std::string syntax =
+      parseError("[\n  {\"brush\": \"rock\",\n   \"x\": 1,, }\n]", InstanceFileFormat::kJson);
   EXPECT_EQ(syntax.rfind("in:3:", 0), 0u) << syntax;
   EXPECT_NE(syntax.find("JSON syntax error"), std::string::npos);
   EXPECT_EQ(parseError(R"([{"brush": "rock", "x": 1, "y": 2, "radius": 1},
@@ -116,12 +123,17 @@ TEST(InstanceImport, ABadRowImportsNothing) {
     rock.name = "rock";
     rock.images.push_back(testing::solidImage(4, 4, 1, 2, 3, 255));
     ASSERT_TRUE((*db)->addBrush(rock));
-    std::ofstream(csv_path) << "brush,x,y,radius\n" << "rock,1,1,1\n" << "rock,2,2,2\n" << "rock,3,3,x\n";
+    std::ofstream(csv_path) << "brush,x,y,radius\n"
+                            << "rock,1,1,1\n"
+                            << "rock,2,2,2\n"
+                            << "rock,3,3,x\n";
     auto bad = importInstances(**db, csv_path);
     ASSERT_FALSE(bad);
     EXPECT_EQ(bad.error().message, csv_path + ":4:4: radius: 'x' is not a number");
     EXPECT_EQ(*(*db)->instanceCount(), 0u);
-    std::ofstream(csv_path) << "brush,x,y,radius\n" << "rock,1,1,1\n" << "0,2,2,2\n";
+    std::ofstream(csv_path) << "brush,x,y,radius\n"
+                            << "rock,1,1,1\n"
+                            << "0,2,2,2\n";
     auto good = importInstances(**db, csv_path);
     ASSERT_TRUE(good) << good.error().message;
     EXPECT_EQ(good->instances, 2u);
@@ -129,7 +141,8 @@ TEST(InstanceImport, ABadRowImportsNothing) {
     EXPECT_EQ(good->last_id, 2u);
     EXPECT_FALSE(importInstances(**db, path + ".txt"));
   }
-  for (const std::string& p : {path, path + "-wal", path + "-shm", csv_path}) std::filesystem::remove(p);
+  for (const std::string& p : {path, path + "-wal", path + "-shm", csv_path})
+    std::filesystem::remove(p);
 }
 
 TEST(InstanceGenerator, IsDeterministicAndRealistic) {

@@ -80,7 +80,8 @@ std::unique_ptr<PostgresCluster> PostgresCluster::start(std::string* why_not) {
 }
 
 std::string PostgresCluster::createDatabase(const std::string& name) {
-  run(fmt::format("psql -h {} -U tessera -d postgres -c \"DROP DATABASE IF EXISTS {}\" -c \"CREATE "
+  run(
+      fmt::format("psql -h {} -U tessera -d postgres -c \"DROP DATABASE IF EXISTS {}\" -c \"CREATE "
                   "DATABASE {}\"",
                   dir_, name, name));
   return fmt::format("host={} dbname={} user=tessera", dir_, name);

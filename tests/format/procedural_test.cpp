@@ -111,10 +111,10 @@ TEST(ProceduralFormat, DirectoryGoldenBytes) {
                              2,   0,   0,   0,                // 2 images
                              0,   0,   0,   0};
   EXPECT_EQ(0, std::memcmp(bytes.data(), fixed, 24));
-  const uint8_t layer[40] = {0x20, 0x4E, 0, 0, 0, 0, 0, 0,  // offset 20000
-                             0x2C, 0x01, 0, 0, 0, 0, 0, 0,  // length 300
-                             7,    0,    0, 0, 0, 0, 0, 0,  // checksum
-                             64,   0,    0, 0, 32, 0, 0, 0,  // 64 x 32
+  const uint8_t layer[40] = {0x20, 0x4E, 0, 0, 0,  0, 0, 0,   // offset 20000
+                             0x2C, 0x01, 0, 0, 0,  0, 0, 0,   // length 300
+                             7,    0,    0, 0, 0,  0, 0, 0,   // checksum
+                             64,   0,    0, 0, 32, 0, 0, 0,   // 64 x 32
                              1,    1,    0, 0, 0,  0, 0, 0};  // 1 channel, zstd
   EXPECT_EQ(0, std::memcmp(bytes.data() + 24, layer, 40));
   const uint8_t brush[16] = {0, 0, 0, 0, 2, 0, 3, 2, 10, 200, 0, 0, 0, 0, 0, 0};
@@ -133,19 +133,20 @@ TEST(ProceduralFormat, DirectoryRejectsTruncationAndHostileFields) {
     copy[offset] = value;
     return decodeProceduralDirectory(copy, testHeader(), 1, "d");
   };
-  EXPECT_FALSE(with(8, 1));              // image 1 of 1
-  EXPECT_FALSE(with(64 + 33, 3));        // JPEG is not lossless
-  EXPECT_FALSE(with(64 + 32, 3));        // a brush image of 3 channels
-  EXPECT_FALSE(with(64 + 80 + 4, 3));    // brush images past the table
-  EXPECT_FALSE(with(64 + 80 + 6, 4));    // unknown blend mode
-  EXPECT_FALSE(with(64 + 80 + 7, 3));    // unknown mask source
-  EXPECT_FALSE(with(64 + 80 + 12, 1));   // reserved
-  EXPECT_FALSE(with(64 + 7, 0x40));      // image offset beyond the file
-  EXPECT_FALSE(with(64 + 8 + 6, 1));     // huge payload length
+  EXPECT_FALSE(with(8, 1));             // image 1 of 1
+  EXPECT_FALSE(with(64 + 33, 3));       // JPEG is not lossless
+  EXPECT_FALSE(with(64 + 32, 3));       // a brush image of 3 channels
+  EXPECT_FALSE(with(64 + 80 + 4, 3));   // brush images past the table
+  EXPECT_FALSE(with(64 + 80 + 6, 4));   // unknown blend mode
+  EXPECT_FALSE(with(64 + 80 + 7, 3));   // unknown mask source
+  EXPECT_FALSE(with(64 + 80 + 12, 1));  // reserved
+  EXPECT_FALSE(with(64 + 7, 0x40));     // image offset beyond the file
+  EXPECT_FALSE(with(64 + 8 + 6, 1));    // huge payload length
   // A masked brush needs the layer.
   ProceduralDirectory no_layer = goldenDirectory();
   no_layer.height_layer = {};
-  EXPECT_FALSE(decodeProceduralDirectory(encodeProceduralDirectory(no_layer), testHeader(), 1, "d"));
+  EXPECT_FALSE(
+      decodeProceduralDirectory(encodeProceduralDirectory(no_layer), testHeader(), 1, "d"));
   no_layer.brushes[0].mask = MaskSource::kNone;
   EXPECT_TRUE(decodeProceduralDirectory(encodeProceduralDirectory(no_layer), testHeader(), 1, "d"));
 }

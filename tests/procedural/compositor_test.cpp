@@ -43,8 +43,7 @@ const uint8_t* texel(const Image& image, uint32_t i, uint32_t j) {
 }
 
 TEST(Div255, IsRoundedDivisionOverItsWholeRange) {
-  for (uint32_t x = 0; x <= 255 * 255; ++x)
-    ASSERT_EQ(detail::div255(x), (x + 127) / 255) << x;
+  for (uint32_t x = 0; x <= 255 * 255; ++x) ASSERT_EQ(detail::div255(x), (x + 127) / 255) << x;
 }
 
 TEST(Compositor, OneBrushTexelPerLevelTexelCopiesTheImage) {
@@ -62,7 +61,7 @@ TEST(Compositor, OneBrushTexelPerLevelTexelCopiesTheImage) {
     for (uint32_t i = 0; i < 4; ++i)
       for (int c = 0; c < 4; ++c)
         EXPECT_EQ(texel(out, 8 + i, 8 + j)[c], image.texels[(j * 4 + i) * 4 + c]) << i << j << c;
-  EXPECT_EQ(texel(out, 7, 9)[3], 0);   // the tap left of the image is transparent
+  EXPECT_EQ(texel(out, 7, 9)[3], 0);  // the tap left of the image is transparent
   EXPECT_EQ(texel(out, 12, 9)[3], 0);
 }
 
@@ -116,7 +115,8 @@ TEST(Compositor, BlendModesMatchHandComputedTexels) {
 }
 
 TEST(Compositor, TransparentBackdropTakesTheSourceAsItIs) {
-  auto set = prepare({brushOf(solidImage(16, 16, 200, 100, 50, 255), BlendMode::kMultiply)}, 64, 64);
+  auto set =
+      prepare({brushOf(solidImage(16, 16, 200, 100, 50, 255), BlendMode::kMultiply)}, 64, 64);
   BrushInstance instance;
   instance.x_px = instance.y_px = 32;
   instance.radius_px = 20;
@@ -190,7 +190,8 @@ TEST(Compositor, RotationTurnsTheImage) {
 TEST(Compositor, SlopeMaskDrawsOnlyWhereSteep) {
   Image layer(64, 64, 1);
   for (uint32_t y = 0; y < 64; ++y)
-    for (uint32_t x = 0; x < 64; ++x) layer.texels[y * 64 + x] = x < 32 ? 10 : uint8_t(10 + (x - 32) * 7);
+    for (uint32_t x = 0; x < 64; ++x)
+      layer.texels[y * 64 + x] = x < 32 ? 10 : uint8_t(10 + (x - 32) * 7);
   Brush rock = brushOf(solidImage(16, 16, 120, 110, 100, 255));
   rock.mask = MaskSource::kSlope;
   rock.mask_low = 10;
@@ -240,8 +241,8 @@ TEST(Compositor, EqualsBruteForceReferenceAtEveryLevel) {
           Image fast, reference;
           ASSERT_TRUE(compositeTile(*set, probe, instances, fast));
           ASSERT_TRUE(compositeTileReference(*set, probe, instances, reference));
-          ASSERT_EQ(fast.texels, reference.texels) << "level " << level << " tile " << tx << ","
-                                                   << ty << " border " << border;
+          ASSERT_EQ(fast.texels, reference.texels)
+              << "level " << level << " tile " << tx << "," << ty << " border " << border;
           ++compared;
         }
       }

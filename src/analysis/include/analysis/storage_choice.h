@@ -12,9 +12,9 @@ namespace tessera::detail {
 
 /// One tile's two costs and what being procedural needs.
 struct StorageTile {
-  uint64_t baked_bytes = 0;       ///< payload if stored as texels (0 for uniform and empty)
-  uint64_t procedural_bytes = 0;  ///< its instance page
-  bool eligible = false;          ///< within the time budget and the page bounds
+  uint64_t baked_bytes = 0;         ///< payload if stored as texels (0 for uniform and empty)
+  uint64_t procedural_bytes = 0;    ///< its instance page
+  bool eligible = false;            ///< within the time budget and the page bounds
   std::vector<uint32_t> resources;  ///< sorted ids of the brushes (and layer) it needs
 };
 
