@@ -183,6 +183,26 @@ TEST_F(ProceduralBuildTest, BakeAllWritesAPlainArchiveTheReaderVerifies) {
   EXPECT_EQ(tile->texels, expected.texels);
 }
 
+// A detail region stores no level finer than 1 over the left half: its level-0 tiles are empty,
+// the rest of the pyramid is whole.
+TEST_F(ProceduralBuildTest, DetailRegionsLeaveFinerLevelsEmpty) {
+  ProceduralBuildOptions o = options("detail.tess");
+  o.detail_regions = {{{0, 0, 384, 512}, 1}};
+  o.small_instance_texels = 0.5;
+  auto report = buildProceduralArchive(o);
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->tiles_dropped, 3u * 4u);  // columns 0..2 of 128-px tiles, all 4 rows
+  auto archive = Archive::openFile(o.output);
+  ASSERT_TRUE(archive);
+  auto procedural = ProceduralTiles::open(**archive);
+  ASSERT_TRUE(procedural) << procedural.error().message;
+  for (uint32_t x = 0; x < 6; ++x) {
+    auto entry = (*procedural)->tileEntry(**archive, {0, 0, x, 1});
+    ASSERT_TRUE(entry);
+    EXPECT_EQ(entry->kind == TileKind::kEmpty, x < 3) << x;
+  }
+}
+
 TEST_F(ProceduralBuildTest, RejectsParentCodedTilesAndMissingDatabases) {
   ProceduralBuildOptions o = options("x.tess");
   o.codec = Codec::kPtm;
