@@ -156,14 +156,25 @@ struct TileGeometry {
 /// (the stored tile's texels grown by one texel of the level, for bilinear footprints).
 BoxPx tileQueryBox(const TileGeometry& tile);
 
+/// The stored-tile texels one instance of a tile's page may change: [x0, x1) x [y0, y1), in
+/// stored-tile texel indices (borders included). The analysis phase clips an instance to the
+/// texels where it is not replaced by an opaque normal-mode texel of a later instance; outside
+/// the clip it would only draw what is then replaced exactly, so clipping never changes a pixel.
+struct TileClip {
+  uint16_t x0 = 0, y0 = 0, x1 = 0xFFFF, y1 = 0xFFFF;  ///< the default clips nothing
+  friend bool operator==(const TileClip&, const TileClip&) = default;
+};
+
 /// Composites `instances` (in drawing order: the caller sorts with drawsBefore) into a stored
 /// tile: sidePx() square, 4 channels, straight alpha, starting from transparent black.
 /// Deterministic to the bit on every machine (integer arithmetic after a per-instance setup in
 /// IEEE double without library calls). Instances that do not touch the tile draw nothing.
 /// Fails (kCorrupt) when an instance names a brush the set lacks: a tile is never drawn with
-/// a brush missing. `out` is resized; its buffer is reused.
+/// a brush missing. `out` is resized; its buffer is reused. `clips`, when not empty, holds one
+/// TileClip per instance.
 [[nodiscard]] Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,
-                                         std::span<const BrushInstance> instances, Image& out);
+                                         std::span<const BrushInstance> instances, Image& out,
+                                         std::span<const TileClip> clips = {});
 
 /// The same, by brute force: every instance at every texel of the tile, no bounding boxes,
 /// no spans. The test oracle for compositeTile and culling.

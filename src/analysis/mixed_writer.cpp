@@ -64,15 +64,16 @@ Result<std::vector<uint8_t>> storedPage(const TempFile& spool, const MixedTile& 
                                         const MixedBrushes& brushes, const std::string& what) {
   std::vector<uint8_t> bytes(tile.page_length);
   TESSERA_TRY(spool.pread(tile.page_offset, bytes));
+  std::vector<TileClip> clips;
   TESSERA_ASSIGN_OR_RETURN(std::vector<BrushInstance> instances,
-                           decodeInstancePage(bytes, uint32_t(brushes.remap.size()), what));
+                           decodeInstancePage(bytes, uint32_t(brushes.remap.size()), what, &clips));
   for (BrushInstance& instance : instances) {
     const int64_t stored = brushes.remap[instance.brush];
     TESSERA_CHECK(stored >= 0) << what << ": a procedural tile draws brush " << instance.brush
                                << ", which is not stored";
     instance.brush = uint32_t(stored);
   }
-  return encodeInstancePage(instances);
+  return encodeInstancePage(instances, clips);
 }
 
 // Payloads and pages in the clustering order; fills the final entries.

@@ -81,7 +81,7 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
   TileAnalysis analysis;
   std::vector<uint8_t> row_alpha;
   std::vector<bool> keep(candidates.size(), false);
-  std::vector<Span> spans(candidates.size());
+  std::vector<TileClip> clips(candidates.size());
   // From the top down: an instance contributes when some texel where it draws is not yet
   // covered by an opaque normal-blend texel above it (such a texel replaces whatever lies
   // below, exactly: docs/procedural.md, "Culling"). Then its own opaque texels cover.
@@ -103,34 +103,38 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
     const std::vector<uint8_t>* mask =
         setup.brush->mask == MaskSource::kNone ? nullptr : &layerValues(setup.brush->mask);
     const bool can_cover = setup.brush->blend == BlendMode::kNormal;
-    bool contributes = false;
+    // Only texels not yet covered are sampled; those where the instance draws bound its clip.
+    int64_t vis_i0 = INT64_MAX, vis_i1 = INT64_MIN, vis_j0 = INT64_MAX, vis_j1 = INT64_MIN;
     for (int64_t j = span.j_lo; j < span.j_hi; ++j) {
-      // Once the instance is known to contribute, only its covering texels still matter.
-      if (contributes && !can_cover) break;
       const RowSpan row = instanceRowSpan(setup, y0 + j);
       const int64_t first = std::max(row.first, x0 + span.i_lo);
       const int64_t last = std::min(row.last, x0 + span.i_hi - 1);
-      if (first > last) continue;
-      row_alpha.resize(size_t(last - first + 1));
-      instanceRowAlpha(setup, y0 + j, first, last, row_alpha.data());
-      const size_t base = size_t(j - j0) * size_t(width) + size_t(first - x0 - i0);
-      for (int64_t i = 0; i <= last - first; ++i) {
-        uint32_t alpha = row_alpha[size_t(i)];
-        if (alpha == 0) continue;
-        const size_t index = base + size_t(i);
-        if (mask) {
-          alpha = div255(alpha * setup.brush->mask_lut[(*mask)[index]]);
-          if (alpha == 0) continue;
+      const size_t base = size_t(j - j0) * size_t(width) - size_t(x0 + i0);
+      for (int64_t run = first; run <= last;) {
+        if (covered[base + size_t(run)]) {
+          ++run;
+          continue;
         }
-        if (!covered[index]) {
-          contributes = true;
+        int64_t run_end = run;
+        while (run_end < last && !covered[base + size_t(run_end + 1)]) ++run_end;
+        row_alpha.resize(size_t(run_end - run + 1));
+        instanceRowAlpha(setup, y0 + j, run, run_end, row_alpha.data());
+        for (int64_t x = run; x <= run_end; ++x) {
+          uint32_t alpha = row_alpha[size_t(x - run)];
+          const size_t index = base + size_t(x);
+          if (alpha != 0 && mask) alpha = div255(alpha * setup.brush->mask_lut[(*mask)[index]]);
+          if (alpha == 0) continue;
+          const int64_t i = x - x0;
+          vis_i0 = std::min(vis_i0, i), vis_i1 = std::max(vis_i1, i);
+          vis_j0 = std::min(vis_j0, j), vis_j1 = std::max(vis_j1, j);
           if (can_cover && alpha == 255) covered[index] = 1;
         }
+        run = run_end + 1;
       }
     }
-    if (contributes) {
+    if (vis_i1 >= vis_i0) {
       keep[k] = true;
-      spans[k] = span;
+      clips[k] = {uint16_t(vis_i0), uint16_t(vis_j0), uint16_t(vis_i1 + 1), uint16_t(vis_j1 + 1)};
     } else {
       ++analysis.covered;
     }
@@ -138,7 +142,9 @@ Result<TileAnalysis> analyseTile(const BrushSet& brushes, const TileGeometry& ti
   for (size_t k = 0; k < candidates.size(); ++k) {
     if (!keep[k]) continue;
     analysis.kept.push_back(candidates[k]);
-    analysis.visited_texels += spans[k].texels();
+    analysis.clips.push_back(clips[k]);
+    // The compositor visits the clip's texels of the instance's row spans: at most its area.
+    analysis.visited_texels += uint64_t(clips[k].x1 - clips[k].x0) * (clips[k].y1 - clips[k].y0);
   }
   analysis.estimated_ms = rules.cost.estimateMs(analysis.kept.size(), analysis.visited_texels);
   analysis.within_budget = analysis.estimated_ms <= rules.tile_budget_ms;

@@ -89,7 +89,7 @@ Result<void> processTile(BuildContext& context, WorkerState& worker, uint64_t fl
   context.covered += analysis.covered;
   context.small += analysis.small;
   const auto composite_start = Clock::now();
-  TESSERA_TRY(compositeTile(*context.set, geometry, analysis.kept, worker.texels));
+  TESSERA_TRY(compositeTile(*context.set, geometry, analysis.kept, worker.texels, analysis.clips));
   context.measured_ms[flat] = millisecondsSince(composite_start);
   context.estimated_ms[flat] = analysis.estimated_ms;
 
@@ -109,7 +109,7 @@ Result<void> processTile(BuildContext& context, WorkerState& worker, uint64_t fl
   const uint64_t page_bytes = instancePageBytes(analysis.kept.size());
   if (tile.baked_kind == TileKind::kEncoded && !analysis.kept.empty() &&
       page_bytes <= maxPayloadBytes(context.info)) {
-    const std::vector<uint8_t> page = encodeInstancePage(analysis.kept);
+    const std::vector<uint8_t> page = encodeInstancePage(analysis.kept, analysis.clips);
     TESSERA_ASSIGN_OR_RETURN(tile.page_offset, spoolBytes(context, page));
     tile.page_length = uint32_t(page.size());
     tile.has_page = true;

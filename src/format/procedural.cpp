@@ -186,13 +186,17 @@ Result<ProceduralDirectory> decodeProceduralDirectory(std::span<const uint8_t> b
   return directory;
 }
 
-std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances) {
+std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances,
+                                        std::span<const TileClip> clips) {
+  TESSERA_CHECK(clips.empty() || clips.size() == instances.size()) << "one clip per instance";
   std::vector<uint8_t> bytes(instancePageBytes(instances.size()), 0);
   uint8_t* p = bytes.data();
   std::memcpy(p, kInstancePageMagic, 4);
   storeU32(p + 4, uint32_t(instances.size()));
   p += kInstancePageHeaderBytes;
-  for (const BrushInstance& instance : instances) {
+  for (size_t i = 0; i < instances.size(); ++i) {
+    const BrushInstance& instance = instances[i];
+    const TileClip clip = clips.empty() ? TileClip{} : clips[i];
     storeU64(p, std::bit_cast<uint64_t>(instance.x_px));
     storeU64(p + 8, std::bit_cast<uint64_t>(instance.y_px));
     storeU32(p + 16, std::bit_cast<uint32_t>(instance.radius_px));
@@ -202,14 +206,18 @@ std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances
     storeU32(p + 32, instance.brush);
     p[36] = instance.opacity;
     p[37] = instance.variant;
+    storeU16(p + 40, clip.x0);
+    storeU16(p + 42, clip.y0);
+    storeU16(p + 44, clip.x1);
+    storeU16(p + 46, clip.y1);
     p += kInstanceRecordBytes;
   }
   return bytes;
 }
 
 Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> bytes,
-                                                      uint32_t brush_count,
-                                                      const std::string& what) {
+                                                      uint32_t brush_count, const std::string& what,
+                                                      std::vector<TileClip>* clips) {
   if (bytes.size() < kInstancePageHeaderBytes ||
       std::memcmp(bytes.data(), kInstancePageMagic, 4) != 0)
     return fail(ErrorCode::kCorrupt, what + ": not an instance page (bad magic or too short)");
@@ -219,6 +227,7 @@ Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> b
                 fmt::format("{}: instance page of {} bytes cannot hold {} instances", what,
                             bytes.size(), count));
   std::vector<BrushInstance> instances(count);
+  if (clips) clips->assign(count, TileClip{});
   const uint8_t* p = bytes.data() + kInstancePageHeaderBytes;
   for (uint32_t i = 0; i < count; ++i, p += kInstanceRecordBytes) {
     BrushInstance& instance = instances[i];
@@ -235,6 +244,11 @@ Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> b
     if (loadU16(p + 38) != 0)
       return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: instance {} reserved bytes not zero", what, i));
+    const TileClip clip{loadU16(p + 40), loadU16(p + 42), loadU16(p + 44), loadU16(p + 46)};
+    if (clip.x0 > clip.x1 || clip.y0 > clip.y1)
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("{}: instance {} has an inverted clip", what, i));
+    if (clips) (*clips)[i] = clip;
     if (instance.brush >= brush_count)
       return fail(ErrorCode::kCorrupt, fmt::format("{}: instance {} names brush {} of {}", what, i,
                                                    instance.brush, brush_count));

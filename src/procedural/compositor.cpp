@@ -100,21 +100,27 @@ BoxPx tileQueryBox(const TileGeometry& tile) {
 }
 
 Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,
-                           std::span<const BrushInstance> instances, Image& out) {
+                           std::span<const BrushInstance> instances, Image& out,
+                           std::span<const TileClip> clips) {
+  TESSERA_CHECK(clips.empty() || clips.size() == instances.size()) << "one clip per instance";
   const BrushSet::Impl& set = brushes.impl();
   const uint32_t side = tile.sidePx();
   resetTile(side, out);
   const ValidRect rect = validRect(tile);
   TileLayers layers(set, tile, rect);
   const uint32_t layer_w = rect.i1 - rect.i0;
-  for (const BrushInstance& instance : instances) {
+  for (size_t n = 0; n < instances.size(); ++n) {
+    const BrushInstance& instance = instances[n];
+    const TileClip clip = clips.empty() ? TileClip{} : clips[n];
     TESSERA_ASSIGN_OR_RETURN(InstanceSetup setup, setupInstance(set, instance, tile.level));
     // Only the texels within `reach` of the centre can be drawn (sampleInstance returns 0
     // beyond), so the loops visit those alone.
-    const int64_t i_lo = std::max<int64_t>(rect.i0, setup.x_c - setup.reach - rect.x0);
-    const int64_t i_hi = std::min<int64_t>(rect.i1, setup.x_c + setup.reach + 1 - rect.x0);
-    const int64_t j_lo = std::max<int64_t>(rect.j0, setup.y_c - setup.reach - rect.y0);
-    const int64_t j_hi = std::min<int64_t>(rect.j1, setup.y_c + setup.reach + 1 - rect.y0);
+    const int64_t i_lo = std::max<int64_t>({rect.i0, setup.x_c - setup.reach - rect.x0, clip.x0});
+    const int64_t i_hi =
+        std::min<int64_t>({rect.i1, setup.x_c + setup.reach + 1 - rect.x0, clip.x1});
+    const int64_t j_lo = std::max<int64_t>({rect.j0, setup.y_c - setup.reach - rect.y0, clip.y0});
+    const int64_t j_hi =
+        std::min<int64_t>({rect.j1, setup.y_c + setup.reach + 1 - rect.y0, clip.y1});
     if (i_lo >= i_hi || j_lo >= j_hi) continue;
     const uint8_t* mask_values =
         setup.brush->mask == MaskSource::kNone ? nullptr : layers.values(setup.brush->mask);

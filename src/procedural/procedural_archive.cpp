@@ -170,13 +170,15 @@ Result<void> ProceduralTiles::compositePage(const Archive& archive, const TileId
   if (page.size() != entry.length_bytes || checksum64(page) != entry.checksum)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: instance page checksum mismatch at offset {}",
                                                  what, entry.offset_bytes));
+  std::vector<TileClip> clips;
   TESSERA_ASSIGN_OR_RETURN(
       std::vector<BrushInstance> instances,
-      decodeInstancePage(page, uint32_t(impl_->directory.brushes.size()), what));
+      decodeInstancePage(page, uint32_t(impl_->directory.brushes.size()), what, &clips));
   const ImageInfo& info = impl_->records[tile.image].info;
   TileGeometry geometry{tile.level,     tile.x,        tile.y,        info.tile_size_px,
                         info.border_px, info.width_px, info.height_px};
-  Result<void> composited = tessera::compositeTile(*impl_->brushes, geometry, instances, out);
+  Result<void> composited =
+      tessera::compositeTile(*impl_->brushes, geometry, instances, out, clips);
   if (!composited) return fail(ErrorCode::kCorrupt, what + ": " + composited.error().message);
   return {};
 }

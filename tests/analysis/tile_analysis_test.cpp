@@ -52,7 +52,7 @@ TEST(TileAnalysis, CullingNeverChangesAPixel) {
           auto analysis = analyseTile(*set, tile, candidates, rules);
           ASSERT_TRUE(analysis) << analysis.error().message;
           Image culled, reference;
-          ASSERT_TRUE(compositeTile(*set, tile, analysis->kept, culled));
+          ASSERT_TRUE(compositeTile(*set, tile, analysis->kept, culled, analysis->clips));
           ASSERT_TRUE(compositeTileReference(*set, tile, all, reference));
           ASSERT_EQ(culled.texels, reference.texels)
               << "seed " << seed << " level " << level << " tile " << tx << "," << ty;

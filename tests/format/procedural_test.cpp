@@ -37,7 +37,8 @@ BrushInstance goldenInstance() {
 
 TEST(ProceduralFormat, InstancePageGoldenBytes) {
   BrushInstance instance = goldenInstance();
-  std::vector<uint8_t> bytes = encodeInstancePage({&instance, 1});
+  const TileClip clip{2, 3, 256, 258};
+  std::vector<uint8_t> bytes = encodeInstancePage({&instance, 1}, {&clip, 1});
   const std::vector<uint8_t> golden = {
       'T',  'I',  'P',  'G',  0x01, 0x00, 0x00, 0x00,  // magic, count 1
       0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0xF8, 0x3F,  // x 1.5
@@ -48,10 +49,14 @@ TEST(ProceduralFormat, InstancePageGoldenBytes) {
       0x20, 0x40, 0xFF, 0x80,                          // tint r g b a
       0x03, 0x00, 0x00, 0x00,                          // brush 3
       0xC8, 0x01, 0x00, 0x00,                          // opacity 200, variant 1, reserved
+      0x02, 0x00, 0x03, 0x00, 0x00, 0x01, 0x02, 0x01,  // clip [2, 256) x [3, 258)
   };
   EXPECT_EQ(bytes, golden);
-  auto decoded = decodeInstancePage(bytes, 4, "t.tess: tile (0,0,0)");
+  std::vector<TileClip> clips;
+  auto decoded = decodeInstancePage(bytes, 4, "t.tess: tile (0,0,0)", &clips);
   ASSERT_TRUE(decoded) << decoded.error().message;
+  ASSERT_EQ(clips.size(), 1u);
+  EXPECT_EQ(clips[0], clip);
   ASSERT_EQ(decoded->size(), 1u);
   EXPECT_EQ((*decoded)[0].x_px, 1.5);
   EXPECT_EQ((*decoded)[0].tint_rgba, 0x80FF4020u);
@@ -90,6 +95,8 @@ TEST(ProceduralFormat, InstancePageRejectsHostileFields) {
   std::vector<uint8_t> huge = encodeInstancePage({});
   huge[4] = 0xFF, huge[5] = 0xFF, huge[6] = 0xFF, huge[7] = 0xFF;  // count 2^32 - 1
   EXPECT_FALSE(decodeInstancePage(huge, 4, "page"));
+  const TileClip inverted{5, 0, 4, 10};
+  EXPECT_FALSE(decodeInstancePage(encodeInstancePage({&instance, 1}, {&inverted, 1}), 4, "page"));
 }
 
 ProceduralDirectory goldenDirectory() {
@@ -183,7 +190,7 @@ TEST(ProceduralFormat, ProceduralEntriesAreReadIn11AndRejectedIn10) {
   info.channels = 4;
   info.tile_size_px = 256;
   info.level_count = 3;
-  std::vector<TileEntry> entries = {proceduralEntry(20000, 48, 0x1234)};
+  std::vector<TileEntry> entries = {proceduralEntry(20000, 56, 0x1234)};
   TileEntry uniform;
   uniform.kind = TileKind::kUniform;
   uniform.uniform_rgba = 0x11223344;
@@ -195,15 +202,15 @@ TEST(ProceduralFormat, ProceduralEntriesAreReadIn11AndRejectedIn10) {
   ASSERT_TRUE(decoded) << decoded.error().message;
   EXPECT_EQ((*decoded)[0].kind, TileKind::kProcedural);
   EXPECT_EQ((*decoded)[0].offset_bytes, 20000u);
-  EXPECT_EQ((*decoded)[0].length_bytes, 48u);
+  EXPECT_EQ((*decoded)[0].length_bytes, 56u);
   EXPECT_EQ((*decoded)[1].uniform_rgba, 0x11223344u);
   header.version_minor = 0;
   auto old = decodeTileEntriesProcedural(bytes, info, header, "p");
   ASSERT_FALSE(old);
   EXPECT_EQ(old.error().code, ErrorCode::kUnsupported);
   header.version_minor = 1;
-  for (TileEntry bad : {proceduralEntry(20000, 47, 1), proceduralEntry(100, 48, 1),
-                        proceduralEntry((1 << 20) - 8, 48, 1)}) {
+  for (TileEntry bad : {proceduralEntry(20000, 55, 1), proceduralEntry(100, 56, 1),
+                        proceduralEntry((1 << 20) - 8, 56, 1)}) {
     EXPECT_FALSE(decodeTileEntriesProcedural(encodeTileEntries({&bad, 1}), info, header, "p"));
   }
   std::vector<uint8_t> with_codec = encodeTileEntries({entries.data(), 1});

@@ -55,9 +55,10 @@ struct AnalysisRules {
 
 struct TileAnalysis {
   std::vector<BrushInstance> kept;  ///< contributing instances, drawing order
+  std::vector<TileClip> clips;      ///< per kept instance: where it is not replaced from above
   uint64_t covered = 0;             ///< dropped: no texel survives the opaque ones above
   uint64_t small = 0;               ///< dropped: much smaller than a texel where finer is dropped
-  uint64_t visited_texels = 0;      ///< the compositor's work for `kept`
+  uint64_t visited_texels = 0;      ///< the compositor's work for `kept` (clip areas)
   double estimated_ms = 0;
   bool within_budget = true;
 };

@@ -29,7 +29,7 @@ inline constexpr uint32_t kProceduralDirectoryFixedBytes = 64;
 inline constexpr uint32_t kProceduralImageRecordBytes = 40;
 inline constexpr uint32_t kBrushRecordBytes = 16;
 inline constexpr uint32_t kInstancePageHeaderBytes = 8;
-inline constexpr uint32_t kInstanceRecordBytes = 40;
+inline constexpr uint32_t kInstanceRecordBytes = 48;
 /// Bounds that keep a hostile directory from driving allocations.
 inline constexpr uint32_t kMaxProceduralBrushes = 65535;
 inline constexpr uint32_t kMaxProceduralImages = 65535;
@@ -80,13 +80,15 @@ Result<ProceduralDirectory> decodeProceduralDirectory(std::span<const uint8_t> b
 
 /// One instance as a page stores it: the page's order is the drawing order, so neither the
 /// database id nor the layer is stored.
-std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances);
+/// `clips` is empty (nothing clipped) or one per instance.
+std::vector<uint8_t> encodeInstancePage(std::span<const BrushInstance> instances,
+                                        std::span<const TileClip> clips = {});
 /// Checks magic, count against length, every instance's fields (finite, radius and scale > 0,
-/// brush below `brush_count`, reserved zero). Instances come back with id = their position in
-/// the page and layer 0.
+/// brush below `brush_count`, reserved zero, clip x0 <= x1 and y0 <= y1). Instances come back
+/// with id = their position in the page and layer 0; their clips go to `clips` when not null.
 Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> bytes,
-                                                      uint32_t brush_count,
-                                                      const std::string& what);
+                                                      uint32_t brush_count, const std::string& what,
+                                                      std::vector<TileClip>* clips = nullptr);
 inline uint64_t instancePageBytes(size_t instances) {
   return kInstancePageHeaderBytes + uint64_t(instances) * kInstanceRecordBytes;
 }
