@@ -36,7 +36,7 @@ class InputReader {
   size_t pos_ = 0;
 };
 
-/// An image's geometry in 12 bytes: width and height (u24 each), channels, log2 of the tile
+/// An image's geometry in 14 bytes: width and height (u24 each), channels, log2 of the tile
 /// size, border, log2 of the page side, level, page x, page y, and a spare byte.
 struct GeometryInput {
   ImageInfo info;
@@ -44,7 +44,7 @@ struct GeometryInput {
   uint32_t page_x = 0;
   uint32_t page_y = 0;
 };
-inline constexpr size_t kGeometryInputBytes = 12;
+inline constexpr size_t kGeometryInputBytes = 14;
 
 inline GeometryInput readGeometry(InputReader& reader) {
   GeometryInput geometry;

@@ -1,25 +1,31 @@
 #!/usr/bin/env bash
 # The whole test suite, as CI runs it (.ci/run): installs the Debian packages, then
 #   1. checks clang-format on every tracked C++ file and .editorconfig on every text file,
-#   2. builds Release and runs every test,
+#   2. builds Release and runs every test; before that build, right after configuring, checks
+#      that no function in src/ is over 120 lines (scripts/check_function_size.sh, clang-tidy
+#      over compile_commands.json),
 #   3. builds RelWithDebInfo with AddressSanitizer + UBSan and runs every test,
 #   4. builds with ThreadSanitizer and runs the tests labelled "concurrency",
+#   5. builds every fuzzer of fuzz/ with clang's libFuzzer under ASan + UBSan and runs each
+#      from its committed corpus for a minute (two at a time),
 # and ends with each stage's ctest summary. Every stage runs even when an earlier one failed,
 # so one run reports everything; the exit status is non-zero when any stage failed.
 #
 # Environment (all optional):
-#   TESSERA_CI_STAGES   stages to run, default "format release asan tsan"
+#   TESSERA_CI_STAGES   stages to run, default "format release asan tsan fuzz"
 #   TESSERA_CI_BUILD    build root, default <repo>/build-ci (one subfolder per stage)
 #   TESSERA_CI_JOBS     parallel compile jobs, default $(nproc)
 #   TESSERA_CI_TIMEOUT  per-test timeout in seconds, default 300 (sanitizer stages: 3x)
 #   TESSERA_CI_FILTER   ctest -R regex, to run a subset while iterating
 #   TESSERA_CI_WERROR   ON/OFF for -Werror in the Release stage, default ON
+#   TESSERA_CI_FUZZ_SECONDS  seconds each fuzzer runs in the fuzz stage, default 60
 set -uo pipefail
 
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo" || exit 1
 
-stages=${TESSERA_CI_STAGES:-format release asan tsan}
+stages=${TESSERA_CI_STAGES:-format release asan tsan fuzz}
+fuzz_seconds=${TESSERA_CI_FUZZ_SECONDS:-60}
 build_root=${TESSERA_CI_BUILD:-$repo/build-ci}
 jobs=${TESSERA_CI_JOBS:-$(nproc)}
 timeout_s=${TESSERA_CI_TIMEOUT:-300}
@@ -123,6 +129,26 @@ targets_with_label() {
     }' "${files[@]}"
 }
 
+# No function in src/ over 120 lines, by clang-tidy over the configured build's
+# compile_commands.json: it needs no build, so it runs before the release build and its
+# failure (a list of file:line function lines) does not stop the tests.
+function_size_check() {
+  local dir=$1 out=$1/function-size.log status line
+  log "function size, $jobs jobs ($(clang-tidy --version 2>/dev/null | grep -o 'version.*'))"
+  TESSERA_TIDY_JOBS=$jobs scripts/check_function_size.sh "$dir" 2>&1 | tee "$out"
+  status=${PIPESTATUS[0]}
+  line=$(grep -E '^check_function_size: [0-9]+ files' "$out" | tail -1)
+  line=${line#check_function_size: }
+  case $status in
+    0) stage_result functions ok "no function over 120 lines ($line)" ;;
+    1) stage_result functions FAIL "$(grep -c '^  src/' "$out") functions over 120 lines ($line)" ;;
+    *) stage_result functions FAIL "clang-tidy missing or could not parse a file (exit $status)" ;;
+  esac
+}
+
+# Steps run right after a stage's configure, given its build folder.
+declare -A after_configure=([release]=function_size_check)
+
 # build_and_test NAME BUILD_TYPE SANITIZE LABEL TIMEOUT [extra cmake args...]
 # With LABEL, only the test executables carrying it are built (all of them if none is found).
 build_and_test() {
@@ -135,6 +161,7 @@ build_and_test() {
     stage_result "$name" FAIL "configure failed"
     return
   fi
+  [[ -n ${after_configure[$name]:-} ]] && "${after_configure[$name]}" "$dir"
   local targets=()
   if [[ -n $label ]]; then
     mapfile -t targets < <(targets_with_label "$label")
@@ -177,15 +204,74 @@ if [[ $("${CXX:-c++}" --version 2>/dev/null) == *"Free Software Foundation"* ]];
   release_flags="-Wno-error=array-bounds -Wno-error=stringop-overflow -Wno-error=stringop-overread"
 fi
 
-# The sanitizer stages compile with -g1 (line tables only), all a sanitizer's symbolized stack
-# needs: full -g made their compiles about 30 % slower (ptm's codec, then one file, under ASan +
-# UBSan: 173 s against 119 s). The ASan stage also compiles at -O1, as AddressSanitizer's
-# documentation advises: its build was most of CI's time, and -O1 takes 16-40 % off its files
-# (cli_test.cpp 53 s against 31 s). The whole run went from 30 min 3 s to 21 min 41 s with
-# this, the CLI11 unity file (src/tools/CMakeLists.txt) and smaller ptm sweep tiles, the ASan
-# tests from 260 s to 165 s.
+# The sanitizer stages compile with -g1 (line tables only): that is all a sanitizer's
+# symbolized stack needs, and full -g makes their compiles about 30 % slower. The ASan stage
+# also compiles at -O1, as AddressSanitizer's documentation advises: its build is most of CI's
+# time, and -O1 takes 16-40 % off its files.
 asan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g1 -DNDEBUG")
 tsan_flags=(-DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O2 -g1 -DNDEBUG")
+
+# The fuzzers declared with `tessera_add_fuzzer(NAME ...)` in fuzz/CMakeLists.txt.
+fuzzer_names() {
+  grep -oE '^tessera_add_fuzzer\([a-z_0-9]+' fuzz/CMakeLists.txt | sed 's/^tessera_add_fuzzer(//'
+}
+
+# The fuzz stage: every fuzzer under ASan + UBSan with libFuzzer (clang), each for
+# $fuzz_seconds from its committed corpus, two at a time (one per core). New inputs go to a
+# scratch folder, so the committed corpus is only read; a crash, a sanitizer report, a timeout
+# (10 s for one input) or an RSS over 2 GiB fails the stage, and the reproducer stays in
+# build-ci/fuzz/artifacts/ (replay: build-ci/fuzz/fuzz/NAME_fuzzer FILE).
+fuzz_stage() {
+  local dir=$build_root/fuzz names=() name
+  log "fuzz: configure (clang, libFuzzer, sanitize=address,undefined) in $dir"
+  if ! command -v clang++ >/dev/null 2>&1; then
+    stage_result fuzz FAIL "clang++ not found (scripts/install-deps.sh installs clang)"
+    return
+  fi
+  mkdir -p "$build_root"
+  if ! CC=clang CXX=clang++ cmake -S "$repo" -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo \
+      -DTESSERA_BUILD_FUZZ=ON -DTESSERA_BUILD_TOOLS=OFF -DTESSERA_SANITIZE=address,undefined \
+      "${asan_flags[@]}" >"$dir.configure.log" 2>&1; then
+    cat "$dir.configure.log"
+    stage_result fuzz FAIL "configure failed"
+    return
+  fi
+  mapfile -t names < <(fuzzer_names)
+  log "fuzz: build (-j$jobs) ${names[*]}"
+  if ! cmake --build "$dir" -j "$jobs" --target "${names[@]/%/_fuzzer}" -- -k 0; then
+    stage_result fuzz FAIL "build failed"
+    return
+  fi
+  mkdir -p "$dir/artifacts"
+  local failures=() running=0 pids=() pid_names=()
+  for name in "${names[@]}"; do
+    local scratch=$dir/scratch/$name
+    rm -rf "$scratch" && mkdir -p "$scratch"
+    log "fuzz: $name for ${fuzz_seconds} s"
+    "$dir/fuzz/${name}_fuzzer" -max_total_time="$fuzz_seconds" -timeout=10 -rss_limit_mb=2048 \
+      -print_final_stats=1 -artifact_prefix="$dir/artifacts/$name-" "$scratch" \
+      "fuzz/corpus/$name" >"$dir/$name.log" 2>&1 &
+    pids+=($!)
+    pid_names+=("$name")
+    if ((${#pids[@]} >= 2)); then
+      wait "${pids[0]}" || failures+=("${pid_names[0]}")
+      pids=("${pids[@]:1}")
+      pid_names=("${pid_names[@]:1}")
+    fi
+  done
+  local i
+  for i in "${!pids[@]}"; do wait "${pids[$i]}" || failures+=("${pid_names[$i]}"); done
+  for name in "${names[@]}"; do
+    printf '%-16s %s\n' "$name" "$(grep -E '^stat::number_of_executed_units' "$dir/$name.log" | \
+      sed 's/.*: */runs: /')"
+  done
+  if ((${#failures[@]})); then
+    for name in "${failures[@]}"; do tail -40 "$dir/$name.log"; done
+    stage_result fuzz FAIL "${#failures[@]} of ${#names[@]} fuzzers found a fault: ${failures[*]}"
+  else
+    stage_result fuzz ok "${#names[@]} fuzzers, ${fuzz_seconds} s each, nothing found"
+  fi
+}
 
 start=$SECONDS
 for stage in $stages; do
@@ -198,7 +284,8 @@ for stage in $stages; do
       build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) "${asan_flags[@]}" ;;
     tsan)
       build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) "${tsan_flags[@]}" ;;
-    *) echo "ci: unknown stage '$stage' (known: format release asan tsan)" >&2; exit 2 ;;
+    fuzz) fuzz_stage ;;
+    *) echo "ci: unknown stage '$stage' (known: format release asan tsan fuzz)" >&2; exit 2 ;;
   esac
 done
 

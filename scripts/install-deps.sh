@@ -4,7 +4,7 @@
 set -euo pipefail
 
 packages=(
-  build-essential cmake ninja-build pkg-config git clang-format
+  build-essential cmake ninja-build pkg-config git clang-format clang-tidy clang libclang-rt-14-dev
   libtiff-dev libjpeg62-turbo-dev libturbojpeg0-dev libpng-dev libwebp-dev
   libzstd-dev liblz4-dev libxxhash-dev
   libcli11-dev libfmt-dev nlohmann-json3-dev libboost-dev libcurl4-openssl-dev
@@ -16,6 +16,9 @@ packages=(
   libpq-dev
   postgresql
   postgresql-15-postgis-3
+  libtinygltf-dev
+  libassimp-dev
+  libmeshoptimizer-dev
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and

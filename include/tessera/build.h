@@ -15,6 +15,9 @@
 
 namespace tessera {
 
+/// Most encoder threads a build accepts (BuildOptions::threads).
+inline constexpr uint32_t kMaxBuildThreads = 1024;
+
 /// Everything `tessera build` can set. Defaults are the CLI's defaults.
 struct BuildOptions {
   /// One or more sources, one image each (a scene's texture set): paths, or
@@ -30,10 +33,17 @@ struct BuildOptions {
   bool chroma_subsampling = true;  ///< JPEG 4:2:0 (true) or 4:4:4
   bool srgb_downsample = false;    ///< average levels in linear light
   TileOrder order = TileOrder::kHilbert;
-  uint32_t threads = 0;          ///< encoder threads; 0 = all cores
+  uint32_t threads = 0;          ///< encoder threads, 0..kMaxBuildThreads; 0 = all cores
   uint32_t page_tiles_log2 = 5;  ///< directory page side in tiles, as a power of two (3..8)
   /// Optional image names stored in metadata, one per input; default: the input's file name.
   std::vector<std::string> image_names;
+  /// Most memory the build may need, in bytes; 0 = defaultBuildMemoryLimitBytes(). The need is
+  /// estimated from the sizes the inputs claim, after their headers are read and before any
+  /// row is allocated, and a build over the limit is refused (docs/builder.md, "Memory budget").
+  uint64_t memory_limit_bytes = 0;
+  /// Directory for the spool of encoded tiles (about the archive's size, removed at the end);
+  /// empty = the output's directory.
+  std::string spool_dir;
 };
 
 /// Progress for a terminal bar. Called from the building thread about every 100 ms.
@@ -54,11 +64,30 @@ struct BuildReport {
   double elapsed_s = 0;
   double megapixels_per_s = 0;  ///< level-0 megapixels / elapsed
   std::vector<ImageInfo> images;
+  uint64_t memory_estimate_bytes = 0;  ///< the memory the build was estimated to need
+  uint64_t memory_limit_bytes = 0;     ///< the limit it was checked against
 };
+
+/// The memory limit of a build that sets none: half of the machine's physical memory, or of
+/// the control group's memory limit (cgroup v2 `memory.max`, v1 `memory.limit_in_bytes`) where
+/// that is lower. Thread-safe.
+[[nodiscard]] uint64_t defaultBuildMemoryLimitBytes();
+
+/// Checks what needs no input file: quality 1..100, the effort's range for the codec (zstd
+/// -100..22, png and webp 0..9, ptm 0..4, none for raw, lz4 and jpeg: 0 only), tile size,
+/// border, directory page size, threads up to kMaxBuildThreads, the codec's availability, and
+/// that an output is named. kInvalidArgument (kUnsupported for a codec missing from this build)
+/// naming the value and what is accepted. buildArchive calls it first.
+[[nodiscard]] Result<void> validateBuildOptions(const BuildOptions& options);
 
 /// Builds an archive. On any failure, and when `cancel` becomes true, nothing is left at
 /// `options.output` (a previous file there is untouched) and no temporary file remains.
-/// Errors name the input or output file and the problem. Blocking; owned by the caller's thread.
+/// Errors name the input or output file and the problem. Before anything is allocated or
+/// written it refuses: an output path that exists and is not a regular file (kInvalidArgument),
+/// inputs whose claimed size needs more memory than the limit (kTooLarge, naming the input, its
+/// claimed size and the memory needed), and too little free space for the spool and the archive
+/// (kIo). A hostile header costs no more memory than the rows that arrive. Blocking; owned by
+/// the caller's thread.
 [[nodiscard]] Result<BuildReport> buildArchive(
     const BuildOptions& options, const std::function<void(const BuildProgress&)>& on_progress = {},
     const std::atomic<bool>* cancel = nullptr);

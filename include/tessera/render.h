@@ -6,8 +6,9 @@
 ///
 /// Sampling rules, in short. Screen pixel (px, py) has its centre at (px + 0.5, py + 0.5), row
 /// 0 at the top. Its level-0 texel coordinate (u, v) (texel (i, j) covers [i, i+1) x [j, j+1))
-/// comes from the view (`textureAt`). Its level of detail is lambda = log2(rho), rho the
-/// larger of |d(u,v)/dx| and |d(u,v)/dy| in level-0 texels per pixel (OpenGL's rule). With
+/// comes from the view (`textureAt`, tessera/view.h). Its level of detail is lambda =
+/// log2(rho), rho the larger of |d(u,v)/dx| and |d(u,v)/dy| in level-0 texels per pixel
+/// (OpenGL's rule; `levelOfDetailAt`). With
 /// L = floor(lambda) clamped to the levels, the pixel shows the finest level T >= L that is
 /// available there (its tile resident): if T == L < coarsest, bilinear at L blended with
 /// bilinear at L + 1 by lambda - L (trilinear); otherwise bilinear at T. Bilinear at a level
@@ -22,7 +23,7 @@
 
 #include <tessera/archive.h>
 #include <tessera/result.h>
-#include <tessera/stream.h>
+#include <tessera/view.h>
 
 namespace tessera {
 
@@ -33,21 +34,6 @@ struct Picture {
   uint32_t height = 0;
   std::vector<uint8_t> rgba;  ///< width * height * 4 bytes
 };
-
-/// Level-0 texel coordinate seen at screen point (sx, sy) (pixel units, (0, 0) the top-left
-/// corner of the screen). Orthographic: the view centre at the screen centre, texels_per_pixel
-/// texels per pixel, the screen rotated by rotation_rad (x towards y). Perspective: the ray
-/// from the eye through that point hits the plane z = 0; false when it does not (at or above
-/// the horizon, or an eye at or below the plane). The camera has the runtime's forward and
-/// right vectors and up = forward x right, so a camera looking down has the horizon at the top
-/// (formulas in docs/rendering.md). Thread-safe (pure).
-bool textureAt(const View& view, double sx, double sy, double& u, double& v);
-
-/// Level of detail at the centre of pixel (px, py): log2 of level-0 texels per pixel, rho as
-/// OpenGL defines it (the longer of the two screen-axis derivatives of (u, v)). Orthographic
-/// views give log2(texels_per_pixel) everywhere. Perspective: derivatives of the ray-plane
-/// hit, exact at the pixel centre; +infinity where the ray misses the plane. Thread-safe.
-double levelOfDetailAt(const View& view, uint32_t px, uint32_t py);
 
 /// What the reference may sample: `available(tile)` says whether a tile is resident (a GPU
 /// renderer holding exactly those tiles should draw the same picture); empty means every
@@ -68,6 +54,7 @@ struct ReferenceOptions {
 /// The level each pixel of `view` shows by the sampling rules (the finest available level at
 /// or above floor(lambda); the next level may blend in), row-major, -1 outside the image or
 /// where nothing is available. Reads no tile: for level overlays (Backes et al., Fig. 1).
+/// Fails (kInvalidArgument) for an image the archive lacks. Any thread, as renderReference.
 [[nodiscard]] Result<std::vector<int32_t>> levelsShown(const Archive& archive, const View& view,
                                                        const ReferenceOptions& options = {});
 
@@ -78,7 +65,7 @@ struct PictureDifference {
   double mean_abs = 0;   ///< mean absolute difference per channel
 };
 
-/// Compares two pictures; fails (kInvalidArgument) when their sizes differ.
+/// Compares two pictures; fails (kInvalidArgument) when their sizes differ. Thread-safe.
 [[nodiscard]] Result<PictureDifference> comparePictures(const Picture& a, const Picture& b);
 
 }  // namespace tessera

@@ -1,9 +1,9 @@
 #pragma once
 /// \file
-/// The streaming runtime: views, clip-region residency (Backes et al., sections 5-6, with the
-/// refinements of Luo & Duan, sections 3.3-3.4), the loader pool and `TileStreamer`, the
-/// facade a renderer calls once per frame. Nothing here blocks the render thread: it only
-/// polls finished work.
+/// The streaming runtime (docs/runtime.md): clip-region residency (Backes et al., sections
+/// 5-6, with the refinements of Luo & Duan, sections 3.3-3.4), the loader pool and
+/// `TileStreamer`, the facade a renderer calls once per frame. Nothing here blocks the render
+/// thread: it only polls finished work. Views are those of tessera/view.h.
 
 #include <chrono>
 #include <cstdint>
@@ -15,46 +15,9 @@
 #include <tessera/cache.h>
 #include <tessera/format.h>
 #include <tessera/result.h>
+#include <tessera/view.h>
 
 namespace tessera {
-
-/// Orthographic 2D view. Positions are level-0 pixels of the image; y grows downwards.
-struct OrthoView {
-  double centre_x = 0;
-  double centre_y = 0;
-  double texels_per_pixel = 1;  ///< level-0 texels per screen pixel (zoom); > 0
-  uint32_t viewport_w = 1280;
-  uint32_t viewport_h = 720;
-  double rotation_rad = 0;  ///< screen rotation about the centre
-};
-
-/// Perspective camera over the texture plane (terrain), in level-0 pixel units: the plane is
-/// z = 0, x right, y down the image; `eye_z` is the height above it.
-struct PerspectiveView {
-  double eye_x = 0;
-  double eye_y = 0;
-  double eye_z = 1000;
-  double yaw_rad = 0;       ///< heading: 0 looks towards -y (up the image)
-  double pitch_rad = -0.7;  ///< below 0 looks down; -pi/2 straight down
-  double fov_y_rad = 1.0;
-  uint32_t viewport_w = 1280;
-  uint32_t viewport_h = 720;
-};
-
-/// A view of one image of an archive.
-struct View {
-  enum class Kind { kOrtho, kPerspective };
-  Kind kind = Kind::kOrtho;
-  uint32_t image = 0;
-  OrthoView ortho;
-  PerspectiveView perspective;
-  uint32_t viewportWidth() const {
-    return kind == Kind::kOrtho ? ortho.viewport_w : perspective.viewport_w;
-  }
-  uint32_t viewportHeight() const {
-    return kind == Kind::kOrtho ? ortho.viewport_h : perspective.viewport_h;
-  }
-};
 
 /// A block of tiles at one level: [x0, x1) x [y0, y1).
 struct TileRect {
@@ -101,9 +64,11 @@ struct TileRequest {
 /// Per-frame tuning. Defaults suit a 1920x1080 view with 256-px tiles.
 struct ResidencyOptions {
   /// Texel bytes handed to the renderer per frame (0 = no byte limit): the upload bandwidth
-  /// the runtime may ask for, 1 GB/s at 60 fps, about 85 RGB tiles of 256 px. A 50,000 px/s
-  /// FHD pan renews about 40 tiles a frame; 32 tiles a frame kept 82% of its frames at full
-  /// detail, this budget 99.7% (docs/benchmarks.md).
+  /// the runtime may ask of the renderer (16 MiB is 1 GB/s at 60 fps). Bytes, not tiles,
+  /// because what an upload costs (bus bandwidth, a copy on a software renderer) grows with
+  /// its bytes. Sized so that the fastest pan the runtime targets stays at full detail; a
+  /// renderer that cannot take as much sets it lower, and full detail then waits a few frames
+  /// longer while the view moves fast (docs/runtime.md, "Residency", step 5).
   uint64_t upload_budget_bytes = 16u << 20;
   /// Tiles handed to the renderer per frame: a cap on per-tile work for small tiles.
   uint32_t upload_budget_tiles = 128;
@@ -172,7 +137,8 @@ struct FrameReport {
 /// What the renderer should do this frame.
 struct FrameUpdate {
   /// Tiles to upload now, parents before children, within the upload budget. Each is in
-  /// the cache and pinned until the renderer calls `TileStreamer::uploaded`.
+  /// the cache and pinned until `TileStreamer::acknowledge` hears whether the renderer
+  /// accepted or declined it.
   std::vector<std::shared_ptr<const DecodedTile>> uploads;
   /// Resident tiles the renderer may drop (left every region).
   std::vector<TileId> releases;
@@ -186,6 +152,18 @@ struct FrameUpdate {
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
   FrameReport report;
+};
+
+/// A renderer's answer to a FrameUpdate (`Renderer::apply`), for `TileStreamer::acknowledge`.
+/// Every tile of `FrameUpdate::uploads` is in exactly one of `accepted` and `declined`.
+struct ApplyResult {
+  std::vector<TileId> accepted;  ///< uploaded: resident from now on
+  /// Not taken (no room, or not this image's): still loaded, offered again in a later frame.
+  std::vector<TileId> declined;
+  /// Tiles resident before this frame that the renderer gave up on its own (a clipmap slot
+  /// taken by a tile of the clip region, its layers reallocated): offered again from the
+  /// cache while they are wanted.
+  std::vector<TileId> dropped;
 };
 
 /// Budgets for one mode of adaptive scheduling.
@@ -227,7 +205,7 @@ struct StreamerOptions {
   /// Loader threads run under SCHED_IDLE: any thread of normal priority, the render thread
   /// first, preempts a decode at once, so a frame never waits for one. Set false in a program
   /// whose other threads keep every core busy, where idle-priority loaders would starve; they
-  /// then run at niceness 5 (docs/runtime.md).
+  /// then run at niceness 5 (docs/runtime.md, "Loader pool").
   bool loader_idle_priority = true;
   /// Tile buffers kept idle for the next decodes: those of evicted tiles, and fresh ones the
   /// loaders fault in while they have nothing to do (only into room the cache budget still
@@ -235,14 +213,14 @@ struct StreamerOptions {
   uint64_t recycled_buffer_bytes = 64u << 20;
   ResidencyOptions residency;
   /// A loader thread takes queued tiles of one level and urgency whose payloads follow each
-  /// other in the file with gaps under this, and decodes them as one batch (neighbours on
-  /// screen are neighbours in the Hilbert layout); batching halves the loader's CPU time per
-  /// tile here (docs/runtime.md).
+  /// other in the file with gaps under this, and decodes them as one batch: neighbours on
+  /// screen are neighbours in the Hilbert layout, and a batch pays the per-job costs (queue,
+  /// lock, read call) once (docs/runtime.md, "Loader pool").
   uint64_t batch_gap_bytes = 64 * 1024;
   /// Within a batch, payloads closer than this are read in one read, gap included: the gaps
-  /// are bytes read for nothing, each extra read a system call (measured trade-off in
-  /// docs/benchmarks.md). A remote source, where each read is a request, wants it as large
-  /// as batch_gap_bytes.
+  /// are bytes read for nothing, each extra read a system call, and this is where the two
+  /// balance on a local disk (docs/runtime.md). A remote source, where each read is a
+  /// request, wants it as large as batch_gap_bytes.
   uint64_t merge_gap_bytes = 16 * 1024;
   /// Payload bytes at the head of the loader's queue the byte source is told to fetch ahead
   /// (ByteSource::prefetch), topped up each time a loader thread takes work. A cold disk then
@@ -257,13 +235,12 @@ struct StreamerOptions {
 };
 
 /// Turns `options` into what a source whose every read is a network round trip wants (an
-/// HTTP URL, a simulated link); tools then apply what the user set explicitly. Measured over
-/// 20 Mbit/s with 40 ms RTT and 2 Mbit/s with 150 ms (docs/benchmarks.md, "Remote streaming
-/// over a slow link"):
-/// - `remote_loader_threads` loader threads at least: each waits a round trip per read, so the
-///   reads in flight, not the cores, set the rate (8 gave 1.1 MB/s on the 2.5 MB/s link);
+/// HTTP URL, a simulated link); tools then apply what the user set explicitly
+/// (docs/runtime.md, "Loader settings over a network"):
+/// - `kRemoteLoaderThreads` loader threads at least: each waits a round trip per read, so
+///   the reads in flight, not the cores, set the rate;
 /// - one read per batch (batch gap = merge gap = 16 KiB): a batch's runs are read one after
-///   another, each a round trip, and a 64 KiB gap read 1.5x the payload bytes;
+///   another, each a round trip, and bytes in the gaps cost link time;
 /// - no read-ahead: the loaders' parallel reads keep the link busy, and fetched-ahead tiles
 ///   that adaptive scheduling then drops cost link time the view needed;
 /// - adaptive scheduling (Marvie & Bouatouch, part III).
@@ -272,10 +249,14 @@ void tuneForRemoteSource(StreamerOptions& options);
 /// source's default connection count matches it.
 inline constexpr uint32_t kRemoteLoaderThreads = 16;
 
-/// The runtime for one archive. `update`, `uploaded` and `release` are render-thread only and
-/// never wait on disk, network or decoding; loading happens on the loader threads.
+/// The runtime for one archive. Render thread only, except where a method says otherwise:
+/// `update` and `acknowledge` never wait on disk, network or decoding; loading happens on the
+/// loader threads it owns.
 class TileStreamer {
  public:
+  /// Starts the loader threads over `archive`. Fails (kInvalidArgument) for a null archive or a
+  /// cache budget below 64 of its largest tiles (the coarsest levels are pinned and a few
+  /// tiles are always in flight: less could never make progress).
   [[nodiscard]] static Result<std::unique_ptr<TileStreamer>> create(
       std::shared_ptr<Archive> archive, const StreamerOptions& options);
   ~TileStreamer();
@@ -283,28 +264,29 @@ class TileStreamer {
   TileStreamer& operator=(const TileStreamer&) = delete;
 
   /// Once per frame: drains finished loads, recomputes clip regions and priorities for
-  /// `view`, cancels requests that left every region, and returns the uploads for this frame.
+  /// `view`, cancels requests that left every region, and returns the uploads for this frame
+  /// (valid until the next update). A view of an image the archive lacks shows its last one.
   const FrameUpdate& update(const View& view);
-  /// The renderer uploaded this tile (from the last FrameUpdate): it becomes resident and
-  /// its cache pin is released.
-  void uploaded(const TileId& id);
-  /// The renderer dropped a resident tile.
-  void released(const TileId& id);
-  /// The renderer could not take this tile from the last FrameUpdate (no room on the GPU):
-  /// its pin is released and it is offered again in a later frame.
-  void declined(const TileId& id);
+  /// The renderer's answer to the last FrameUpdate, once per apply and before the next
+  /// update: accepted tiles become resident and their cache pins are released; declined ones
+  /// are unpinned and offered again in a later frame; dropped ones stop being resident and are
+  /// offered again from the cache while wanted. Tiles it does not know are ignored.
+  void acknowledge(const ApplyResult& result);
   /// Current state of a tile.
   TileState state(const TileId& id) const;
-  /// Blocks until the loader is idle: for tests and benchmarks, never the render thread.
+  /// Blocks until the loader is idle: for tests and benchmarks, never the render thread. Any
+  /// thread.
   void waitIdleForTesting();
 
+  /// The archive it streams. Any thread (the archive is thread-safe).
   const Archive& archive() const;
+  /// The decoded-tile cache the loaders fill. Any thread (the cache is thread-safe).
   TileCache& cache();
+  /// A snapshot of the cache's counters. Any thread.
   CacheStats cacheStats() const;
 
-  struct Impl;
-
  private:
+  struct Impl;
   explicit TileStreamer(std::unique_ptr<Impl> impl);
   std::unique_ptr<Impl> impl_;
 };

@@ -10,6 +10,7 @@
 #include "format/checksum.h"
 #include "format/directory.h"
 #include "format/header.h"
+#include "format/sections.h"
 #include "format/tile_order.h"
 
 namespace tessera::detail {
@@ -222,9 +223,12 @@ Result<MixedWritten> writeMixedArchive(const TempFile& spool, const ImageInfo& i
   for (uint32_t l = info.level_count; l-- > 0;) {
     TESSERA_ASSIGN_OR_RETURN(records[0].levels[l].page_index, place(indexes[l]));
   }
-  BlockRef directory_ref;
+  BlockRef sections_ref;
   if (procedural) {
-    TESSERA_ASSIGN_OR_RETURN(directory_ref, place(encodeProceduralDirectory(directory)));
+    TESSERA_ASSIGN_OR_RETURN(const BlockRef directory_ref,
+                             place(encodeProceduralDirectory(directory)));
+    const SectionEntry section{uint32_t(SectionKind::kProcedural), directory_ref};
+    TESSERA_ASSIGN_OR_RETURN(sections_ref, place(encodeSectionTable({&section, 1})));
   }
   const std::string text = metadata.dump();
   if (text.size() > kMaxMetadataBytes)
@@ -243,7 +247,7 @@ Result<MixedWritten> writeMixedArchive(const TempFile& spool, const ImageInfo& i
   // Everything but the header first; the header, the commit marker, last.
   TESSERA_TRY(out.pwrite(kHeaderBytes, std::span(region).subspan(kHeaderBytes)));
   std::vector<uint8_t> header_bytes = encodeHeader(header);
-  if (procedural) stampProceduralHeader(header_bytes, directory_ref);
+  if (procedural) stampSectionTableRef(header_bytes, sections_ref);
   TESSERA_TRY(out.pwrite(0, header_bytes));
   written.file_bytes = header.file_bytes;
   return written;

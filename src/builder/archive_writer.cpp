@@ -57,38 +57,81 @@ struct PlacedBlock {
   std::vector<uint8_t> bytes;
 };
 
-}  // namespace
+/// Per image, per level, the entries as the archive stores them: [image][level][slot].
+using ArchiveEntries = std::vector<std::vector<std::vector<TileEntry>>>;
 
-Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
-                                    std::span<const SpooledImage> images, TileOrder order,
-                                    const nlohmann::json& metadata, const TempFile& out) {
-  const std::string& name = out.finalPath();
-  // Payloads are copied from the spool with pread, not through a mapping: mapped spool pages
-  // count in the process's resident set, which would then grow with the archive.
-  std::vector<uint8_t> payload;
+/// What the payload pass wrote.
+struct CopiedPayloads {
+  ArchiveEntries entries;  ///< with the payloads' offsets in the output
+  uint64_t payload_bytes = 0;
+};
 
-  // Payloads, clustered. Entries are copied so the caller's spool offsets stay intact.
-  std::vector<std::vector<std::vector<TileEntry>>> final_entries(images.size());
-  Appender appender(out, kHeaderRegionBytes);
-  WrittenArchive written;
-  for (uint32_t i = 0; i < images.size(); ++i) {
-    const SpooledImage& image = images[i];
-    auto& levels = final_entries[i];
-    levels.resize(image.entries.size());
-    for (uint32_t l = 0; l < image.entries.size(); ++l) {
-      levels[l].resize(image.entries[l].size());
-      for (size_t k = 0; k < image.entries[l].size(); ++k) {
-        const SpoolEntry& spooled = image.entries[l][k];
-        TileEntry& entry = levels[l][k];
-        entry.kind = spooled.kind;
-        entry.uniform_rgba = spooled.uniform_rgba;
-        if (spooled.kind == TileKind::kEncoded) {
-          entry.codec = spooled.codec;
-          entry.length_bytes = spooled.length_bytes;
-          entry.checksum = spooled.checksum;
-        }
+/// The directory as written: image records (page indexes not placed yet) and, per image, per
+/// level from the coarsest, its page index (empty bytes for a level without pages).
+struct WrittenDirectory {
+  std::vector<ImageRecord> records;
+  std::vector<PlacedBlock> page_indexes;
+};
+
+/// The first kHeaderRegionBytes of the file: the header, the root directory, then the page
+/// indexes and metadata that fit, so that one read opens the archive.
+class HeaderRegion {
+ public:
+  explicit HeaderRegion(uint64_t root_bytes)
+      : bytes_(kHeaderRegionBytes, 0), used_(kHeaderBytes + root_bytes) {}
+  /// Places `block` in the region while it fits, else at the end of the file.
+  Result<void> place(PlacedBlock& block, Appender& appender) {
+    if (block.bytes.empty()) return {};
+    if (used_ + block.bytes.size() <= kHeaderRegionBytes) {
+      block.ref.offset_bytes = used_;
+      std::memcpy(bytes_.data() + used_, block.bytes.data(), block.bytes.size());
+      used_ += block.bytes.size();
+      return {};
+    }
+    TESSERA_ASSIGN_OR_RETURN(block.ref.offset_bytes, appender.append(block.bytes));
+    return {};
+  }
+  std::span<uint8_t> bytes() { return bytes_; }
+
+ private:
+  std::vector<uint8_t> bytes_;
+  uint64_t used_;
+};
+
+/// The entries of `image` as stored, without payload offsets (those come with the copy).
+std::vector<std::vector<TileEntry>> entriesOf(const SpooledImage& image) {
+  std::vector<std::vector<TileEntry>> levels(image.entries.size());
+  for (uint32_t l = 0; l < image.entries.size(); ++l) {
+    levels[l].resize(image.entries[l].size());
+    for (size_t k = 0; k < image.entries[l].size(); ++k) {
+      const SpoolEntry& spooled = image.entries[l][k];
+      TileEntry& entry = levels[l][k];
+      entry.kind = spooled.kind;
+      entry.uniform_rgba = spooled.uniform_rgba;
+      if (spooled.kind == TileKind::kEncoded) {
+        entry.codec = spooled.codec;
+        entry.length_bytes = spooled.length_bytes;
+        entry.checksum = spooled.checksum;
       }
     }
+  }
+  return levels;
+}
+
+/// Copies the payloads from the spool to the output in the clustering order. The entries are
+/// copies, so the caller's spool offsets stay intact.
+Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
+                                    std::span<const SpooledImage> images, TileOrder order,
+                                    Appender& appender) {
+  // pread, not a mapping: mapped spool pages count in the process's resident set, which would
+  // then grow with the archive.
+  std::vector<uint8_t> payload;
+  CopiedPayloads copied;
+  copied.entries.resize(images.size());
+  for (uint32_t i = 0; i < images.size(); ++i) {
+    const SpooledImage& image = images[i];
+    auto& levels = copied.entries[i];
+    levels = entriesOf(image);
     for (const TileId& tile : tileOrder(image.info, i, order)) {
       size_t slot = size_t(tile.y) * image.info.tilesX(tile.level) + tile.x;
       const SpoolEntry& spooled = image.entries[tile.level][slot];
@@ -98,116 +141,144 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
       payload.resize(spooled.length_bytes);
       TESSERA_TRY(spool.pread(spooled.spool_offset, payload));
       TESSERA_ASSIGN_OR_RETURN(levels[tile.level][slot].offset_bytes, appender.append(payload));
-      written.payload_bytes += spooled.length_bytes;
+      copied.payload_bytes += spooled.length_bytes;
     }
   }
+  return copied;
+}
 
-  // Directory pages, coarse levels first like the payloads, and the page indexes.
-  std::vector<ImageRecord> records(images.size());
-  std::vector<PlacedBlock> page_indexes;
-  for (uint32_t i = 0; i < images.size(); ++i) {
-    const ImageInfo& info = images[i].info;
-    records[i].info = info;
-    records[i].levels.resize(info.level_count);
-    for (uint32_t l = info.level_count; l-- > 0;) {
-      uint32_t pages_x = pagesX(info, l), pages_y = pagesY(info, l);
-      std::vector<PageRef> refs(size_t(pages_x) * pages_y);
-      bool any_page = false;
-      for (uint32_t py = 0; py < pages_y; ++py) {
-        for (uint32_t px = 0; px < pages_x; ++px) {
-          PageGeometry geometry = pageGeometry(info, l, px, py);
-          std::vector<TileEntry> page_entries;
-          page_entries.reserve(size_t(geometry.columns) * geometry.rows);
-          bool all_empty = true;
-          for (uint32_t ty = 0; ty < geometry.rows; ++ty) {
-            for (uint32_t tx = 0; tx < geometry.columns; ++tx) {
-              size_t slot =
-                  size_t(geometry.first_tile_y + ty) * info.tilesX(l) + geometry.first_tile_x + tx;
-              page_entries.push_back(final_entries[i][l][slot]);
-              all_empty &= page_entries.back().kind == TileKind::kEmpty;
-            }
-          }
-          if (all_empty) continue;
-          std::vector<uint8_t> bytes = encodeTileEntries(page_entries);
-          PageRef& ref = refs[size_t(py) * pages_x + px];
-          TESSERA_ASSIGN_OR_RETURN(ref.offset_bytes, appender.append(bytes));
-          ref.length_bytes = bytes.size();
-          ref.checksum = checksum64(bytes);
-          any_page = true;
+/// Writes the non-empty directory pages of one level and returns its page index (no bytes
+/// when every page is empty).
+Result<PlacedBlock> writeLevelPages(const ImageInfo& info, uint32_t level,
+                                    const std::vector<TileEntry>& entries, Appender& appender) {
+  uint32_t pages_x = pagesX(info, level), pages_y = pagesY(info, level);
+  std::vector<PageRef> refs(size_t(pages_x) * pages_y);
+  bool any_page = false;
+  for (uint32_t py = 0; py < pages_y; ++py) {
+    for (uint32_t px = 0; px < pages_x; ++px) {
+      PageGeometry geometry = pageGeometry(info, level, px, py);
+      std::vector<TileEntry> page_entries;
+      page_entries.reserve(size_t(geometry.columns) * geometry.rows);
+      bool all_empty = true;
+      for (uint32_t ty = 0; ty < geometry.rows; ++ty) {
+        for (uint32_t tx = 0; tx < geometry.columns; ++tx) {
+          size_t slot =
+              size_t(geometry.first_tile_y + ty) * info.tilesX(level) + geometry.first_tile_x + tx;
+          page_entries.push_back(entries[slot]);
+          all_empty &= page_entries.back().kind == TileKind::kEmpty;
         }
       }
-      uint64_t level_payload = 0;
-      for (const TileEntry& entry : final_entries[i][l]) level_payload += entry.length_bytes;
-      records[i].levels[l].payload_bytes = level_payload;
-      if (any_page) {
-        PlacedBlock block;
-        block.bytes = encodePageIndex(refs);
-        block.ref.length_bytes = block.bytes.size();
-        block.ref.checksum = checksum64(block.bytes);
-        page_indexes.push_back(std::move(block));
-      } else {
-        page_indexes.push_back({});
-      }
+      if (all_empty) continue;
+      std::vector<uint8_t> bytes = encodeTileEntries(page_entries);
+      PageRef& ref = refs[size_t(py) * pages_x + px];
+      TESSERA_ASSIGN_OR_RETURN(ref.offset_bytes, appender.append(bytes));
+      ref.length_bytes = bytes.size();
+      ref.checksum = checksum64(bytes);
+      any_page = true;
     }
   }
+  PlacedBlock block;
+  if (!any_page) return block;
+  block.bytes = encodePageIndex(refs);
+  block.ref.length_bytes = block.bytes.size();
+  block.ref.checksum = checksum64(block.bytes);
+  return block;
+}
 
-  // Place page indexes and metadata in the header region while they fit (one read opens the
+/// Directory pages, coarse levels first like the payloads, and each level's page index.
+Result<WrittenDirectory> writeDirectoryPages(std::span<const SpooledImage> images,
+                                             const ArchiveEntries& entries, Appender& appender) {
+  WrittenDirectory directory;
+  directory.records.resize(images.size());
+  for (uint32_t i = 0; i < images.size(); ++i) {
+    const ImageInfo& info = images[i].info;
+    ImageRecord& record = directory.records[i];
+    record.info = info;
+    record.levels.resize(info.level_count);
+    for (uint32_t l = info.level_count; l-- > 0;) {
+      uint64_t level_payload = 0;
+      for (const TileEntry& entry : entries[i][l]) level_payload += entry.length_bytes;
+      record.levels[l].payload_bytes = level_payload;
+      TESSERA_ASSIGN_OR_RETURN(PlacedBlock index,
+                               writeLevelPages(info, l, entries[i][l], appender));
+      directory.page_indexes.push_back(std::move(index));
+    }
+  }
+  return directory;
+}
+
+/// The metadata block: `metadata` as JSON text, checksummed, not placed yet.
+Result<PlacedBlock> metadataBlock(const nlohmann::json& metadata, const std::string& name) {
+  PlacedBlock block;
+  std::string text = metadata.dump();
+  block.bytes.assign(text.begin(), text.end());
+  block.ref.length_bytes = block.bytes.size();
+  block.ref.checksum = checksum64(block.bytes);
+  if (block.bytes.size() > kMaxMetadataBytes)
+    return fail(ErrorCode::kTooLarge, name + ": metadata exceeds 16 MiB");
+  return block;
+}
+
+/// Writes the header region with the root directory and, last, the header: until those 128
+/// bytes land the file does not parse as an archive. Returns the file's size.
+Result<uint64_t> writeHeaderRegion(const TempFile& out, HeaderRegion& region,
+                                   const std::vector<ImageRecord>& records,
+                                   const BlockRef& metadata, uint64_t end_bytes) {
+  std::vector<uint8_t> root = encodeRootDirectory(records);
+  std::span<uint8_t> bytes = region.bytes();
+  std::memcpy(bytes.data() + kHeaderBytes, root.data(), root.size());
+  FileHeader header;
+  header.file_bytes = std::max<uint64_t>(end_bytes, kHeaderRegionBytes);
+  header.image_count = uint32_t(records.size());
+  header.root = {kHeaderBytes, root.size(), checksum64(root)};
+  header.metadata = metadata;
+  TESSERA_TRY(out.pwrite(kHeaderBytes, bytes.subspan(kHeaderBytes)));
+  if (end_bytes < kHeaderRegionBytes) TESSERA_TRY(out.pwrite(0, bytes.first(kHeaderBytes)));
+  std::vector<uint8_t> header_bytes = encodeHeader(header);
+  TESSERA_TRY(out.pwrite(0, header_bytes));
+  return header.file_bytes;
+}
+
+}  // namespace
+
+Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
+                                    std::span<const SpooledImage> images, TileOrder order,
+                                    const nlohmann::json& metadata, const TempFile& out) {
+  const std::string& name = out.finalPath();
+  Appender appender(out, kHeaderRegionBytes);
+  TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads,
+                           copyPayloads(spool, spool_bytes, images, order, appender));
+  TESSERA_ASSIGN_OR_RETURN(WrittenDirectory directory,
+                           writeDirectoryPages(images, payloads.entries, appender));
+
+  // Page indexes and metadata go in the header region while they fit (one read opens the
   // archive), else at the tail. The root directory's size is known before its contents.
   uint64_t root_bytes = 0;
-  for (const ImageRecord& record : records)
+  for (const ImageRecord& record : directory.records)
     root_bytes += kImageRecordBytes + uint64_t(record.info.level_count) * kLevelRecordBytes;
-  std::vector<uint8_t> region(kHeaderRegionBytes, 0);
-  uint64_t region_used = kHeaderBytes + root_bytes;
-  auto place = [&](PlacedBlock& block) -> Result<void> {
-    if (block.bytes.empty()) return {};
-    if (region_used + block.bytes.size() <= kHeaderRegionBytes) {
-      block.ref.offset_bytes = region_used;
-      std::memcpy(region.data() + region_used, block.bytes.data(), block.bytes.size());
-      region_used += block.bytes.size();
-      return {};
-    }
-    TESSERA_ASSIGN_OR_RETURN(block.ref.offset_bytes, appender.append(block.bytes));
-    return {};
-  };
+  HeaderRegion region(root_bytes);
   size_t next_index = 0;
   for (uint32_t i = 0; i < images.size(); ++i) {
     for (uint32_t l = images[i].info.level_count; l-- > 0;) {
-      PlacedBlock& block = page_indexes[next_index++];
-      TESSERA_TRY(place(block));
-      records[i].levels[l].page_index = block.ref;
+      PlacedBlock& block = directory.page_indexes[next_index++];
+      TESSERA_TRY(region.place(block, appender));
+      directory.records[i].levels[l].page_index = block.ref;
     }
   }
-  PlacedBlock metadata_block;
-  std::string metadata_text = metadata.dump();
-  metadata_block.bytes.assign(metadata_text.begin(), metadata_text.end());
-  metadata_block.ref.length_bytes = metadata_block.bytes.size();
-  metadata_block.ref.checksum = checksum64(metadata_block.bytes);
-  if (metadata_block.bytes.size() > kMaxMetadataBytes)
-    return fail(ErrorCode::kTooLarge, name + ": metadata exceeds 16 MiB");
-  TESSERA_TRY(place(metadata_block));
+  TESSERA_ASSIGN_OR_RETURN(PlacedBlock metadata_block, metadataBlock(metadata, name));
+  TESSERA_TRY(region.place(metadata_block, appender));
   TESSERA_TRY(appender.flush());
-
   if (root_bytes > kHeaderRegionBytes - kHeaderBytes)
     return fail(ErrorCode::kTooLarge,
                 fmt::format("{}: {} images need a {} byte root directory, over the {} byte "
                             "header region",
                             name, images.size(), root_bytes, kHeaderRegionBytes));
-  std::vector<uint8_t> root = encodeRootDirectory(records);
-  std::memcpy(region.data() + kHeaderBytes, root.data(), root.size());
 
-  FileHeader header;
-  header.file_bytes = std::max<uint64_t>(appender.end(), kHeaderRegionBytes);
-  header.image_count = uint32_t(images.size());
-  header.root = {kHeaderBytes, root.size(), checksum64(root)};
-  header.metadata = metadata_block.ref;
-  // The region without the header first, the header last: until those 128 bytes land the
-  // file does not parse as an archive.
-  TESSERA_TRY(out.pwrite(kHeaderBytes, std::span(region).subspan(kHeaderBytes)));
-  if (appender.end() < kHeaderRegionBytes)
-    TESSERA_TRY(out.pwrite(0, std::span(region).first(kHeaderBytes)));
-  std::vector<uint8_t> header_bytes = encodeHeader(header);
-  TESSERA_TRY(out.pwrite(0, header_bytes));
-  written.file_bytes = header.file_bytes;
+  WrittenArchive written;
+  written.payload_bytes = payloads.payload_bytes;
+  TESSERA_ASSIGN_OR_RETURN(
+      written.file_bytes,
+      writeHeaderRegion(out, region, directory.records, metadata_block.ref, appender.end()));
   return written;
 }
 

@@ -22,6 +22,10 @@ struct SourceInfo {
   /// Rows the reader produces most cheaply at once (a TIFF strip or tile row); the builder
   /// asks for bands of about this height. At least 1.
   uint32_t natural_band_rows = 1;
+  /// Bytes the reader itself holds while reading (the strip or tile it decodes from, the
+  /// decoder's row and coefficient buffers), at most: the build's memory estimate adds it to
+  /// the band and the pyramid before anything is allocated.
+  uint64_t buffer_bytes = 0;
   /// "tiff", "png", "jpeg", "synthetic".
   std::string format;
   /// Source-specific facts for the archive metadata: for GeoTIFF the georeference

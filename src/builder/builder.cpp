@@ -17,9 +17,11 @@
 
 #include "archive_writer.h"
 #include "band_reader.h"
+#include "build_budget.h"
 #include "output/output_file.h"
 #include "pyramid_builder.h"
 #include "tile_cutter.h"
+#include "uninitialized_buffer.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
 #include "codecs/encode.h"
@@ -32,9 +34,6 @@ using namespace detail;
 namespace {
 
 using Clock = std::chrono::steady_clock;
-
-/// Each worker batches payloads into a chunk and writes it to the spool in one call.
-constexpr size_t kSpoolChunkBytes = 4u << 20;
 
 /// Recycled tile buffers. Their count bounds the tiles in flight between the cutter and the
 /// encoders (the builder's memory bound), and recycling avoids a fresh mmap per tile.
@@ -132,9 +131,9 @@ TileClass classifyTile(const uint8_t* texels, uint32_t side, uint32_t channels,
   return has_alpha && colour == 0 ? TileClass::kEmpty : TileClass::kUniform;
 }
 
-void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
-               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
-               const ParentTexels* parent = nullptr) {
+void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
+                      const uint8_t* texels, uint32_t side, uint32_t channels,
+                      const std::string& what, const ParentTexels* parent) {
   uint32_t colour = 0;
   switch (classifyTile(texels, side, channels, &colour)) {
     case TileClass::kEmpty:
@@ -173,6 +172,20 @@ void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
   }
 }
 
+// An exception (std::bad_alloc in a codec) must not leave the worker thread: it would end the
+// process, and the job's tile buffer would never return to the pool. It fails the build.
+void encodeJob(EncodeContext& context, WorkerState& worker, SpoolEntry& entry,
+               const uint8_t* texels, uint32_t side, uint32_t channels, const std::string& what,
+               const ParentTexels* parent = nullptr) {
+  try {
+    encodeJobOrThrow(context, worker, entry, texels, side, channels, what, parent);
+  } catch (const std::bad_alloc&) {
+    context.recordError({ErrorCode::kTooLarge, what + ": out of memory while encoding"});
+  } catch (const std::exception& e) {
+    context.recordError({ErrorCode::kInternal, what + ": " + e.what()});
+  }
+}
+
 /// Summary statistics of an image, from its coarsest level (one tile: cheap, and the mean is
 /// exact up to rounding of the box filter).
 nlohmann::json coarsestLevelStatistics(const LevelRows& rows) {
@@ -207,6 +220,7 @@ class EncodingSink final : public TileSink {
         source_name_(source_name) {}
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    growEntries(level, tile_row);
     if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
     if (codecNeedsParent(context_.codec)) return holdRow(level, tile_row, rows);
     const uint32_t side = info_.storedTileSidePx();
@@ -228,6 +242,16 @@ class EncodingSink final : public TileSink {
   nlohmann::json statistics;
 
  private:
+  // A level's entries are reserved whole and come into being a tile row at a time, as the rows
+  // arrive: a reservation costs no resident memory, and within it a vector never moves, so
+  // the encoders' entry pointers stay valid.
+  void growEntries(uint32_t level, uint32_t tile_row) {
+    std::vector<SpoolEntry>& entries = spooled_.entries[level];
+    const size_t needed = size_t(tile_row + 1) * info_.tilesX(level);
+    TESSERA_CHECK(needed <= entries.capacity()) << "tile row past the level's reservation";
+    if (entries.size() < needed) entries.resize(needed);
+  }
+
   // Codecs that code a tile against its parent (ptm) need the parent's tile row, which the
   // streaming pyramid cuts after both of its child rows (or, without borders, between them).
   // So a row's raw tiles are held until its parent row exists, and a parent row until both
@@ -312,47 +336,22 @@ class EncodingSink final : public TileSink {
   const std::string& source_name_;
 };
 
-Result<void> validateOptions(const BuildOptions& options) {
-  if (options.inputs.empty()) return fail(ErrorCode::kInvalidArgument, "no input given");
-  if (options.output.empty()) return fail(ErrorCode::kInvalidArgument, "no output path given");
-  if (options.quality < 1 || options.quality > 100)
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("quality {} out of 1..100", options.quality));
-  if (!findEncoder(options.codec))
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("codec {} is not available in this build", codecName(options.codec)));
-  if (options.codec == Codec::kPtm && options.srgb_downsample)
-    return fail(ErrorCode::kInvalidArgument,
-                "codec ptm stores the integer floor-average pyramid of Marvie & Bouatouch; it "
-                "cannot average in linear light (--srgb)");
-  if (options.image_names.size() > options.inputs.size())
-    return fail(ErrorCode::kInvalidArgument, "more image names than inputs");
-  for (const std::string& input : options.inputs) {
-    if (std::filesystem::path(input).lexically_normal() ==
-        std::filesystem::path(options.output).lexically_normal())
-      return fail(ErrorCode::kInvalidArgument, input + ": output would overwrite the input");
-  }
-  return {};
-}
-
 std::string displayName(const std::string& input) {
   if (input.rfind("synthetic:", 0) == 0) return input;
   return std::filesystem::path(input).filename().string();
 }
 
-}  // namespace
-
-Result<BuildReport> buildArchive(const BuildOptions& options,
-                                 const std::function<void(const BuildProgress&)>& on_progress,
-                                 const std::atomic<bool>* cancel) {
-  const auto start = Clock::now();
-  TESSERA_TRY(validateOptions(options));
-
-  // Open every source first: bad inputs fail before any output exists, and progress knows
-  // the total.
+/// The build's sources, opened, with the images they become.
+struct OpenedSources {
   std::vector<std::unique_ptr<BandReader>> readers;
-  std::vector<ImageInfo> infos;
-  uint64_t pixels_total = 0;
+  std::vector<ImageInfo> infos;  ///< one per reader, level_count set
+  uint64_t pixels_total = 0;     ///< level-0 pixels of every image
+};
+
+/// Opens every source first: bad inputs fail before any output exists, and progress knows the
+/// total.
+Result<OpenedSources> openSources(const BuildOptions& options) {
+  OpenedSources sources;
   for (size_t i = 0; i < options.inputs.size(); ++i) {
     TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(options.inputs[i]));
     const SourceInfo& source = reader->info();
@@ -369,16 +368,188 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
         i < options.image_names.size() ? options.image_names[i] : displayName(options.inputs[i]);
     TESSERA_TRY(validateImageInfo(info, options.inputs[i]));
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
-    pixels_total += uint64_t(info.width_px) * info.height_px;
-    readers.push_back(std::move(reader));
-    infos.push_back(info);
+    sources.pixels_total += uint64_t(info.width_px) * info.height_px;
+    sources.readers.push_back(std::move(reader));
+    sources.infos.push_back(info);
   }
+  return sources;
+}
 
-  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
-  TESSERA_ASSIGN_OR_RETURN(TempFile spool, TempFile::create(options.output));
+/// A build's progress across its images, reported at most every 100 ms.
+struct BuildProgressClock {
+  const std::function<void(const BuildProgress&)>& on_progress;
+  const Clock::time_point start;
+  const uint64_t pixels_total;
+  uint64_t pixels_done = 0;
+  Clock::time_point last = Clock::now();
 
-  uint32_t threads =
+  void rowsRead(uint64_t pixels, const EncodeContext& context) {
+    pixels_done += pixels;
+    if (!on_progress || Clock::now() - last <= std::chrono::milliseconds(100)) return;
+    last = Clock::now();
+    on_progress({pixels_done, pixels_total,
+                 context.tiles_encoded + context.tiles_uniform + context.tiles_empty,
+                 std::chrono::duration<double>(last - start).count()});
+  }
+};
+
+/// What the builder and the encoders share while the images stream through.
+struct EncodeStage {
+  EncodeContext& context;
+  WorkerPool& pool;
+  TileBufferPool& buffers;
+  BuildProgressClock& progress;
+  const std::atomic<bool>* cancel;
+  bool cancelled() const { return cancel && cancel->load(std::memory_order_relaxed); }
+};
+
+/// An image's entry in the archive metadata: its source and statistics, then the reader's
+/// source-specific facts (georeference, TIFF layout, synthetic seed).
+nlohmann::json imageMetadata(const ImageInfo& info, const std::string& input,
+                             const SourceInfo& source, const nlohmann::json& statistics) {
+  nlohmann::json meta = {
+      {"name", info.name},       {"source", input},          {"source_format", source.format},
+      {"width", info.width_px},  {"height", info.height_px}, {"channels", info.channels},
+      {"statistics", statistics}};
+  for (auto& [key, value] : source.metadata.items()) meta[key] = value;
+  return meta;
+}
+
+/// Waits for the pool's jobs when it goes out of scope: queued jobs hold the sink and buffers
+/// of the image being encoded, so no early return may outrun them.
+struct PoolDrain {
+  WorkerPool& pool;
+  ~PoolDrain() { pool.waitIdle(); }
+};
+
+/// Streams image `index` band by band through the pyramid into the encoders and returns its
+/// metadata; every tile is encoded into `spooled` when it returns.
+Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, const ImageInfo& info,
+                                   BandReader& reader, SpooledImage& spooled, EncodeStage& stage) {
+  spooled.info = info;
+  spooled.entries.resize(info.level_count);
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
+  EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, options.inputs[index]);
+  PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
+  const uint32_t band_rows = bandRowsFor(info, reader.info());
+  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  UninitializedBuffer band(row_bytes * band_rows);
+  PoolDrain drain{stage.pool};
+  for (uint32_t y = 0; y < info.height_px;) {
+    if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+    if (auto error = stage.context.error()) return Unexpected(*error);
+    uint32_t rows = std::min(band_rows, info.height_px - y);
+    TESSERA_TRY(reader.readRows(rows, {band.data(), row_bytes * rows}));
+    TESSERA_TRY(pyramid.addRows(band.data(), rows));
+    y += rows;
+    stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
+  }
+  TESSERA_TRY(pyramid.finish());
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    TESSERA_CHECK(spooled.entries[l].size() == size_t(info.tilesX(l)) * info.tilesY(l))
+        << "level " << l << " has tile rows the pyramid never announced";
+  stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
+  return imageMetadata(info, options.inputs[index], reader.info(), sink.statistics);
+}
+
+/// The archive's metadata: the format, the build's options and each image's entry.
+nlohmann::json archiveMetadata(const BuildOptions& options, nlohmann::json image_metadata) {
+  return {{"format", "tessera"},
+          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+          {"created_by", "tessera build"},
+          {"build",
+           {{"tile_size", options.tile_size_px},
+            {"border", options.border_px},
+            {"codec", codecName(options.codec)},
+            {"quality", options.quality},
+            {"effort", options.effort},
+            {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
+            {"downsample", options.codec == Codec::kPtm ? "box-floor"
+                           : options.srgb_downsample    ? "box-linear-light"
+                                                        : "box"},
+            {"order", options.order == TileOrder::kHilbert    ? "hilbert"
+                      : options.order == TileOrder::kQuadtree ? "quadtree"
+                                                              : "row-major"}}},
+          {"images", std::move(image_metadata)}};
+}
+
+/// Streams every image into the spool and returns their metadata entries, the worker spools
+/// flushed.
+Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& sources,
+                                    std::vector<SpooledImage>& spooled, EncodeContext& context,
+                                    uint32_t threads, BuildProgressClock& progress,
+                                    const std::atomic<bool>* cancel) {
+  nlohmann::json image_metadata = nlohmann::json::array();
+  TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<WorkerPool> started,
+                           WorkerPool::start(threads, 2 * threads));
+  WorkerPool& pool = *started;
+  size_t max_tile_bytes = 0;
+  for (const ImageInfo& info : sources.infos)
+    max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
+  TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
+  EncodeStage stage{context, pool, buffers, progress, cancel};
+  for (uint32_t i = 0; i < sources.infos.size(); ++i) {
+    TESSERA_ASSIGN_OR_RETURN(
+        nlohmann::json meta,
+        encodeImage(options, i, sources.infos[i], *sources.readers[i], spooled[i], stage));
+    image_metadata.push_back(std::move(meta));
+  }
+  pool.waitIdle();
+  for (WorkerSpool& worker_spool : context.worker_spools)
+    if (Result<void> flushed = flushWorkerSpool(context, worker_spool); !flushed)
+      context.recordError(flushed.error());
+  if (auto error = context.error()) return Unexpected(*error);
+  return image_metadata;
+}
+
+/// What the build was checked to need before it started.
+struct BuildBudget {
+  MemoryEstimate memory;
+  uint64_t memory_limit_bytes = 0;
+  std::string spool_dir;  ///< where the spool goes: --spool-dir or the output's directory
+};
+
+/// The memory the sources' claimed sizes need, against the limit: before any row or tile is
+/// allocated.
+Result<BuildBudget> checkBudget(const BuildOptions& options, const OpenedSources& sources,
+                                uint32_t threads) {
+  BuildBudget budget;
+  std::vector<const SourceInfo*> source_infos;
+  for (const auto& reader : sources.readers) source_infos.push_back(&reader->info());
+  budget.memory = estimateBuildMemory(sources.infos, source_infos, options.codec, threads);
+  budget.memory_limit_bytes =
+      options.memory_limit_bytes ? options.memory_limit_bytes : defaultBuildMemoryLimitBytes();
+  const std::string origin = options.memory_limit_bytes
+                                 ? "--memory-limit"
+                                 : fmt::format("the default: half of the {} this machine has",
+                                               formatByteCount(usableMemoryBytes()));
+  TESSERA_TRY(checkMemoryBudget(budget.memory, budget.memory_limit_bytes, origin, sources.infos,
+                                options.inputs));
+  budget.spool_dir = options.spool_dir.empty() ? directoryOf(options.output) : options.spool_dir;
+  return budget;
+}
+
+}  // namespace
+
+Result<BuildReport> buildArchive(const BuildOptions& options,
+                                 const std::function<void(const BuildProgress&)>& on_progress,
+                                 const std::atomic<bool>* cancel) {
+  const auto start = Clock::now();
+  TESSERA_TRY(validateBuildOptions(options));
+  // An output that cannot be replaced fails before the inputs are read.
+  TESSERA_TRY(checkOutputPath(options.output));
+  TESSERA_ASSIGN_OR_RETURN(OpenedSources sources, openSources(options));
+  const uint32_t threads =
       options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+  TESSERA_ASSIGN_OR_RETURN(const BuildBudget budget, checkBudget(options, sources, threads));
+  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
+  TESSERA_ASSIGN_OR_RETURN(TempFile spool,
+                           TempFile::createScratch(budget.spool_dir, options.output + ": spool"));
+  // The files exist but are still invisible: a build that cannot fit leaves nothing behind.
+  TESSERA_TRY(checkFreeSpace(options.output, directoryOf(options.output), budget.spool_dir,
+                             estimateArchiveBytes(sources.infos, options.codec, options.quality)));
+
   EncodeContext context;
   context.spool = &spool;
   context.codec = options.codec;
@@ -387,97 +558,17 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   context.encode_options.chroma_subsampling = options.chroma_subsampling;
   context.worker_spools.resize(threads);
 
-  std::vector<SpooledImage> spooled(infos.size());
-  nlohmann::json image_metadata = nlohmann::json::array();
-  uint64_t pixels_done = 0;
-  auto last_progress = Clock::now();
+  std::vector<SpooledImage> spooled(sources.infos.size());
+  BuildProgressClock progress{on_progress, start, sources.pixels_total};
+  TESSERA_ASSIGN_OR_RETURN(
+      nlohmann::json image_metadata,
+      encodeImages(options, sources, spooled, context, threads, progress, cancel));
   auto cancelled = [&] { return cancel && cancel->load(std::memory_order_relaxed); };
-  {
-    WorkerPool pool(threads, 2 * threads);
-    size_t max_tile_bytes = 0;
-    for (const ImageInfo& info : infos)
-      max_tile_bytes = std::max(max_tile_bytes, info.storedTileBytes());
-    TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
-    // On any early return the pool must finish its jobs before the buffers and context die.
-    auto stop = [&](Error error) -> Unexpected {
-      pool.waitIdle();
-      return Unexpected(std::move(error));
-    };
-
-    for (uint32_t i = 0; i < infos.size(); ++i) {
-      const ImageInfo& info = infos[i];
-      BandReader& reader = *readers[i];
-      spooled[i].info = info;
-      spooled[i].entries.resize(info.level_count);
-      for (uint32_t l = 0; l < info.level_count; ++l)
-        spooled[i].entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
-      EncodingSink sink(info, spooled[i], context, pool, buffers, options.inputs[i]);
-      PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
-      const uint32_t natural = std::max(1u, reader.info().natural_band_rows);
-      const uint32_t band_rows = natural >= info.tile_size_px
-                                     ? std::min(natural, 4 * info.tile_size_px)
-                                     : info.tile_size_px;
-      const size_t row_bytes = size_t(info.width_px) * info.channels;
-      std::vector<uint8_t> band(row_bytes * std::min(band_rows, info.height_px));
-      for (uint32_t y = 0; y < info.height_px;) {
-        if (cancelled()) return stop({ErrorCode::kCancelled, options.output + ": build cancelled"});
-        if (auto error = context.error()) return stop(*error);
-        uint32_t rows = std::min(band_rows, info.height_px - y);
-        Result<void> read = reader.readRows(rows, {band.data(), row_bytes * rows});
-        if (!read) return stop(read.error());
-        Result<void> added = pyramid.addRows(band.data(), rows);
-        if (!added) return stop(added.error());
-        y += rows;
-        pixels_done += uint64_t(rows) * info.width_px;
-        if (on_progress && Clock::now() - last_progress > std::chrono::milliseconds(100)) {
-          last_progress = Clock::now();
-          on_progress({pixels_done, pixels_total,
-                       context.tiles_encoded + context.tiles_uniform + context.tiles_empty,
-                       std::chrono::duration<double>(last_progress - start).count()});
-        }
-      }
-      Result<void> finished = pyramid.finish();
-      if (!finished) return stop(finished.error());
-      pool.waitIdle();  // queued jobs hold `sink`, which dies with this iteration
-      nlohmann::json meta = {{"name", info.name},
-                             {"source", options.inputs[i]},
-                             {"source_format", reader.info().format},
-                             {"width", info.width_px},
-                             {"height", info.height_px},
-                             {"channels", info.channels},
-                             {"statistics", sink.statistics}};
-      for (auto& [key, value] : reader.info().metadata.items()) meta[key] = value;
-      image_metadata.push_back(std::move(meta));
-    }
-    pool.waitIdle();
-    for (WorkerSpool& worker_spool : context.worker_spools)
-      if (Result<void> flushed = flushWorkerSpool(context, worker_spool); !flushed)
-        context.recordError(flushed.error());
-    if (auto error = context.error()) return Unexpected(*error);
-  }
   if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
 
-  nlohmann::json metadata = {
-      {"format", "tessera"},
-      {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
-      {"created_by", "tessera build"},
-      {"build",
-       {{"tile_size", options.tile_size_px},
-        {"border", options.border_px},
-        {"codec", codecName(options.codec)},
-        {"quality", options.quality},
-        {"effort", options.effort},
-        {"chroma_subsampling", options.chroma_subsampling ? "4:2:0" : "4:4:4"},
-        {"downsample", options.codec == Codec::kPtm ? "box-floor"
-                       : options.srgb_downsample    ? "box-linear-light"
-                                                    : "box"},
-        {"order", options.order == TileOrder::kHilbert    ? "hilbert"
-                  : options.order == TileOrder::kQuadtree ? "quadtree"
-                                                          : "row-major"}}},
-      {"images", image_metadata}};
-  TESSERA_ASSIGN_OR_RETURN(
-      WrittenArchive written,
-      writeArchive(spool, context.spool_end.load(), spooled, options.order, metadata, out));
+  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
+                           writeArchive(spool, context.spool_end.load(), spooled, options.order,
+                                        archiveMetadata(options, std::move(image_metadata)), out));
   if (cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
   TESSERA_TRY(out.commit());
 
@@ -488,10 +579,13 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   report.tiles_uniform = context.tiles_uniform;
   report.tiles_empty = context.tiles_empty;
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
-  report.megapixels_per_s = pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
-  report.images = infos;
+  report.megapixels_per_s = sources.pixels_total / 1e6 / std::max(report.elapsed_s, 1e-9);
+  report.images = sources.infos;
+  report.memory_estimate_bytes = budget.memory.totalBytes();
+  report.memory_limit_bytes = budget.memory_limit_bytes;
   if (on_progress)
-    on_progress({pixels_total, pixels_total, report.tiles_encoded, report.elapsed_s});
+    on_progress(
+        {sources.pixels_total, sources.pixels_total, report.tiles_encoded, report.elapsed_s});
   return report;
 }
 

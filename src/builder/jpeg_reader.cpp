@@ -26,6 +26,7 @@
 
 #include "band_reader.h"
 #include "file_reader.h"
+#include "scanline_reader.h"
 
 namespace tessera::detail {
 namespace {
@@ -49,9 +50,9 @@ void onJpegMessage(j_common_ptr cinfo, int level) {
   onJpegError(cinfo);      // warnings mean corrupt data: see the file comment
 }
 
-class JpegReader final : public BandReader {
+class JpegReader final : public ScanlineReader {
  public:
-  explicit JpegReader(std::string path) : path_(std::move(path)) {
+  explicit JpegReader(std::string path) : ScanlineReader(std::move(path)) {
     cinfo_.err = jpeg_std_error(&errors_.base);
     errors_.base.error_exit = onJpegError;
     errors_.base.emit_message = onJpegMessage;
@@ -64,27 +65,21 @@ class JpegReader final : public BandReader {
   JpegReader& operator=(const JpegReader&) = delete;
 
   Result<void> open();
-  const SourceInfo& info() const override { return info_; }
-  Result<void> readRows(uint32_t rows, std::span<uint8_t> out) override;
 
  private:
   // The setjmp-guarded steps hold only trivial locals; each returns false after a libjpeg
   // error, with the message in errors_.message.
   bool readHeader();
   bool startDecompress(J_COLOR_SPACE out_colour_space);
-  bool readRow(uint8_t* row);
+  bool decodeRow(uint8_t* row) override;
   // Reads past the last row to EOI, so a file cut or padded with junk there still fails.
-  bool finish();
+  bool finishDecoding() override;
+  const char* decoderMessage() const override { return errors_.message; }
 
-  std::string path_;
   std::FILE* file_ = nullptr;
   jpeg_decompress_struct cinfo_{};
   JpegErrorManager errors_{};
   bool created_ = false;
-  SourceInfo info_;
-  uint32_t next_row_ = 0;
-  // libjpeg's state is undefined after an error, so a failed reader only repeats its error.
-  std::string failure_;
 };
 
 bool JpegReader::readHeader() {
@@ -105,13 +100,13 @@ bool JpegReader::startDecompress(J_COLOR_SPACE out_colour_space) {
   return true;
 }
 
-bool JpegReader::finish() {
+bool JpegReader::finishDecoding() {
   if (setjmp(errors_.jump)) return false;
   jpeg_finish_decompress(&cinfo_);
   return true;
 }
 
-bool JpegReader::readRow(uint8_t* row) {
+bool JpegReader::decodeRow(uint8_t* row) {
   if (setjmp(errors_.jump)) return false;
   JSAMPROW rows[1] = {row};
   if (jpeg_read_scanlines(&cinfo_, rows, 1) != 1) {
@@ -175,30 +170,15 @@ Result<void> JpegReader::open() {
   // An MCU row: what libjpeg decodes at once for a baseline image.
   info_.natural_band_rows =
       std::min<uint32_t>(info_.height_px, uint32_t(std::max(1, cinfo_.max_v_samp_factor)) * 8);
+  // A progressive image's coefficients are held whole (2 bytes a sample, capped above); a
+  // baseline decoder holds an MCU row per component and its upsampling context.
+  info_.buffer_bytes = jpeg_has_multiple_scans(&cinfo_)
+                           ? samples * 2
+                           : 4 * uint64_t(info_.natural_band_rows) * cinfo_.output_width *
+                                 uint64_t(cinfo_.num_components);
+  info_.buffer_bytes += uint64_t(1) << 20;
   info_.format = "jpeg";
   info_.metadata["jpeg"] = {{"progressive", jpeg_has_multiple_scans(&cinfo_) != 0}};
-  return {};
-}
-
-Result<void> JpegReader::readRows(uint32_t rows, std::span<uint8_t> out) {
-  const size_t row_bytes = size_t(info_.width_px) * info_.channels;
-  TESSERA_CHECK(rows > 0 && rows <= info_.height_px - next_row_)
-      << path_ << ": readRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
-  TESSERA_CHECK(out.size() >= rows * row_bytes) << path_ << ": output span too small";
-  if (!failure_.empty()) return fail(ErrorCode::kCorrupt, failure_);
-  for (uint32_t r = 0; r < rows; ++r) {
-    if (!readRow(out.data() + r * row_bytes)) {
-      failure_ = fmt::format("{}: row {}: truncated or corrupt data ({})", path_, next_row_,
-                             errors_.message);
-      return fail(ErrorCode::kCorrupt, failure_);
-    }
-    ++next_row_;
-  }
-  if (next_row_ == info_.height_px && !finish()) {
-    failure_ = fmt::format("{}: after the last row: truncated or corrupt data ({})", path_,
-                           errors_.message);
-    return fail(ErrorCode::kCorrupt, failure_);
-  }
   return {};
 }
 

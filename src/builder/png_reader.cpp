@@ -27,6 +27,7 @@
 
 #include "band_reader.h"
 #include "file_reader.h"
+#include "scanline_reader.h"
 
 namespace tessera::detail {
 namespace {
@@ -49,9 +50,9 @@ void onPngError(png_structp png, png_const_charp message) {
 // Warnings (bad ancillary chunks, an sRGB profile mismatch) leave the pixels intact.
 void onPngWarning(png_structp, png_const_charp) {}
 
-class PngReader final : public BandReader {
+class PngReader final : public ScanlineReader {
  public:
-  explicit PngReader(std::string path) : path_(std::move(path)) {}
+  explicit PngReader(std::string path) : ScanlineReader(std::move(path)) {}
   ~PngReader() override {
     if (png_) png_destroy_read_struct(&png_, &png_info_, nullptr);
     if (file_) std::fclose(file_);
@@ -60,8 +61,6 @@ class PngReader final : public BandReader {
   PngReader& operator=(const PngReader&) = delete;
 
   Result<void> open();
-  const SourceInfo& info() const override { return info_; }
-  Result<void> readRows(uint32_t rows, std::span<uint8_t> out) override;
 
  private:
   struct Header {
@@ -77,19 +76,22 @@ class PngReader final : public BandReader {
   // messages_.error).
   bool readHeader(Header* header);
   bool setUpTransforms(Header* header);
-  bool readRow(uint8_t* row);
+  // Sets up the transforms before the first row and checks the layout they give.
+  bool startRows();
+  bool decodeRow(uint8_t* row) override;
   // Reads past the last row to IEND, so a file cut after its pixels still fails.
-  bool finish();
+  bool finishDecoding() override;
+  const char* decoderMessage() const override { return messages_.error; }
 
-  std::string path_;
   std::FILE* file_ = nullptr;
+  // The header as read; the transforms are set up (png_read_update_info) only when the first
+  // row is asked for: libpng then allocates and clears two rows of the claimed width, which
+  // the build's memory check must see before they exist.
+  Header header_;
+  bool rows_started_ = false;
   png_structp png_ = nullptr;
   png_infop png_info_ = nullptr;
   PngMessages messages_;
-  SourceInfo info_;
-  uint32_t next_row_ = 0;
-  // libpng's state is undefined after an error, so a failed reader only repeats its error.
-  std::string failure_;
 };
 
 bool PngReader::readHeader(Header* header) {
@@ -116,13 +118,27 @@ bool PngReader::setUpTransforms(Header* header) {
   return true;
 }
 
-bool PngReader::readRow(uint8_t* row) {
+bool PngReader::startRows() {
+  if (!setUpTransforms(&header_)) return false;
+  if (header_.channels != int(info_.channels) ||
+      header_.row_bytes != size_t(header_.width) * info_.channels) {
+    std::snprintf(messages_.error, sizeof(messages_.error),
+                  "unexpected PNG layout: %d channels, %zu bytes per row", header_.channels,
+                  header_.row_bytes);
+    return false;
+  }
+  rows_started_ = true;
+  return true;
+}
+
+bool PngReader::decodeRow(uint8_t* row) {
+  if (!rows_started_ && !startRows()) return false;
   if (setjmp(png_jmpbuf(png_))) return false;
   png_read_row(png_, row, nullptr);
   return true;
 }
 
-bool PngReader::finish() {
+bool PngReader::finishDecoding() {
   if (setjmp(png_jmpbuf(png_))) return false;
   png_read_end(png_, nullptr);
   return true;
@@ -143,7 +159,7 @@ Result<void> PngReader::open() {
   if (!png_ || !png_info_) return fail(ErrorCode::kInternal, path_ + ": cannot set up libpng");
   png_set_sig_bytes(png_, sizeof(signature));
 
-  Header header;
+  Header& header = header_;
   if (!readHeader(&header)) {
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: truncated or corrupt PNG header ({})", path_, messages_.error));
@@ -161,20 +177,26 @@ Result<void> PngReader::open() {
                     ": interlaced (Adam7) PNG is not supported: it cannot be read in bands; "
                     "re-save it without interlacing");
   }
-  if (!setUpTransforms(&header)) {
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: corrupt PNG header ({})", path_, messages_.error));
-  }
-  if (header.channels < 1 || header.channels > 4 ||
-      header.row_bytes != size_t(header.width) * header.channels) {
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("{}: unexpected PNG layout ({} channels, {} bytes per row)", path_,
-                            header.channels, header.row_bytes));
+  // The channels the transforms below will give (palette and low-bit gray expanded, tRNS as
+  // alpha), known from the header without setting them up yet.
+  const bool transparency = png_get_valid(png_, png_info_, PNG_INFO_tRNS) != 0;
+  uint32_t channels = 0;
+  switch (header.colour_type) {
+    case PNG_COLOR_TYPE_GRAY: channels = transparency ? 2 : 1; break;
+    case PNG_COLOR_TYPE_GRAY_ALPHA: channels = 2; break;
+    case PNG_COLOR_TYPE_RGB:
+    case PNG_COLOR_TYPE_PALETTE: channels = transparency ? 4 : 3; break;
+    case PNG_COLOR_TYPE_RGB_ALPHA: channels = 4; break;
+    default:
+      return fail(ErrorCode::kUnsupported, fmt::format("{}: PNG colour type {} is not supported",
+                                                       path_, header.colour_type));
   }
   info_.width_px = header.width;
   info_.height_px = header.height;
-  info_.channels = uint32_t(header.channels);
+  info_.channels = channels;
   info_.natural_band_rows = std::min<uint32_t>(header.height, 64);
+  // libpng's current and previous rows (before and after the expansions) and zlib's window.
+  info_.buffer_bytes = 4 * (uint64_t(header.width) * channels + 1) + (uint64_t(1) << 20);
   info_.format = "png";
   static constexpr const char* kColourNames[] = {"gray",       "?", "rgb", "palette",
                                                  "gray+alpha", "?", "rgba"};
@@ -182,28 +204,6 @@ Result<void> PngReader::open() {
       {"colour_type", header.colour_type <= 6 ? kColourNames[header.colour_type] : "?"},
       {"bit_depth", header.bit_depth},
   };
-  return {};
-}
-
-Result<void> PngReader::readRows(uint32_t rows, std::span<uint8_t> out) {
-  const size_t row_bytes = size_t(info_.width_px) * info_.channels;
-  TESSERA_CHECK(rows > 0 && rows <= info_.height_px - next_row_)
-      << path_ << ": readRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
-  TESSERA_CHECK(out.size() >= rows * row_bytes) << path_ << ": output span too small";
-  if (!failure_.empty()) return fail(ErrorCode::kCorrupt, failure_);
-  for (uint32_t r = 0; r < rows; ++r) {
-    if (!readRow(out.data() + r * row_bytes)) {
-      failure_ = fmt::format("{}: row {}: truncated or corrupt data ({})", path_, next_row_,
-                             messages_.error);
-      return fail(ErrorCode::kCorrupt, failure_);
-    }
-    ++next_row_;
-  }
-  if (next_row_ == info_.height_px && !finish()) {
-    failure_ = fmt::format("{}: after the last row: truncated or corrupt data ({})", path_,
-                           messages_.error);
-    return fail(ErrorCode::kCorrupt, failure_);
-  }
   return {};
 }
 

@@ -6,14 +6,16 @@
 #include <fmt/format.h>
 
 #include "downsample.h"
+#include "uninitialized_buffer.h"
 
 namespace tessera::detail {
 
 // One level's band: a ring of rows. When tile row r is announced the ring holds rows
 // [r*t - b, (r+1)*t + b), and the next announcement needs rows from (r+1)*t - b on, so
-// t + 2b slots never overwrite a row still needed (a row y replaces y - t - 2b).
+// t + 2b slots never overwrite a row still needed (a row y replaces y - t - 2b). The ring is
+// not written ahead of its rows, so its memory arrives with them.
 struct PyramidBuilder::Level final : LevelRows {
-  std::vector<uint8_t> ring;
+  UninitializedBuffer ring;
   uint32_t ring_rows = 0;
   size_t row_bytes = 0;
   uint32_t received = 0;

@@ -284,176 +284,197 @@ uint32_t SyntheticGenerator::footprintDepth(uint32_t t, uint32_t side, uint32_t 
   return uint32_t(((margin * noise) >> 13) + slant);
 }
 
-void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
-  const uint32_t width = spec_.width_px;
-  const uint32_t height = spec_.height_px;
-  const uint32_t channels = spec_.channels;
-  ensureGridRows(y >> kGridShift);
-  const int32_t fy = int32_t(y & (kGridPx - 1));
-
-  // Coarse fields interpolated down to this row, and their vertical change per 16 px.
-  int32_t* row_fields = row_fields_.data();
-  int32_t* row_slopes = row_slopes_.data();
+void SyntheticGenerator::interpolateRowFields(int32_t fy) {
   for (size_t i = 0; i < size_t(kFieldCount) * grid_cols_; ++i) {
     const int32_t top = grid_top_[i];
-    row_slopes[i] = grid_bottom_[i] - top;
-    row_fields[i] = top + ((row_slopes[i] * fy) >> kGridShift);
+    row_slopes_[i] = grid_bottom_[i] - top;
+    row_fields_[i] = top + ((row_slopes_[i] * fy) >> kGridShift);
   }
-  auto field = [&](Field f) { return row_fields + size_t(f) * grid_cols_; };
-  auto slopes = [&](Field f) { return row_slopes + size_t(f) * grid_cols_; };
+}
 
+SyntheticGenerator::RowFootprint SyntheticGenerator::rowFootprint(uint32_t y) const {
+  const uint32_t width = spec_.width_px;
+  const uint32_t height = spec_.height_px;
+  RowFootprint footprint;
+  footprint.left = footprintDepth(y, height, margin_x_px_, footprint_seeds_[0], false);
+  const uint32_t right = footprintDepth(y, height, margin_x_px_, footprint_seeds_[1], true);
+  footprint.valid_end = width - std::min(width, right);
+  footprint.near_top = y < 2 * margin_y_px_;
+  footprint.near_bottom = height - 1 - y < 2 * margin_y_px_;
+  return footprint;
+}
+
+void SyntheticGenerator::chunkElevation(uint32_t y, uint32_t x0, uint32_t count) {
+  int32_t* elevation = elevation_.data();
+  // Coarse elevation, plus one pixel past the chunk for the horizontal slope.
+  const int32_t* coarse = rowField(kElevation);
+  for (uint32_t i = 0; i <= count; ++i) {
+    const uint32_t x = x0 + i;
+    const uint32_t gx = x >> kGridShift;
+    const int32_t fx = int32_t(x & (kGridPx - 1));
+    elevation[i] = coarse[gx] + (((coarse[gx + 1] - coarse[gx]) * fx) >> kGridShift);
+  }
+  for (const Octave& octave : fine_) addFineOctave(octave, y, x0, count);
+}
+
+void SyntheticGenerator::addFineOctave(const Octave& octave, uint32_t y, uint32_t x0,
+                                       uint32_t count) {
+  // Bilinear per pixel between lattice values looked up in a noise table at a per-lattice-row
+  // offset (a hash per lattice row instead of per lattice point).
+  const int32_t* fine_noise = noise_table_.data();
+  int32_t* elevation = elevation_.data();
+  const int shift = octave.cell_shift;
+  const uint32_t ly = y >> shift;
+  const int32_t wy = int32_t(y & ((1u << shift) - 1));
+  const uint32_t key0 = mix(ly ^ octave.seed);
+  const int32_t amplitude = octave.amplitude;
+  if (shift == 0) {
+    for (uint32_t i = 0; i <= count; ++i) {
+      elevation[i] += (fine_noise[(x0 + i + key0) & kNoiseMask] * amplitude) >> 11;
+    }
+    return;
+  }
+  const uint32_t key1 = mix((ly + 1) ^ octave.seed);
+  const uint32_t lx0 = x0 >> shift;
+  const uint32_t lattice_cols = ((x0 + count) >> shift) - lx0 + 2;
+  int32_t* values = lattice_.data();
+  for (uint32_t j = 0; j < lattice_cols; ++j) {
+    const int32_t a = fine_noise[(lx0 + j + key0) & kNoiseMask];
+    const int32_t b = fine_noise[(lx0 + j + key1) & kNoiseMask];
+    values[j] = ((a + (((b - a) * wy) >> shift)) * amplitude) >> 11;
+  }
+  const uint32_t mask = (1u << shift) - 1;
+  for (uint32_t i = 0; i <= count; ++i) {
+    const uint32_t x = x0 + i;
+    const uint32_t j = (x >> shift) - lx0;
+    elevation[i] += values[j] + (((values[j + 1] - values[j]) * int32_t(x & mask)) >> shift);
+  }
+}
+
+SyntheticGenerator::CellLines SyntheticGenerator::cellLines(uint32_t gx) const {
+  struct LineStyle {
+    Field field;
+    int32_t half_width16;
+  };
+  static constexpr LineStyle kLines[] = {{kRiver, kRiverHalfWidth16},
+                                         {kStream, kStreamHalfWidth16},
+                                         {kHighway, kHighwayHalfWidth16},
+                                         {kRoad, kRoadHalfWidth16}};
+  // A line field is linear across the cell, so if both ends have one sign and are farther
+  // from zero than the line's half-width, no pixel of the cell is on the line.
+  CellLines lines;
+  for (const LineStyle& line : kLines) {
+    const int32_t* v = rowField(line.field);
+    const int32_t a = v[gx], b = v[gx + 1];
+    const int32_t slope = std::abs(b - a) + std::abs(rowSlopes(line.field)[gx]);
+    const int32_t limit = line.half_width16 * slope;  // compared with |value| * 256
+    const bool crosses = (a ^ b) < 0 || std::min(std::abs(a), std::abs(b)) * 256 < limit;
+    if (!crosses) continue;
+    lines.mask |= 1u << line.field;
+    lines.value[line.field] = a * int32_t(kGridPx);  // value * 16, stepped per pixel
+    lines.step[line.field] = b - a;
+    lines.limit[line.field] = limit;
+  }
+  return lines;
+}
+
+SyntheticGenerator::CellBorders SyntheticGenerator::cellBorders(
+    uint32_t cell_x, const RowFootprint& footprint) const {
+  const uint32_t width = spec_.width_px;
+  CellBorders borders;
+  if (footprint.near_top) {
+    borders.top0 = int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[2], true));
+    borders.top1 =
+        int32_t(footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[2], true));
+  }
+  if (footprint.near_bottom) {
+    borders.bottom0 =
+        int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[3], false));
+    borders.bottom1 =
+        int32_t(footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[3], false));
+  }
+  return borders;
+}
+
+void SyntheticGenerator::colourCell(uint32_t y, uint32_t x0, uint32_t cell_x, uint32_t cell_count,
+                                    const RowFootprint& footprint, uint8_t* out) const {
+  const uint32_t height = spec_.height_px;
+  const uint32_t channels = spec_.channels;
+  const uint32_t gx = cell_x >> kGridShift;
+  const int32_t* elevation = elevation_.data();
+  const CellBorders borders = cellBorders(cell_x, footprint);
+  const CellLines lines = cellLines(gx);
+  const int32_t wet = clampInt((rowField(kMoisture)[gx] + 1024) >> 3, 0, 256);
+  const int32_t slope_y = rowSlopes(kElevation)[gx] >> kGridShift;
+
+  for (uint32_t k = 0; k < cell_count; ++k) {
+    const uint32_t x = cell_x + k;
+    const uint32_t i = x - x0;
+    uint8_t* pixel = out + size_t(x) * channels;
+    bool valid = x >= footprint.left && x < footprint.valid_end;
+    if (footprint.near_top) {
+      valid = valid && int32_t(y) >= borders.top0 + (((borders.top1 - borders.top0) * int32_t(k)) >>
+                                                     kGridShift);
+    }
+    if (footprint.near_bottom) {
+      valid = valid && int32_t(height - 1 - y) >=
+                           borders.bottom0 +
+                               (((borders.bottom1 - borders.bottom0) * int32_t(k)) >> kGridShift);
+    }
+    uint8_t shaded[3];
+    const uint8_t* colour = valid ? terrainColour(elevation[i], elevation[i + 1] - elevation[i],
+                                                  slope_y, wet, lines, k, shaded)
+                                  : kNoDataColour;
+    pixel[0] = colour[0];
+    pixel[1] = colour[1];
+    pixel[2] = colour[2];
+    if (channels == 4) pixel[3] = valid ? 255 : 0;
+  }
+}
+
+const uint8_t* SyntheticGenerator::terrainColour(int32_t elevation, int32_t slope_x,
+                                                 int32_t slope_y, int32_t wet,
+                                                 const CellLines& lines, uint32_t k,
+                                                 uint8_t* shaded) const {
+  const int32_t relative = elevation - kSeaLevel;
+  if (relative < kDeepSea) return kDeepSeaColour;
+  const int32_t index = clampInt((relative - kPaletteMin) >> 5, 0, kPaletteSize - 1);
+  // Moisture picks one of kWetLevels palettes, dithered by the elevation's low bits.
+  const int32_t level = (wet + ((elevation >> 2) & 15)) >> 4;
+  const uint8_t* base = palettes_.data() + (size_t(level) * kPaletteSize + size_t(index)) * 3;
+  if (relative < 0) return base;
+  const int32_t slope = slope_x + slope_y;
+  const int32_t shade = clampInt(256 - ((slope * kShadeGain) >> 8), 176, 336);
+  for (int c = 0; c < 3; ++c) shaded[c] = uint8_t(std::min(255, (base[c] * shade) >> 8));
+  if (lines.mask == 0) return shaded;
+  auto on = [&](Field f) {
+    if (!(lines.mask & (1u << f))) return false;
+    const int32_t value16 = lines.value[f] + lines.step[f] * int32_t(k);
+    return std::abs(value16) * 16 < lines.limit[f];
+  };
+  const bool road_zone = relative >= kRoadMinElevation && relative < kRoadMaxElevation;
+  if (road_zone && on(kHighway)) return kHighwayColour;
+  if (relative < kRiverMaxElevation && on(kRiver)) return kRiverColour;
+  if (relative < kRiverMaxElevation && wet > 128 && on(kStream)) return kStreamColour;
+  if (road_zone && wet < 176 && on(kRoad)) return kRoadColour;
+  return shaded;
+}
+
+void SyntheticGenerator::generateRow(uint32_t y, uint8_t* out) {
+  const uint32_t width = spec_.width_px;
+  ensureGridRows(y >> kGridShift);
+  // Coarse fields interpolated down to this row, and their vertical change per 16 px.
+  interpolateRowFields(int32_t(y & (kGridPx - 1)));
   // Valid pixels lie in [left, width - right) on this row, and below top(x) and above
   // height - bottom(x); only rows near the top and bottom edges evaluate those, per grid column.
-  const uint32_t left = footprintDepth(y, height, margin_x_px_, footprint_seeds_[0], false);
-  const uint32_t right = footprintDepth(y, height, margin_x_px_, footprint_seeds_[1], true);
-  const uint32_t valid_end = width - std::min(width, right);
-  const bool near_top = y < 2 * margin_y_px_;
-  const bool near_bottom = height - 1 - y < 2 * margin_y_px_;
-
-  const int32_t* fine_noise = noise_table_.data();
+  const RowFootprint footprint = rowFootprint(y);
   for (uint32_t x0 = 0; x0 < width; x0 += kChunkPx) {
     const uint32_t count = std::min(kChunkPx, width - x0);
-    int32_t* elevation = elevation_.data();
-    // Coarse elevation, plus one pixel past the chunk for the horizontal slope.
-    const int32_t* coarse = field(kElevation);
-    for (uint32_t i = 0; i <= count; ++i) {
-      const uint32_t x = x0 + i;
-      const uint32_t gx = x >> kGridShift;
-      const int32_t fx = int32_t(x & (kGridPx - 1));
-      elevation[i] = coarse[gx] + (((coarse[gx + 1] - coarse[gx]) * fx) >> kGridShift);
-    }
-    // Fine octaves: bilinear per pixel between lattice values looked up in a noise table at
-    // a per-lattice-row offset (a hash per lattice row instead of per lattice point).
-    for (const Octave& octave : fine_) {
-      const int shift = octave.cell_shift;
-      const uint32_t ly = y >> shift;
-      const int32_t wy = int32_t(y & ((1u << shift) - 1));
-      const uint32_t key0 = mix(ly ^ octave.seed);
-      const int32_t amplitude = octave.amplitude;
-      if (shift == 0) {
-        for (uint32_t i = 0; i <= count; ++i) {
-          elevation[i] += (fine_noise[(x0 + i + key0) & kNoiseMask] * amplitude) >> 11;
-        }
-        continue;
-      }
-      const uint32_t key1 = mix((ly + 1) ^ octave.seed);
-      const uint32_t lx0 = x0 >> shift;
-      const uint32_t lattice_cols = ((x0 + count) >> shift) - lx0 + 2;
-      int32_t* values = lattice_.data();
-      for (uint32_t j = 0; j < lattice_cols; ++j) {
-        const int32_t a = fine_noise[(lx0 + j + key0) & kNoiseMask];
-        const int32_t b = fine_noise[(lx0 + j + key1) & kNoiseMask];
-        values[j] = ((a + (((b - a) * wy) >> shift)) * amplitude) >> 11;
-      }
-      const uint32_t mask = (1u << shift) - 1;
-      for (uint32_t i = 0; i <= count; ++i) {
-        const uint32_t x = x0 + i;
-        const uint32_t j = (x >> shift) - lx0;
-        elevation[i] += values[j] + (((values[j + 1] - values[j]) * int32_t(x & mask)) >> shift);
-      }
-    }
-
-    struct LineStyle {
-      Field field;
-      int32_t half_width16;
-    };
-    static constexpr LineStyle kLines[] = {{kRiver, kRiverHalfWidth16},
-                                           {kStream, kStreamHalfWidth16},
-                                           {kHighway, kHighwayHalfWidth16},
-                                           {kRoad, kRoadHalfWidth16}};
+    chunkElevation(y, x0, count);
     // Colour, one grid cell (16 px) at a time: within a cell every coarse field is linear in
     // x, so per-cell decisions (which lines can cross it, its moisture) are exact or nearly.
-    for (uint32_t cell_x = x0; cell_x < x0 + count; cell_x += kGridPx) {
-      const uint32_t gx = cell_x >> kGridShift;
-      const uint32_t cell_count = std::min(kGridPx, x0 + count - cell_x);
-      // The top/bottom borders, linear across the cell.
-      int32_t top0 = 0, top1 = 0, bottom0 = 0, bottom1 = 0;
-      if (near_top) {
-        top0 = int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[2], true));
-        top1 = int32_t(
-            footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[2], true));
-      }
-      if (near_bottom) {
-        bottom0 = int32_t(footprintDepth(cell_x, width, margin_y_px_, footprint_seeds_[3], false));
-        bottom1 = int32_t(
-            footprintDepth(cell_x + kGridPx, width, margin_y_px_, footprint_seeds_[3], false));
-      }
-      // A line field is linear across the cell, so if both ends have one sign and are farther
-      // from zero than the line's half-width, no pixel of the cell is on the line.
-      uint32_t line_mask = 0;
-      int32_t line_value[kFieldCount] = {}, line_step[kFieldCount] = {},
-              line_limit[kFieldCount] = {};
-      for (const LineStyle& line : kLines) {
-        const int32_t* v = field(line.field);
-        const int32_t a = v[gx], b = v[gx + 1];
-        const int32_t slope = std::abs(b - a) + std::abs(slopes(line.field)[gx]);
-        const int32_t limit = line.half_width16 * slope;  // compared with |value| * 256
-        const bool crosses = (a ^ b) < 0 || std::min(std::abs(a), std::abs(b)) * 256 < limit;
-        if (!crosses) continue;
-        line_mask |= 1u << line.field;
-        line_value[line.field] = a * int32_t(kGridPx);  // value * 16, stepped per pixel
-        line_step[line.field] = b - a;
-        line_limit[line.field] = limit;
-      }
-      const int32_t wet = clampInt((field(kMoisture)[gx] + 1024) >> 3, 0, 256);
-      const int32_t slope_y = slopes(kElevation)[gx] >> kGridShift;
-
-      for (uint32_t k = 0; k < cell_count; ++k) {
-        const uint32_t x = cell_x + k;
-        const uint32_t i = x - x0;
-        uint8_t* pixel = out + size_t(x) * channels;
-        bool valid = x >= left && x < valid_end;
-        if (near_top)
-          valid = valid && int32_t(y) >= top0 + (((top1 - top0) * int32_t(k)) >> kGridShift);
-        if (near_bottom) {
-          valid = valid && int32_t(height - 1 - y) >=
-                               bottom0 + (((bottom1 - bottom0) * int32_t(k)) >> kGridShift);
-        }
-        const int32_t relative = elevation[i] - kSeaLevel;
-        const uint8_t* colour;
-        uint8_t shaded[3];
-        if (!valid) {
-          colour = kNoDataColour;
-        } else if (relative < kDeepSea) {
-          colour = kDeepSeaColour;
-        } else {
-          const int32_t index = clampInt((relative - kPaletteMin) >> 5, 0, kPaletteSize - 1);
-          // Moisture picks one of kWetLevels palettes, dithered by the elevation's low bits.
-          const int32_t level = (wet + ((elevation[i] >> 2) & 15)) >> 4;
-          const uint8_t* base =
-              palettes_.data() + (size_t(level) * kPaletteSize + size_t(index)) * 3;
-          if (relative < 0) {
-            colour = base;
-          } else {
-            const int32_t slope = (elevation[i + 1] - elevation[i]) + slope_y;
-            const int32_t shade = clampInt(256 - ((slope * kShadeGain) >> 8), 176, 336);
-            for (int c = 0; c < 3; ++c) shaded[c] = uint8_t(std::min(255, (base[c] * shade) >> 8));
-            colour = shaded;
-            if (line_mask != 0) {
-              auto on = [&](Field f) {
-                if (!(line_mask & (1u << f))) return false;
-                const int32_t value16 = line_value[f] + line_step[f] * int32_t(k);
-                return std::abs(value16) * 16 < line_limit[f];
-              };
-              const bool road_zone = relative >= kRoadMinElevation && relative < kRoadMaxElevation;
-              if (road_zone && on(kHighway)) {
-                colour = kHighwayColour;
-              } else if (relative < kRiverMaxElevation && on(kRiver)) {
-                colour = kRiverColour;
-              } else if (relative < kRiverMaxElevation && wet > 128 && on(kStream)) {
-                colour = kStreamColour;
-              } else if (road_zone && wet < 176 && on(kRoad)) {
-                colour = kRoadColour;
-              }
-            }
-          }
-        }
-        pixel[0] = colour[0];
-        pixel[1] = colour[1];
-        pixel[2] = colour[2];
-        if (channels == 4) pixel[3] = valid ? 255 : 0;
-      }
-    }
+    for (uint32_t cell_x = x0; cell_x < x0 + count; cell_x += kGridPx)
+      colourCell(y, x0, cell_x, std::min(kGridPx, x0 + count - cell_x), footprint, out);
   }
 }
 
@@ -474,6 +495,10 @@ class SyntheticReader final : public BandReader {
     info_.height_px = spec.height_px;
     info_.channels = spec.channels;
     info_.natural_band_rows = std::min(kBandRows, spec.height_px);
+    // The generator's per-row fields and slopes (six of each), the grid row it computes and
+    // its lattice: a few dozen ints per grid column.
+    info_.buffer_bytes =
+        uint64_t(32) * (spec.width_px / kGridPx + 2) * sizeof(int32_t) + (uint64_t(1) << 20);
     info_.format = "synthetic";
     info_.metadata["synthetic"] = {{"source", name}, {"seed", spec.seed}};
   }

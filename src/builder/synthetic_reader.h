@@ -47,9 +47,49 @@ class SyntheticGenerator {
   };
   enum Field { kElevation, kMoisture, kRiver, kStream, kHighway, kRoad, kFieldCount };
 
+  /// Where a row's valid pixels lie: [left, valid_end), and whether the top and bottom
+  /// borders, which vary along the row, reach it.
+  struct RowFootprint {
+    uint32_t left = 0;
+    uint32_t valid_end = 0;
+    bool near_top = false;
+    bool near_bottom = false;
+  };
+  /// The top and bottom border depths at a grid cell's two ends (linear across the cell);
+  /// zero where the row is not near that edge.
+  struct CellBorders {
+    int32_t top0 = 0, top1 = 0, bottom0 = 0, bottom1 = 0;
+  };
+  /// The line features (rivers, streams, roads) that may cross a grid cell: bit f of `mask`
+  /// for field f, with its value * 16 at the cell's left end, its change per pixel and the
+  /// threshold |value| * 16 stays under on the line.
+  struct CellLines {
+    uint32_t mask = 0;
+    int32_t value[kFieldCount] = {};
+    int32_t step[kFieldCount] = {};
+    int32_t limit[kFieldCount] = {};
+  };
+
   void ensureGridRows(uint32_t grid_row);
   void computeGridRow(uint32_t grid_row, std::vector<int32_t>* values);
   void generateRow(uint32_t y, uint8_t* out);
+  /// row_fields_ and row_slopes_ for the row `fy` px below the cached top grid row.
+  void interpolateRowFields(int32_t fy);
+  const int32_t* rowField(Field f) const { return row_fields_.data() + size_t(f) * grid_cols_; }
+  const int32_t* rowSlopes(Field f) const { return row_slopes_.data() + size_t(f) * grid_cols_; }
+  RowFootprint rowFootprint(uint32_t y) const;
+  /// elevation_[0..count] for pixels x0..x0 + count of row y (one past the chunk, for slopes).
+  void chunkElevation(uint32_t y, uint32_t x0, uint32_t count);
+  void addFineOctave(const Octave& octave, uint32_t y, uint32_t x0, uint32_t count);
+  CellLines cellLines(uint32_t gx) const;
+  CellBorders cellBorders(uint32_t cell_x, const RowFootprint& footprint) const;
+  /// Writes the pixels [cell_x, cell_x + cell_count) of row y, within the chunk at x0.
+  void colourCell(uint32_t y, uint32_t x0, uint32_t cell_x, uint32_t cell_count,
+                  const RowFootprint& footprint, uint8_t* out) const;
+  /// The colour of a valid pixel: sea, shaded land, or a line crossing it (pixel k of its
+  /// cell). Returns a constant colour or `shaded` (3 bytes of scratch it may fill).
+  const uint8_t* terrainColour(int32_t elevation, int32_t slope_x, int32_t slope_y, int32_t wet,
+                               const CellLines& lines, uint32_t k, uint8_t* shaded) const;
   int32_t footprintNoise(uint32_t t, uint32_t side, uint32_t seed) const;
   uint32_t footprintDepth(uint32_t t, uint32_t side, uint32_t margin, uint32_t seed,
                           bool slant_up) const;

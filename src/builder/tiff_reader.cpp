@@ -27,6 +27,7 @@
 
 #include "band_reader.h"
 #include "file_reader.h"
+#include "uninitialized_buffer.h"
 
 namespace tessera::detail {
 namespace {
@@ -178,6 +179,27 @@ class TiffReader final : public BandReader {
  private:
   // An error naming the file, what failed, and what libtiff said about it.
   Unexpected tiffFailure(ErrorCode code, const std::string& what);
+  // The file's tags open() decides on.
+  struct TiffFormat {
+    uint32_t width_px = 0;
+    uint32_t height_px = 0;
+    uint16_t bits = 0;  // per sample
+    uint16_t sample_format = SAMPLEFORMAT_UINT;
+    uint16_t photometric = 0;
+    uint16_t planar = PLANARCONFIG_CONTIG;
+    uint16_t compression = COMPRESSION_NONE;
+  };
+  // The steps of open(), in order: each fails naming the file and the problem.
+  Result<void> openFile();
+  Result<TiffFormat> readFormat();  // also sets spp_
+  Result<void> checkSamples(const TiffFormat& format);
+  // Colour samples per pixel for the photometric (1 or 3); refuses what is not supported.
+  Result<uint32_t> colourSamples(const TiffFormat& format);
+  // The layout, unit and natural band for tiled and for striped files.
+  Result<void> setUpTiles(const TiffFormat& format, nlohmann::json& tiff);
+  Result<void> setUpStrips(const TiffFormat& format, nlohmann::json& tiff);
+  // Samples of one pixel in a decoded unit: one plane's when separate, else every sample.
+  uint64_t samplesPerUnitPixel() const { return separate_ ? 1 : spp_; }
   Result<void> readGeoreference();
   Result<void> fillBand(uint32_t first_row);
   Result<void> readScanline(uint32_t row, uint16_t plane);
@@ -206,10 +228,10 @@ class TiffReader final : public BandReader {
   uint32_t next_row_ = 0;
   // Decoded rows [band_first_row_, band_first_row_ + band_rows_) in output channels, for
   // layouts that decode more rows at once than the caller may ask for.
-  std::vector<uint8_t> band_;
+  UninitializedBuffer band_;
   uint32_t band_first_row_ = 0;
   uint32_t band_rows_ = 0;
-  std::vector<uint8_t> unit_;  // one scanline, strip plane or tile as decoded
+  UninitializedBuffer unit_;  // one scanline, strip plane or tile as decoded
 };
 
 Unexpected TiffReader::tiffFailure(ErrorCode code, const std::string& what) {
@@ -222,6 +244,47 @@ Unexpected TiffReader::tiffFailure(ErrorCode code, const std::string& what) {
 }
 
 Result<void> TiffReader::open() {
+  TESSERA_TRY(openFile());
+  TESSERA_ASSIGN_OR_RETURN(const TiffFormat format, readFormat());
+  TESSERA_TRY(checkSamples(format));
+  TESSERA_ASSIGN_OR_RETURN(const uint32_t colour_samples, colourSamples(format));
+
+  const uint32_t extra_samples = spp_ - colour_samples;
+  const uint32_t channels = colour_samples + (extra_samples > 0 ? 1 : 0);
+  if (format.photometric == PHOTOMETRIC_MINISWHITE) invert_[0] = 0xff;
+  separate_ = format.planar == PLANARCONFIG_SEPARATE && spp_ > 1;
+  identity_ = !separate_ && spp_ == channels && invert_[0] == 0;
+
+  info_.width_px = format.width_px;
+  info_.height_px = format.height_px;
+  info_.channels = channels;
+  info_.format = "tiff";
+  nlohmann::json tiff = {
+      {"compression", compressionName(format.compression)},
+      {"bigtiff", TIFFIsBigTIFF(tif_) != 0},
+      {"planar", separate_ ? "separate" : "contiguous"},
+      {"photometric", photometricName(format.photometric)},
+      {"samples_per_pixel", spp_},
+  };
+  if (extra_samples > 1) tiff["dropped_extra_samples"] = extra_samples - 1;
+  TESSERA_TRY(TIFFIsTiled(tif_) ? setUpTiles(format, tiff) : setUpStrips(format, tiff));
+  const uint64_t row_bytes = uint64_t(format.width_px) * channels;
+  if (row_bytes * info_.natural_band_rows > kMaxBandBytes) {
+    return tiffFailure(ErrorCode::kTooLarge,
+                       fmt::format("a band of {} rows x {} px exceeds the {} MiB limit",
+                                   info_.natural_band_rows, format.width_px, kMaxBandBytes >> 20));
+  }
+  info_.metadata["tiff"] = std::move(tiff);
+  TESSERA_TRY(readGeoreference());
+  messages_->warnings.clear();
+  // The unit, the band it is spread into, and libtiff's raw strip or tile (at most the size of
+  // the decoded unit for these codecs, plus its own slack).
+  info_.buffer_bytes = 2 * unit_bytes_ + row_bytes * info_.natural_band_rows + (uint64_t(1) << 20);
+  unit_.resize(unit_bytes_);
+  return {};
+}
+
+Result<void> TiffReader::openFile() {
   TIFFOpenOptions* options = TIFFOpenOptionsAlloc();
   TIFFOpenOptionsSetErrorHandlerExtR(options, onTiffError, messages_.get());
   TIFFOpenOptionsSetWarningHandlerExtR(options, onTiffWarning, messages_.get());
@@ -231,53 +294,59 @@ Result<void> TiffReader::open() {
   tif_ = TIFFOpenExt(path_.c_str(), "rm", options);
   TIFFOpenOptionsFree(options);
   if (!tif_) return tiffFailure(ErrorCode::kCorrupt, "not a readable TIFF");
+  return {};
+}
 
-  uint32_t width = 0, height = 0;
-  if (!TIFFGetField(tif_, TIFFTAG_IMAGEWIDTH, &width) ||
-      !TIFFGetField(tif_, TIFFTAG_IMAGELENGTH, &height)) {
+Result<TiffReader::TiffFormat> TiffReader::readFormat() {
+  TiffFormat format;
+  if (!TIFFGetField(tif_, TIFFTAG_IMAGEWIDTH, &format.width_px) ||
+      !TIFFGetField(tif_, TIFFTAG_IMAGELENGTH, &format.height_px)) {
     return tiffFailure(ErrorCode::kCorrupt, "missing ImageWidth or ImageLength");
   }
-  TESSERA_TRY(checkSourceDimensions(path_, width, height));
-
-  uint16_t bits = 0, sample_format = SAMPLEFORMAT_UINT, photometric = 0;
-  uint16_t planar = PLANARCONFIG_CONTIG, compression = COMPRESSION_NONE;
-  TIFFGetFieldDefaulted(tif_, TIFFTAG_BITSPERSAMPLE, &bits);
+  TESSERA_TRY(checkSourceDimensions(path_, format.width_px, format.height_px));
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_BITSPERSAMPLE, &format.bits);
   TIFFGetFieldDefaulted(tif_, TIFFTAG_SAMPLESPERPIXEL, &spp_);
-  TIFFGetFieldDefaulted(tif_, TIFFTAG_SAMPLEFORMAT, &sample_format);
-  TIFFGetFieldDefaulted(tif_, TIFFTAG_PLANARCONFIG, &planar);
-  TIFFGetFieldDefaulted(tif_, TIFFTAG_COMPRESSION, &compression);
-  if (!TIFFGetField(tif_, TIFFTAG_PHOTOMETRIC, &photometric)) {
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_SAMPLEFORMAT, &format.sample_format);
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_PLANARCONFIG, &format.planar);
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_COMPRESSION, &format.compression);
+  if (!TIFFGetField(tif_, TIFFTAG_PHOTOMETRIC, &format.photometric)) {
     return tiffFailure(ErrorCode::kCorrupt, "missing PhotometricInterpretation");
   }
+  return format;
+}
 
-  if (sample_format == SAMPLEFORMAT_INT) {
+Result<void> TiffReader::checkSamples(const TiffFormat& format) {
+  if (format.sample_format == SAMPLEFORMAT_INT) {
     return tiffFailure(ErrorCode::kUnsupported,
                        "signed integer samples are not supported "
                        "(8-bit unsigned only)");
   }
-  if (sample_format == SAMPLEFORMAT_IEEEFP) {
+  if (format.sample_format == SAMPLEFORMAT_IEEEFP) {
     return tiffFailure(ErrorCode::kUnsupported, fmt::format("{}-bit floating-point samples are "
                                                             "not supported (8-bit unsigned only)",
-                                                            bits));
+                                                            format.bits));
   }
-  if (sample_format != SAMPLEFORMAT_UINT && sample_format != SAMPLEFORMAT_VOID) {
+  if (format.sample_format != SAMPLEFORMAT_UINT && format.sample_format != SAMPLEFORMAT_VOID) {
     return tiffFailure(ErrorCode::kUnsupported,
-                       fmt::format("sample format {} is not supported", sample_format));
+                       fmt::format("sample format {} is not supported", format.sample_format));
   }
-  if (bits != 8) {
+  if (format.bits != 8) {
     // The archive stores 8 bits per channel; scaling 16-bit data down is a choice (linear?
     // window?) the user should make with a tool like GDAL before building, not silently here.
     return tiffFailure(ErrorCode::kUnsupported,
-                       fmt::format("{}-bit samples are not supported (8-bit only)", bits));
+                       fmt::format("{}-bit samples are not supported (8-bit only)", format.bits));
   }
+  return {};
+}
 
+Result<uint32_t> TiffReader::colourSamples(const TiffFormat& format) {
   uint32_t colour_samples = 0;
-  switch (photometric) {
+  switch (format.photometric) {
     case PHOTOMETRIC_MINISBLACK:
     case PHOTOMETRIC_MINISWHITE: colour_samples = 1; break;
     case PHOTOMETRIC_RGB: colour_samples = 3; break;
     case PHOTOMETRIC_YCBCR:
-      if (compression != COMPRESSION_JPEG) {
+      if (format.compression != COMPRESSION_JPEG) {
         return tiffFailure(ErrorCode::kUnsupported,
                            "YCbCr photometric is supported only with JPEG compression");
       }
@@ -288,108 +357,84 @@ Result<void> TiffReader::open() {
                          "palette (colour-mapped) TIFF is not supported; expand it to RGB first");
     default:
       return tiffFailure(ErrorCode::kUnsupported, fmt::format("{} photometric is not supported",
-                                                              photometricName(photometric)));
+                                                              photometricName(format.photometric)));
   }
   if (spp_ < colour_samples) {
     return tiffFailure(ErrorCode::kCorrupt, fmt::format("{} samples per pixel for {} photometric",
-                                                        spp_, photometricName(photometric)));
+                                                        spp_, photometricName(format.photometric)));
   }
-  if (!TIFFIsCODECConfigured(compression)) {
+  if (!TIFFIsCODECConfigured(format.compression)) {
     return tiffFailure(ErrorCode::kUnsupported, fmt::format("compression {} is not supported by "
                                                             "this libtiff",
-                                                            compressionName(compression)));
+                                                            compressionName(format.compression)));
   }
-  if (compression == COMPRESSION_JPEG && photometric == PHOTOMETRIC_YCBCR) {
+  if (format.compression == COMPRESSION_JPEG && format.photometric == PHOTOMETRIC_YCBCR) {
     // Let libjpeg upsample and convert: the scanline and tile sizes then count RGB pixels.
     TIFFSetField(tif_, TIFFTAG_JPEGCOLORMODE, JPEGCOLORMODE_RGB);
   }
+  return colour_samples;
+}
 
-  const uint32_t extra_samples = spp_ - colour_samples;
-  const uint32_t channels = colour_samples + (extra_samples > 0 ? 1 : 0);
-  if (photometric == PHOTOMETRIC_MINISWHITE) invert_[0] = 0xff;
-  separate_ = planar == PLANARCONFIG_SEPARATE && spp_ > 1;
-  identity_ = !separate_ && spp_ == channels && invert_[0] == 0;
-
-  info_.width_px = width;
-  info_.height_px = height;
-  info_.channels = channels;
-  info_.format = "tiff";
-  const uint64_t row_bytes = uint64_t(width) * channels;
-  const uint64_t samples_per_unit_pixel = separate_ ? 1 : spp_;
-
-  nlohmann::json tiff = {
-      {"compression", compressionName(compression)},
-      {"bigtiff", TIFFIsBigTIFF(tif_) != 0},
-      {"planar", separate_ ? "separate" : "contiguous"},
-      {"photometric", photometricName(photometric)},
-      {"samples_per_pixel", spp_},
-  };
-  if (extra_samples > 1) tiff["dropped_extra_samples"] = extra_samples - 1;
-
-  if (TIFFIsTiled(tif_)) {
-    layout_ = Layout::kTiles;
-    TIFFGetField(tif_, TIFFTAG_TILEWIDTH, &tile_width_px_);
-    TIFFGetField(tif_, TIFFTAG_TILELENGTH, &tile_height_px_);
-    if (tile_width_px_ == 0 || tile_height_px_ == 0) {
-      return tiffFailure(ErrorCode::kCorrupt, "zero tile width or height");
-    }
-    unit_bytes_ = uint64_t(tile_width_px_) * tile_height_px_ * samples_per_unit_pixel;
-    if (unit_bytes_ > kMaxUnitBytes) {
-      return tiffFailure(ErrorCode::kTooLarge,
-                         fmt::format("tiles of {}x{} px exceed the {} MiB limit per tile",
-                                     tile_width_px_, tile_height_px_, kMaxUnitBytes >> 20));
-    }
-    if (TIFFTileSize64(tif_) != unit_bytes_) {
-      return tiffFailure(ErrorCode::kUnsupported,
-                         fmt::format("unexpected decoded tile size {} (expected {})",
-                                     TIFFTileSize64(tif_), unit_bytes_));
-    }
-    info_.natural_band_rows = std::min(tile_height_px_, height);
-    tiff["layout"] = "tiled";
-    tiff["tile_width"] = tile_width_px_;
-    tiff["tile_height"] = tile_height_px_;
-  } else {
-    uint32_t rows_per_strip = 0;
-    TIFFGetFieldDefaulted(tif_, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
-    rows_per_strip_ = std::clamp<uint32_t>(rows_per_strip, 1, height);
-    tiff["layout"] = "striped";
-    tiff["rows_per_strip"] = rows_per_strip_;
-    if (TIFFScanlineSize64(tif_) != uint64_t(width) * samples_per_unit_pixel) {
-      return tiffFailure(ErrorCode::kUnsupported,
-                         fmt::format("unexpected scanline size {} (expected {})",
-                                     TIFFScanlineSize64(tif_), width * samples_per_unit_pixel));
-    }
-    if (separate_ && compression != COMPRESSION_NONE) {
-      // Compressed strips cannot be entered mid-way (libtiff has no random access into
-      // them), and the planes of one row live in different strips, so a band is a strip.
-      layout_ = Layout::kSeparateStrips;
-      unit_bytes_ = uint64_t(width) * rows_per_strip_;
-      if (unit_bytes_ > kMaxUnitBytes || row_bytes * rows_per_strip_ > kMaxBandBytes) {
-        return tiffFailure(ErrorCode::kTooLarge,
-                           fmt::format("planar strips of {} rows x {} px exceed the {} MiB limit; "
-                                       "rewrite with fewer rows per strip or as tiles",
-                                       rows_per_strip_, width, kMaxUnitBytes >> 20));
-      }
-      info_.natural_band_rows = rows_per_strip_;
-    } else {
-      // Scanlines: libtiff reads a compressed strip incrementally and chops a single
-      // uncompressed strip, so a 100000-row strip costs one scanline of memory here.
-      layout_ = Layout::kStripedScanlines;
-      unit_bytes_ = uint64_t(width) * samples_per_unit_pixel;
-      const uint64_t rows_by_bytes = std::max<uint64_t>(1, (kMaxBandBytes / 16) / row_bytes);
-      info_.natural_band_rows =
-          uint32_t(std::min<uint64_t>({rows_per_strip_, kScanlineBandRows, rows_by_bytes, height}));
-    }
+Result<void> TiffReader::setUpTiles(const TiffFormat& format, nlohmann::json& tiff) {
+  layout_ = Layout::kTiles;
+  TIFFGetField(tif_, TIFFTAG_TILEWIDTH, &tile_width_px_);
+  TIFFGetField(tif_, TIFFTAG_TILELENGTH, &tile_height_px_);
+  if (tile_width_px_ == 0 || tile_height_px_ == 0) {
+    return tiffFailure(ErrorCode::kCorrupt, "zero tile width or height");
   }
-  if (row_bytes * info_.natural_band_rows > kMaxBandBytes) {
+  unit_bytes_ = uint64_t(tile_width_px_) * tile_height_px_ * samplesPerUnitPixel();
+  if (unit_bytes_ > kMaxUnitBytes) {
     return tiffFailure(ErrorCode::kTooLarge,
-                       fmt::format("a band of {} rows x {} px exceeds the {} MiB limit",
-                                   info_.natural_band_rows, width, kMaxBandBytes >> 20));
+                       fmt::format("tiles of {}x{} px exceed the {} MiB limit per tile",
+                                   tile_width_px_, tile_height_px_, kMaxUnitBytes >> 20));
   }
-  info_.metadata["tiff"] = std::move(tiff);
-  TESSERA_TRY(readGeoreference());
-  messages_->warnings.clear();
-  unit_.resize(unit_bytes_);
+  if (TIFFTileSize64(tif_) != unit_bytes_) {
+    return tiffFailure(ErrorCode::kUnsupported,
+                       fmt::format("unexpected decoded tile size {} (expected {})",
+                                   TIFFTileSize64(tif_), unit_bytes_));
+  }
+  info_.natural_band_rows = std::min(tile_height_px_, format.height_px);
+  tiff["layout"] = "tiled";
+  tiff["tile_width"] = tile_width_px_;
+  tiff["tile_height"] = tile_height_px_;
+  return {};
+}
+
+Result<void> TiffReader::setUpStrips(const TiffFormat& format, nlohmann::json& tiff) {
+  const uint32_t width = format.width_px, height = format.height_px;
+  const uint64_t row_bytes = uint64_t(width) * info_.channels;
+  const uint64_t samples_per_unit_pixel = samplesPerUnitPixel();
+  uint32_t rows_per_strip = 0;
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
+  rows_per_strip_ = std::clamp<uint32_t>(rows_per_strip, 1, height);
+  tiff["layout"] = "striped";
+  tiff["rows_per_strip"] = rows_per_strip_;
+  if (TIFFScanlineSize64(tif_) != uint64_t(width) * samples_per_unit_pixel) {
+    return tiffFailure(ErrorCode::kUnsupported,
+                       fmt::format("unexpected scanline size {} (expected {})",
+                                   TIFFScanlineSize64(tif_), width * samples_per_unit_pixel));
+  }
+  if (separate_ && format.compression != COMPRESSION_NONE) {
+    // Compressed strips cannot be entered mid-way (libtiff has no random access into
+    // them), and the planes of one row live in different strips, so a band is a strip.
+    layout_ = Layout::kSeparateStrips;
+    unit_bytes_ = uint64_t(width) * rows_per_strip_;
+    if (unit_bytes_ > kMaxUnitBytes || row_bytes * rows_per_strip_ > kMaxBandBytes) {
+      return tiffFailure(ErrorCode::kTooLarge,
+                         fmt::format("planar strips of {} rows x {} px exceed the {} MiB limit; "
+                                     "rewrite with fewer rows per strip or as tiles",
+                                     rows_per_strip_, width, kMaxUnitBytes >> 20));
+    }
+    info_.natural_band_rows = rows_per_strip_;
+    return {};
+  }
+  // Scanlines: libtiff reads a compressed strip incrementally and chops a single
+  // uncompressed strip, so a 100000-row strip costs one scanline of memory here.
+  layout_ = Layout::kStripedScanlines;
+  unit_bytes_ = uint64_t(width) * samples_per_unit_pixel;
+  const uint64_t rows_by_bytes = std::max<uint64_t>(1, (kMaxBandBytes / 16) / row_bytes);
+  info_.natural_band_rows =
+      uint32_t(std::min<uint64_t>({rows_per_strip_, kScanlineBandRows, rows_by_bytes, height}));
   return {};
 }
 

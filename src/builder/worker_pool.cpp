@@ -1,15 +1,50 @@
 #include "worker_pool.h"
 
+#include <system_error>
+
+#include <fmt/format.h>
+
+#include <tessera/check.h>
+
 namespace tessera::detail {
 
-WorkerPool::WorkerPool(uint32_t threads, size_t max_queued)
-    : max_queued_(max_queued == 0 ? 1 : max_queued) {
+WorkerPool::WorkerPool(Unstarted, size_t max_queued)
+    : max_queued_(max_queued == 0 ? 1 : max_queued) {}
+
+WorkerPool::WorkerPool(uint32_t threads, size_t max_queued) : WorkerPool(Unstarted{}, max_queued) {
+  const std::string refused = startWorkers(threads);
+  TESSERA_CHECK(refused.empty()) << refused;
+}
+
+Result<std::unique_ptr<WorkerPool>> WorkerPool::start(uint32_t threads, size_t max_queued) {
+  std::unique_ptr<WorkerPool> pool(new WorkerPool(Unstarted{}, max_queued));
+  const std::string refused = pool->startWorkers(threads);
+  if (!refused.empty()) return fail(ErrorCode::kTooLarge, refused);
+  return pool;
+}
+
+std::string WorkerPool::startWorkers(uint32_t threads) {
   if (threads == 0) threads = 1;
   for (uint32_t i = 0; i < threads; ++i) {
     states_.push_back(std::make_unique<WorkerState>());
     states_.back()->index = i;
   }
-  for (uint32_t i = 0; i < threads; ++i) workers_.emplace_back([this, i] { run(*states_[i]); });
+  for (uint32_t i = 0; i < threads; ++i) {
+    try {
+      workers_.emplace_back([this, i] { run(*states_[i]); });
+    } catch (const std::system_error& e) {
+      {
+        std::lock_guard lock(mutex_);
+        stopping_ = true;
+      }
+      work_ready_.notify_all();
+      for (std::thread& worker : workers_) worker.join();
+      workers_.clear();
+      return fmt::format("cannot start {} encoder threads: the system refused thread {} ({})",
+                         threads, i + 1, e.what());
+    }
+  }
+  return "";
 }
 
 WorkerPool::~WorkerPool() {

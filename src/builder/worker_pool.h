@@ -12,6 +12,8 @@
 #include <thread>
 #include <vector>
 
+#include <tessera/result.h>
+
 #include "codecs/decode.h"
 
 namespace tessera::detail {
@@ -29,8 +31,14 @@ class WorkerPool {
   using Job = std::function<void(WorkerState&)>;
 
   /// Starts `threads` workers (at least 1). `max_queued` bounds jobs waiting to run;
-  /// submit blocks beyond it, which bounds the memory held by queued work.
+  /// submit blocks beyond it, which bounds the memory held by queued work. The system must be
+  /// able to start them (a contract: TESSERA_CHECK); start() is the fallible form.
   WorkerPool(uint32_t threads, size_t max_queued);
+  /// The same, but a thread the system refuses (EAGAIN: too many threads or too little memory
+  /// for their stacks) fails with kTooLarge naming how many were asked for and how many
+  /// started; the ones that started are joined first.
+  [[nodiscard]] static Result<std::unique_ptr<WorkerPool>> start(uint32_t threads,
+                                                                 size_t max_queued);
   /// Drains the queue, then joins the workers.
   ~WorkerPool();
   WorkerPool(const WorkerPool&) = delete;
@@ -44,6 +52,10 @@ class WorkerPool {
   WorkerState& state(uint32_t index) { return *states_[index]; }
 
  private:
+  struct Unstarted {};
+  WorkerPool(Unstarted, size_t max_queued);
+  /// Starts the workers; on a refusal stops and joins those started and returns its message.
+  std::string startWorkers(uint32_t threads);
   void run(WorkerState& state);
 
   std::mutex mutex_;  // guards queue_, running_ and stopping_

@@ -1,11 +1,17 @@
 #include "format/metadata.h"
 
+#include <algorithm>
+
 #include <nlohmann/json.hpp>
 
 namespace tessera::detail {
 
 Result<ArchiveMetadata> parseMetadata(std::span<const uint8_t> bytes, size_t image_count,
                                       const std::string& name) {
+  // nlohmann's lexer ends the document at a NUL byte, so a block with one would be accepted
+  // with whatever follows it unread; JSON text never holds a raw NUL.
+  if (std::find(bytes.begin(), bytes.end(), uint8_t(0)) != bytes.end())
+    return fail(ErrorCode::kCorrupt, name + ": metadata holds a NUL byte");
   const nlohmann::json parsed =
       nlohmann::json::parse(bytes.begin(), bytes.end(), nullptr, /*allow_exceptions=*/false);
   if (parsed.is_discarded() || !parsed.is_object())

@@ -14,8 +14,6 @@ namespace tessera::detail {
 
 namespace {
 
-constexpr uint32_t kHeaderChecksumOffset = 120;
-
 void storeBlockRef(uint8_t* p, const BlockRef& block) {
   storeU64(p, block.offset_bytes);
   storeU64(p + 8, block.length_bytes);
@@ -261,33 +259,9 @@ Result<std::vector<BrushInstance>> decodeInstancePage(std::span<const uint8_t> b
   return instances;
 }
 
-void stampProceduralHeader(std::span<uint8_t> header_bytes, const BlockRef& directory) {
-  TESSERA_CHECK(header_bytes.size() >= kHeaderBytes) << "a header is 128 bytes";
-  uint8_t* p = header_bytes.data();
-  storeU16(p + 10, kProceduralMinorVersion);
-  storeBlockRef(p + kProceduralHeaderOffset, directory);
-  storeU64(p + kHeaderChecksumOffset, checksum64({p, kHeaderChecksumOffset}));
-}
-
-Result<BlockRef> decodeProceduralHeader(std::span<const uint8_t> header_bytes,
-                                        const FileHeader& header, const std::string& name) {
-  TESSERA_CHECK(header_bytes.size() >= kHeaderBytes) << "a header is 128 bytes";
-  if (header.version_minor < kProceduralMinorVersion) return BlockRef{};
-  const uint8_t* p = header_bytes.data();
-  BlockRef block = loadBlockRef(p + kProceduralHeaderOffset);
-  if (header.version_minor == kProceduralMinorVersion && !allZero(p + 104, 16))
-    return fail(ErrorCode::kCorrupt, name + ": reserved header bytes 104..119 are not zero");
-  if (block.length_bytes == 0) {
-    if (block.offset_bytes || block.checksum)
-      return fail(ErrorCode::kCorrupt,
-                  name + ": procedural directory is empty but has an offset or checksum");
-    return block;
-  }
-  if (block.offset_bytes < kHeaderBytes || block.offset_bytes > header.file_bytes ||
-      block.length_bytes > header.file_bytes - block.offset_bytes)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: procedural directory [{}, +{}) outside the file", name,
-                            block.offset_bytes, block.length_bytes));
+Result<BlockRef> decodeProceduralRef(std::span<const SectionEntry> sections,
+                                     const std::string& name) {
+  const BlockRef block = findSection(sections, SectionKind::kProcedural);
   if (block.length_bytes > kMaxMetadataBytes)
     return fail(ErrorCode::kTooLarge,
                 fmt::format("{}: procedural directory of {} bytes", name, block.length_bytes));

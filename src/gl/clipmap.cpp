@@ -6,29 +6,21 @@
 // samples across the toroidal seam (their one-texel shrink, done per fragment: a footprint
 // that reaches a slot holding another tile, or none, moves to the next coarser level).
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <optional>
 #include <unordered_map>
 #include <vector>
 
 #include <fmt/format.h>
 
-#include <tessera/gl.h>
-
-#include "gl/gl_objects.h"
-#include "gl/renderers.h"
+#include "renderer_base.h"
+#include "renderers.h"
 
 namespace tessera::gl {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-constexpr int kMaxLevels = 32;
-
-const char* kVertexShader = R"(#version 450 core
+const char* const kVertexShader = R"(
 uniform vec4 u_rect;  // the image, level-0 texels relative to the anchor
 uniform mat4 u_view_projection;
 out vec2 v_world;
@@ -39,14 +31,12 @@ void main() {
 }
 )";
 
-const char* kFragmentShader = R"(#version 450 core
-#define MAX_LEVELS 32
+const char* const kFragmentShader = R"(
 in vec2 v_world;
 uniform sampler2DArray u_texels;   // layer = level, N x N texels, toroidal
 uniform usampler2DArray u_owner;   // layer = level, n x n slots: owning tile + 1, 0 = empty
 uniform ivec2 u_anchor_int[MAX_LEVELS];   // the anchor in level texels, integer part
 uniform vec2 u_anchor_frac[MAX_LEVELS];   // and fraction
-uniform ivec2 u_level_size[MAX_LEVELS];   // level width and height in texels
 uniform int u_coarsest;
 uniform int u_tile;    // t
 uniform int u_slots;   // n
@@ -81,8 +71,7 @@ bool bilinear(int level, vec2 world, out vec4 colour) {
 }
 
 void main() {
-  float rho = max(length(dFdx(v_world)), length(dFdy(v_world)));
-  float lambda = log2(rho);
+  float lambda = levelOfDetail(v_world);
   int wanted = clamp(int(floor(lambda)), 0, u_coarsest);
   for (int level = wanted; level <= u_coarsest; ++level) {
     vec4 colour;
@@ -99,32 +88,22 @@ void main() {
 }
 )";
 
-class ClipmapRenderer final : public TargetRenderer {
+class ClipmapRenderer final : public RendererBase {
  public:
-  ClipmapRenderer(const ImageInfo& info, const GlRendererOptions& options)
-      : info_(info), options_(options) {}
+  ClipmapRenderer(const ImageInfo& info, const RendererOptions& options)
+      : RendererBase(info, options) {}
 
   Result<void> init() {
-    if (info_.level_count > uint32_t(kMaxLevels))
+    if (info_.level_count > kMaxShaderLevels)
       return fail(ErrorCode::kUnsupported, fmt::format("clipmap renderer: {} levels, at most {}",
-                                                       info_.level_count, kMaxLevels));
-    Result<Program> program = linkProgram("clipmap", kVertexShader, kFragmentShader);
-    if (!program) return forwardError(program);
-    program_ = std::move(*program);
+                                                       info_.level_count, kMaxShaderLevels));
+    TESSERA_TRY(linkRendererProgram("clipmap", kVertexShader, kFragmentShader));
     const GLuint p = program_.get();
     glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
     glProgramUniform1i(p, glGetUniformLocation(p, "u_owner"), 1);
     glProgramUniform1i(p, glGetUniformLocation(p, "u_coarsest"), GLint(info_.level_count - 1));
     glProgramUniform1i(p, glGetUniformLocation(p, "u_tile"), GLint(info_.tile_size_px));
-    std::vector<GLint> sizes;
-    for (uint32_t level = 0; level < info_.level_count; ++level) {
-      sizes.push_back(GLint(info_.levelWidthPx(level)));
-      sizes.push_back(GLint(info_.levelHeightPx(level)));
-    }
-    glProgramUniform2iv(p, glGetUniformLocation(p, "u_level_size"), GLsizei(info_.level_count),
-                        sizes.data());
     rect_uniform_ = glGetUniformLocation(p, "u_rect");
-    view_projection_uniform_ = glGetUniformLocation(p, "u_view_projection");
     anchor_int_uniform_ = glGetUniformLocation(p, "u_anchor_int");
     anchor_frac_uniform_ = glGetUniformLocation(p, "u_anchor_frac");
     slots_uniform_ = glGetUniformLocation(p, "u_slots");
@@ -132,120 +111,37 @@ class ClipmapRenderer final : public TargetRenderer {
     return {};
   }
 
-  void apply(const FrameUpdate& update, TileStreamer& streamer) override {
+  const ApplyResult& apply(const FrameUpdate& update) override {
     const auto started = Clock::now();
-    stats_.uploads = 0;
-    stats_.upload_bytes = 0;
-    stats_.declined = 0;
+    beginApply();
     // The layers hold n x n tiles, n the clip region's side (eq. 3): a larger one (a bigger
-    // window) reallocates them and sends every tile back to be uploaded again.
+    // window) reallocates them and drops every tile, to be uploaded again.
     const uint32_t needed =
         std::max({options_.initial_clip_tiles, update.clip_region_tiles, uint32_t(1)});
-    if (needed > slots_) reallocate(needed, streamer);
+    if (needed > slots_) reallocate(needed);
     regions_.assign(info_.level_count, TileRect{});
     for (const auto& region : update.regions)
       if (region.level < info_.level_count) regions_[region.level] = region.region;
-
     for (const TileId& id : update.releases) {
       auto it = slot_of_.find(id);
       if (it == slot_of_.end()) continue;
       setOwner(id.level, it->second, nullptr);
       slot_of_.erase(it);
     }
-
-    struct Pending {
-      const DecodedTile* tile;  ///< null when a later tile of this frame took its slot
-      uint32_t slot;
-    };
-    std::vector<Pending> pending;
-    std::unordered_map<TileId, size_t, TileIdHash> pending_index;
-    for (const auto& tile : update.uploads) {
-      const TileId& id = tile->id;
-      if (tile->texels.channels != info_.channels ||
-          tile->texels.width_px != info_.storedTileSidePx() || id.level >= info_.level_count) {
-        streamer.declined(id);
-        ++stats_.declined;
-        continue;
-      }
-      const uint32_t slot = slotOf(id);
-      const std::optional<TileId>& owner = owners_[id.level][slot];
-      if (owner && *owner != id) {
-        // Two tiles of a level share a slot only when one lies outside the clip region (the
-        // keep margin, the lookahead, far ground in perspective): a tile inside takes the slot,
-        // one outside never evicts another (two outside tiles would take it in turns, each
-        // sent back to be loaded and offered again).
-        if (!inRegion(id)) {
-          streamer.declined(id);
-          ++stats_.declined;
-          continue;
-        }
-        // A tile that took the slot earlier in this same frame never went up: it goes back
-        // to the streamer as declined, not released.
-        auto earlier = pending_index.find(*owner);
-        if (earlier != pending_index.end()) {
-          pending[earlier->second].tile = nullptr;
-          streamer.declined(*owner);
-          ++stats_.declined;
-          pending_index.erase(earlier);
-        } else {
-          streamer.released(*owner);
-        }
-        slot_of_.erase(*owner);
-      }
-      setOwner(id.level, slot, &id);
-      slot_of_[id] = slot;
-      pending_index[id] = pending.size();
-      pending.push_back({tile.get(), slot});
-    }
-    if (!pending.empty()) {
-      std::vector<std::pair<const uint8_t*, size_t>> sources;
-      for (const Pending& p : pending)
-        if (p.tile)
-          sources.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
-      staging_.stage(sources);
-      // The tile's interior only: its borders are its neighbours' texels, which sit beside it
-      // in the layer already.
-      glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-      glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(info_.storedTileSidePx()));
-      glPixelStorei(GL_UNPACK_SKIP_PIXELS, GLint(info_.border_px));
-      glPixelStorei(GL_UNPACK_SKIP_ROWS, GLint(info_.border_px));
-      const GLsizei t = GLsizei(info_.tile_size_px);
-      size_t offset = 0;  // staged one after the other, in this order
-      for (const Pending& p : pending) {
-        if (!p.tile) continue;
-        const GLint sx = GLint(p.slot % slots_) * t, sy = GLint(p.slot / slots_) * t;
-        glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(p.tile->id.level), t, t, 1,
-                            tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
-                            reinterpret_cast<const void*>(offset));
-        offset += p.tile->texels.texels.size();
-        streamer.uploaded(p.tile->id);
-        ++stats_.uploads;
-        stats_.upload_bytes += p.tile->texels.texels.size();
-      }
-      glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-      glPixelStorei(GL_UNPACK_SKIP_PIXELS, 0);
-      glPixelStorei(GL_UNPACK_SKIP_ROWS, 0);
-      staging_.unbind();
-    }
-    stats_.resident_tiles = uint32_t(slot_of_.size());
-    stats_.apply_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+    placeUploads(update);
+    if (!pending_.empty()) uploadInteriors();
+    return endApply(started, slot_of_.size());
   }
 
   void draw(const View& view) override {
     const auto started = Clock::now();
-    target_.bind(view.viewportWidth(), view.viewportHeight());
-    glClearColor(0, 0, 0, 0);
-    glClear(GL_COLOR_BUFFER_BIT);
-    glDisable(GL_DEPTH_TEST);
-    glDisable(GL_BLEND);
+    const ViewProjection transform = beginDraw(view);
     stats_.tiles_drawn = 0;
     if (slots_ == 0) {
       stats_.draw_cpu_ms = 0;
       return;
     }
-    const ViewTransform transform = viewTransform(view, info_);
     const GLuint p = program_.get();
-    glProgramUniformMatrix4fv(p, view_projection_uniform_, 1, GL_FALSE, transform.view_projection);
     glProgramUniform4f(p, rect_uniform_, float(-transform.anchor_x), float(-transform.anchor_y),
                        float(info_.width_px - transform.anchor_x),
                        float(info_.height_px - transform.anchor_y));
@@ -271,11 +167,10 @@ class ClipmapRenderer final : public TargetRenderer {
     glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
     glBindVertexArray(0);
     stats_.tiles_drawn = uint32_t(slot_of_.size());
-    stats_.draw_cpu_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
+    stats_.draw_cpu_ms = msSince(started);
   }
 
   bool resident(const TileId& tile) const override { return slot_of_.count(tile) > 0; }
-  const RenderStats& stats() const override { return stats_; }
   RendererKind kind() const override { return RendererKind::kClipmap; }
 
   Result<ClipmapLayer> readLayer(uint32_t level) const {
@@ -307,8 +202,67 @@ class ClipmapRenderer final : public TargetRenderer {
                         1, 1, 1, GL_RG_INTEGER, GL_UNSIGNED_INT, value);
   }
 
-  void reallocate(uint32_t slots, TileStreamer& streamer) {
-    for (const auto& [id, slot] : slot_of_) streamer.released(id);
+  /// Gives each of this frame's uploads its slot (pending_), or declines it.
+  void placeUploads(const FrameUpdate& update) {
+    pending_.clear();
+    pending_index_.clear();
+    for (const auto& tile : update.uploads) {
+      const TileId& id = tile->id;
+      if (!holds(*tile)) {
+        decline(id);
+        continue;
+      }
+      const uint32_t slot = slotOf(id);
+      const std::optional<TileId>& owner = owners_[id.level][slot];
+      if (owner && *owner != id) {
+        // Two tiles of a level share a slot only when one lies outside the clip region (the
+        // keep margin, the lookahead, far ground in perspective): a tile inside takes the slot,
+        // one outside never evicts another (two outside tiles would take it in turns, each
+        // sent back to be loaded and offered again).
+        if (!inRegion(id)) {
+          decline(id);
+          continue;
+        }
+        // A tile that took the slot earlier in this same frame never went up: it is declined,
+        // not dropped.
+        auto earlier = pending_index_.find(*owner);
+        if (earlier != pending_index_.end()) {
+          pending_[earlier->second].tile = nullptr;
+          decline(*owner);
+          pending_index_.erase(earlier);
+        } else {
+          drop(*owner);
+        }
+        slot_of_.erase(*owner);
+      }
+      setOwner(id.level, slot, &id);
+      slot_of_[id] = slot;
+      pending_index_[id] = pending_.size();
+      pending_.push_back({tile.get(), slot});
+    }
+  }
+
+  /// Uploads the interior of each pending tile into its slot: its borders are its
+  /// neighbours' texels, which sit beside it in the layer already.
+  void uploadInteriors() {
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, GLint(info_.storedTileSidePx()));
+    glPixelStorei(GL_UNPACK_SKIP_PIXELS, GLint(info_.border_px));
+    glPixelStorei(GL_UNPACK_SKIP_ROWS, GLint(info_.border_px));
+    const GLsizei t = GLsizei(info_.tile_size_px);
+    uploadStaged(pending_, [&](const DecodedTile& tile, uint32_t slot, size_t offset) {
+      const GLint sx = GLint(slot % slots_) * t, sy = GLint(slot / slots_) * t;
+      glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(tile.id.level), t, t, 1,
+                          tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                          reinterpret_cast<const void*>(offset));
+    });
+    glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+    glPixelStorei(GL_UNPACK_SKIP_PIXELS, 0);
+    glPixelStorei(GL_UNPACK_SKIP_ROWS, 0);
+  }
+
+  /// Layers of `slots` x `slots` tiles; every tile held so far is dropped.
+  void reallocate(uint32_t slots) {
+    for (const auto& [id, slot] : slot_of_) drop(id);
     slot_of_.clear();
     slots_ = slots;
     const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
@@ -326,34 +280,30 @@ class ClipmapRenderer final : public TargetRenderer {
     stats_.gpu_bytes = uint64_t(side) * side * levels * info_.channels;
   }
 
-  ImageInfo info_;
-  GlRendererOptions options_;
-  Program program_;
-  GLint rect_uniform_ = -1, view_projection_uniform_ = -1, anchor_int_uniform_ = -1,
-        anchor_frac_uniform_ = -1, slots_uniform_ = -1;
+  GLint rect_uniform_ = -1, anchor_int_uniform_ = -1, anchor_frac_uniform_ = -1,
+        slots_uniform_ = -1;
   Texture texels_, owner_;
   uint32_t slots_ = 0;                                      ///< n: tiles along a layer's side
   std::vector<std::vector<std::optional<TileId>>> owners_;  ///< per level, per slot
   std::unordered_map<TileId, uint32_t, TileIdHash> slot_of_;
-  std::vector<TileRect> regions_;  ///< this frame's clip region per level
-  UploadStaging staging_;
-  VertexArray vertex_array_;
-  RenderStats stats_;
+  std::vector<TileRect> regions_;       ///< this frame's clip region per level
+  std::vector<PendingUpload> pending_;  ///< scratch of apply: this frame's uploads, in order
+  std::unordered_map<TileId, size_t, TileIdHash> pending_index_;  ///< into pending_
 };
 
 }  // namespace
 
-Result<ClipmapLayer> readClipmapLayer(GlRenderer& renderer, uint32_t level) {
+Result<ClipmapLayer> readClipmapLayer(Renderer& renderer, uint32_t level) {
   auto* clipmap = dynamic_cast<ClipmapRenderer*>(&renderer);
   if (!clipmap) return fail(ErrorCode::kInvalidArgument, "not a clipmap renderer");
   return clipmap->readLayer(level);
 }
 
-Result<std::unique_ptr<GlRenderer>> createClipmapRenderer(const ImageInfo& info,
-                                                          const GlRendererOptions& options) {
+Result<std::unique_ptr<Renderer>> createClipmapRenderer(const ImageInfo& info,
+                                                        const RendererOptions& options) {
   auto renderer = std::make_unique<ClipmapRenderer>(info, options);
   TESSERA_TRY(renderer->init());
-  return std::unique_ptr<GlRenderer>(std::move(renderer));
+  return std::unique_ptr<Renderer>(std::move(renderer));
 }
 
 }  // namespace tessera::gl

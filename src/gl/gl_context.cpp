@@ -10,12 +10,14 @@
 
 #include <tessera/gl.h>
 
+#include "gl/window.h"
+
 namespace tessera {
 
 struct GlContext::Impl {
   EGLDisplay display = EGL_NO_DISPLAY;
   EGLContext context = EGL_NO_CONTEXT;
-  GLFWwindow* window = nullptr;
+  GlWindow window;  ///< glfw null for a headless context
 
   ~Impl() {
     if (context != EGL_NO_CONTEXT) {
@@ -24,7 +26,7 @@ struct GlContext::Impl {
     }
     // The display is shared by every context of the process (EGL returns the same one), so
     // it stays initialised; eglTerminate here would pull it from under another context.
-    if (window) glfwDestroyWindow(window);
+    if (window.glfw) glfwDestroyWindow(window.glfw);
   }
 };
 
@@ -113,17 +115,17 @@ Result<std::unique_ptr<GlContext>> GlContext::createWindow(uint32_t width, uint3
   glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
   glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
   auto impl = std::make_unique<Impl>();
-  impl->window = glfwCreateWindow(int(width), int(height), title.c_str(), nullptr, nullptr);
-  if (!impl->window)
+  impl->window.glfw = glfwCreateWindow(int(width), int(height), title.c_str(), nullptr, nullptr);
+  if (!impl->window.glfw)
     return fail(ErrorCode::kUnsupported, "cannot create an OpenGL 4.5 core window");
-  glfwMakeContextCurrent(impl->window);
+  glfwMakeContextCurrent(impl->window.glfw);
   TESSERA_TRY(requireGl45("window"));
   return std::unique_ptr<GlContext>(new GlContext(std::move(impl)));
 }
 
 void GlContext::makeCurrent() {
-  if (impl_->window)
-    glfwMakeContextCurrent(impl_->window);
+  if (impl_->window.glfw)
+    glfwMakeContextCurrent(impl_->window.glfw);
   else
     eglMakeCurrent(impl_->display, EGL_NO_SURFACE, EGL_NO_SURFACE, impl_->context);
 }
@@ -136,12 +138,8 @@ std::string GlContext::description() const {
   return text(GL_RENDERER) + ", " + text(GL_VERSION);
 }
 
-GLFWwindow* GlContext::window() const {
-  return impl_->window;
-}
-
-const char* rendererName(RendererKind kind) {
-  return kind == RendererKind::kTileQuads ? "tile-quads" : "clipmap";
+GlWindow* GlContext::window() const {
+  return impl_->window.glfw ? &impl_->window : nullptr;
 }
 
 }  // namespace tessera

@@ -5,31 +5,21 @@
 // uploads parents first and releases them last) for trilinear filtering; where a finer tile
 // is missing, the coarser one beneath shows through, magnified.
 #include <algorithm>
-#include <chrono>
 #include <cmath>
-#include <cstring>
 #include <unordered_map>
 #include <vector>
 
 #include <fmt/format.h>
 
-#include <tessera/gl.h>
-
-#include "gl/gl_objects.h"
-#include "gl/renderers.h"
+#include "renderer_base.h"
+#include "renderers.h"
 #include "stream/footprint.h"
 
 namespace tessera::gl {
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-double msSince(Clock::time_point start) {
-  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
-}
-
-const char* kVertexShader = R"(#version 450 core
+const char* const kVertexShader = R"(
 // Per tile: its rectangle in level-0 texels relative to the view's anchor, clipped to the
 // image; the tile's and its parent's origins (level-0 texels, same anchor); level, layer,
 // parent layer (-1: none) and whether it is the coarsest level.
@@ -54,7 +44,7 @@ void main() {
 }
 )";
 
-const char* kFragmentShader = R"(#version 450 core
+const char* const kFragmentShader = R"(
 in vec2 v_world;
 flat in vec4 v_origins;
 flat in ivec4 v_info;
@@ -64,7 +54,6 @@ uniform sampler2DArray u_tiles;
 uniform float u_tile_size;
 uniform float u_border;
 uniform float u_stored_side;
-uniform ivec2 u_level_size[32];  // level width and height in texels
 // Without borders: per instance, the layers of the 3 x 3 tiles around the tile, then around
 // its parent (-1 where not resident).
 layout(std430, binding = 0) readonly buffer Neighbours { int neighbours[]; };
@@ -100,9 +89,7 @@ vec4 sampleBorderless(vec2 world, vec2 origin, int level, ivec2 tile, int table)
   return mix(mix(texels[0], texels[1], f.x), mix(texels[2], texels[3], f.x), f.y);
 }
 void main() {
-  // OpenGL's rho: the longer screen-axis derivative of the level-0 texel coordinate.
-  float rho = max(length(dFdx(v_world)), length(dFdy(v_world)));
-  float lambda = log2(rho);
+  float lambda = levelOfDetail(v_world);
   int level = v_info.x;
   bool coarsest = v_info.w != 0;
   if (!coarsest && lambda >= float(level + 1)) discard;  // a coarser tile beneath draws here
@@ -125,22 +112,18 @@ struct Instance {
   int32_t tile[2];
 };
 
-class TileQuadsRenderer final : public TargetRenderer {
+class TileQuadsRenderer final : public RendererBase {
  public:
-  TileQuadsRenderer(const ImageInfo& info, const GlRendererOptions& options)
-      : info_(info), options_(options) {}
+  TileQuadsRenderer(const ImageInfo& info, const RendererOptions& options)
+      : RendererBase(info, options) {}
 
   Result<void> init() {
-    Result<Program> program = linkProgram("tile-quads", kVertexShader, kFragmentShader);
-    if (!program) return forwardError(program);
-    program_ = std::move(*program);
-    view_projection_uniform_ = glGetUniformLocation(program_.get(), "u_view_projection");
-    glProgramUniform1i(program_.get(), glGetUniformLocation(program_.get(), "u_tiles"), 0);
-    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_tile_size"),
-                       float(info_.tile_size_px));
-    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_border"),
-                       float(info_.border_px));
-    glProgramUniform1f(program_.get(), glGetUniformLocation(program_.get(), "u_stored_side"),
+    TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, kFragmentShader));
+    const GLuint p = program_.get();
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_tiles"), 0);
+    glProgramUniform1f(p, glGetUniformLocation(p, "u_tile_size"), float(info_.tile_size_px));
+    glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(info_.border_px));
+    glProgramUniform1f(p, glGetUniformLocation(p, "u_stored_side"),
                        float(info_.storedTileSidePx()));
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers_);
     TESSERA_TRY(growLayers(std::max<uint32_t>(1, options_.initial_layers)));
@@ -163,109 +146,80 @@ class TileQuadsRenderer final : public TargetRenderer {
     glVertexArrayAttribIFormat(vao, 3, 2, GL_INT, offsetof(Instance, tile));
     glVertexArrayAttribBinding(vao, 3, 0);
     neighbours_buffer_ = createBuffer();
-    std::vector<GLint> sizes;
-    for (uint32_t level = 0; level < std::min(info_.level_count, 32u); ++level) {
-      sizes.push_back(GLint(info_.levelWidthPx(level)));
-      sizes.push_back(GLint(info_.levelHeightPx(level)));
-    }
-    glProgramUniform2iv(program_.get(), glGetUniformLocation(program_.get(), "u_level_size"),
-                        GLsizei(sizes.size() / 2), sizes.data());
     return {};
   }
 
-  void apply(const FrameUpdate& update, TileStreamer& streamer) override {
+  const ApplyResult& apply(const FrameUpdate& update) override {
     const auto started = Clock::now();
-    stats_.uploads = 0;
-    stats_.upload_bytes = 0;
-    stats_.declined = 0;
+    beginApply();
     for (const TileId& id : update.releases) release(id);
-
     // Layers first, so a tile with no room is declined before any byte is copied.
-    struct Pending {
-      const DecodedTile* tile;
-      GLint layer;
-      size_t offset;
-    };
-    std::vector<Pending> pending;
-    size_t total = 0;
+    pending_.clear();
     for (const auto& tile : update.uploads) {
-      if (tile->texels.channels != info_.channels ||
-          tile->texels.width_px != info_.storedTileSidePx() ||
-          tile->texels.height_px != info_.storedTileSidePx()) {
-        streamer.declined(tile->id);  // not this image's: never drawn, never a wrong tile
-        ++stats_.declined;
+      if (!holds(*tile)) {
+        decline(tile->id);
         continue;
       }
       auto existing = layers_.find(tile->id);
-      GLint layer = existing != layers_.end() ? existing->second : takeLayer();
+      const GLint layer = existing != layers_.end() ? existing->second : takeLayer();
       if (layer < 0) {
-        streamer.declined(tile->id);
-        ++stats_.declined;
+        decline(tile->id);
         continue;
       }
       layers_[tile->id] = layer;
-      pending.push_back({tile.get(), layer, total});
-      total += tile->texels.texels.size();
+      pending_.push_back({tile.get(), uint32_t(layer)});
     }
-    if (!pending.empty()) {
-      std::vector<std::pair<const uint8_t*, size_t>> sources;
-      for (const Pending& p : pending)
-        sources.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
-      staging_.stage(sources);
-      const GLsizei side = GLsizei(info_.storedTileSidePx());
-      for (const Pending& p : pending) {
-        glTextureSubImage3D(tiles_.get(), 0, 0, 0, p.layer, side, side, 1,
-                            tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
-                            reinterpret_cast<const void*>(p.offset));
-        streamer.uploaded(p.tile->id);
-        ++stats_.uploads;
-        stats_.upload_bytes += p.tile->texels.texels.size();
-      }
-      staging_.unbind();
-    }
-    stats_.resident_tiles = uint32_t(layers_.size());
-    stats_.apply_cpu_ms = msSince(started);
+    const GLsizei side = GLsizei(info_.storedTileSidePx());
+    uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
+      glTextureSubImage3D(tiles_.get(), 0, 0, 0, GLint(layer), side, side, 1,
+                          tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                          reinterpret_cast<const void*>(offset));
+    });
+    return endApply(started, layers_.size());
   }
 
   void draw(const View& view) override {
     const auto started = Clock::now();
-    target_.bind(view.viewportWidth(), view.viewportHeight());
-    glClearColor(0, 0, 0, 0);
-    glClear(GL_COLOR_BUFFER_BIT);
-    glDisable(GL_DEPTH_TEST);
-    glDisable(GL_BLEND);
+    const ViewProjection transform = beginDraw(view);
+    collectInstances(view, transform);
+    stats_.tiles_drawn = uint32_t(instances_.size());
+    if (!instances_.empty()) {
+      glNamedBufferData(instances_buffer_.get(), GLsizeiptr(instances_.size() * sizeof(Instance)),
+                        instances_.data(), GL_STREAM_DRAW);
+      if (info_.border_px == 0) bindNeighbours(view.image);
+      glUseProgram(program_.get());
+      glBindTextureUnit(0, tiles_.get());
+      glBindVertexArray(vertex_array_.get());
+      glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));
+      glBindVertexArray(0);
+    }
+    stats_.draw_cpu_ms = msSince(started);
+  }
 
-    const ViewTransform transform = viewTransform(view, info_);
+  bool resident(const TileId& tile) const override { return layers_.count(tile) > 0; }
+  RendererKind kind() const override { return RendererKind::kTileQuads; }
+
+ private:
+  /// The quads of this frame: every resident tile that meets the view's footprint (the
+  /// runtime's, for field-of-view culling), coarse levels first so that finer tiles draw
+  /// over them where they apply.
+  void collectInstances(const View& view, const ViewProjection& transform) {
     const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
     instances_.clear();
-    const uint32_t t = info_.tile_size_px;
     // An orthographic view has one level of detail everywhere: tiles finer than it would
     // discard every fragment, and a coarser tile whose children are all resident is hidden
     // under them. Skipping both keeps overdraw near one layer instead of one per resident
-    // level (on llvmpipe, 9 levels cost 120 ms a 1280x720 frame). Perspective views keep
-    // every level: their level of detail varies across a tile.
+    // level (docs/rendering.md has the cost on llvmpipe). Perspective views keep every
+    // level: their level of detail varies across a tile.
     const bool ortho = view.kind == View::Kind::kOrtho;
     const uint32_t finest_drawn =
-        ortho ? desiredLevelFor(view.ortho.texels_per_pixel > 0 ? view.ortho.texels_per_pixel : 1,
-                                info_.level_count)
-              : 0;
-    auto hiddenByChildren = [&](const TileId& id) {
-      if (!ortho || id.level == 0 || id.level - 1 < finest_drawn) return false;
-      const uint32_t child_level = id.level - 1;
-      for (uint32_t dy = 0; dy < 2; ++dy)
-        for (uint32_t dx = 0; dx < 2; ++dx) {
-          const uint32_t cx = id.x * 2 + dx, cy = id.y * 2 + dy;
-          if (cx >= info_.tilesX(child_level) || cy >= info_.tilesY(child_level)) continue;
-          if (!layers_.count({id.image, child_level, cx, cy})) return false;
-        }
-      return true;
-    };
+        ortho ? desiredLevelFor(texelsPerPixelOf(view.ortho), info_.level_count) : 0;
     for (const auto& [id, layer] : layers_) {
-      if (id.level < finest_drawn || hiddenByChildren(id)) continue;
-      const double span = std::ldexp(double(t), int(id.level));
-      double x0 = id.x * span, y0 = id.y * span;
-      double x1 = std::min(x0 + span, double(info_.width_px));
-      double y1 = std::min(y0 + span, double(info_.height_px));
+      if (id.level < finest_drawn || (ortho && hiddenByChildren(id, finest_drawn))) continue;
+      const double span = std::ldexp(double(info_.tile_size_px), int(id.level));
+      const double x0 = id.x * span, y0 = id.y * span;
+      const double x1 = std::min(x0 + span, double(info_.width_px));
+      const double y1 = std::min(y0 + span, double(info_.height_px));
       if (x1 <= footprint.x0 || x0 >= footprint.x1 || y1 <= footprint.y0 || y0 >= footprint.y1)
         continue;  // outside the field of view
       Instance instance{};
@@ -294,53 +248,50 @@ class TileQuadsRenderer final : public TargetRenderer {
       instance.info[3] = coarsest ? 1 : 0;
       instances_.push_back(instance);
     }
-    // Coarse levels first: finer tiles draw over them where they apply.
     std::sort(instances_.begin(), instances_.end(),
               [](const Instance& a, const Instance& b) { return a.info[0] > b.info[0]; });
-    stats_.tiles_drawn = uint32_t(instances_.size());
-    if (!instances_.empty()) {
-      glNamedBufferData(instances_buffer_.get(), GLsizeiptr(instances_.size() * sizeof(Instance)),
-                        instances_.data(), GL_STREAM_DRAW);
-      if (info_.border_px == 0) {
-        // Borderless tiles filter across their edges with texels of their resident
-        // neighbours: the layers of the 3 x 3 tiles around each tile and around its parent.
-        neighbours_.clear();
-        auto layerOf = [&](uint32_t level, int64_t x, int64_t y) {
-          if (x < 0 || y < 0) return GLint(-1);
-          auto it = layers_.find({view.image, level, uint32_t(x), uint32_t(y)});
-          return it == layers_.end() ? GLint(-1) : it->second;
-        };
-        for (const Instance& instance : instances_) {
-          const uint32_t level = uint32_t(instance.info[0]);
-          for (int generation = 0; generation < 2; ++generation) {
-            const int64_t x = instance.tile[0] >> generation, y = instance.tile[1] >> generation;
-            for (int dy = -1; dy <= 1; ++dy)
-              for (int dx = -1; dx <= 1; ++dx)
-                neighbours_.push_back(level + generation < info_.level_count
-                                          ? layerOf(level + generation, x + dx, y + dy)
-                                          : GLint(-1));
-          }
-        }
-        glNamedBufferData(neighbours_buffer_.get(), GLsizeiptr(neighbours_.size() * sizeof(GLint)),
-                          neighbours_.data(), GL_STREAM_DRAW);
-        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, neighbours_buffer_.get());
-      }
-      glUseProgram(program_.get());
-      glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
-                                transform.view_projection);
-      glBindTextureUnit(0, tiles_.get());
-      glBindVertexArray(vertex_array_.get());
-      glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));
-      glBindVertexArray(0);
-    }
-    stats_.draw_cpu_ms = msSince(started);
   }
 
-  bool resident(const TileId& tile) const override { return layers_.count(tile) > 0; }
-  const RenderStats& stats() const override { return stats_; }
-  RendererKind kind() const override { return RendererKind::kTileQuads; }
+  /// True when every child of `id` that lies on the image is resident, at a level an
+  /// orthographic view at `finest_drawn` draws: they hide it.
+  bool hiddenByChildren(const TileId& id, uint32_t finest_drawn) const {
+    if (id.level == 0 || id.level - 1 < finest_drawn) return false;
+    const uint32_t child_level = id.level - 1;
+    for (uint32_t dy = 0; dy < 2; ++dy)
+      for (uint32_t dx = 0; dx < 2; ++dx) {
+        const uint32_t cx = id.x * 2 + dx, cy = id.y * 2 + dy;
+        if (cx >= info_.tilesX(child_level) || cy >= info_.tilesY(child_level)) continue;
+        if (!layers_.count({id.image, child_level, cx, cy})) return false;
+      }
+    return true;
+  }
 
- private:
+  /// Borderless tiles filter across their edges with texels of their resident neighbours:
+  /// per instance, the layers of the 3 x 3 tiles around it and around its parent (-1 where
+  /// none is resident), in the storage buffer the fragment shader reads.
+  void bindNeighbours(uint32_t image) {
+    neighbours_.clear();
+    auto layerOf = [&](uint32_t level, int64_t x, int64_t y) {
+      if (x < 0 || y < 0) return GLint(-1);
+      auto it = layers_.find({image, level, uint32_t(x), uint32_t(y)});
+      return it == layers_.end() ? GLint(-1) : it->second;
+    };
+    for (const Instance& instance : instances_) {
+      const uint32_t level = uint32_t(instance.info[0]);
+      for (int generation = 0; generation < 2; ++generation) {
+        const int64_t x = instance.tile[0] >> generation, y = instance.tile[1] >> generation;
+        for (int dy = -1; dy <= 1; ++dy)
+          for (int dx = -1; dx <= 1; ++dx)
+            neighbours_.push_back(level + generation < info_.level_count
+                                      ? layerOf(level + generation, x + dx, y + dy)
+                                      : GLint(-1));
+      }
+    }
+    glNamedBufferData(neighbours_buffer_.get(), GLsizeiptr(neighbours_.size() * sizeof(GLint)),
+                      neighbours_.data(), GL_STREAM_DRAW);
+    glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, neighbours_buffer_.get());
+  }
+
   /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
   Result<void> growLayers(uint32_t layers) {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
@@ -379,31 +330,25 @@ class TileQuadsRenderer final : public TargetRenderer {
     layers_.erase(it);
   }
 
-  ImageInfo info_;
-  GlRendererOptions options_;
-  Program program_;
-  GLint view_projection_uniform_ = -1;
   Texture tiles_;
   GLint max_layers_ = 0;
   uint32_t layer_capacity_ = 0;
   std::vector<GLint> free_layers_;
   std::unordered_map<TileId, GLint, TileIdHash> layers_;
+  std::vector<PendingUpload> pending_;  ///< scratch of apply
   Buffer instances_buffer_;
-  UploadStaging staging_;
-  VertexArray vertex_array_;
   std::vector<Instance> instances_;
   Buffer neighbours_buffer_;
   std::vector<GLint> neighbours_;
-  RenderStats stats_;
 };
 
 }  // namespace
 
-Result<std::unique_ptr<GlRenderer>> createTileQuadsRenderer(const ImageInfo& info,
-                                                            const GlRendererOptions& options) {
+Result<std::unique_ptr<Renderer>> createTileQuadsRenderer(const ImageInfo& info,
+                                                          const RendererOptions& options) {
   auto renderer = std::make_unique<TileQuadsRenderer>(info, options);
   TESSERA_TRY(renderer->init());
-  return std::unique_ptr<GlRenderer>(std::move(renderer));
+  return std::unique_ptr<Renderer>(std::move(renderer));
 }
 
 }  // namespace tessera::gl

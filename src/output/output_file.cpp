@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -11,13 +12,20 @@
 
 #include <fmt/format.h>
 
+#include <tessera/check.h>
+
 namespace tessera::detail {
 
 namespace {
 
-std::string directoryOf(const std::string& path) {
-  std::filesystem::path parent = std::filesystem::path(path).parent_path();
-  return parent.empty() ? "." : parent.string();
+// What a non-regular file is, for the refusal's message.
+const char* fileKind(mode_t mode) {
+  if (S_ISDIR(mode)) return "a directory";
+  if (S_ISCHR(mode)) return "a character device";
+  if (S_ISBLK(mode)) return "a block device";
+  if (S_ISFIFO(mode)) return "a FIFO (named pipe)";
+  if (S_ISSOCK(mode)) return "a socket";
+  return "not a regular file";
 }
 
 std::string errnoText(int error) {
@@ -28,36 +36,86 @@ ErrorCode ioCode(int error) {
   return error == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo;
 }
 
-}  // namespace
-
-Result<TempFile> TempFile::create(const std::string& final_path) {
-  std::string dir = directoryOf(final_path);
+// `role` says which directory: "output directory", "spool directory".
+Result<void> checkDirectory(const std::string& dir, const std::string& what, const char* role) {
   struct stat st {};
   if (::stat(dir.c_str(), &st) != 0)
-    return fail(ioCode(errno), fmt::format("{}: output directory {} is not accessible: {}",
-                                           final_path, dir, errnoText(errno)));
+    return fail(ioCode(errno),
+                fmt::format("{}: {} {} is not accessible: {}", what, role, dir, errnoText(errno)));
   if (!S_ISDIR(st.st_mode))
-    return fail(ErrorCode::kIo, fmt::format("{}: {} is not a directory", final_path, dir));
+    return fail(ErrorCode::kIo, fmt::format("{}: {} is not a directory", what, dir));
+  return {};
+}
+
+std::atomic<uint32_t> g_temp_counter{0};
+
+}  // namespace
+
+std::string directoryOf(const std::string& path) {
+  std::filesystem::path parent = std::filesystem::path(path).parent_path();
+  return parent.empty() ? "." : parent.string();
+}
+
+Result<void> checkOutputPath(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return {};  // nothing there (or a dangling link) to lose
+  if (S_ISREG(st.st_mode)) return {};
+  return fail(ErrorCode::kInvalidArgument,
+              fmt::format("{}: exists and is {}, not a regular file; refusing to replace it ({})",
+                          path, fileKind(st.st_mode),
+                          S_ISDIR(st.st_mode) ? "name a file inside it"
+                                              : "write to a regular file and copy it there"));
+}
+
+Result<DiskSpace> diskSpaceAt(const std::string& directory) {
+  struct statvfs fs {};
+  struct stat st {};
+  if (::statvfs(directory.c_str(), &fs) != 0 || ::stat(directory.c_str(), &st) != 0)
+    return fail(ioCode(errno),
+                fmt::format("{}: cannot examine the file system: {}", directory, errnoText(errno)));
+  return DiskSpace{uint64_t(fs.f_bavail) * fs.f_frsize, uint64_t(st.st_dev)};
+}
+
+Result<TempFile> TempFile::openIn(const std::string& dir, const std::string& what,
+                                  const std::string& fallback_path) {
   int fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0644);
-  if (fd >= 0) return TempFile(fd, final_path, "");
+  if (fd >= 0) return TempFile(fd, what, "");
   if (errno != EOPNOTSUPP && errno != EISDIR && errno != EINVAL && errno != ENOENT)
-    return fail(ErrorCode::kIo, fmt::format("{}: cannot create a file in {}: {}", final_path, dir,
-                                            errnoText(errno)));
+    return fail(ErrorCode::kIo,
+                fmt::format("{}: cannot create a file in {}: {}", what, dir, errnoText(errno)));
   // File systems without O_TMPFILE: a named temporary, removed by the destructor.
-  static std::atomic<uint32_t> counter{0};
-  std::string temp = fmt::format("{}.tmp-{}-{}", final_path, ::getpid(), counter++);
-  fd = ::open(temp.c_str(), O_CREAT | O_EXCL | O_RDWR | O_CLOEXEC, 0644);
+  fd = ::open(fallback_path.c_str(), O_CREAT | O_EXCL | O_RDWR | O_CLOEXEC, 0644);
   if (fd < 0)
-    return fail(ErrorCode::kIo, fmt::format("{}: cannot create temporary {}: {}", final_path, temp,
-                                            errnoText(errno)));
-  return TempFile(fd, final_path, temp);
+    return fail(ErrorCode::kIo, fmt::format("{}: cannot create temporary {}: {}", what,
+                                            fallback_path, errnoText(errno)));
+  return TempFile(fd, what, fallback_path);
+}
+
+Result<TempFile> TempFile::create(const std::string& final_path) {
+  const std::string dir = directoryOf(final_path);
+  TESSERA_TRY(checkDirectory(dir, final_path, "output directory"));
+  // Before anything is written: a build to /dev/null should fail at once, not after an hour.
+  TESSERA_TRY(checkOutputPath(final_path));
+  return openIn(dir, final_path,
+                fmt::format("{}.tmp-{}-{}", final_path, ::getpid(), g_temp_counter++));
+}
+
+Result<TempFile> TempFile::createScratch(const std::string& directory, const std::string& purpose) {
+  TESSERA_TRY(checkDirectory(directory, purpose, "directory"));
+  const std::string fallback = (std::filesystem::path(directory) /
+                                fmt::format(".tessera-scratch-{}-{}", ::getpid(), g_temp_counter++))
+                                   .string();
+  TESSERA_ASSIGN_OR_RETURN(TempFile file, openIn(directory, purpose, fallback));
+  file.scratch_ = true;
+  return file;
 }
 
 TempFile::TempFile(TempFile&& other) noexcept
     : fd_(other.fd_),
       final_path_(std::move(other.final_path_)),
       temp_path_(std::move(other.temp_path_)),
-      committed_(other.committed_) {
+      committed_(other.committed_),
+      scratch_(other.scratch_) {
   other.fd_ = -1;
   other.temp_path_.clear();
 }
@@ -96,14 +154,17 @@ Result<void> TempFile::pread(uint64_t offset_bytes, std::span<uint8_t> out) cons
 }
 
 Result<void> TempFile::commit() {
+  TESSERA_CHECK(!scratch_) << final_path_ << ": a scratch file is never committed";
   if (::fsync(fd_) != 0)
     return fail(ErrorCode::kIo, fmt::format("{}: fsync failed: {}", final_path_, errnoText(errno)));
+  // Again: a FIFO or device node made at the path while the file was written is not replaced
+  // either (a narrower race than none: rename itself cannot be told to spare one).
+  TESSERA_TRY(checkOutputPath(final_path_));
   std::string named = temp_path_;
   if (named.empty()) {
     // Give the anonymous file a unique name beside the target, then rename it over the target:
     // linkat cannot replace an existing file, rename can, atomically.
-    static std::atomic<uint32_t> counter{0};
-    named = fmt::format("{}.tmp-{}-{}", final_path_, ::getpid(), counter++);
+    named = fmt::format("{}.tmp-{}-{}", final_path_, ::getpid(), g_temp_counter++);
     std::string proc = fmt::format("/proc/self/fd/{}", fd_);
     if (::linkat(AT_FDCWD, proc.c_str(), AT_FDCWD, named.c_str(), AT_SYMLINK_FOLLOW) != 0)
       return fail(ErrorCode::kIo, fmt::format("{}: cannot name the finished file: {}", final_path_,

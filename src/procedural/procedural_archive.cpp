@@ -14,6 +14,7 @@
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/procedural.h"
+#include "format/sections.h"
 
 namespace tessera {
 
@@ -71,8 +72,16 @@ Result<std::shared_ptr<const ProceduralTiles>> ProceduralTiles::open(const Archi
   std::vector<uint8_t> header_bytes(kHeaderBytes);
   TESSERA_TRY(source.read(0, header_bytes));
   TESSERA_ASSIGN_OR_RETURN(impl->header, decodeHeader(header_bytes, archive.name()));
-  TESSERA_ASSIGN_OR_RETURN(BlockRef block,
-                           decodeProceduralHeader(header_bytes, impl->header, archive.name()));
+  TESSERA_ASSIGN_OR_RETURN(const BlockRef table,
+                           decodeSectionTableRef(header_bytes, impl->header, archive.name()));
+  std::vector<SectionEntry> sections;
+  if (table.length_bytes != 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> table_bytes,
+                             readVerified(source, table, archive.name() + ": section table"));
+    TESSERA_ASSIGN_OR_RETURN(sections,
+                             decodeSectionTable(table_bytes, impl->header, archive.name()));
+  }
+  TESSERA_ASSIGN_OR_RETURN(BlockRef block, decodeProceduralRef(sections, archive.name()));
   if (block.length_bytes == 0)
     return fail(ErrorCode::kNotFound, archive.name() + ": the archive has no procedural tiles");
   TESSERA_ASSIGN_OR_RETURN(

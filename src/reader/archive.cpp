@@ -10,6 +10,7 @@
 #include "codecs/decode.h"
 #include "format/checksum.h"
 #include "format/metadata.h"
+#include "reader/parent_chain.h"
 
 namespace tessera {
 
@@ -24,13 +25,6 @@ uint64_t levelKey(uint32_t image, uint32_t level) {
 
 uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
   return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
-}
-
-// Images < 2^16, levels < 2^5 and tile columns and rows < 2^18 (kMaxImageSidePx over the
-// smallest tile) pack into 57 bits.
-uint64_t tileKey(const TileId& tile) {
-  return (uint64_t(tile.image) << 41) | (uint64_t(tile.level) << 36) | (uint64_t(tile.x) << 18) |
-         tile.y;
 }
 
 }  // namespace
@@ -285,38 +279,9 @@ Result<void> Archive::decodeTileInto(const TileId& tile, const TileEntry& entry,
   return decodeWithParent(tile, entry, payload, image, &parent, scratch);
 }
 
-std::shared_ptr<const Image> Archive::Impl::cachedParent(const TileId& tile) {
-  std::lock_guard lock(parent_mutex);
-  auto it = parents.find(tileKey(tile));
-  return it == parents.end() ? nullptr : it->second;
-}
-
-void Archive::Impl::cacheParent(const TileId& tile, std::shared_ptr<const Image> image) {
-  std::lock_guard lock(parent_mutex);
-  const uint64_t key = tileKey(tile);
-  if (parents.count(key) != 0) return;
-  parent_bytes += image->texels.size();
-  parents.emplace(key, std::move(image));
-  parent_order.push_back(key);
-  while (parent_bytes > kParentCacheBytes && parent_order.size() > 1) {
-    auto it = parents.find(parent_order.front());
-    parent_bytes -= it->second->texels.size();
-    parents.erase(it);
-    parent_order.pop_front();
-  }
-}
-
 Result<std::shared_ptr<const Image>> Archive::decodedParent(const TileId& tile,
                                                             CodecScratch* scratch) const {
-  const TileId parent = parentTile(tile);
-  if (auto cached = impl_->cachedParent(parent)) return cached;
-  Result<Image> decoded = readTile(parent, scratch);
-  if (!decoded)
-    return fail(decoded.error().code, fmt::format("{}: its parent cannot be decoded: {}",
-                                                  impl_->tileName(tile), decoded.error().message));
-  auto shared = std::make_shared<const Image>(std::move(*decoded));
-  impl_->cacheParent(parent, shared);
-  return shared;
+  return detail::decodeParent(*this, tile, impl_->parents, scratch);
 }
 
 Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entry,

@@ -12,6 +12,7 @@
 
 #include "format/directory.h"
 #include "format/header.h"
+#include "recent_parents.h"
 
 namespace tessera {
 
@@ -51,15 +52,9 @@ struct Archive::Impl {
   std::unordered_map<uint64_t, std::shared_future<PageResult>> pages_loading;
   std::string tileName(const TileId& tile) const;
 
-  /// Decoded parents of parent-coded (ptm) tiles, so that the four children of a parent, read
-  /// one after another (a region, verify, extract), decode it once. FIFO within a byte budget.
-  static constexpr size_t kParentCacheBytes = 32u << 20;
-  std::mutex parent_mutex;  // guards parents, parent_order and parent_bytes
-  std::unordered_map<uint64_t, std::shared_ptr<const Image>> parents;
-  std::deque<uint64_t> parent_order;
-  size_t parent_bytes = 0;
-  std::shared_ptr<const Image> cachedParent(const TileId& tile);
-  void cacheParent(const TileId& tile, std::shared_ptr<const Image> image);
+  /// Decoded parents of parent-coded (ptm) tiles for decodeTile without a parent (regions,
+  /// verify, extract, the server). The loader passes its own decoded-tile cache instead.
+  detail::RecentParents parents;
 };
 
 }  // namespace tessera

@@ -11,7 +11,7 @@
 
 #include <tessera/render.h>
 
-#include "view_math.h"
+#include "view/screen_mapping.h"
 
 namespace tessera {
 

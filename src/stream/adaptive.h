@@ -12,7 +12,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include <tessera/link.h>
+#include "link_estimator.h"
 #include <tessera/stream.h>
 
 namespace tessera::detail {

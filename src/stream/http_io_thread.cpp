@@ -9,6 +9,7 @@
 
 #include <fmt/format.h>
 
+#include "content_range.h"
 #include "http_source_impl.h"
 
 namespace tessera::detail {
@@ -20,47 +21,6 @@ std::string trim(std::string_view text) {
   while (begin < end && std::isspace(static_cast<unsigned char>(text[begin]))) ++begin;
   while (end > begin && std::isspace(static_cast<unsigned char>(text[end - 1]))) --end;
   return std::string(text.substr(begin, end - begin));
-}
-
-/// "bytes A-B/T" (T may be "*"): the range a 206 carries, or the size a 416 reports
-/// ("bytes */T", has_range false).
-struct ContentRange {
-  bool has_range = false;
-  uint64_t first = 0, last = 0;
-  bool has_total = false;
-  uint64_t total = 0;
-};
-
-// Decimal digits only, the whole text, within 64 bits (from_chars takes no sign or space for
-// an unsigned type).
-bool parseUint(std::string_view text, uint64_t& out) {
-  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), out);
-  return error == std::errc() && end == text.data() + text.size();
-}
-
-bool parseContentRange(const std::string& header, ContentRange& out) {
-  std::string_view text = header;
-  if (lowercase(std::string(text.substr(0, 6))) != "bytes ") return false;
-  text.remove_prefix(6);
-  const size_t slash = text.find('/');
-  if (slash == std::string_view::npos) return false;
-  std::string_view range = text.substr(0, slash), total = text.substr(slash + 1);
-  if (total == "*") {
-    out.has_total = false;
-  } else {
-    if (!parseUint(total, out.total)) return false;
-    out.has_total = true;
-  }
-  if (range == "*") {
-    out.has_range = false;
-    return out.has_total;
-  }
-  const size_t dash = range.find('-');
-  if (dash == std::string_view::npos) return false;
-  if (!parseUint(range.substr(0, dash), out.first) || !parseUint(range.substr(dash + 1), out.last))
-    return false;
-  out.has_range = out.first <= out.last;
-  return out.has_range;
 }
 
 /// Statuses worth another attempt: the server or a proxy may answer the next one.
@@ -302,89 +262,108 @@ bool HttpSource::finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_6
   curl_easy_getinfo(transfer.easy, CURLINFO_STARTTRANSFER_TIME_T, &first_byte_us);
   stopAttempt(transfer);
   const std::string what = fmt::format("{}: {}", url_, rangeText(transfer));
-  auto retryOrFail = [&](ErrorCode error_code, const std::string& cause,
-                         std::chrono::milliseconds server_wait) -> bool {
-    if (transfer.attempt < options_.max_attempts) {
-      const uint32_t shift = std::min<uint32_t>(transfer.attempt - 1, 20);
-      auto backoff = std::min<std::chrono::milliseconds>(options_.retry_initial * (1u << shift),
-                                                         options_.retry_max);
-      backoff = std::chrono::milliseconds(int64_t(
-          double(backoff.count()) * std::uniform_real_distribution<double>(0.5, 1.0)(random)));
-      if (server_wait.count() > 0) backoff = std::min(server_wait, options_.retry_after_max);
-      transfer.not_before = Clock::now() + backoff;
-      return true;
-    }
-    complete(
-        transfer,
-        fail(error_code, fmt::format("{}: {} (after {} attempts)", what, cause, transfer.attempt)),
-        true);
-    return false;
-  };
-
   if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
-    std::string now = !transfer.etag.empty()            ? transfer.etag
-                      : !transfer.last_modified.empty() ? transfer.last_modified
-                                                        : "unknown";
-    Error error = transfer.change_error;
-    error.message = fmt::format("{}, now {}); reopen it", error.message, now);
-    setChanged(error);
-    complete(transfer, Unexpected(error), true);
+    finishChangeReport(transfer);
     return false;
   }
-  if (transfer.fault == Fault::kCancelled) {
-    complete(transfer, Unexpected(cancelledOf(transfer)), false);
-    return false;
-  }
-  if (transfer.fault == Fault::kStalled)
-    return retryOrFail(ErrorCode::kIo,
-                       fmt::format("stalled: no byte for {} ms", options_.stall_timeout.count()),
-                       {});
-  if (transfer.fault == Fault::kChanged) {
-    beginChangeReport(transfer, transfer.fault_detail);
+  if (transfer.fault != Fault::kNone) return finishFault(transfer, what, random);
+  if (code != CURLE_OK) return finishCurlError(transfer, code, what, random);
+  return finishResponse(transfer, what, double(total_us) / 1e6, double(first_byte_us) / 1e6,
+                        random);
+}
+
+bool HttpSource::retryOrFail(Transfer& transfer, ErrorCode code, const std::string& what,
+                             const std::string& cause, std::chrono::milliseconds server_wait,
+                             std::mt19937_64& random) {
+  if (transfer.attempt < options_.max_attempts) {
+    const uint32_t shift = std::min<uint32_t>(transfer.attempt - 1, 20);
+    auto backoff = std::min<std::chrono::milliseconds>(options_.retry_initial * (1u << shift),
+                                                       options_.retry_max);
+    backoff = std::chrono::milliseconds(int64_t(
+        double(backoff.count()) * std::uniform_real_distribution<double>(0.5, 1.0)(random)));
+    if (server_wait.count() > 0) backoff = std::min(server_wait, options_.retry_after_max);
+    transfer.not_before = Clock::now() + backoff;
     return true;
   }
-  if (transfer.fault == Fault::kWholeFile) {
-    if (transfer.kind == Transfer::Kind::kRead && !transfer.etag.empty() &&
-        transfer.etag != etag_) {
-      beginChangeReport(transfer, "");
-      return true;
-    }
-    complete(transfer,
-             fail(ErrorCode::kUnsupported,
-                  fmt::format("{}: server does not honour byte ranges (answered 200 with the "
-                              "whole file to a Range request)",
-                              what)),
-             true);
-    return false;
+  complete(transfer,
+           fail(code, fmt::format("{}: {} (after {} attempts)", what, cause, transfer.attempt)),
+           true);
+  return false;
+}
+
+void HttpSource::finishChangeReport(Transfer& transfer) {
+  std::string now = !transfer.etag.empty()            ? transfer.etag
+                    : !transfer.last_modified.empty() ? transfer.last_modified
+                                                      : "unknown";
+  Error error = transfer.change_error;
+  error.message = fmt::format("{}, now {}); reopen it", error.message, now);
+  setChanged(error);
+  complete(transfer, Unexpected(error), true);
+}
+
+bool HttpSource::finishFault(Transfer& transfer, const std::string& what, std::mt19937_64& random) {
+  switch (transfer.fault) {
+    case Fault::kNone: break;
+    case Fault::kCancelled:
+      complete(transfer, Unexpected(cancelledOf(transfer)), false);
+      return false;
+    case Fault::kStalled:
+      return retryOrFail(transfer, ErrorCode::kIo, what,
+                         fmt::format("stalled: no byte for {} ms", options_.stall_timeout.count()),
+                         {}, random);
+    case Fault::kChanged: beginChangeReport(transfer, transfer.fault_detail); return true;
+    case Fault::kWholeFile:
+      if (transfer.kind == Transfer::Kind::kRead && !transfer.etag.empty() &&
+          transfer.etag != etag_) {
+        beginChangeReport(transfer, "");
+        return true;
+      }
+      complete(transfer,
+               fail(ErrorCode::kUnsupported,
+                    fmt::format("{}: server does not honour byte ranges (answered 200 with the "
+                                "whole file to a Range request)",
+                                what)),
+               true);
+      return false;
+    case Fault::kBadRange:
+    case Fault::kTooLong:
+      complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, transfer.fault_detail)),
+               true);
+      return false;
   }
-  if (transfer.fault == Fault::kBadRange || transfer.fault == Fault::kTooLong) {
-    complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, transfer.fault_detail)),
-             true);
-    return false;
-  }
-  if (code != CURLE_OK) {
-    const std::string cause =
-        transfer.curl_error[0] ? std::string(transfer.curl_error) : curl_easy_strerror(code);
-    if (code == CURLE_PARTIAL_FILE)
-      return retryOrFail(ErrorCode::kIo, "truncated response: " + cause, {});
-    if (retryableCurlCode(code)) return retryOrFail(ErrorCode::kIo, cause, {});
-    complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, cause)), true);
-    return false;
-  }
+  TESSERA_CHECK(false) << what << ": finishFault without a fault";
+  return false;
+}
+
+bool HttpSource::finishCurlError(Transfer& transfer, CURLcode code, const std::string& what,
+                                 std::mt19937_64& random) {
+  const std::string cause =
+      transfer.curl_error[0] ? std::string(transfer.curl_error) : curl_easy_strerror(code);
+  if (code == CURLE_PARTIAL_FILE)
+    return retryOrFail(transfer, ErrorCode::kIo, what, "truncated response: " + cause, {}, random);
+  if (retryableCurlCode(code))
+    return retryOrFail(transfer, ErrorCode::kIo, what, cause, {}, random);
+  complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, cause)), true);
+  return false;
+}
+
+bool HttpSource::finishResponse(Transfer& transfer, const std::string& what, double seconds,
+                                double first_byte_seconds, std::mt19937_64& random) {
   const long status = transfer.status;
   const std::string status_line = fmt::format(
       "HTTP {}{}{}", status, transfer.status_text.empty() ? "" : " ", transfer.status_text);
   if (status == 206) {
-    if (!transfer.body_started) return retryOrFail(ErrorCode::kIo, "206 without a body", {});
+    if (!transfer.body_started)
+      return retryOrFail(transfer, ErrorCode::kIo, what, "206 without a body", {}, random);
     if (transfer.received != transfer.length_bytes)
-      return retryOrFail(ErrorCode::kIo,
+      return retryOrFail(transfer, ErrorCode::kIo, what,
                          fmt::format("truncated response: {} of {} bytes", transfer.received,
                                      transfer.length_bytes),
-                         {});
+                         {}, random);
     if (transfer.kind == Transfer::Kind::kProbe) {
       transfer.length_bytes = transfer.received;
     }
-    recordSample(transfer, double(total_us) / 1e6, double(first_byte_us) / 1e6);
+    recordSample(transfer, seconds, first_byte_seconds);
     complete(transfer, {}, false);
     return false;
   }
@@ -392,44 +371,45 @@ bool HttpSource::finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_6
     beginChangeReport(transfer, "");
     return true;
   }
-  if (status == 416) {
-    ContentRange range;
-    if (transfer.kind == Transfer::Kind::kProbe &&
-        parseContentRange(transfer.content_range, range) && !range.has_range && range.has_total &&
-        range.total == 0) {
-      transfer.probe_total = 0;
-      transfer.received = 0;
-      complete(transfer, {}, false);
-      return false;
-    }
-    if (transfer.kind == Transfer::Kind::kRead &&
-        parseContentRange(transfer.content_range, range) && range.has_total &&
-        range.total != size_bytes_) {
-      beginChangeReport(transfer,
-                        fmt::format("size was {} bytes, now {}", size_bytes_, range.total));
-      return true;
-    }
-    complete(transfer,
-             fail(ErrorCode::kIo, fmt::format("{}: {} (range not satisfiable)", what, status_line)),
-             true);
-    return false;
-  }
+  if (status == 416) return finishUnsatisfiable(transfer, what, status_line);
   if (status == 404 || status == 410) {
     complete(transfer, fail(ErrorCode::kNotFound, fmt::format("{}: {}", what, status_line)), true);
     return false;
   }
   if (retryableStatus(status))
     return retryOrFail(
-        ErrorCode::kIo, status_line,
-        status == 429 || status == 503 ? retryAfter(transfer) : std::chrono::milliseconds(0));
+        transfer, ErrorCode::kIo, what, status_line,
+        status == 429 || status == 503 ? retryAfter(transfer) : std::chrono::milliseconds(0),
+        random);
   complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, status_line)), true);
+  return false;
+}
+
+bool HttpSource::finishUnsatisfiable(Transfer& transfer, const std::string& what,
+                                     const std::string& status_line) {
+  ContentRange range;
+  if (transfer.kind == Transfer::Kind::kProbe && parseContentRange(transfer.content_range, range) &&
+      !range.has_range && range.has_total && range.total == 0) {
+    transfer.probe_total = 0;
+    transfer.received = 0;
+    complete(transfer, {}, false);
+    return false;
+  }
+  if (transfer.kind == Transfer::Kind::kRead && parseContentRange(transfer.content_range, range) &&
+      range.has_total && range.total != size_bytes_) {
+    beginChangeReport(transfer, fmt::format("size was {} bytes, now {}", size_bytes_, range.total));
+    return true;
+  }
+  complete(transfer,
+           fail(ErrorCode::kIo, fmt::format("{}: {} (range not satisfiable)", what, status_line)),
+           true);
   return false;
 }
 
 std::chrono::milliseconds HttpSource::retryAfter(const Transfer& transfer) const {
   if (transfer.retry_after.empty()) return std::chrono::milliseconds(0);
   uint64_t seconds = 0;
-  if (parseUint(transfer.retry_after, seconds))
+  if (parseHttpUint(transfer.retry_after, seconds))
     return std::chrono::milliseconds(std::min<uint64_t>(seconds, 86400) * 1000);
   const time_t when = curl_getdate(transfer.retry_after.c_str(), nullptr);
   if (when < 0) return std::chrono::milliseconds(0);

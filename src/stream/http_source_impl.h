@@ -177,6 +177,35 @@ class HttpSource final : public ByteSource {
   /// After one attempt: completes the transfer, or returns true to retry it (not_before set).
   bool finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_64& random);
 
+  /// Schedules another attempt after a jittered exponential backoff (or the server's
+  /// Retry-After, capped) and returns true; after max_attempts completes the transfer with
+  /// `code` and `cause` and returns false.
+  bool retryOrFail(Transfer& transfer, ErrorCode code, const std::string& what,
+                   const std::string& cause, std::chrono::milliseconds server_wait,
+                   std::mt19937_64& random);
+
+  /// The HEAD asked by beginChangeReport answered: fails the source and the transfer with the
+  /// change, naming the version the server has now.
+  void finishChangeReport(Transfer& transfer);
+
+  /// An attempt the callbacks marked with a fault: cancelled, stalled (retried), another
+  /// version (change report), the whole file or a wrong range. finishAttempt's result.
+  bool finishFault(Transfer& transfer, const std::string& what, std::mt19937_64& random);
+
+  /// An attempt libcurl failed: retried when the error may pass (a truncated body, a timeout,
+  /// a refused connection), else completed with it. finishAttempt's result.
+  bool finishCurlError(Transfer& transfer, CURLcode code, const std::string& what,
+                       std::mt19937_64& random);
+
+  /// An attempt answered by the server: a complete 206 (its timing recorded), a change (412),
+  /// 416, not found, a retryable status or a failure. finishAttempt's result.
+  bool finishResponse(Transfer& transfer, const std::string& what, double seconds,
+                      double first_byte_seconds, std::mt19937_64& random);
+
+  /// A 416: an empty file when probing, a file that shrank when reading, else a failure.
+  bool finishUnsatisfiable(Transfer& transfer, const std::string& what,
+                           const std::string& status_line);
+
   std::chrono::milliseconds retryAfter(const Transfer& transfer) const;
 
   /// The file changed: asks the server (HEAD) for its version now, for the message; the

@@ -12,6 +12,8 @@
 
 #include <tessera/codec_scratch.h>
 
+#include "reader/parent_chain.h"
+
 namespace tessera::detail {
 
 using Clock = std::chrono::steady_clock;
@@ -39,6 +41,26 @@ size_t addToRuns(std::vector<ByteRange>& runs, uint64_t offset, uint64_t length,
   return runs.size() - 1;
 }
 
+/// The loader's decoded-tile cache as the reader's store of decoded parents, so a process
+/// keeps them in one cache: a parent found there is pinned for as long as the handle lives, so
+/// eviction cannot recycle its buffer half-way through a decode. The ancestors a fallback
+/// decodes are not kept: they would take budget the residency manager never asked for.
+class CachedParents final : public ParentStore {
+ public:
+  explicit CachedParents(TileCache& cache) : cache_(cache) {}
+  std::shared_ptr<const Image> find(const TileId& id) override {
+    std::shared_ptr<const DecodedTile> tile = cache_.pinIfCached(id);
+    if (!tile) return nullptr;
+    TileCache* cache = &cache_;
+    return std::shared_ptr<const Image>(&tile->texels,
+                                        [cache, tile](const Image*) { cache->unpin(tile->id); });
+  }
+  void offer(const TileId&, const std::shared_ptr<const Image>&) override {}
+
+ private:
+  TileCache& cache_;
+};
+
 /// Tiles one worker looks up for read-ahead per batch it takes: bounds the time a worker
 /// spends on hints before its own read.
 constexpr size_t kReadAheadTilesPerCall = 512;
@@ -46,14 +68,10 @@ constexpr size_t kReadAheadTilesPerCall = 512;
 }  // namespace
 
 struct LoaderPool::Batch {
-  struct Item {
-    TileId id;
-    TileEntry entry;
-  };
   TileId first;
   bool early = false;  ///< taken while its first tile's parent was loading (takeBatchLocked)
   std::vector<TileId> candidates;
-  std::vector<Item> items;
+  std::vector<BatchItem> items;
 };
 
 LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
@@ -446,82 +464,72 @@ void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
     work_ready_.notify_one();
 }
 
-Result<Image> LoaderPool::decodeParentChain(const TileId& child, CodecScratch& scratch,
-                                            uint64_t& bytes_read, size_t& reads) {
-  const Archive& archive = *archive_;
-  std::vector<TileId> chain;  // finest first
-  std::shared_ptr<const DecodedTile> base;
-  for (TileId id = Archive::parentTile(child);; id = Archive::parentTile(id)) {
-    if ((base = cache_.pinIfCached(id))) break;
-    chain.push_back(id);
-    if (!needsParent(id)) break;  // the coarsest level decodes on its own
-  }
-  const TileId base_id = base ? base->id : TileId{};
-  Image decoded;
-  const Image* parent = base ? &base->texels : nullptr;
-  Result<void> status;
-  for (auto it = chain.rbegin(); it != chain.rend() && status; ++it) {
-    Result<TileEntry> entry = archive.tileEntry(*it);
-    if (!entry) {
-      status = forwardError(entry);
-      break;
-    }
-    std::vector<uint8_t> payload;
-    if (entry->kind == TileKind::kEncoded) {
-      Result<std::vector<uint8_t>> read = archive.readPayload(*it, *entry);
-      ++reads;
-      if (!read) {
-        status = forwardError(read);
-        break;
-      }
-      bytes_read += read->size();
-      payload = std::move(*read);
-    }
-    Image next;
-    status = parent ? archive.decodeTileInto(*it, *entry, payload, next, *parent, &scratch)
-                    : archive.decodeTileInto(*it, *entry, payload, next, &scratch);
-    decoded = std::move(next);
-    parent = &decoded;
-  }
-  if (base) cache_.unpin(base_id);
-  if (!status)
-    return fail(status.error().code, fmt::format("{}: its parent cannot be decoded: {}",
-                                                 archive.tileName(child), status.error().message));
-  return decoded;
-}
-
 Result<void> LoaderPool::decodeItem(const TileId& id, const TileEntry& entry,
                                     std::span<const uint8_t> payload, Image& texels,
                                     size_t tile_bytes, CodecScratch& scratch) {
   const Archive& archive = *archive_;
-  if (entry.kind != TileKind::kEncoded || !codecNeedsParent(entry.codec) || !needsParent(id))
+  if (!codedAgainstParent(archive, id, entry))
     return archive.decodeTileInto(id, entry, payload, texels, &scratch);
-  const TileId parent_id = Archive::parentTile(id);
-  if (std::shared_ptr<const DecodedTile> parent = cache_.pinIfCached(parent_id)) {
-    Result<void> decoded =
-        archive.decodeTileInto(id, entry, payload, texels, parent->texels, &scratch);
-    cache_.unpin(parent_id);
-    return decoded;
-  }
-  // The parent left the cache after it loaded (or failed to load): its chain is read and
-  // decoded here, in the budget, never an unverified or stale parent.
+  CachedParents cached(cache_);
+  if (std::shared_ptr<const Image> parent = cached.find(Archive::parentTile(id)))
+    return archive.decodeTileInto(id, entry, payload, texels, *parent, &scratch);
+  // The parent left the cache after it loaded (or failed to load): the reader decodes its
+  // chain from the nearest cached ancestor down, in the budget, never an unverified or stale
+  // parent.
   if (!cache_.reserve(tile_bytes))
     return fail(ErrorCode::kIo, fmt::format("{}: tile cache full of pinned tiles", archive.name()));
-  uint64_t bytes_read = 0;
-  size_t reads = 0;
-  Result<Image> parent = decodeParentChain(id, scratch, bytes_read, reads);
+  ChainReads reads;
+  Result<std::shared_ptr<const Image>> parent = decodeParent(archive, id, cached, &scratch, &reads);
   {
     std::lock_guard lock(mutex_);
     ++stats_.parent_fallbacks;
-    stats_.reads += reads;
-    stats_.bytes_read += bytes_read;
+    stats_.reads += reads.reads;
+    stats_.bytes_read += reads.bytes_read;
   }
-  Result<void> decoded = parent
-                             ? archive.decodeTileInto(id, entry, payload, texels, *parent, &scratch)
-                             : Result<void>(forwardError(parent));
+  Result<void> decoded =
+      parent ? archive.decodeTileInto(id, entry, payload, texels, **parent, &scratch)
+             : Result<void>(forwardError(parent));
   cache_.unreserve(tile_bytes);
   return decoded;
 }
+
+std::vector<LoaderPool::BatchItem> LoaderPool::neighboursInRange(
+    std::span<const BatchItem> neighbours, const TileEntry& first, uint64_t gap_bytes,
+    uint64_t max_bytes) {
+  uint64_t begin = first.offset_bytes;
+  uint64_t end = begin + first.length_bytes;
+  std::vector<BatchItem> chosen;
+  for (const BatchItem& n : neighbours) {
+    if (n.entry.offset_bytes < end) continue;
+    if (n.entry.offset_bytes - end > gap_bytes) break;
+    const uint64_t new_end = n.entry.offset_bytes + n.entry.length_bytes;
+    if (new_end - begin > max_bytes) break;
+    end = new_end;
+    chosen.push_back(n);
+  }
+  for (auto it = neighbours.rbegin(); it != neighbours.rend(); ++it) {
+    const uint64_t n_end = it->entry.offset_bytes + it->entry.length_bytes;
+    if (n_end > begin) continue;
+    if (begin - n_end > gap_bytes) break;
+    if (end - it->entry.offset_bytes > max_bytes) break;
+    begin = it->entry.offset_bytes;
+    chosen.push_back(*it);
+  }
+  return chosen;
+}
+
+/// A batch's payloads as read: one run per merged read.
+struct LoaderPool::BatchReads {
+  struct Run {
+    ByteRange span;
+    std::vector<uint8_t> bytes;
+    Result<void> read;  ///< kCancelled: abandoned in flight, or skipped as no longer wanted
+  };
+  std::vector<Run> runs;
+  std::vector<size_t> run_of_item;  ///< per batch item: the run holding its payload (encoded)
+  size_t reads = 0;                 ///< read calls made
+  uint64_t bytes_read = 0;          ///< bytes they read; abandoned reads count none
+};
 
 void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   const Archive& archive = *archive_;
@@ -531,180 +539,175 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     return;
   }
   batch.items.push_back({batch.first, *first_entry});
-
-  // Batch: requests of the same level and urgency whose payloads extend the first one's range
-  // with gaps under batch_gap_bytes (neighbours on the Hilbert curve usually are).
-  if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty()) {
-    std::vector<Batch::Item> neighbours;
-    for (const TileId& id : batch.candidates) {
-      Result<TileEntry> entry = archive.tileEntry(id);
-      if (entry && entry->kind == TileKind::kEncoded) neighbours.push_back({id, *entry});
-    }
-    std::sort(neighbours.begin(), neighbours.end(), [](const auto& a, const auto& b) {
-      return a.entry.offset_bytes < b.entry.offset_bytes;
-    });
-    uint64_t begin = first_entry->offset_bytes;
-    uint64_t end = begin + first_entry->length_bytes;
-    std::vector<Batch::Item> chosen;
-    // Grow the range forwards, then backwards.
-    for (const auto& n : neighbours) {
-      if (n.entry.offset_bytes < end) continue;
-      if (n.entry.offset_bytes - end > options_.batch_gap_bytes) break;
-      uint64_t new_end = n.entry.offset_bytes + n.entry.length_bytes;
-      if (new_end - begin > options_.max_merged_read_bytes) break;
-      end = new_end;
-      chosen.push_back(n);
-    }
-    for (auto it = neighbours.rbegin(); it != neighbours.rend(); ++it) {
-      uint64_t n_end = it->entry.offset_bytes + it->entry.length_bytes;
-      if (n_end > begin) continue;
-      if (begin - n_end > options_.batch_gap_bytes) break;
-      if (end - it->entry.offset_bytes > options_.max_merged_read_bytes) break;
-      begin = it->entry.offset_bytes;
-      chosen.push_back(*it);
-    }
-    // Claim the chosen ones that are still queued (another worker or a new frame may have
-    // taken or cancelled them meanwhile).
-    const auto now = Clock::now();
-    std::lock_guard lock(mutex_);
-    for (const auto& item : chosen) {
-      auto it = std::find_if(queue_.begin(), queue_.end(),
-                             [&](const Pending& p) { return p.id == item.id; });
-      if (it == queue_.end()) continue;
-      queue_.erase(it);
-      in_flight_.insert(item.id);
-      if (any_dependent_ && needsParent(item.id) && in_flight_.count(Archive::parentTile(item.id)))
-        ++stats_.children_read_early;
-      if (auto w = wanted_.find(item.id); w != wanted_.end()) link_.queueWait(now - w->second);
-      batch.items.push_back(item);
-    }
-    stats_.queued = queue_.size();
-  }
-
-  // Reads: the batch's payloads in file order, each run whose gaps are under merge_gap_bytes
-  // in one call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set
-  // on one bad read, and the loader must count the reads and bytes it makes.
-  struct Run {
-    ByteRange span;
-    std::vector<uint8_t> bytes;
-    Result<void> read;
-  };
-  std::vector<const Batch::Item*> encoded;
-  for (const auto& item : batch.items)
-    if (item.entry.kind == TileKind::kEncoded) encoded.push_back(&item);
-  std::sort(encoded.begin(), encoded.end(), [](const Batch::Item* a, const Batch::Item* b) {
-    return a->entry.offset_bytes < b->entry.offset_bytes;
-  });
-  std::vector<ByteRange> spans;
-  std::vector<size_t> run_of_item(batch.items.size());
-  for (const Batch::Item* item : encoded)
-    run_of_item[size_t(item - batch.items.data())] = addToRuns(
-        spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
-  std::vector<Run> runs(spans.size());
-  std::vector<std::vector<TileId>> run_tiles(spans.size());
-  for (size_t i = 0; i < batch.items.size(); ++i)
-    if (batch.items[i].entry.kind == TileKind::kEncoded)
-      run_tiles[run_of_item[i]].push_back(batch.items[i].id);
-  uint64_t bytes_read = 0;
-  size_t reads = 0;
-  for (size_t i = 0; i < runs.size(); ++i) {
-    Run& run = runs[i];
-    run.span = spans[i];
-    ActiveRead active;
-    active.tiles = std::move(run_tiles[i]);
-    {
-      // A run whose tiles all left while the batch's earlier runs were read is not read.
-      std::lock_guard lock(mutex_);
-      if (!anyWantedLocked(active.tiles)) {
-        run.read = fail(ErrorCode::kCancelled, fmt::format("{}: read at offset {} no longer wanted",
-                                                           archive.name(), run.span.offset_bytes));
-        continue;
-      }
-      active_reads_.push_back(&active);
-    }
-    run.bytes.resize(run.span.length_bytes);
-    const auto started = Clock::now();
-    link_.readStarted(started);
-    run.read = archive.source().readCancellable(run.span.offset_bytes, run.bytes, active.cancel);
-    link_.readFinished(started, Clock::now(), run.read ? run.bytes.size() : 0);
-    {
-      std::lock_guard lock(mutex_);
-      active_reads_.erase(std::find(active_reads_.begin(), active_reads_.end(), &active));
-    }
-    // An abandoned read delivered nothing (a failed one is counted, as it always was).
-    if (run.read || run.read.error().code != ErrorCode::kCancelled) bytes_read += run.bytes.size();
-    ++reads;
-  }
-  if (reads) {
-    std::lock_guard lock(mutex_);
-    stats_.reads += reads;
-    stats_.bytes_read += bytes_read;
-  }
-
+  if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty())
+    addNeighbours(batch, *first_entry);
+  const BatchReads reads = readBatch(batch);
   const size_t tile_bytes = archive.images()[batch.first.image].storedTileBytes();
   last_tile_bytes_.store(tile_bytes, std::memory_order_relaxed);
   for (size_t i = 0; i < batch.items.size(); ++i) {
-    const Batch::Item& item = batch.items[i];
-    std::span<const uint8_t> payload;
-    if (item.entry.kind == TileKind::kEncoded) {
-      const Run& run = runs[run_of_item[i]];
-      if (!run.read && run.read.error().code == ErrorCode::kCancelled) {
-        finish(item.id, {item.id, false, true, "", true}, false);
-        continue;
-      }
-      if (!run.read) {
-        finish(item.id, {item.id, false, false, run.read.error().message}, true);
-        continue;
-      }
-      payload = std::span<const uint8_t>(run.bytes).subspan(
-          item.entry.offset_bytes - run.span.offset_bytes, item.entry.length_bytes);
-      if (Result<void> verified = archive.verifyPayload(item.id, item.entry, payload); !verified) {
-        finish(item.id, {item.id, false, false, verified.error().message}, true);
-        continue;
-      }
-    }
-    // A child taken while its parent loaded finishes after it (decoding against the cached
-    // parent), as every child does: the order does not depend on the worker that took it.
-    if (any_dependent_ && needsParent(item.id) && !waitForParentLoad(item.id)) {
-      finish(item.id, {item.id, false, true, "", true}, false);
+    const BatchItem& item = batch.items[i];
+    Result<std::span<const uint8_t>> payload = payloadOf(item, reads, i);
+    if (!payload) {
+      // An abandoned read is no failure: its tiles left the wanted set.
+      const bool cancelled = payload.error().code == ErrorCode::kCancelled;
+      finish(item.id,
+             {item.id, false, cancelled, cancelled ? "" : payload.error().message, cancelled},
+             !cancelled);
       continue;
     }
-    // The budget counts buffers in flight: no room means try again later, not an error.
-    if (!cache_.reserve(tile_bytes)) {
-      finish(item.id, {item.id, false, false, "tile cache full of pinned tiles"}, true);
-      continue;
-    }
-    auto started = Clock::now();
-    Image texels;
-    texels.texels = texel_pool_->take(tile_bytes);
-    Result<void> decoded = decodeItem(item.id, item.entry, payload, texels, tile_bytes, scratch);
-    uint64_t decode_ns = uint64_t(
-        std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
-    cache_.unreserve(tile_bytes);
-    if (!decoded) {
-      texel_pool_->give(std::move(texels.texels));
-      finish(item.id, {item.id, false, false, decoded.error().message}, true);
-      continue;
-    }
-    bool wanted;
-    {
-      std::lock_guard lock(mutex_);
-      wanted = wanted_.count(item.id) > 0;
-      stats_.decode_ns += decode_ns;
-      if (wanted) {
-        ++stats_.tiles_loaded;
-        stats_.payload_bytes += item.entry.length_bytes;
-      } else {
-        ++stats_.stale_dropped;
-      }
-    }
-    // A tile that left every region while it loaded is dropped here (Backes et al., section 6).
-    if (wanted)
-      cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
-    else
-      texel_pool_->give(std::move(texels.texels));
-    finish(item.id, {item.id, wanted, !wanted, ""}, false);
+    decodeAndDeliver(item, *payload, tile_bytes, scratch);
   }
+}
+
+void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
+  // Requests of the same level and urgency whose payloads extend the first one's range with
+  // gaps under batch_gap_bytes (neighbours on the Hilbert curve usually are).
+  std::vector<BatchItem> neighbours;
+  for (const TileId& id : batch.candidates) {
+    Result<TileEntry> entry = archive_->tileEntry(id);
+    if (entry && entry->kind == TileKind::kEncoded) neighbours.push_back({id, *entry});
+  }
+  std::sort(neighbours.begin(), neighbours.end(), [](const auto& a, const auto& b) {
+    return a.entry.offset_bytes < b.entry.offset_bytes;
+  });
+  const std::vector<BatchItem> chosen = neighboursInRange(
+      neighbours, first_entry, options_.batch_gap_bytes, options_.max_merged_read_bytes);
+  // Claim the chosen ones that are still queued (another worker or a new frame may have taken
+  // or cancelled them meanwhile).
+  const auto now = Clock::now();
+  std::lock_guard lock(mutex_);
+  for (const auto& item : chosen) {
+    auto it = std::find_if(queue_.begin(), queue_.end(),
+                           [&](const Pending& p) { return p.id == item.id; });
+    if (it == queue_.end()) continue;
+    queue_.erase(it);
+    in_flight_.insert(item.id);
+    if (any_dependent_ && needsParent(item.id) && in_flight_.count(Archive::parentTile(item.id)))
+      ++stats_.children_read_early;
+    if (auto w = wanted_.find(item.id); w != wanted_.end()) link_.queueWait(now - w->second);
+    batch.items.push_back(item);
+  }
+  stats_.queued = queue_.size();
+}
+
+LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
+  // The batch's payloads in file order, each run whose gaps are under merge_gap_bytes in one
+  // call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set on one
+  // bad read, and the loader must count the reads and bytes it makes.
+  std::vector<const BatchItem*> encoded;
+  for (const auto& item : batch.items)
+    if (item.entry.kind == TileKind::kEncoded) encoded.push_back(&item);
+  std::sort(encoded.begin(), encoded.end(), [](const BatchItem* a, const BatchItem* b) {
+    return a->entry.offset_bytes < b->entry.offset_bytes;
+  });
+  BatchReads reads;
+  std::vector<ByteRange> spans;
+  reads.run_of_item.resize(batch.items.size());
+  for (const BatchItem* item : encoded)
+    reads.run_of_item[size_t(item - batch.items.data())] = addToRuns(
+        spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
+  std::vector<std::vector<TileId>> run_tiles(spans.size());
+  for (size_t i = 0; i < batch.items.size(); ++i)
+    if (batch.items[i].entry.kind == TileKind::kEncoded)
+      run_tiles[reads.run_of_item[i]].push_back(batch.items[i].id);
+  reads.runs.resize(spans.size());
+  for (size_t i = 0; i < spans.size(); ++i) {
+    reads.runs[i].span = spans[i];
+    readRun(reads, i, std::move(run_tiles[i]));
+  }
+  if (reads.reads) {
+    std::lock_guard lock(mutex_);
+    stats_.reads += reads.reads;
+    stats_.bytes_read += reads.bytes_read;
+  }
+  return reads;
+}
+
+void LoaderPool::readRun(BatchReads& reads, size_t index, std::vector<TileId> tiles) {
+  const Archive& archive = *archive_;
+  BatchReads::Run& run = reads.runs[index];
+  ActiveRead active;
+  active.tiles = std::move(tiles);
+  {
+    // A run whose tiles all left while the batch's earlier runs were read is not read.
+    std::lock_guard lock(mutex_);
+    if (!anyWantedLocked(active.tiles)) {
+      run.read = fail(ErrorCode::kCancelled, fmt::format("{}: read at offset {} no longer wanted",
+                                                         archive.name(), run.span.offset_bytes));
+      return;
+    }
+    active_reads_.push_back(&active);
+  }
+  run.bytes.resize(run.span.length_bytes);
+  const auto started = Clock::now();
+  link_.readStarted(started);
+  run.read = archive.source().readCancellable(run.span.offset_bytes, run.bytes, active.cancel);
+  link_.readFinished(started, Clock::now(), run.read ? run.bytes.size() : 0);
+  {
+    std::lock_guard lock(mutex_);
+    active_reads_.erase(std::find(active_reads_.begin(), active_reads_.end(), &active));
+  }
+  // An abandoned read counts no bytes (it delivered none); a failed one counts those asked for.
+  if (run.read || run.read.error().code != ErrorCode::kCancelled)
+    reads.bytes_read += run.bytes.size();
+  ++reads.reads;
+}
+
+Result<std::span<const uint8_t>> LoaderPool::payloadOf(const BatchItem& item,
+                                                       const BatchReads& reads,
+                                                       size_t index) const {
+  if (item.entry.kind != TileKind::kEncoded) return std::span<const uint8_t>();
+  const BatchReads::Run& run = reads.runs[reads.run_of_item[index]];
+  if (!run.read) return forwardError(run.read);
+  const auto payload = std::span<const uint8_t>(run.bytes).subspan(
+      item.entry.offset_bytes - run.span.offset_bytes, item.entry.length_bytes);
+  TESSERA_TRY(archive_->verifyPayload(item.id, item.entry, payload));
+  return payload;
+}
+
+void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t> payload,
+                                  size_t tile_bytes, CodecScratch& scratch) {
+  // A child taken while its parent loaded finishes after it (decoding against the cached
+  // parent), as every child does: the order does not depend on the worker that took it.
+  if (any_dependent_ && needsParent(item.id) && !waitForParentLoad(item.id)) {
+    finish(item.id, {item.id, false, true, "", true}, false);
+    return;
+  }
+  // The budget counts buffers in flight: no room means try again later, not an error.
+  if (!cache_.reserve(tile_bytes)) {
+    finish(item.id, {item.id, false, false, "tile cache full of pinned tiles"}, true);
+    return;
+  }
+  const auto started = Clock::now();
+  Image texels;
+  texels.texels = texel_pool_->take(tile_bytes);
+  Result<void> decoded = decodeItem(item.id, item.entry, payload, texels, tile_bytes, scratch);
+  const uint64_t decode_ns = uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
+  cache_.unreserve(tile_bytes);
+  if (!decoded) {
+    texel_pool_->give(std::move(texels.texels));
+    finish(item.id, {item.id, false, false, decoded.error().message}, true);
+    return;
+  }
+  bool wanted;
+  {
+    std::lock_guard lock(mutex_);
+    wanted = wanted_.count(item.id) > 0;
+    stats_.decode_ns += decode_ns;
+    if (wanted) {
+      ++stats_.tiles_loaded;
+      stats_.payload_bytes += item.entry.length_bytes;
+    } else {
+      ++stats_.stale_dropped;
+    }
+  }
+  // A tile that left every region while it loaded is dropped here (Backes et al., section 6).
+  if (wanted)
+    cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
+  else
+    texel_pool_->give(std::move(texels.texels));
+  finish(item.id, {item.id, wanted, !wanted, ""}, false);
 }
 
 }  // namespace tessera::detail

@@ -19,9 +19,9 @@
 
 #include <tessera/archive.h>
 #include <tessera/cache.h>
-#include <tessera/link.h>
 #include <tessera/stream.h>
 
+#include "link_estimator.h"
 #include "texel_pool.h"
 
 namespace tessera::detail {
@@ -121,7 +121,13 @@ class LoaderPool {
     uint32_t failures = 0;
     std::chrono::steady_clock::time_point not_before;
   };
+  /// A tile of a batch with its directory entry.
+  struct BatchItem {
+    TileId id;
+    TileEntry entry;
+  };
   struct Batch;
+  struct BatchReads;
   /// A read in flight and the tiles it carries; setWanted sets `cancel` when none of them is
   /// wanted any more, so a read over a network stops using the link.
   struct ActiveRead {
@@ -136,7 +142,31 @@ class LoaderPool {
   /// `early` batch (its tile's parent loading) may take siblings whose parent is loading too.
   void takeLocked(Batch& batch, size_t index, bool early,
                   std::chrono::steady_clock::time_point now);
+  /// Reads, verifies, decodes and caches the batch's tiles, finishing each.
   void loadBatch(Batch& batch, CodecScratch& scratch);
+  /// Of `neighbours` (encoded, sorted by offset), those whose payloads extend `first`'s range
+  /// forwards, then backwards, with gaps of at most `gap_bytes` and the whole range at most
+  /// `max_bytes` long: one read then carries them all.
+  static std::vector<BatchItem> neighboursInRange(std::span<const BatchItem> neighbours,
+                                                  const TileEntry& first, uint64_t gap_bytes,
+                                                  uint64_t max_bytes);
+  /// Adds to `batch` the candidates that extend its first tile's read (neighboursInRange) and
+  /// are still queued, taking them in flight.
+  void addNeighbours(Batch& batch, const TileEntry& first_entry);
+  /// Reads the batch's payloads in file order, runs with gaps under merge_gap_bytes in one call
+  /// each, counting the reads and bytes in stats_.
+  BatchReads readBatch(const Batch& batch);
+  /// Reads run `index` of `reads`, cancellable through active_reads_ (setWanted abandons it
+  /// when none of `tiles` is wanted any more), or skips it (kCancelled) when none is wanted now.
+  void readRun(BatchReads& reads, size_t index, std::vector<TileId> tiles);
+  /// The verified payload of batch item `index` (empty for a tile without one); its run's
+  /// error when the read failed or was abandoned (kCancelled).
+  Result<std::span<const uint8_t>> payloadOf(const BatchItem& item, const BatchReads& reads,
+                                             size_t index) const;
+  /// Decodes a verified payload into a cache tile after the tile's parent has loaded, inserts
+  /// it if it is still wanted (dropped as stale if not) and finishes it.
+  void decodeAndDeliver(const BatchItem& item, std::span<const uint8_t> payload, size_t tile_bytes,
+                        CodecScratch& scratch);
   /// True when `id` is coded against a parent (its image's codec is dependent and it is below
   /// the coarsest level). Lock-free: reads constant members only.
   bool needsParent(const TileId& id) const;
@@ -159,15 +189,12 @@ class LoaderPool {
       std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash>& wanted,
       std::chrono::steady_clock::time_point now);
   /// Decodes a verified payload into `texels`: a dependent codec's tile against its parent,
-  /// pinned in the cache for the decode, or decodeParentChain's when the parent is not cached.
+  /// pinned in the cache for the decode; when the parent is not cached, against the one the
+  /// reader decodes from the nearest cached ancestor down (detail::decodeParent), counted in
+  /// parent_fallbacks and the read statistics. The tiles decoded on the way are not cached.
   Result<void> decodeItem(const TileId& id, const TileEntry& entry,
                           std::span<const uint8_t> payload, Image& texels, size_t tile_bytes,
                           CodecScratch& scratch);
-  /// The decoded parent of `child` when it is not in the cache: reads and decodes the chain
-  /// from the nearest cached ancestor (or the coarsest level) down, counting the bytes and
-  /// reads in `bytes_read` and `reads`. The tiles decoded on the way are not cached.
-  Result<Image> decodeParentChain(const TileId& child, CodecScratch& scratch, uint64_t& bytes_read,
-                                  size_t& reads);
   void finish(const TileId& id, LoadEvent event, bool failed);
   /// Queued tiles at the head of the queue not hinted yet, if the read-ahead window has room;
   /// marks them hinted (size unknown yet). Under mutex_.

@@ -14,31 +14,6 @@ double levelScale(uint32_t level) {
   return std::ldexp(1.0, int(level));
 }
 
-/// Camera basis of a perspective view: forward, right and up unit vectors.
-struct Basis {
-  double fx, fy, fz, rx, ry, rz, ux, uy, uz;
-};
-
-Basis basisOf(const PerspectiveView& v) {
-  Basis b{};
-  b.fx = std::sin(v.yaw_rad) * std::cos(v.pitch_rad);
-  b.fy = -std::cos(v.yaw_rad) * std::cos(v.pitch_rad);
-  b.fz = std::sin(v.pitch_rad);
-  b.rx = std::cos(v.yaw_rad);
-  b.ry = std::sin(v.yaw_rad);
-  b.rz = 0;
-  // up = right x forward
-  b.ux = b.ry * b.fz - b.rz * b.fy;
-  b.uy = b.rz * b.fx - b.rx * b.fz;
-  b.uz = b.rx * b.fy - b.ry * b.fx;
-  return b;
-}
-
-/// Screen-space size of one pixel at unit distance, in radians.
-double pixelAngle(const PerspectiveView& v) {
-  return 2 * std::tan(v.fov_y_rad / 2) / std::max(1u, v.viewport_h);
-}
-
 /// Rays that miss the ground (above the horizon) are cut where one pixel covers a whole
 /// coarsest-level tile: nothing finer could be seen there.
 double farDistance(const PerspectiveView& v, const ImageInfo& info) {
@@ -52,7 +27,7 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
   Footprint f;
   if (view.kind == View::Kind::kOrtho) {
     const OrthoView& o = view.ortho;
-    double tpp = o.texels_per_pixel > 0 ? o.texels_per_pixel : 1;
+    double tpp = texelsPerPixelOf(o);
     double hw = o.viewport_w * 0.5 * tpp, hh = o.viewport_h * 0.5 * tpp;
     double c = std::abs(std::cos(o.rotation_rad)), s = std::abs(std::sin(o.rotation_rad));
     double ex = c * hw + s * hh, ey = s * hw + c * hh;
@@ -66,9 +41,6 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
     return f;
   }
   const PerspectiveView& p = view.perspective;
-  Basis b = basisOf(p);
-  double tan_half = std::tan(p.fov_y_rad / 2);
-  double aspect = double(std::max(1u, p.viewport_w)) / std::max(1u, p.viewport_h);
   double far = farDistance(p, info);
   double eye_z = std::max(p.eye_z, 1e-6);
   f.x0 = f.x1 = p.eye_x;
@@ -85,10 +57,8 @@ Footprint footprintOf(const View& view, const ImageInfo& info) {
   for (int i = 0; i <= kSteps; ++i) {
     for (int j = 0; j <= kSteps; ++j) {
       if (i != 0 && i != kSteps && j != 0 && j != kSteps) continue;
-      double sx = -1 + 2.0 * i / kSteps, sy = -1 + 2.0 * j / kSteps;
-      double dx = b.fx + (b.rx * sx * aspect + b.ux * sy) * tan_half;
-      double dy = b.fy + (b.ry * sx * aspect + b.uy * sy) * tan_half;
-      double dz = b.fz + (b.rz * sx * aspect + b.uz * sy) * tan_half;
+      const Vec3 d = rayDirection(p, -1 + 2.0 * i / kSteps, -1 + 2.0 * j / kSteps);
+      const double dx = d.x, dy = d.y, dz = d.z;
       double len = std::sqrt(dx * dx + dy * dy + dz * dz);
       double dist = dz < 0 ? std::min(far, eye_z / -dz * len) : far;
       include(p.eye_x + dx / len * dist, p.eye_y + dy / len * dist);
@@ -193,103 +163,88 @@ void ResidencyManager::addWanted(const TileId& tile, int cls, double distance, b
   plan_.wanted.push_back({tile, priority, prefetch, uint32_t(cls)});
 }
 
-const ResidencyPlan& ResidencyManager::plan(const View& view) {
+double ResidencyManager::distanceFromCentre(const TileId& tile) const {
+  const double span = levelScale(tile.level) * info_.tile_size_px;
+  const double dx = (tile.x + 0.5) * span - frame_.fp.centre_x;
+  const double dy = (tile.y + 0.5) * span - frame_.fp.centre_y;
+  return std::sqrt(dx * dx + dy * dy) / span;
+}
+
+void ResidencyManager::addRect(uint32_t level, const TileRect& rect, int cls, bool prefetch,
+                               bool ahead) {
+  TileRect r = intersect(rect, gridRect(level));
+  for (int64_t y = r.y0; y < r.y1; ++y)
+    for (int64_t x = r.x0; x < r.x1; ++x) {
+      TileId tile{image_, level, uint32_t(x), uint32_t(y)};
+      addWanted(tile, cls, distanceFromCentre(tile), prefetch, ahead);
+    }
+}
+
+void ResidencyManager::addVisibleOrtho() {
+  const Footprint& fp = frame_.fp;
+  const uint32_t t = info_.tile_size_px;
+  for (uint32_t l = frame_.desired; l < info_.level_count; ++l) {
+    TileRect under = intersect(tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, l, t), gridRect(l));
+    addRect(l, under, 1, false);
+    if (l == frame_.desired)
+      for (int64_t y = under.y0; y < under.y1; ++y)
+        for (int64_t x = under.x0; x < under.x1; ++x)
+          plan_.visible.push_back({image_, l, uint32_t(x), uint32_t(y)});
+  }
+}
+
+void ResidencyManager::addVisiblePerspective(const View& view) {
+  // Quadtree refinement: split a visible tile while it is coarser than its nearest point needs.
+  const Footprint& fp = frame_.fp;
   const uint32_t t = info_.tile_size_px;
   const uint32_t coarsest = info_.level_count - 1;
-  Footprint fp = footprintOf(view, info_);
-  const uint32_t desired = fp.desired_level;
-  const uint32_t n = clipRegionTiles(view.viewportWidth(), view.viewportHeight(), t);
-
-  double prev_centre_x = footprint_.centre_x, prev_centre_y = footprint_.centre_y;
-  bool first_frame = !centres_[desired].valid;
-  for (uint32_t l = desired; l <= coarsest; ++l) updateCentre(l, fp.centre_x, fp.centre_y, n, true);
-  // Levels finer than the desired one lose their centres so a later zoom-in starts afresh.
-  for (uint32_t l = 0; l < desired; ++l) centres_[l].valid = false;
-
-  plan_ = {};
-  plan_.desired_level = desired;
-  wanted_index_.clear();
-  keep_rects_.assign(info_.level_count, TileRect{});
-
-  auto distanceFrom = [&](const TileId& tile) {
-    double span = levelScale(tile.level) * t;
-    double dx = (tile.x + 0.5) * span - fp.centre_x, dy = (tile.y + 0.5) * span - fp.centre_y;
-    return std::sqrt(dx * dx + dy * dy) / span;
-  };
-  auto addRect = [&](uint32_t level, const TileRect& rect, int cls, bool prefetch,
-                     bool ahead = false) {
-    TileRect r = intersect(rect, gridRect(level));
-    for (int64_t y = r.y0; y < r.y1; ++y)
-      for (int64_t x = r.x0; x < r.x1; ++x) {
-        TileId tile{image_, level, uint32_t(x), uint32_t(y)};
-        addWanted(tile, cls, distanceFrom(tile), prefetch, ahead);
-      }
-  };
-
-  // Class 0: the coarsest level, always resident so every texel is always covered.
-  addRect(coarsest, gridRect(coarsest), 0, false);
-
-  // Class 1: what the view shows, at the level it needs, and everything coarser beneath it.
-  if (view.kind == View::Kind::kOrtho) {
-    for (uint32_t l = desired; l <= coarsest; ++l) {
-      TileRect under = intersect(tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, l, t), gridRect(l));
-      addRect(l, under, 1, false);
-      if (l == desired)
-        for (int64_t y = under.y0; y < under.y1; ++y)
-          for (int64_t x = under.x0; x < under.x1; ++x)
-            plan_.visible.push_back({image_, l, uint32_t(x), uint32_t(y)});
+  std::vector<TileId> stack;
+  TileRect top = gridRect(coarsest);
+  for (int64_t y = top.y0; y < top.y1; ++y)
+    for (int64_t x = top.x0; x < top.x1; ++x)
+      stack.push_back({image_, coarsest, uint32_t(x), uint32_t(y)});
+  constexpr size_t kMaxVisibleTiles = 4096;
+  while (!stack.empty()) {
+    TileId tile = stack.back();
+    stack.pop_back();
+    addWanted(tile, 1, distanceFromCentre(tile), false, false);
+    uint32_t needed = requiredLevelForTile(view, info_, tile, frame_.desired);
+    if (tile.level == 0 || needed >= tile.level || plan_.visible.size() > kMaxVisibleTiles) {
+      plan_.visible.push_back(tile);
+      continue;
     }
-  } else {
-    // Quadtree refinement: split a visible tile while it is coarser than its nearest point needs.
-    std::vector<TileId> stack;
-    TileRect top = gridRect(coarsest);
-    for (int64_t y = top.y0; y < top.y1; ++y)
-      for (int64_t x = top.x0; x < top.x1; ++x)
-        stack.push_back({image_, coarsest, uint32_t(x), uint32_t(y)});
-    constexpr size_t kMaxVisibleTiles = 4096;
-    while (!stack.empty()) {
-      TileId tile = stack.back();
-      stack.pop_back();
-      addWanted(tile, 1, distanceFrom(tile), false, false);
-      uint32_t needed = requiredLevelForTile(view, info_, tile, desired);
-      if (tile.level == 0 || needed >= tile.level || plan_.visible.size() > kMaxVisibleTiles) {
-        plan_.visible.push_back(tile);
-        continue;
-      }
-      TileRect children =
-          intersect(intersect({int64_t(tile.x) * 2, int64_t(tile.y) * 2, int64_t(tile.x) * 2 + 2,
-                               int64_t(tile.y) * 2 + 2},
-                              tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, tile.level - 1, t)),
-                    gridRect(tile.level - 1));
-      for (int64_t y = children.y0; y < children.y1; ++y)
-        for (int64_t x = children.x0; x < children.x1; ++x)
-          stack.push_back({image_, tile.level - 1, uint32_t(x), uint32_t(y)});
-    }
+    TileRect children =
+        intersect(intersect({int64_t(tile.x) * 2, int64_t(tile.y) * 2, int64_t(tile.x) * 2 + 2,
+                             int64_t(tile.y) * 2 + 2},
+                            tilesUnder(fp.x0, fp.y0, fp.x1, fp.y1, tile.level - 1, t)),
+                  gridRect(tile.level - 1));
+    for (int64_t y = children.y0; y < children.y1; ++y)
+      for (int64_t x = children.x0; x < children.x1; ++x)
+        stack.push_back({image_, tile.level - 1, uint32_t(x), uint32_t(y)});
   }
+}
 
-  // Class 1 too: where the view will be `lookahead_frames` from now, and everything swept on
-  // the way, with the coarser tiles beneath (a child goes up only after its parent). A move of
-  // a whole region or more in one frame is a jump, not a velocity.
-  if (view.kind == View::Kind::kOrtho && !first_frame && options_.lookahead_frames > 0) {
-    const double span = levelScale(desired) * t;
-    const double step_x = fp.centre_x - prev_centre_x, step_y = fp.centre_y - prev_centre_y;
-    const bool moving = step_x != 0 || step_y != 0;
-    if (moving && std::max(std::abs(step_x), std::abs(step_y)) < n * span) {
-      const double ahead_x = step_x * options_.lookahead_frames;
-      const double ahead_y = step_y * options_.lookahead_frames;
-      const double x0 = std::min(fp.x0, fp.x0 + ahead_x), x1 = std::max(fp.x1, fp.x1 + ahead_x);
-      const double y0 = std::min(fp.y0, fp.y0 + ahead_y), y1 = std::max(fp.y1, fp.y1 + ahead_y);
-      for (uint32_t l = desired; l <= coarsest; ++l)
-        addRect(l, tilesUnder(x0, y0, x1, y1, l, t), 1, false, /*ahead=*/true);
-    }
-  }
+void ResidencyManager::addLookahead() {
+  // A move of a whole region or more in one frame is a jump, not a velocity.
+  const Footprint& fp = frame_.fp;
+  const double span = levelScale(frame_.desired) * info_.tile_size_px;
+  const double step_x = fp.centre_x - frame_.prev_centre_x;
+  const double step_y = fp.centre_y - frame_.prev_centre_y;
+  const bool moving = step_x != 0 || step_y != 0;
+  if (!moving || std::max(std::abs(step_x), std::abs(step_y)) >= frame_.n * span) return;
+  const double ahead_x = step_x * options_.lookahead_frames;
+  const double ahead_y = step_y * options_.lookahead_frames;
+  const double x0 = std::min(fp.x0, fp.x0 + ahead_x), x1 = std::max(fp.x1, fp.x1 + ahead_x);
+  const double y0 = std::min(fp.y0, fp.y0 + ahead_y), y1 = std::max(fp.y1, fp.y1 + ahead_y);
+  for (uint32_t l = frame_.desired; l < info_.level_count; ++l)
+    addRect(l, tilesUnder(x0, y0, x1, y1, l, info_.tile_size_px), 1, false, /*ahead=*/true);
+}
 
-  // Class 2: the clip region at the desired level (eq. 3-4, with hysteresis), and at coarser
-  // levels the tiles under it: from the start level of eq. 7 on that is a single tile.
-  const LevelCentre& c = centres_[desired];
-  TileRect clip = clipRegionAround(c.x, c.y, n);
-  for (uint32_t l = desired; l <= coarsest; ++l) {
-    TileRect region = coarsen(clip, l - desired);
+TileRect ResidencyManager::addClipRegions() {
+  const LevelCentre& c = centres_[frame_.desired];
+  const TileRect clip = clipRegionAround(c.x, c.y, frame_.n);
+  for (uint32_t l = frame_.desired; l < info_.level_count; ++l) {
+    TileRect region = coarsen(clip, l - frame_.desired);
     TileRect clipped = intersect(region, gridRect(l));
     addRect(l, clipped, 2, false);
     if (!clipped.empty()) plan_.clip_regions.push_back({l, clipped});
@@ -302,28 +257,31 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
     keep = {std::min<int64_t>(keep.x0, tile.x), std::min<int64_t>(keep.y0, tile.y),
             std::max<int64_t>(keep.x1, tile.x + 1), std::max<int64_t>(keep.y1, tile.y + 1)};
   }
+  return clip;
+}
 
-  // Class 3: direction-based prefetch (Luo & Duan, section 3.3): when the view centre
-  // crosses a tile boundary, the next column or row beyond the clip region in that direction.
-  if (options_.prefetch) {
-    double span = levelScale(desired) * t;
-    if (first_frame) {
-      addRect(desired, {clip.x0 - 1, clip.y0 - 1, clip.x1 + 1, clip.y0}, 3, true);
-      addRect(desired, {clip.x0 - 1, clip.y1, clip.x1 + 1, clip.y1 + 1}, 3, true);
-      addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
-      addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
-    } else {
-      int64_t cross_x =
-          int64_t(std::floor(fp.centre_x / span)) - int64_t(std::floor(prev_centre_x / span));
-      int64_t cross_y =
-          int64_t(std::floor(fp.centre_y / span)) - int64_t(std::floor(prev_centre_y / span));
-      if (cross_x > 0) addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
-      if (cross_x < 0) addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
-      if (cross_y > 0) addRect(desired, {clip.x0, clip.y1, clip.x1, clip.y1 + 1}, 3, true);
-      if (cross_y < 0) addRect(desired, {clip.x0, clip.y0 - 1, clip.x1, clip.y0}, 3, true);
-    }
+void ResidencyManager::addPrefetch(const TileRect& clip) {
+  const uint32_t desired = frame_.desired;
+  if (frame_.first_frame) {
+    addRect(desired, {clip.x0 - 1, clip.y0 - 1, clip.x1 + 1, clip.y0}, 3, true);
+    addRect(desired, {clip.x0 - 1, clip.y1, clip.x1 + 1, clip.y1 + 1}, 3, true);
+    addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
+    addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
+    return;
   }
+  const double span = levelScale(desired) * info_.tile_size_px;
+  const Footprint& fp = frame_.fp;
+  int64_t cross_x =
+      int64_t(std::floor(fp.centre_x / span)) - int64_t(std::floor(frame_.prev_centre_x / span));
+  int64_t cross_y =
+      int64_t(std::floor(fp.centre_y / span)) - int64_t(std::floor(frame_.prev_centre_y / span));
+  if (cross_x > 0) addRect(desired, {clip.x1, clip.y0, clip.x1 + 1, clip.y1}, 3, true);
+  if (cross_x < 0) addRect(desired, {clip.x0 - 1, clip.y0, clip.x0, clip.y1}, 3, true);
+  if (cross_y > 0) addRect(desired, {clip.x0, clip.y1, clip.x1, clip.y1 + 1}, 3, true);
+  if (cross_y < 0) addRect(desired, {clip.x0, clip.y0 - 1, clip.x1, clip.y0}, 3, true);
+}
 
+void ResidencyManager::finishPlan() {
   // Keep only the best priority per tile, sorted.
   std::sort(plan_.wanted.begin(), plan_.wanted.end(),
             [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
@@ -332,16 +290,57 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
                      [&](const TileRequest& r) { return wanted_index_.at(r.id) != r.priority; }),
       plan_.wanted.end());
 
+  const Footprint& fp = frame_.fp;
   plan_.motion.centre_x = fp.centre_x;
   plan_.motion.centre_y = fp.centre_y;
-  plan_.motion.motion_x = first_frame ? 0 : fp.centre_x - prev_centre_x;
-  plan_.motion.motion_y = first_frame ? 0 : fp.centre_y - prev_centre_y;
+  plan_.motion.motion_x = frame_.first_frame ? 0 : fp.centre_x - frame_.prev_centre_x;
+  plan_.motion.motion_y = frame_.first_frame ? 0 : fp.centre_y - frame_.prev_centre_y;
   for (uint32_t l = 0; l < info_.level_count; ++l)
     if (!keep_rects_[l].empty())
       plan_.motion.keep_regions.push_back(
           {image_, l, keep_rects_[l].x0, keep_rects_[l].y0, keep_rects_[l].x1, keep_rects_[l].y1});
-  footprint_ = fp;
-  last_view_ = view;
+}
+
+const ResidencyPlan& ResidencyManager::plan(const View& view) {
+  const uint32_t coarsest = info_.level_count - 1;
+  frame_.fp = footprintOf(view, info_);
+  frame_.desired = frame_.fp.desired_level;
+  frame_.n = clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info_.tile_size_px);
+  // The last frame's centre, for the motion, the lookahead and the prefetch.
+  frame_.prev_centre_x = last_centre_x_;
+  frame_.prev_centre_y = last_centre_y_;
+  frame_.first_frame = !centres_[frame_.desired].valid;
+  for (uint32_t l = frame_.desired; l <= coarsest; ++l)
+    updateCentre(l, frame_.fp.centre_x, frame_.fp.centre_y, frame_.n, true);
+  // Levels finer than the desired one lose their centres so a later zoom-in starts afresh.
+  for (uint32_t l = 0; l < frame_.desired; ++l) centres_[l].valid = false;
+
+  plan_ = {};
+  plan_.desired_level = frame_.desired;
+  wanted_index_.clear();
+  keep_rects_.assign(info_.level_count, TileRect{});
+
+  // Class 0: the coarsest level, always resident so every texel is always covered.
+  addRect(coarsest, gridRect(coarsest), 0, false);
+  // Class 1: what the view shows, at the level it needs, and everything coarser beneath it;
+  // then where an orthographic view will be `lookahead_frames` from now, and everything it
+  // sweeps on the way, with the coarser tiles beneath (a child goes up only after its parent).
+  if (view.kind == View::Kind::kOrtho)
+    addVisibleOrtho();
+  else
+    addVisiblePerspective(view);
+  if (view.kind == View::Kind::kOrtho && !frame_.first_frame && options_.lookahead_frames > 0)
+    addLookahead();
+  // Class 2: the clip region at the desired level (eq. 3-4, with hysteresis), and at coarser
+  // levels the tiles under it: from the start level of eq. 7 on that is a single tile.
+  const TileRect clip = addClipRegions();
+  // Class 3: direction-based prefetch (Luo & Duan, section 3.3): when the view centre
+  // crosses a tile boundary, the next column or row beyond the clip region in that direction.
+  if (options_.prefetch) addPrefetch(clip);
+
+  finishPlan();
+  last_centre_x_ = frame_.fp.centre_x;
+  last_centre_y_ = frame_.fp.centre_y;
   return plan_;
 }
 

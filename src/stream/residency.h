@@ -59,17 +59,39 @@ class ResidencyManager {
     int64_t x = 0, y = 0;  ///< clip-region centre tile (eq. 4)
     int64_t prev_x = 0, prev_y = 0;
   };
+  /// What plan() works from this frame.
+  struct FrameState {
+    Footprint fp;
+    uint32_t desired = 0;                         ///< the footprint's desired level
+    uint32_t n = 0;                               ///< clip-region side (eq. 3)
+    double prev_centre_x = 0, prev_centre_y = 0;  ///< the last frame's footprint centre
+    bool first_frame = true;                      ///< no centre yet at the desired level
+  };
+
   void updateCentre(uint32_t level, double f_x, double f_y, uint32_t n, bool limit_step);
   void addWanted(const TileId& tile, int cls, double distance, bool prefetch, bool ahead);
   TileRect gridRect(uint32_t level) const;
+  // The steps of plan(), in order; each adds to plan_ from frame_.
+  /// Distance of a tile's centre from the view centre, in tiles of its level.
+  double distanceFromCentre(const TileId& tile) const;
+  /// Every tile of `rect` (clipped to the grid) at `level`, in class `cls`.
+  void addRect(uint32_t level, const TileRect& rect, int cls, bool prefetch, bool ahead = false);
+  void addVisibleOrtho();
+  void addVisiblePerspective(const View& view);
+  void addLookahead();
+  /// Class 2 and the keep regions; returns the desired level's clip region.
+  TileRect addClipRegions();
+  void addPrefetch(const TileRect& clip);
+  /// Sorts the wanted set, keeps each tile's best priority, and fills the motion.
+  void finishPlan();
 
   ImageInfo info_;
   uint32_t image_;
   ResidencyOptions options_;
   std::vector<LevelCentre> centres_;
   ResidencyPlan plan_;
-  View last_view_;
-  Footprint footprint_;
+  FrameState frame_;
+  double last_centre_x_ = 0, last_centre_y_ = 0;  ///< the footprint centre of the last plan
   std::unordered_map<TileId, double, TileIdHash> wanted_index_;
   std::vector<TileRect> keep_rects_;  ///< per level, in tiles
 };

@@ -1,9 +1,8 @@
 #pragma once
 // Buffers of decoded tiles that left the cache, and fresh ones idle loaders fault in ahead of
-// need (LoaderPool prewarming), kept for the next decodes. A tile decoded into
-// a recycled buffer costs no allocation, no zeroing and no page faults: on the 2-core CI
-// machine a fresh 256-px RGB tile buffer costs about 80 us of page faults and clearing, most
-// of the 115 us its JPEG decode takes (docs/runtime.md).
+// need (LoaderPool prewarming), kept for the next decodes. A tile decoded into a recycled
+// buffer costs no allocation, no zeroing and no page faults, which for a fresh buffer can
+// cost most of what the decode itself does (docs/runtime.md has the figures).
 #include <cstdint>
 #include <memory>
 #include <mutex>

@@ -43,11 +43,30 @@ struct TileStreamer::Impl {
   /// Per image and level: sum and count of known payload sizes, to estimate unknown ones.
   std::vector<std::vector<std::pair<uint64_t, uint64_t>>> size_sums;
   std::unordered_set<TileId, TileIdHash> in_flight;
+  /// This frame's uploads; while they are chosen, the candidates so far.
+  std::unordered_set<TileId, TileIdHash> uploading;
 
   /// A tile's payload bytes, from its directory entry when its page is in memory (never a
   /// read: the render thread must not wait), else the mean of known ones at its level, else
   /// at any level, else the decoded size (an upper bound for every codec but raw's equal).
   uint64_t payloadBytes(const TileId& id);
+
+  // The steps of update(), in order.
+  /// Drains the loader's finished loads into `loaded` (failures counted).
+  void pollLoads();
+  /// The residency manager of `image`, made on first use.
+  detail::ResidencyManager& residencyOf(uint32_t image);
+  /// Wanted tiles that are neither resident nor loaded go to `requests` (sorted by priority);
+  /// loaded ones become this frame's uploads within the budget, parents before children.
+  /// Returns the uploads' texel bytes.
+  uint64_t chooseUploads(const detail::ResidencyPlan& plan, const ImageInfo& info);
+  /// Adaptive scheduling: trims `requests` to what the link delivers in time.
+  void scheduleAdaptive(const View& view, uint32_t image, const detail::ResidencyPlan& plan,
+                        FrameReport& report);
+  /// Resident tiles of `image` that left every (expanded) region go to update.releases.
+  void releaseLeft(uint32_t image, const detail::ResidencyManager& residency);
+  /// The loader's figures into `report`.
+  void reportLoader(FrameReport& report) const;
 };
 
 uint64_t TileStreamer::Impl::payloadBytes(const TileId& id) {
@@ -116,6 +135,140 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   return std::unique_ptr<TileStreamer>(new TileStreamer(std::move(impl)));
 }
 
+void TileStreamer::Impl::pollLoads() {
+  events.clear();
+  loader->poll(events);
+  for (const detail::LoadEvent& event : events)
+    if (event.ok)
+      loaded.insert(event.id);
+    else if (!event.stale)
+      ++load_failures;
+}
+
+detail::ResidencyManager& TileStreamer::Impl::residencyOf(uint32_t image) {
+  if (!residency[image])
+    residency[image] = std::make_unique<detail::ResidencyManager>(archive->images()[image], image,
+                                                                  options.residency);
+  return *residency[image];
+}
+
+uint64_t TileStreamer::Impl::chooseUploads(const detail::ResidencyPlan& plan,
+                                           const ImageInfo& info) {
+  // The render thread tracks "loaded" from the loader's events, so it takes the cache's lock
+  // once per frame (findAndPin); a tile evicted meanwhile is simply requested again.
+  requests.clear();
+  candidates.clear();
+  candidate_requests.clear();
+  uploading.clear();
+  const ResidencyOptions& budget = options.residency;
+  const uint32_t coarsest = info.level_count - 1;
+  auto parentReady = [&](const TileId& id) {
+    TileId parent{id.image, id.level + 1, id.x / 2, id.y / 2};
+    return id.level == coarsest || resident.count(parent) || uploading.count(parent);
+  };
+  uint64_t candidate_bytes = 0;
+  for (const TileRequest& request : plan.wanted) {
+    const TileId& id = request.id;
+    if (resident.count(id) || awaiting_upload.count(id)) continue;
+    if (!loaded.count(id)) {
+      requests.push_back(request);
+      continue;
+    }
+    bool budget_left = candidates.size() < budget.upload_budget_tiles &&
+                       (budget.upload_budget_bytes == 0 || candidates.empty() ||
+                        candidate_bytes + info.storedTileBytes() <= budget.upload_budget_bytes);
+    if (budget_left && parentReady(id)) {
+      candidates.push_back(id);
+      candidate_requests.push_back(request);
+      uploading.insert(id);
+      candidate_bytes += info.storedTileBytes();
+    }
+  }
+  pinned.clear();
+  cache->findAndPin(candidates, pinned);
+  uploading.clear();
+  uint64_t upload_bytes = 0;
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const TileId& id = candidates[i];
+    if (!pinned[i]) {
+      loaded.erase(id);  // evicted since it loaded
+      requests.push_back(candidate_requests[i]);
+      continue;
+    }
+    if (!parentReady(id)) {  // its parent was evicted before it could go up
+      cache->unpin(id);
+      continue;
+    }
+    upload_bytes += pinned[i]->texels.texels.size();
+    uploading.insert(id);
+    awaiting_upload.insert(id);
+    loaded.erase(id);
+    update.uploads.push_back(std::move(pinned[i]));
+  }
+  std::sort(requests.begin(), requests.end(),
+            [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
+  return upload_bytes;
+}
+
+void TileStreamer::Impl::scheduleAdaptive(const View& view, uint32_t image,
+                                          const detail::ResidencyPlan& plan, FrameReport& report) {
+  const ImageInfo& info = archive->images()[image];
+  if (!adaptive[image])
+    adaptive[image] = std::make_unique<detail::AdaptiveScheduler>(
+        options.adaptive, info.level_count, info.storedTileBytes(), options.cache_budget_bytes);
+  loader->inFlight(in_flight);
+  const bool dependent = codecNeedsParent(info.default_codec);
+  auto facts = [&](const TileId& id) {
+    detail::TileFacts f;
+    f.held =
+        resident.count(id) || awaiting_upload.count(id) || loaded.count(id) || uploading.count(id);
+    f.in_flight = in_flight.count(id) > 0;
+    f.payload_bytes = payloadBytes(id);
+    if (dependent && id.level + 1 < info.level_count) {
+      const TileId parent = Archive::parentTile(id);
+      f.parent_ready = cache->contains(parent) || in_flight.count(parent) > 0;
+    }
+    return f;
+  };
+  const auto now = options.adaptive.clock ? options.adaptive.clock() : Clock::now();
+  adaptive[image]->schedule(view, now, loader->linkEstimate(), plan.wanted, facts, requests,
+                            report);
+}
+
+void TileStreamer::Impl::releaseLeft(uint32_t image, const detail::ResidencyManager& manager) {
+  for (auto it = resident.begin(); it != resident.end();) {
+    if (it->image == image && !manager.isKept(*it)) {
+      update.releases.push_back(*it);
+      loaded.insert(*it);  // probably still cached; found out at the next upload attempt
+      it = resident.erase(it);
+    } else {
+      ++it;
+    }
+  }
+}
+
+void TileStreamer::Impl::reportLoader(FrameReport& report) const {
+  const detail::LoaderStats stats = loader->stats();
+  report.queue_length = stats.queued;
+  report.in_flight = stats.in_flight;
+  report.loader_idle_since = stats.idle_since;
+  report.bytes_read_total = stats.bytes_read;
+  report.payload_bytes_total = stats.payload_bytes;
+  report.reads_total = stats.reads;
+  report.tiles_loaded_total = stats.tiles_loaded;
+  report.load_failures_total = stats.failures;
+  report.decode_ms_total = stats.decode_ns / 1e6;
+  report.hinted_bytes_total = stats.hinted_bytes;
+  report.link_bytes_per_s = stats.link.bytes_per_s;
+  report.link_latency_ms = stats.link.latency_s * 1e3;
+  report.queue_wait_ms = stats.link.queue_wait_s * 1e3;
+  report.cancelled_total = stats.cancelled;
+  report.reads_cancelled_total = stats.reads_cancelled;
+  report.parents_queued_total = stats.parents_queued;
+  report.parent_fallbacks_total = stats.parent_fallbacks;
+  report.children_read_early_total = stats.children_read_early;
+}
+
 const FrameUpdate& TileStreamer::update(const View& view) {
   const auto started = Clock::now();
   Impl& s = *impl_;
@@ -123,167 +276,54 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   out.uploads.clear();
   out.releases.clear();
   out.regions.clear();
+  s.pollLoads();
 
-  s.events.clear();
-  s.loader->poll(s.events);
-  for (const detail::LoadEvent& event : s.events)
-    if (event.ok)
-      s.loaded.insert(event.id);
-    else if (!event.stale)
-      ++s.load_failures;
-
-  uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
-  if (!s.residency[image])
-    s.residency[image] = std::make_unique<detail::ResidencyManager>(s.archive->images()[image],
-                                                                    image, s.options.residency);
-  detail::ResidencyManager& residency = *s.residency[image];
+  const uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
+  const ImageInfo& info = s.archive->images()[image];
+  detail::ResidencyManager& residency = s.residencyOf(image);
   const detail::ResidencyPlan& plan = residency.plan(view);
   ViewerMotion motion = plan.motion;
-  motion.tile_size_px = s.archive->images()[image].tile_size_px;
+  motion.tile_size_px = info.tile_size_px;
   s.cache->setViewerMotion(motion);
   out.regions = plan.clip_regions;
-  out.clip_region_tiles = clipRegionTiles(view.viewportWidth(), view.viewportHeight(),
-                                          s.archive->images()[image].tile_size_px);
+  out.clip_region_tiles =
+      clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info.tile_size_px);
 
-  // Wanted tiles that are neither resident nor loaded go to the loader, in priority order.
-  // Loaded ones become upload candidates within the budget, parents before children. The
-  // render thread tracks "loaded" from the loader's events, so it takes the cache's lock once
-  // per frame (findAndPin); a tile evicted meanwhile is simply requested again.
-  s.requests.clear();
-  s.candidates.clear();
-  s.candidate_requests.clear();
-  std::unordered_set<TileId, TileIdHash> uploading;
-  const ResidencyOptions& budget = s.options.residency;
-  const ImageInfo& info = s.archive->images()[image];
-  const uint32_t coarsest = info.level_count - 1;
-  auto parentReady = [&](const TileId& id) {
-    TileId parent{id.image, id.level + 1, id.x / 2, id.y / 2};
-    return id.level == coarsest || s.resident.count(parent) || uploading.count(parent);
-  };
-  uint64_t candidate_bytes = 0;
-  for (const TileRequest& request : plan.wanted) {
-    const TileId& id = request.id;
-    if (s.resident.count(id) || s.awaiting_upload.count(id)) continue;
-    if (!s.loaded.count(id)) {
-      s.requests.push_back(request);
-      continue;
-    }
-    bool budget_left = s.candidates.size() < budget.upload_budget_tiles &&
-                       (budget.upload_budget_bytes == 0 || s.candidates.empty() ||
-                        candidate_bytes + info.storedTileBytes() <= budget.upload_budget_bytes);
-    if (budget_left && parentReady(id)) {
-      s.candidates.push_back(id);
-      s.candidate_requests.push_back(request);
-      uploading.insert(id);
-      candidate_bytes += info.storedTileBytes();
-    }
-  }
-  s.pinned.clear();
-  s.cache->findAndPin(s.candidates, s.pinned);
-  uploading.clear();
-  uint64_t upload_bytes = 0;
-  for (size_t i = 0; i < s.candidates.size(); ++i) {
-    const TileId& id = s.candidates[i];
-    if (!s.pinned[i]) {
-      s.loaded.erase(id);  // evicted since it loaded
-      s.requests.push_back(s.candidate_requests[i]);
-      continue;
-    }
-    if (!parentReady(id)) {  // its parent was evicted before it could go up
-      s.cache->unpin(id);
-      continue;
-    }
-    upload_bytes += s.pinned[i]->texels.texels.size();
-    uploading.insert(id);
-    s.awaiting_upload.insert(id);
-    s.loaded.erase(id);
-    out.uploads.push_back(std::move(s.pinned[i]));
-  }
-  std::sort(s.requests.begin(), s.requests.end(),
-            [](const TileRequest& a, const TileRequest& b) { return a.priority < b.priority; });
+  const uint64_t upload_bytes = s.chooseUploads(plan, info);
   FrameReport& report = out.report;
   report = {};
   report.requested_level = plan.desired_level;
-  if (s.options.adaptive.enabled) {
-    if (!s.adaptive[image])
-      s.adaptive[image] = std::make_unique<detail::AdaptiveScheduler>(
-          s.options.adaptive, info.level_count, info.storedTileBytes(),
-          s.options.cache_budget_bytes);
-    s.loader->inFlight(s.in_flight);
-    const bool dependent = codecNeedsParent(info.default_codec);
-    auto facts = [&](const TileId& id) {
-      detail::TileFacts f;
-      f.held = s.resident.count(id) || s.awaiting_upload.count(id) || s.loaded.count(id) ||
-               uploading.count(id);
-      f.in_flight = s.in_flight.count(id) > 0;
-      f.payload_bytes = s.payloadBytes(id);
-      if (dependent && id.level + 1 < info.level_count) {
-        const TileId parent = Archive::parentTile(id);
-        f.parent_ready = s.cache->contains(parent) || s.in_flight.count(parent) > 0;
-      }
-      return f;
-    };
-    const auto now = s.options.adaptive.clock ? s.options.adaptive.clock() : Clock::now();
-    s.adaptive[image]->schedule(view, now, s.loader->linkEstimate(), plan.wanted, facts, s.requests,
-                                report);
-  }
+  if (s.options.adaptive.enabled) s.scheduleAdaptive(view, image, plan, report);
   s.loader->setWanted(s.requests);
-
-  // Resident tiles that left every (expanded) region are released.
-  for (auto it = s.resident.begin(); it != s.resident.end();) {
-    if (it->image == image && !residency.isKept(*it)) {
-      out.releases.push_back(*it);
-      s.loaded.insert(*it);  // probably still cached; found out at the next upload attempt
-      it = s.resident.erase(it);
-    } else {
-      ++it;
-    }
-  }
+  s.releaseLeft(image, residency);
 
   residency.measureCoverage(
-      [&](const TileId& id) { return s.resident.count(id) > 0 || uploading.count(id) > 0; },
+      [&](const TileId& id) { return s.resident.count(id) > 0 || s.uploading.count(id) > 0; },
       report);
-  const detail::LoaderStats loader_stats = s.loader->stats();
-  report.queue_length = loader_stats.queued;
-  report.in_flight = loader_stats.in_flight;
-  report.loader_idle_since = loader_stats.idle_since;
+  s.reportLoader(report);
   report.uploads = out.uploads.size();
   report.upload_bytes = upload_bytes;
-  report.bytes_read_total = loader_stats.bytes_read;
-  report.payload_bytes_total = loader_stats.payload_bytes;
-  report.reads_total = loader_stats.reads;
-  report.tiles_loaded_total = loader_stats.tiles_loaded;
-  report.load_failures_total = loader_stats.failures;
-  report.decode_ms_total = loader_stats.decode_ns / 1e6;
-  report.hinted_bytes_total = loader_stats.hinted_bytes;
-  report.link_bytes_per_s = loader_stats.link.bytes_per_s;
-  report.link_latency_ms = loader_stats.link.latency_s * 1e3;
-  report.queue_wait_ms = loader_stats.link.queue_wait_s * 1e3;
-  report.cancelled_total = loader_stats.cancelled;
-  report.reads_cancelled_total = loader_stats.reads_cancelled;
-  report.parents_queued_total = loader_stats.parents_queued;
-  report.parent_fallbacks_total = loader_stats.parent_fallbacks;
-  report.children_read_early_total = loader_stats.children_read_early;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }
 
-void TileStreamer::uploaded(const TileId& id) {
-  if (impl_->awaiting_upload.erase(id) == 0) return;
-  impl_->resident.insert(id);
-  impl_->cache->unpin(id);
-}
-
-void TileStreamer::released(const TileId& id) {
-  // Probably still cached (a renderer that drops a tile to make room, or is replaced, drops
-  // one the runtime loaded): offered again from the cache, requested only if it was evicted.
-  if (impl_->resident.erase(id)) impl_->loaded.insert(id);
-}
-
-void TileStreamer::declined(const TileId& id) {
-  if (impl_->awaiting_upload.erase(id) == 0) return;
-  impl_->cache->unpin(id);
-  impl_->loaded.insert(id);
+void TileStreamer::acknowledge(const ApplyResult& result) {
+  Impl& s = *impl_;
+  for (const TileId& id : result.accepted) {
+    if (s.awaiting_upload.erase(id) == 0) continue;
+    s.resident.insert(id);
+    s.cache->unpin(id);
+  }
+  for (const TileId& id : result.declined) {
+    if (s.awaiting_upload.erase(id) == 0) continue;
+    s.cache->unpin(id);
+    s.loaded.insert(id);
+  }
+  // A dropped tile is probably still cached (a renderer that drops a tile to make room, or is
+  // replaced, drops one the runtime loaded): offered again from the cache, requested only if
+  // it was evicted meanwhile.
+  for (const TileId& id : result.dropped)
+    if (s.resident.erase(id)) s.loaded.insert(id);
 }
 
 TileState TileStreamer::state(const TileId& id) const {

@@ -2,8 +2,11 @@
 // Shared pieces of the `tessera` subcommands: each subcommand file registers its options on
 // the CLI11 app and runs; they share only these plain structs and free functions.
 
+#include <cstdint>
 #include <cstdio>
 #include <string>
+#include <string_view>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -14,10 +17,11 @@ namespace tessera::cli {
 /// Exit codes, documented in `tessera --help` and docs/cli.md.
 enum ExitCode : int {
   kExitOk = 0,
-  kExitFailure = 1,     ///< the operation failed (bad input, I/O error)
-  kExitUsage = 2,       ///< bad command line
-  kExitCorrupt = 3,     ///< verify found faults
-  kExitCancelled = 130  ///< interrupted (SIGINT)
+  kExitFailure = 1,       ///< the operation failed (bad input, I/O error)
+  kExitUsage = 2,         ///< bad command line
+  kExitCorrupt = 3,       ///< verify found faults
+  kExitCancelled = 130,   ///< interrupted by SIGINT (128 + 2)
+  kExitTerminated = 143,  ///< stopped by SIGTERM (128 + 15)
 };
 
 /// Prints "tessera: <message>" to stderr and returns the exit code for the error.
@@ -48,6 +52,19 @@ inline constexpr const char* kArchiveArgumentHelp =
 
 /// Formats a byte count as "12.3 MiB".
 std::string formatBytes(uint64_t bytes);
+
+/// Parses a size such as "8GiB", "512M", "1.5g" or "4000000000": a number, then optionally
+/// K, M, G, T (powers of 1024, with or without "iB") or KB, MB, GB, TB (powers of 1000); case
+/// does not matter. Fails with kInvalidArgument naming `option`, the text and the accepted
+/// forms; a size of 0 or past 2^63 bytes is refused.
+[[nodiscard]] Result<uint64_t> parseByteSize(const std::string& option, const std::string& text);
+
+/// The name among `candidates` nearest to `word` by edit distance, or "" when none is within
+/// a third of the word's length (at least 2 edits): the suggestion for a misspelt name.
+std::string nearestName(std::string_view word, const std::vector<std::string>& candidates);
+
+/// "a, b or c": the accepted values of an option, for its "unknown value" message.
+std::string listChoices(const std::vector<std::string>& choices);
 
 void registerBuildCommand(CLI::App& app, int& exit_code);
 void registerInfoCommand(CLI::App& app, int& exit_code);

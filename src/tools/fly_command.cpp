@@ -1,5 +1,5 @@
 // `tessera fly`: flies a camera path headless at a fixed frame rate, in real time, and
-// records what the runtime did each frame (no GPU: uploads are accepted at once).
+// records what the runtime did each frame; without --render, uploads are accepted at once.
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -19,6 +19,7 @@
 #include <tessera/picture_file.h>
 #include <tessera/byte_source.h>
 #include <tessera/link.h>
+#include <tessera/renderer.h>
 #include <tessera/stream.h>
 
 #include <tessera/codec_scratch.h>
@@ -33,8 +34,12 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// Loader threads over a simulated link when --threads is 0: reads there wait a round trip
-/// each, so more of them in flight than cores keep the link busy.
+/// Without --render, what a renderer with room for everything answers: every upload accepted.
+ApplyResult acceptEverything(const FrameUpdate& update) {
+  ApplyResult result;
+  for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+  return result;
+}
 
 /// Drops the archive's pages from the page cache (posix_fadvise DONTNEED: no root needed,
 /// unlike /proc/sys/vm/drop_caches), so the next reads come from the disk.
@@ -124,144 +129,106 @@ Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> til
   return ms;
 }
 
-}  // namespace
-
-int runFly(const FlyArgs& args) {
-  uint32_t viewport_w = 0, viewport_h = 0;
-  if (std::sscanf(args.viewport.c_str(), "%ux%u", &viewport_w, &viewport_h) != 2 ||
-      viewport_w == 0 || viewport_h == 0 || viewport_w > 16384 || viewport_h > 16384)
-    return reportError({ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080"});
-  if (!(args.fps > 0 && args.fps <= 1000))
-    return reportError({ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]"});
-  // Over --link, the archive (a file or a URL) is read through a simulated network link: the
-  // header too, as a remote client would.
+/// What a flight starts from: the checked arguments, the archive and the camera path.
+struct FlightSetup {
+  uint32_t viewport_w = 0;
+  uint32_t viewport_h = 0;
+  /// With --link, the simulated link every read of the archive crosses; else null.
   std::shared_ptr<ThrottledSource> link;
+  std::shared_ptr<Archive> archive;
+  double open_ms = 0;     ///< opening: part of a remote client's time to its first picture
+  bool remote = false;    ///< reads cross a network, simulated or real
+  bool adaptive = false;  ///< adaptive scheduling on
+  ImageInfo info;         ///< the image flown over
+  CameraPath path;
+};
+
+/// Checks `args`, opens the archive (through the simulated link with --link, the header too,
+/// as a remote client would read it) and builds the camera path.
+Result<FlightSetup> setUpFlight(const FlyArgs& args) {
+  FlightSetup setup;
+  if (std::sscanf(args.viewport.c_str(), "%ux%u", &setup.viewport_w, &setup.viewport_h) != 2 ||
+      setup.viewport_w == 0 || setup.viewport_h == 0 || setup.viewport_w > 16384 ||
+      setup.viewport_h > 16384)
+    return fail(ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080");
+  if (!(args.fps > 0 && args.fps <= 1000))
+    return fail(ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]");
+  const auto open_start = Clock::now();
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
-  // Opening is part of a remote client's time to its first picture (one request for a URL).
-  const auto open_start = std::chrono::steady_clock::now();
   if (!args.link.empty()) {
     Result<LinkModel> model = parseLinkModel(args.link);
-    if (!model) return reportError(model.error());
+    if (!model) return forwardError(model);
     Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
-    if (!inner) return reportError(inner.error());
-    link = makeThrottledSource(*inner, *model);
-    archive = Archive::open(link);
+    if (!inner) return forwardError(inner);
+    setup.link = makeThrottledSource(*inner, *model);
+    archive = Archive::open(setup.link);
   } else {
     archive = openArchive(args.archive);
   }
-  if (!archive) return reportError(archive.error());
-  const double open_ms =
-      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - open_start)
-          .count();
+  if (!archive) return forwardError(archive);
+  setup.archive = std::move(*archive);
+  setup.open_ms = std::chrono::duration<double, std::milli>(Clock::now() - open_start).count();
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
-    return reportError({ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off"});
+    return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
   if (!(args.still_after_s >= 0))
-    return reportError({ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds"});
-  // Auto: on wherever reads cross a network, simulated or real.
-  const bool adaptive =
-      args.adaptive == "on" || (args.adaptive == "auto" && (link || isRemoteUri(args.archive)));
-  if (args.image >= (*archive)->images().size())
-    return reportError({ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image)});
-  const ImageInfo& info = (*archive)->images()[args.image];
+    return fail(ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds");
+  setup.remote = setup.link || isRemoteUri(args.archive);
+  setup.adaptive = args.adaptive == "on" || (args.adaptive == "auto" && setup.remote);
+  if (args.image >= setup.archive->images().size())
+    return fail(ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image));
+  setup.info = setup.archive->images()[args.image];
+  Result<CameraPath> path = std::filesystem::exists(args.path)
+                                ? loadPathFile(args.path)
+                                : builtinPath(args.path, setup.info, args.speed_px_s,
+                                              args.duration_s, setup.viewport_w, setup.viewport_h);
+  if (!path) return forwardError(path);
+  setup.path = std::move(*path);
+  return setup;
+}
 
-  Result<CameraPath> path =
-      std::filesystem::exists(args.path)
-          ? loadPathFile(args.path)
-          : builtinPath(args.path, info, args.speed_px_s, args.duration_s, viewport_w, viewport_h);
-  if (!path) return reportError(path.error());
-
+/// The streamer's options: the remote tuning first wherever reads cross a network, then what
+/// the user set explicitly.
+StreamerOptions flightStreamerOptions(const FlyArgs& args, const FlightSetup& setup) {
   StreamerOptions options;
-  // Wherever reads cross a network, simulated or real, the remote tuning first; what the
-  // user set explicitly below overrides it.
-  const bool remote = link || isRemoteUri(args.archive);
-  if (remote) tuneForRemoteSource(options);
+  if (setup.remote) tuneForRemoteSource(options);
   options.cache_budget_bytes = args.cache_mib << 20;
   options.viewer_shift_eviction = args.eviction != "lru";
-  if (args.threads != 0 || !remote) options.loader_threads = args.threads;
+  if (args.threads != 0 || !setup.remote) options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
   options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
   if (args.merge_gap_kib) options.merge_gap_bytes = *args.merge_gap_kib << 10;
-  if (!remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
+  if (!setup.remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
     options.read_ahead_bytes = args.read_ahead_kib << 10;
   options.loader_idle_priority = args.loader_priority == "idle";
-  options.adaptive.enabled = adaptive;
+  options.adaptive.enabled = setup.adaptive;
   options.adaptive.still_after_s = args.still_after_s;
   if (args.batch_gap_kib) options.batch_gap_bytes = *args.batch_gap_kib << 10;
   if (args.max_read_kib) options.max_merged_read_bytes = *args.max_read_kib << 10;
-  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
-  if (!streamer) return reportError(streamer.error());
-  std::unique_ptr<FlyRenderer> gpu;
-  if (args.render != "none") {
-    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(
-        args.render == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads, info);
-    if (!created) return reportError(created.error());
-    gpu = std::move(*created);
-  }
+  return options;
+}
+
+/// What a flight recorded, frame by frame and per jump; written out after it.
+struct FlightLog {
+  std::vector<std::string> csv_rows;   ///< frames.csv up to render_ms
+  std::vector<std::string> csv_tails;  ///< the columns after gpu_ms, known only at the end
+  std::vector<double> update_ms;
   std::vector<double> render_ms;
   std::vector<ReportFrame> report_frames;
   std::vector<ReportPicture> report_pictures;
-  // A picture of the GPU's last frame to a PNG in the output folder, kept for the report.
-  auto savePicture = [&](const Picture& picture, const std::string& name,
-                         const std::string& caption) -> Result<void> {
-    const std::string file = args.out_dir + "/" + name;
-    TESSERA_TRY(writePng(picture, file));
-    if (args.report) {
-      std::ifstream in(file, std::ios::binary);
-      report_pictures.push_back(
-          {caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
-    }
-    return {};
-  };
-
-  std::error_code ec;
-  std::filesystem::create_directories(args.out_dir, ec);
-  std::ofstream csv(args.out_dir + "/frames.csv");
-  if (!csv) return reportError({ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write"});
-  csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
-         "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
-         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
-         "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
-         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
-  std::vector<std::string> csv_rows;   // written after the flight, when GPU times are known
-  std::vector<std::string> csv_tails;  // the columns after gpu_ms
-
-  std::vector<double> update_ms;
   std::vector<JumpTiming> jumps{{0}};
-  size_t frames_full_detail = 0, frames_covered = 0, frames = 0;
-  // Frames before the first covered one are start-up (the coarsest tile is still loading):
-  // a viewer shows its first picture only then. Coverage is counted from that frame on.
+  size_t frames = 0;
+  size_t frames_full_detail = 0;
+  size_t frames_covered = 0;
+  /// Frames before the first covered one are start-up (the coarsest tile is still loading):
+  /// a viewer shows its first picture only then. Coverage is counted from that frame on.
   size_t startup_frames = 0;
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
-  if (args.cold && !isRemoteUri(args.archive)) dropFromPageCache(args.archive);
-  const auto start = Clock::now();
-  const double duration = path->durationS();
   FrameReport last{};
-  for (uint64_t k = 0;; ++k) {
-    double t_s = k / args.fps;
-    if (t_s > duration) break;
-    // Frame pacing: a real renderer presents at the display rate; this is that wait.
-    std::this_thread::sleep_until(
-        start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
-    double now_s = std::chrono::duration<double>(Clock::now() - start).count();
-    if (k > 0 && path->jumpsBetween((k - 1) / args.fps, t_s)) {
-      if (args.cold && !remote) dropFromPageCache(args.archive);
-      jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
-    }
-    View view;
-    view.image = args.image;
-    view.ortho = path->at(t_s, viewport_w, viewport_h);
-    const FrameUpdate& update = (*streamer)->update(view);
-    if (args.decode_bound)
-      for (const auto& tile : update.uploads) jumps.back().uploaded.push_back(tile->id);
-    double frame_render_ms = -1;
-    if (gpu) {
-      frame_render_ms = gpu->frame(k, view, update, **streamer);
-      render_ms.push_back(frame_render_ms);
-    } else {
-      for (const auto& tile : update.uploads) (*streamer)->uploaded(tile->id);  // null renderer
-    }
-    const FrameReport& r = update.report;
+
+  /// Records frame `k`, seen `now_s` after `start`.
+  void record(uint64_t k, double now_s, Clock::time_point start, const View& view,
+              const FrameReport& r, double frame_render_ms) {
     last = r;
     update_ms.push_back(r.update_ms);
     ++frames;
@@ -293,76 +260,123 @@ int runFly(const FlyArgs& args) {
     report_frames.push_back({now_s * 1000, r.update_ms, frame_render_ms, -1, r.coverage_desired,
                              r.fully_covered, r.bytes_read_total, r.link_bytes_per_s,
                              r.desired_level, r.requested_level, r.finest_full_level});
-    if (gpu) {
-      if (std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
-          args.screenshot_frames.end()) {
-        Result<void> saved =
-            savePicture(gpu->renderer().readPixels(), fmt::format("frame-{}.png", k),
-                        fmt::format("frame {} ({:.2f} s)", k, t_s));
-        if (!saved) return reportError(saved.error());
-      }
-      // At rest: the last frame before the next jump (or the end), against the reference of
-      // the tiles resident then.
-      const double next_t = (k + 1) / args.fps;
-      if (next_t > duration || path->jumpsBetween(t_s, next_t)) {
-        const size_t index = jumps.size() - 1;
-        Picture picture = gpu->renderer().readPixels();
-        ReferenceOptions reference_options;
-        reference_options.available = [&](const TileId& id) {
-          return gpu->renderer().resident(id);
-        };
-        Result<Picture> reference = renderReference(**archive, view, reference_options);
-        if (!reference) return reportError(reference.error());
-        Result<PictureDifference> difference = comparePictures(picture, *reference);
-        if (!difference) return reportError(difference.error());
-        jump.rest_psnr_db = difference->psnr_db;
-        jump.rest_max_abs = difference->max_abs;
-        Result<void> saved =
-            savePicture(picture, fmt::format("rest-{}.png", index),
+  }
+};
+
+/// A picture of the GPU's last frame to a PNG in the output folder, kept for the report.
+Result<void> saveFlightPicture(const FlyArgs& args, FlightLog& log, const Picture& picture,
+                               const std::string& name, const std::string& caption) {
+  const std::string file = args.out_dir + "/" + name;
+  TESSERA_TRY(writePng(picture, file));
+  if (args.report) {
+    std::ifstream in(file, std::ios::binary);
+    log.report_pictures.push_back(
+        {caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
+  }
+  return {};
+}
+
+/// With --render, after frame `k` at `t_s`: the screenshots asked for, and at rest (the last
+/// frame before the next jump, or the end) the picture against the reference of the tiles
+/// resident then, with its level overlay.
+Result<void> captureFlightPictures(const FlyArgs& args, const FlightSetup& setup, FlyRenderer& gpu,
+                                   const View& view, uint64_t k, double t_s, FlightLog& log) {
+  if (std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
+      args.screenshot_frames.end())
+    TESSERA_TRY(saveFlightPicture(args, log, gpu.renderer().readPixels(),
+                                  fmt::format("frame-{}.png", k),
+                                  fmt::format("frame {} ({:.2f} s)", k, t_s)));
+  const double next_t = (k + 1) / args.fps;
+  if (next_t <= setup.path.durationS() && !setup.path.jumpsBetween(t_s, next_t)) return {};
+  const size_t index = log.jumps.size() - 1;
+  Picture picture = gpu.renderer().readPixels();
+  ReferenceOptions reference_options;
+  reference_options.available = [&](const TileId& id) { return gpu.renderer().resident(id); };
+  Result<Picture> reference = renderReference(*setup.archive, view, reference_options);
+  if (!reference) return forwardError(reference);
+  Result<PictureDifference> difference = comparePictures(picture, *reference);
+  if (!difference) return forwardError(difference);
+  log.jumps.back().rest_psnr_db = difference->psnr_db;
+  log.jumps.back().rest_max_abs = difference->max_abs;
+  TESSERA_TRY(
+      saveFlightPicture(args, log, picture, fmt::format("rest-{}.png", index),
                         fmt::format("at rest before jump {}: {:.1f} dB against the CPU reference",
-                                    index + 1, std::min(difference->psnr_db, 99.0)));
-        if (!saved) return reportError(saved.error());
-        Result<Picture> tinted =
-            levelOverlay(picture, **archive, view, reference_options.available);
-        if (!tinted) return reportError(tinted.error());
-        saved = savePicture(*tinted, fmt::format("rest-{}-levels.png", index),
-                            "the same, tinted by the level that draws each pixel");
-        if (!saved) return reportError(saved.error());
-      }
+                                    index + 1, std::min(difference->psnr_db, 99.0))));
+  Result<Picture> tinted = levelOverlay(picture, *setup.archive, view, reference_options.available);
+  if (!tinted) return forwardError(tinted);
+  return saveFlightPicture(args, log, *tinted, fmt::format("rest-{}-levels.png", index),
+                           "the same, tinted by the level that draws each pixel");
+}
+
+/// Flies the path in real time at args.fps, one streamer update (and with `gpu`, one apply and
+/// draw) per frame, and records each frame in `log`.
+Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStreamer& streamer,
+                       FlyRenderer* gpu, FlightLog& log) {
+  if (args.cold && !isRemoteUri(args.archive)) dropFromPageCache(args.archive);
+  const auto start = Clock::now();
+  const double duration = setup.path.durationS();
+  for (uint64_t k = 0;; ++k) {
+    double t_s = k / args.fps;
+    if (t_s > duration) break;
+    // Frame pacing: a real renderer presents at the display rate; this is that wait.
+    std::this_thread::sleep_until(
+        start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
+    double now_s = std::chrono::duration<double>(Clock::now() - start).count();
+    if (k > 0 && setup.path.jumpsBetween((k - 1) / args.fps, t_s)) {
+      if (args.cold && !setup.remote) dropFromPageCache(args.archive);
+      log.jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
     }
+    View view;
+    view.image = args.image;
+    view.ortho = setup.path.at(t_s, setup.viewport_w, setup.viewport_h);
+    const FrameUpdate& update = streamer.update(view);
+    if (args.decode_bound)
+      for (const auto& tile : update.uploads) log.jumps.back().uploaded.push_back(tile->id);
+    double frame_render_ms = -1;
+    if (gpu) {
+      frame_render_ms = gpu->frame(k, view, update, streamer);
+      log.render_ms.push_back(frame_render_ms);
+    } else {
+      streamer.acknowledge(acceptEverything(update));  // no GPU: a renderer of infinite room
+    }
+    log.record(k, now_s, start, view, update.report, frame_render_ms);
+    if (gpu) TESSERA_TRY(captureFlightPictures(args, setup, *gpu, view, k, t_s, log));
   }
-  if (gpu) {
-    std::vector<double> gpu_ms = gpu->finishGpuTimes();
-    for (size_t i = 0; i < report_frames.size() && i < gpu_ms.size(); ++i)
-      report_frames[i].gpu_ms = gpu_ms[i];
-  }
-  for (size_t i = 0; i < csv_rows.size(); ++i)
-    csv << csv_rows[i] << ","
-        << (i < report_frames.size() && report_frames[i].gpu_ms >= 0
-                ? fmt::format("{:.4f}", report_frames[i].gpu_ms)
+  return {};
+}
+
+/// frames.csv: the rows recorded, with the GPU times read back after the flight.
+Result<void> writeFramesCsv(const FlyArgs& args, const FlightLog& log) {
+  std::ofstream csv(args.out_dir + "/frames.csv", std::ios::app);
+  for (size_t i = 0; i < log.csv_rows.size(); ++i)
+    csv << log.csv_rows[i] << ","
+        << (i < log.report_frames.size() && log.report_frames[i].gpu_ms >= 0
+                ? fmt::format("{:.4f}", log.report_frames[i].gpu_ms)
                 : std::string("-1"))
-        << "," << csv_tails[i] << "\n";
-  CacheStats cache = (*streamer)->cacheStats();
-  const std::string policy_name = (*streamer)->cache().policyName();
-  const uint32_t threads =
-      args.threads ? args.threads : std::max(1u, std::thread::hardware_concurrency());
-  if (args.decode_bound) {
-    streamer->reset();  // its loader threads are gone before the bound is measured
-    for (JumpTiming& jump : jumps) {
-      Result<double> ms = decodeBoundMs(**archive, jump.uploaded, threads);
-      if (!ms) return reportError(ms.error());
-      jump.decode_bound_ms = *ms;
-    }
-  }
+        << "," << log.csv_tails[i] << "\n";
+  return {};
+}
+
+nlohmann::json flightPercentiles(const std::vector<double>& values) {
+  return nlohmann::json{
+      {"p50", percentile(values, 50)},
+      {"p99", percentile(values, 99)},
+      {"max", values.empty() ? 0 : *std::max_element(values.begin(), values.end())}};
+}
+
+/// summary.json's jumps: full detail and clip-region times, and what --render and
+/// --decode-bound measured.
+nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rendered,
+                           uint32_t threads) {
   nlohmann::json jump_list = nlohmann::json::array();
-  for (const JumpTiming& j : jumps) {
+  for (const JumpTiming& j : log.jumps) {
     nlohmann::json entry = {
         {"at_s", j.at_s},
         {"full_detail_ms",
          j.full_detail_ms < 0 ? nlohmann::json() : nlohmann::json(j.full_detail_ms)},
         {"clip_region_ms",
          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}};
-    if (gpu) {
+    if (rendered) {
       entry["rest_psnr_db"] = j.rest_psnr_db < 0           ? nlohmann::json()
                               : std::isinf(j.rest_psnr_db) ? nlohmann::json(999.0)
                                                            : nlohmann::json(j.rest_psnr_db);
@@ -375,16 +389,26 @@ int runFly(const FlyArgs& args) {
     }
     jump_list.push_back(std::move(entry));
   }
+  return jump_list;
+}
+
+/// summary.json (docs/fly.md, "summary.json").
+nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
+                             const StreamerOptions& options, const FlightLog& log,
+                             const CacheStats& cache, const std::string& policy_name,
+                             nlohmann::json jumps) {
+  const FrameReport& last = log.last;
+  const size_t frames = log.frames;
   nlohmann::json summary = {
       {"archive", args.archive},
-      {"path", path->name},
-      {"codec", codecName(info.default_codec)},
+      {"path", setup.path.name},
+      {"codec", codecName(setup.info.default_codec)},
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
-      {"page_cache", remote      ? "remote (HTTP)"
-                     : args.cold ? "cold (posix_fadvise DONTNEED before each jump)"
-                                 : "as found"},
+      {"page_cache", setup.remote ? "remote (HTTP)"
+                     : args.cold  ? "cold (posix_fadvise DONTNEED before each jump)"
+                                  : "as found"},
       {"merge_gap_bytes", options.merge_gap_bytes},
       {"batch_gap_bytes", options.batch_gap_bytes},
       {"read_ahead_bytes", options.read_ahead_bytes},
@@ -392,23 +416,22 @@ int runFly(const FlyArgs& args) {
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
-      {"frames_full_detail_pct", frames ? 100.0 * frames_full_detail / frames : 0},
-      {"startup_frames", startup_frames},
-      {"open_ms", open_ms},
-      {"startup_ms", startup_ms < 0 ? nlohmann::json() : nlohmann::json(startup_ms)},
+      {"frames_full_detail_pct", frames ? 100.0 * log.frames_full_detail / frames : 0},
+      {"startup_frames", log.startup_frames},
+      {"open_ms", setup.open_ms},
+      {"startup_ms", log.startup_ms < 0 ? nlohmann::json() : nlohmann::json(log.startup_ms)},
       {"frames_fully_covered_pct",
-       frames > startup_frames ? 100.0 * frames_covered / double(frames - startup_frames) : 0},
-      {"update_ms",
-       {{"p50", percentile(update_ms, 50)},
-        {"p99", percentile(update_ms, 99)},
-        {"max", update_ms.empty() ? 0 : *std::max_element(update_ms.begin(), update_ms.end())}}},
-      {"jumps", jump_list},
+       frames > log.startup_frames
+           ? 100.0 * log.frames_covered / double(frames - log.startup_frames)
+           : 0},
+      {"update_ms", flightPercentiles(log.update_ms)},
+      {"jumps", std::move(jumps)},
       {"bytes_read", last.bytes_read_total},
       {"reads", last.reads_total},
       {"hinted_bytes", last.hinted_bytes_total},
-      {"payload_bytes_delivered", uploaded_payload_bytes},
+      {"payload_bytes_delivered", log.uploaded_payload_bytes},
       {"read_amplification",
-       uploaded_payload_bytes ? double(last.bytes_read_total) / uploaded_payload_bytes : 0},
+       log.uploaded_payload_bytes ? double(last.bytes_read_total) / log.uploaded_payload_bytes : 0},
       {"tiles_loaded", last.tiles_loaded_total},
       {"load_failures", last.load_failures_total},
       {"decode_ms_total", last.decode_ms_total},
@@ -420,8 +443,8 @@ int runFly(const FlyArgs& args) {
         {"evictions", cache.evictions},
         {"peak_bytes", cache.peak_bytes}}},
       {"peak_rss_bytes", peakRssBytes()},
-      {"adaptive", adaptive ? "on" : "off"},
-      {"simulated_link", link ? args.link : "none"},
+      {"adaptive", setup.adaptive ? "on" : "off"},
+      {"simulated_link", setup.link ? args.link : "none"},
       {"link_bytes_per_s", last.link_bytes_per_s},
       {"link_latency_ms", last.link_latency_ms},
       {"requests_cancelled", last.cancelled_total},
@@ -429,65 +452,138 @@ int runFly(const FlyArgs& args) {
       {"parents_queued", last.parents_queued_total},
       {"parent_fallbacks", last.parent_fallbacks_total},
       {"children_read_early", last.children_read_early_total}};
-  if (adaptive) summary["still_after_s"] = args.still_after_s;
-  if (std::optional<LinkStats> link_stats = (*archive)->source().linkStats()) {
-    // Over a network: what the link did, and what the requests saw of it (the last ones).
-    std::vector<double> mib_s, first_byte_ms;
-    for (const LinkSample& sample : link_stats->recent) {
-      if (sample.seconds > 0) mib_s.push_back(double(sample.bytes) / sample.seconds / 1048576.0);
-      first_byte_ms.push_back(sample.first_byte_seconds * 1000);
-    }
-    summary["link"] = {{"requests", link_stats->requests},
-                       {"bytes_received", link_stats->bytes_received},
-                       {"retries", link_stats->retries},
-                       {"errors", link_stats->errors},
-                       {"cancelled", link_stats->cancelled},
-                       {"prefetched_bytes", link_stats->prefetched_bytes},
-                       {"prefetch_hit_bytes", link_stats->prefetch_hit_bytes},
-                       {"recent_requests", link_stats->recent.size()},
-                       {"recent_mib_s_p50", percentile(mib_s, 50)},
-                       {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
+  if (setup.adaptive) summary["still_after_s"] = args.still_after_s;
+  return summary;
+}
+
+/// Over a network: what the link did, and what the requests saw of it (the last ones).
+void addFlightLinkSummary(const Archive& archive, nlohmann::json& summary) {
+  std::optional<LinkStats> link_stats = archive.source().linkStats();
+  if (!link_stats) return;
+  std::vector<double> mib_s, first_byte_ms;
+  for (const LinkSample& sample : link_stats->recent) {
+    if (sample.seconds > 0) mib_s.push_back(double(sample.bytes) / sample.seconds / 1048576.0);
+    first_byte_ms.push_back(sample.first_byte_seconds * 1000);
   }
-  if (gpu) {
-    std::vector<double> gpu_ms;
-    for (const ReportFrame& f : report_frames)
-      if (f.gpu_ms >= 0) gpu_ms.push_back(f.gpu_ms);
-    auto stats = [](const std::vector<double>& v) {
-      return nlohmann::json{{"p50", percentile(v, 50)},
-                            {"p99", percentile(v, 99)},
-                            {"max", v.empty() ? 0 : *std::max_element(v.begin(), v.end())}};
-    };
-    summary["renderer"] = args.render;
-    summary["gl"] = gpu->description();
-    summary["render_ms"] = stats(render_ms);
-    summary["gpu_ms"] = stats(gpu_ms);
-  }
-  std::ofstream(args.out_dir + "/summary.json") << summary.dump(2) << "\n";
-  if (args.report) {
-    Result<void> written =
-        writeFlyReport(args.out_dir + "/report.html", summary, report_frames, report_pictures);
-    if (!written) return reportError(written.error());
-  }
-  if (args.json) {
-    std::printf("%s\n", summary.dump(2).c_str());
-  } else if (!args.quiet) {
+  summary["link"] = {{"requests", link_stats->requests},
+                     {"bytes_received", link_stats->bytes_received},
+                     {"retries", link_stats->retries},
+                     {"errors", link_stats->errors},
+                     {"cancelled", link_stats->cancelled},
+                     {"prefetched_bytes", link_stats->prefetched_bytes},
+                     {"prefetch_hit_bytes", link_stats->prefetch_hit_bytes},
+                     {"recent_requests", link_stats->recent.size()},
+                     {"recent_mib_s_p50", percentile(mib_s, 50)},
+                     {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
+}
+
+/// With --render: the renderer, the driver, and the render thread's and GPU's time per frame.
+void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const FlightLog& log,
+                            nlohmann::json& summary) {
+  std::vector<double> gpu_ms;
+  for (const ReportFrame& f : log.report_frames)
+    if (f.gpu_ms >= 0) gpu_ms.push_back(f.gpu_ms);
+  summary["renderer"] = args.render;
+  summary["gl"] = gpu.description();
+  summary["render_ms"] = flightPercentiles(log.render_ms);
+  summary["gpu_ms"] = flightPercentiles(gpu_ms);
+}
+
+/// The one or two lines `tessera fly` prints unless --json or --quiet.
+void printFlightSummary(const FlyArgs& args, const FlightSetup& setup, const FlightLog& log,
+                        const nlohmann::json& summary) {
+  const FrameReport& last = log.last;
+  std::printf(
+      "%s: %zu frames, %.1f%% at full detail, %.1f%% covered; update p50 %.3f ms p99 "
+      "%.3f ms; read %s (amplification %.2f); first full detail after %.1f ms; wrote "
+      "%s/frames.csv and summary.json\n",
+      args.archive.c_str(), log.frames, summary["frames_full_detail_pct"].get<double>(),
+      summary["frames_fully_covered_pct"].get<double>(), percentile(log.update_ms, 50),
+      percentile(log.update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
+      summary["read_amplification"].get<double>(), log.jumps[0].full_detail_ms,
+      args.out_dir.c_str());
+  if (setup.link)
     std::printf(
-        "%s: %zu frames, %.1f%% at full detail, %.1f%% covered; update p50 %.3f ms p99 "
-        "%.3f ms; read %s (amplification %.2f); first full detail after %.1f ms; wrote "
-        "%s/frames.csv and summary.json\n",
-        args.archive.c_str(), frames, summary["frames_full_detail_pct"].get<double>(),
-        summary["frames_fully_covered_pct"].get<double>(), percentile(update_ms, 50),
-        percentile(update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
-        summary["read_amplification"].get<double>(), jumps[0].full_detail_ms, args.out_dir.c_str());
-    if (link)
-      std::printf(
-          "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
-          "latency; adaptive scheduling %s\n",
-          args.link.c_str(), formatBytes(link->totals().bytes).c_str(),
-          (unsigned long long)last.reads_cancelled_total,
-          formatBytes(uint64_t(last.link_bytes_per_s)).c_str(), last.link_latency_ms,
-          adaptive ? "on" : "off");
+        "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
+        "latency; adaptive scheduling %s\n",
+        args.link.c_str(), formatBytes(setup.link->totals().bytes).c_str(),
+        (unsigned long long)last.reads_cancelled_total,
+        formatBytes(uint64_t(last.link_bytes_per_s)).c_str(), last.link_latency_ms,
+        setup.adaptive ? "on" : "off");
+}
+
+/// frames.csv's header, written before the flight so that an unwritable folder fails first.
+Result<void> startFramesCsv(const FlyArgs& args) {
+  std::error_code ec;
+  std::filesystem::create_directories(args.out_dir, ec);
+  std::ofstream csv(args.out_dir + "/frames.csv");
+  if (!csv) return fail(ErrorCode::kIo, args.out_dir + "/frames.csv: cannot write");
+  csv << "frame,t_ms,centre_x,centre_y,texels_per_pixel,desired_level,finest_full_level,"
+         "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
+         "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
+         "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
+         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
+  return {};
+}
+
+/// runFly after the archive is open: fly, then write what the flight recorded.
+Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
+  const StreamerOptions options = flightStreamerOptions(args, setup);
+  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
+  if (!streamer) return forwardError(streamer);
+  std::unique_ptr<FlyRenderer> gpu;
+  if (args.render != "none") {
+    const std::optional<RendererKind> kind = rendererNamed(args.render);
+    if (!kind)
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("--render {}: no such renderer", args.render));
+    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(*kind, setup.info);
+    if (!created) return forwardError(created);
+    gpu = std::move(*created);
   }
+  TESSERA_TRY(startFramesCsv(args));
+  FlightLog log;
+  TESSERA_TRY(flyFrames(args, setup, **streamer, gpu.get(), log));
+  if (gpu) {
+    std::vector<double> gpu_ms = gpu->finishGpuTimes();
+    for (size_t i = 0; i < log.report_frames.size() && i < gpu_ms.size(); ++i)
+      log.report_frames[i].gpu_ms = gpu_ms[i];
+  }
+  TESSERA_TRY(writeFramesCsv(args, log));
+  const CacheStats cache = (*streamer)->cacheStats();
+  const std::string policy_name = (*streamer)->cache().policyName();
+  const uint32_t threads =
+      args.threads ? args.threads : std::max(1u, std::thread::hardware_concurrency());
+  if (args.decode_bound) {
+    streamer->reset();  // its loader threads are gone before the bound is measured
+    for (JumpTiming& jump : log.jumps) {
+      Result<double> ms = decodeBoundMs(*setup.archive, jump.uploaded, threads);
+      if (!ms) return forwardError(ms);
+      jump.decode_bound_ms = *ms;
+    }
+  }
+  nlohmann::json summary = flightSummary(args, setup, options, log, cache, policy_name,
+                                         flightJumps(args, log, gpu != nullptr, threads));
+  addFlightLinkSummary(*setup.archive, summary);
+  if (gpu) addFlightRenderSummary(args, *gpu, log, summary);
+  std::ofstream(args.out_dir + "/summary.json") << summary.dump(2) << "\n";
+  if (args.report)
+    TESSERA_TRY(writeFlyReport(args.out_dir + "/report.html", summary, log.report_frames,
+                               log.report_pictures));
+  if (args.json)
+    std::printf("%s\n", summary.dump(2).c_str());
+  else if (!args.quiet)
+    printFlightSummary(args, setup, log, summary);
+  return {};
+}
+
+}  // namespace
+
+int runFly(const FlyArgs& args) {
+  Result<FlightSetup> setup = setUpFlight(args);
+  if (!setup) return reportError(setup.error());
+  Result<void> flown = runFlight(args, *setup);
+  if (!flown) return reportError(flown.error());
   return kExitOk;
 }
 

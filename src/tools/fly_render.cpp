@@ -26,7 +26,7 @@ Result<std::unique_ptr<FlyRenderer>> FlyRenderer::create(RendererKind kind, cons
   Result<std::unique_ptr<GlContext>> context = GlContext::createHeadless();
   if (!context) return forwardError(context);
   fly->context_ = std::move(*context);
-  Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
+  Result<std::unique_ptr<Renderer>> renderer = createRenderer(kind, info);
   if (!renderer) return forwardError(renderer);
   fly->renderer_ = std::move(*renderer);
   fly->queries_.resize(kQueryRing);
@@ -48,7 +48,7 @@ double FlyRenderer::frame(uint64_t index, const View& view, const FrameUpdate& u
   if (query.running) collect(true);  // the ring is full: the oldest must be read first
   query.began = std::chrono::steady_clock::now();
   glBeginQuery(GL_TIME_ELAPSED, query.id);
-  renderer_->apply(update, streamer);
+  streamer.acknowledge(renderer_->apply(update));
   renderer_->draw(view);
   glEndQuery(GL_TIME_ELAPSED);
   glFlush();

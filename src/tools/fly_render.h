@@ -24,13 +24,14 @@ class FlyRenderer {
                                                                    const ImageInfo& info);
   ~FlyRenderer();
 
-  /// Applies the frame's uploads and draws `view`, timing the GPU's work with a timer query
-  /// read back a few frames later (never waited for). Returns the render thread's time, ms.
+  /// Applies the frame's uploads (acknowledged to `streamer`) and draws `view`, timing the
+  /// GPU's work with a timer query read back a few frames later (never waited for). Returns
+  /// the render thread's time, ms.
   double frame(uint64_t index, const View& view, const FrameUpdate& update, TileStreamer& streamer);
   /// GPU time per frame, ms; -1 where the driver gave none. Waits for queries still running.
   std::vector<double> finishGpuTimes();
 
-  GlRenderer& renderer() { return *renderer_; }
+  Renderer& renderer() { return *renderer_; }
   std::string description() const { return context_->description(); }
 
  private:
@@ -38,7 +39,7 @@ class FlyRenderer {
   void collect(bool wait);
 
   std::unique_ptr<GlContext> context_;
-  std::unique_ptr<GlRenderer> renderer_;
+  std::unique_ptr<Renderer> renderer_;
   struct Query {
     uint32_t id = 0;
     uint64_t frame = 0;

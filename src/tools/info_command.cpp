@@ -6,6 +6,7 @@
 #include <tessera/open.h>
 
 #include "cli.h"
+#include "scene_command.h"
 
 namespace tessera::cli {
 
@@ -118,7 +119,10 @@ void registerInfoCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("archive", *path, kArchiveArgumentHelp)->required();
   cmd->add_flag("--json", *json, "Machine-readable output");
   cmd->add_flag("--no-levels", *no_levels, "Skip the per-level table (reads no directory pages)");
-  cmd->callback([=, &exit_code] { exit_code = runInfo(*path, *json, !*no_levels); });
+  addSceneInfoOptions(*cmd);
+  cmd->callback([=, &exit_code] {
+    if (!runSceneInfo(*path, *json, &exit_code)) exit_code = runInfo(*path, *json, !*no_levels);
+  });
 }
 
 }  // namespace tessera::cli

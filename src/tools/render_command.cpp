@@ -11,8 +11,10 @@
 #include <tessera/archive.h>
 #include <tessera/picture_file.h>
 #include <tessera/render.h>
+#include <tessera/stream.h>
 
 #include "cli.h"
+#include "output/output_file.h"
 
 namespace tessera::cli {
 
@@ -52,6 +54,9 @@ int runRender(const RenderArgs& args) {
     return reportError({ErrorCode::kInvalidArgument, "--centre must be two finite numbers"});
   if (!std::isfinite(args.rotation_deg))
     return reportError({ErrorCode::kInvalidArgument, "--rotation must be a finite number"});
+  // Before a picture of up to 16384 x 16384 px is drawn for nothing.
+  if (Result<void> output = detail::checkOutputPath(args.output); !output)
+    return reportError(output.error());
   Result<std::shared_ptr<Archive>> opened = Archive::openFile(args.archive);
   if (!opened) return reportError(opened.error());
   const Archive& archive = **opened;
@@ -88,7 +93,7 @@ void registerRenderCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("archive", args->archive, "Archive file")->required();
   cmd->add_option("-o,--output", args->output, "PNG to write")->required();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
-  cmd->add_option("--centre", args->centre, "View centre X,Y in level-0 texels")
+  cmd->add_option("--centre,--center", args->centre, "View centre X,Y in level-0 texels")
       ->delimiter(',')
       ->expected(2)
       ->required();

@@ -1,7 +1,10 @@
 // `tessera serve`: serves archives over HTTP until SIGINT or SIGTERM (docs/serve.md).
 #include <signal.h>
+#include <sys/stat.h>
 
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <memory>
 
 #include <fmt/format.h>
@@ -14,8 +17,28 @@ namespace tessera::cli {
 
 namespace {
 
-int runServe(const ServeOptions& options, double cache_mib) {
+/// Every path exists and is a file or a folder; else an error naming the path and the reason
+/// ("No such file or directory", "Permission denied"), before the server starts.
+Result<void> checkServedPaths(const std::vector<std::string>& paths) {
+  for (const std::string& path : paths) {
+    struct stat status {};
+    if (::stat(path.c_str(), &status) != 0) {
+      const int error = errno;
+      return fail(error == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
+                  fmt::format("{}: cannot serve it: {}", path, std::strerror(error)));
+    }
+    if (!S_ISDIR(status.st_mode) && !S_ISREG(status.st_mode))
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: cannot serve it: neither an archive file nor a folder", path));
+  }
+  return {};
+}
+
+int runServe(const ServeOptions& options, double cache_mib, uint32_t port_number) {
+  if (Result<void> paths = checkServedPaths(options.paths); !paths)
+    return reportError(paths.error());
   ServeOptions resolved = options;
+  resolved.port = uint16_t(port_number);
   resolved.transcode_cache_bytes = uint64_t(cache_mib * 1024 * 1024);
   // Block the stop signals before any server thread exists, so every thread inherits the
   // mask and only sigwait below sees them.
@@ -57,15 +80,20 @@ int runServe(const ServeOptions& options, double cache_mib) {
 void registerServeCommand(CLI::App& app, int& exit_code) {
   auto options = std::make_shared<ServeOptions>();
   auto cache_mib = std::make_shared<double>(64);
+  // Read wider than the uint16_t it becomes, so 99999 is "out of range", not "Could not convert".
+  auto port = std::make_shared<uint32_t>(options->port);
   CLI::App* cmd = app.add_subcommand(
       "serve",
       "Serve archives over HTTP: tiles, byte ranges, Deep Zoom, XYZ, metrics and the web viewer "
       "(docs/serve.md)");
   cmd->add_option("paths", options->paths, "Archives (.tess) or folders of them")->required();
   cmd->add_option("--bind", options->bind_address, "Address to listen on")->capture_default_str();
-  cmd->add_option("--port", options->port, "TCP port; 0 picks a free one")->capture_default_str();
-  cmd->add_option("--threads", options->threads, "I/O threads; 0 = one per core")
-      ->capture_default_str();
+  cmd->add_option("--port", *port, "TCP port, 0..65535; 0 picks a free one")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 65535u));
+  cmd->add_option("--threads", options->threads, "I/O threads, 0..1024; 0 = one per core")
+      ->capture_default_str()
+      ->check(CLI::Range(0u, 1024u));
   cmd->add_option("--max-connections", options->max_connections,
                   "Connections beyond this are closed on accept")
       ->capture_default_str()
@@ -105,7 +133,7 @@ void registerServeCommand(CLI::App& app, int& exit_code) {
                   "Send Access-Control-Allow-Origin with this origin (or *)");
   cmd->add_option("--access-log", options->access_log,
                   "One line per request to FILE, or - for stdout (after the listening line)");
-  cmd->callback([=, &exit_code] { exit_code = runServe(*options, *cache_mib); });
+  cmd->callback([=, &exit_code] { exit_code = runServe(*options, *cache_mib, *port); });
 }
 
 }  // namespace tessera::cli

@@ -17,52 +17,12 @@ double longerSide(const ImageInfo& info) {
   return double(std::max(info.width_px, info.height_px));
 }
 
-struct Basis {
-  double f[3], r[3], u[3];
-};
-
-// The camera basis of gl::viewTransform (and the runtime's residency): forward, right, r x f.
-Basis basisOf(const PerspectiveView& p) {
-  Basis b;
-  b.f[0] = std::sin(p.yaw_rad) * std::cos(p.pitch_rad);
-  b.f[1] = -std::cos(p.yaw_rad) * std::cos(p.pitch_rad);
-  b.f[2] = std::sin(p.pitch_rad);
-  b.r[0] = std::cos(p.yaw_rad);
-  b.r[1] = std::sin(p.yaw_rad);
-  b.r[2] = 0;
-  b.u[0] = b.r[1] * b.f[2] - b.r[2] * b.f[1];
-  b.u[1] = b.r[2] * b.f[0] - b.r[0] * b.f[2];
-  b.u[2] = b.r[0] * b.f[1] - b.r[1] * b.f[0];
-  return b;
-}
-
-// Radians one screen pixel spans at the centre of a perspective view.
-double pixelAngle(double fov_y_rad, uint32_t viewport_h) {
-  return 2 * std::tan(fov_y_rad / 2) / std::max(1u, viewport_h);
-}
-
 }  // namespace
 
 std::optional<PlanePoint> planeAt(const View& view, double sx, double sy) {
-  if (view.kind == View::Kind::kOrtho) {
-    const OrthoView& o = view.ortho;
-    // Inverse of the renderers' d = R^T (uv - c) / tpp.
-    const double dx = sx - o.viewport_w / 2.0, dy = sy - o.viewport_h / 2.0;
-    const double c = std::cos(o.rotation_rad), s = std::sin(o.rotation_rad);
-    return PlanePoint{o.centre_x + (c * dx - s * dy) * o.texels_per_pixel,
-                      o.centre_y + (s * dx + c * dy) * o.texels_per_pixel};
-  }
-  const PerspectiveView& p = view.perspective;
-  const Basis b = basisOf(p);
-  const double w = std::max(1u, p.viewport_w), h = std::max(1u, p.viewport_h);
-  const double tan_half = std::tan(p.fov_y_rad / 2);
-  // The shared basis's u = r x f points down the screen (towards the ground at the bottom).
-  const double nx = (2 * sx / w - 1) * tan_half * (w / h), ny = (2 * sy / h - 1) * tan_half;
-  double dir[3];
-  for (int i = 0; i < 3; ++i) dir[i] = b.f[i] + b.r[i] * nx + b.u[i] * ny;
-  if (dir[2] >= 0) return std::nullopt;
-  const double t = p.eye_z / -dir[2];
-  return PlanePoint{p.eye_x + t * dir[0], p.eye_y + t * dir[1]};
+  PlanePoint point;
+  if (!textureAt(view, sx, sy, point.x, point.y)) return std::nullopt;
+  return point;
 }
 
 double minTexelsPerPixel() {
@@ -127,7 +87,7 @@ PerspectiveView perspectiveFrom(const OrthoView& ortho, const ImageInfo& info, d
   view.yaw_rad = ortho.rotation_rad;
   view.pitch_rad = std::clamp(pitch_rad, kLowestPitchRad, kHighestPitchRad);
   // Across the view direction a pixel at distance D spans D * pixel_angle texels.
-  const double distance = ortho.texels_per_pixel / pixelAngle(view.fov_y_rad, view.viewport_h);
+  const double distance = ortho.texels_per_pixel / pixelAngle(view);
   view.eye_z = std::clamp(distance * std::sin(-view.pitch_rad), minAltitude(), maxAltitude(info));
   const double back = view.eye_z / std::tan(-view.pitch_rad);
   view.eye_x = ortho.centre_x - std::sin(view.yaw_rad) * back;
@@ -148,9 +108,8 @@ OrthoView orthoFrom(const PerspectiveView& view, const ImageInfo& info) {
   ortho.viewport_h = view.viewport_h;
   ortho.centre_x = centre.x;
   ortho.centre_y = centre.y;
-  ortho.texels_per_pixel =
-      std::clamp(distance * pixelAngle(view.fov_y_rad, view.viewport_h), minTexelsPerPixel(),
-                 maxTexelsPerPixel(info, view.viewport_w, view.viewport_h));
+  ortho.texels_per_pixel = std::clamp(distance * pixelAngle(view), minTexelsPerPixel(),
+                                      maxTexelsPerPixel(info, view.viewport_w, view.viewport_h));
   clampToImage(ortho, info);
   return ortho;
 }

@@ -5,7 +5,7 @@
 #include <optional>
 
 #include <tessera/format.h>
-#include <tessera/stream.h>
+#include <tessera/view.h>
 
 namespace tessera::cli {
 
@@ -15,9 +15,9 @@ struct PlanePoint {
   double y = 0;
 };
 
-/// The plane point seen at screen position (sx, sy) (pixels, (0, 0) the top-left corner), by
-/// the transform the renderers draw with (gl::viewTransform). Empty for a perspective ray at
-/// or above the horizon.
+/// The plane point seen at screen position (sx, sy) (pixels, (0, 0) the top-left corner):
+/// tessera::textureAt, the camera every renderer draws with. Empty for a perspective ray at or
+/// above the horizon.
 std::optional<PlanePoint> planeAt(const View& view, double sx, double sy);
 
 /// Zoom limits: at most 64 screen pixels per texel in, and out until the whole image spans

@@ -22,10 +22,12 @@
 #include <tessera/open.h>
 #include <tessera/picture_file.h>
 #include <tessera/gl.h>
+#include <tessera/renderer.h>
 #include <tessera/link.h>
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "gl/window.h"
 #include "view_camera.h"
 #include "view_command.h"
 #include "view_overlay.h"
@@ -265,9 +267,105 @@ struct FrameFigures {
   }
 };
 
+// The panel's sections, each under a collapsing header.
+
+// The renderer's figures, and a choice of renderer; returns the one picked.
+RendererKind panelRenderer(const Renderer& renderer) {
+  int kind = renderer.kind() == RendererKind::kTileQuads ? 0 : 1;
+  ImGui::RadioButton("tile quads", &kind, 0);
+  ImGui::SameLine();
+  ImGui::RadioButton("clipmap", &kind, 1);
+  const RenderStats& rs = renderer.stats();
+  ImGui::Text("resident %u tiles, %s on the GPU", rs.resident_tiles,
+              formatBytes(rs.gpu_bytes).c_str());
+  ImGui::Text("drawn %u, uploaded %u (%s), declined %u", rs.tiles_drawn, rs.uploads,
+              formatBytes(rs.upload_bytes).c_str(), rs.declined);
+  ImGui::Text("apply %.3f ms, draw %.3f ms", rs.apply_cpu_ms, rs.draw_cpu_ms);
+  return kind == 0 ? RendererKind::kTileQuads : RendererKind::kClipmap;
+}
+
+void panelView(Viewer& v) {
+  bool perspective = v.view.kind == View::Kind::kPerspective;
+  if (ImGui::Checkbox("perspective fly-over (P)", &perspective)) togglePerspective(v);
+  if (v.view.kind == View::Kind::kOrtho) {
+    ImGui::Text("centre (%.0f, %.0f), %.4g texels/pixel", v.view.ortho.centre_x,
+                v.view.ortho.centre_y, v.view.ortho.texels_per_pixel);
+  } else {
+    const PerspectiveView& p = v.view.perspective;
+    ImGui::Text("eye (%.0f, %.0f) at %.0f, yaw %.0f, pitch %.0f deg", p.eye_x, p.eye_y, p.eye_z,
+                p.yaw_rad * 57.2958, p.pitch_rad * 57.2958);
+  }
+  ImGui::Text("viewport %ux%u", v.view.viewportWidth(), v.view.viewportHeight());
+}
+
+void panelStreaming(const FrameReport& r, const FrameFigures& figures) {
+  ImGui::Text("desired level %u, finest full level %u", r.desired_level, r.finest_full_level);
+  ImGui::Text("coverage at the desired level %.1f%%%s", r.coverage_desired * 100,
+              r.fully_covered ? "" : " (not fully covered)");
+  ImGui::Text("loader queue %zu, in flight %zu", r.queue_length, r.in_flight);
+  ImGui::Text("read %s/s, %s in all", formatBytes(uint64_t(figures.read_rate.bytesPerS())).c_str(),
+              formatBytes(r.bytes_read_total).c_str());
+  ImGui::Text("tiles loaded %llu, failures %llu", (unsigned long long)r.tiles_loaded_total,
+              (unsigned long long)r.load_failures_total);
+  ImGui::Text("uploads this frame %zu (%s), update %.3f ms", r.uploads,
+              formatBytes(r.upload_bytes).c_str(), r.update_ms);
+}
+
+// The link as the loader measures it and what adaptive scheduling made of it (Marvie &
+// Bouatouch, part III).
+void panelLink(const FrameReport& r, const FrameFigures& figures) {
+  ImGui::Text("throughput %s/s, latency %.1f ms, queue wait %.1f ms",
+              formatBytes(uint64_t(r.link_bytes_per_s)).c_str(), r.link_latency_ms,
+              r.queue_wait_ms);
+  float link_max = 0;
+  for (float mb_s : figures.link_mb_s) link_max = std::max(link_max, mb_s);
+  ImGui::PlotLines("##link", figures.link_mb_s.data(), int(kFrameHistory), int(figures.next),
+                   "MB/s", 0.0f, std::max(0.1f, link_max * 1.2f), ImVec2(-1, 40));
+  if (r.adaptive) {
+    ImGui::Text("adaptive: %s budgets, levels down to %u (desired %u)",
+                r.view_still ? "still" : "moving", r.requested_level, r.desired_level);
+    ImGui::Text("per level %s, on the way %s, deferred %llu tiles",
+                r.budget_bytes == UINT64_MAX ? "no limit" : formatBytes(r.budget_bytes).c_str(),
+                formatBytes(r.requested_bytes).c_str(), (unsigned long long)r.deferred_tiles);
+    ImGui::Text("memory %s of %s", formatBytes(r.memory_bytes).c_str(),
+                formatBytes(r.memory_budget_bytes).c_str());
+  } else {
+    ImGui::TextDisabled("adaptive scheduling off (--adaptive on)");
+  }
+  ImGui::Text("cancelled: %llu queued requests, %llu reads in flight",
+              (unsigned long long)r.cancelled_total, (unsigned long long)r.reads_cancelled_total);
+  if (r.parents_queued_total || r.parent_fallbacks_total || r.children_read_early_total)
+    ImGui::Text(
+        "ptm parents: %llu queued for children, %llu read again for a decode, "
+        "%llu children read during their load",
+        (unsigned long long)r.parents_queued_total, (unsigned long long)r.parent_fallbacks_total,
+        (unsigned long long)r.children_read_early_total);
+}
+
+void panelCache(const TileStreamer& streamer, size_t cache_budget_bytes) {
+  const CacheStats c = streamer.cacheStats();
+  const uint64_t lookups = c.hits + c.misses;
+  ImGui::Text("hits %llu, misses %llu (%.1f%% hits)", (unsigned long long)c.hits,
+              (unsigned long long)c.misses, lookups ? 100.0 * c.hits / lookups : 0.0);
+  ImGui::Text("%s of %s, %zu tiles, %zu pinned", formatBytes(c.bytes).c_str(),
+              formatBytes(cache_budget_bytes).c_str(), c.tiles, c.pinned);
+  ImGui::Text("evictions %llu", (unsigned long long)c.evictions);
+}
+
+void panelOverlays(Viewer& v) {
+  ImGui::Checkbox("levels in colour (L)", &v.overlays.levels);
+  ImGui::Checkbox("clip regions and field of view (C)", &v.overlays.clip_regions);
+  ImGui::Checkbox("tile grid (G)", &v.overlays.grid);
+  for (uint32_t level = 0; level < v.info.level_count; ++level) {
+    const LevelColour c = levelColour(level);
+    if (level > 0) ImGui::SameLine();
+    ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "%u", level);
+  }
+}
+
 // The panel; returns the renderer the user picked (the current one when unchanged).
 RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUpdate& update,
-                       TileStreamer& streamer, const GlRenderer& renderer,
+                       const TileStreamer& streamer, const Renderer& renderer,
                        const FrameFigures& figures, size_t cache_budget_bytes,
                        const std::string& last_screenshot) {
   RendererKind picked = renderer.kind();
@@ -283,102 +381,16 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
   ImGui::PlotLines("##frame_ms", figures.frame_ms.data(), int(kFrameHistory), int(figures.next),
                    "frame ms", 0.0f, std::max(33.3f, float(mean_ms * 3)), ImVec2(-1, 60));
   ImGui::Text("streaming on the render thread: %.3f ms", figures.streaming_ms);
-
-  if (ImGui::CollapsingHeader("Renderer", ImGuiTreeNodeFlags_DefaultOpen)) {
-    int kind = renderer.kind() == RendererKind::kTileQuads ? 0 : 1;
-    ImGui::RadioButton("tile quads", &kind, 0);
-    ImGui::SameLine();
-    ImGui::RadioButton("clipmap", &kind, 1);
-    picked = kind == 0 ? RendererKind::kTileQuads : RendererKind::kClipmap;
-    const RenderStats& rs = renderer.stats();
-    ImGui::Text("resident %u tiles, %s on the GPU", rs.resident_tiles,
-                formatBytes(rs.gpu_bytes).c_str());
-    ImGui::Text("drawn %u, uploaded %u (%s), declined %u", rs.tiles_drawn, rs.uploads,
-                formatBytes(rs.upload_bytes).c_str(), rs.declined);
-    ImGui::Text("apply %.3f ms, draw %.3f ms", rs.apply_cpu_ms, rs.draw_cpu_ms);
-  }
-
-  if (ImGui::CollapsingHeader("View", ImGuiTreeNodeFlags_DefaultOpen)) {
-    bool perspective = v.view.kind == View::Kind::kPerspective;
-    if (ImGui::Checkbox("perspective fly-over (P)", &perspective)) togglePerspective(v);
-    if (v.view.kind == View::Kind::kOrtho) {
-      ImGui::Text("centre (%.0f, %.0f), %.4g texels/pixel", v.view.ortho.centre_x,
-                  v.view.ortho.centre_y, v.view.ortho.texels_per_pixel);
-    } else {
-      const PerspectiveView& p = v.view.perspective;
-      ImGui::Text("eye (%.0f, %.0f) at %.0f, yaw %.0f, pitch %.0f deg", p.eye_x, p.eye_y, p.eye_z,
-                  p.yaw_rad * 57.2958, p.pitch_rad * 57.2958);
-    }
-    ImGui::Text("viewport %ux%u", v.view.viewportWidth(), v.view.viewportHeight());
-  }
-
-  const FrameReport& r = update.report;
-  if (ImGui::CollapsingHeader("Streaming", ImGuiTreeNodeFlags_DefaultOpen)) {
-    ImGui::Text("desired level %u, finest full level %u", r.desired_level, r.finest_full_level);
-    ImGui::Text("coverage at the desired level %.1f%%%s", r.coverage_desired * 100,
-                r.fully_covered ? "" : " (not fully covered)");
-    ImGui::Text("loader queue %zu, in flight %zu", r.queue_length, r.in_flight);
-    ImGui::Text("read %s/s, %s in all",
-                formatBytes(uint64_t(figures.read_rate.bytesPerS())).c_str(),
-                formatBytes(r.bytes_read_total).c_str());
-    ImGui::Text("tiles loaded %llu, failures %llu", (unsigned long long)r.tiles_loaded_total,
-                (unsigned long long)r.load_failures_total);
-    ImGui::Text("uploads this frame %zu (%s), update %.3f ms", r.uploads,
-                formatBytes(r.upload_bytes).c_str(), r.update_ms);
-  }
-
-  // The link as the loader measures it and what adaptive scheduling made of it (Marvie &
-  // Bouatouch, part III).
-  if (ImGui::CollapsingHeader("Link and scheduling", ImGuiTreeNodeFlags_DefaultOpen)) {
-    ImGui::Text("throughput %s/s, latency %.1f ms, queue wait %.1f ms",
-                formatBytes(uint64_t(r.link_bytes_per_s)).c_str(), r.link_latency_ms,
-                r.queue_wait_ms);
-    float link_max = 0;
-    for (float mb_s : figures.link_mb_s) link_max = std::max(link_max, mb_s);
-    ImGui::PlotLines("##link", figures.link_mb_s.data(), int(kFrameHistory), int(figures.next),
-                     "MB/s", 0.0f, std::max(0.1f, link_max * 1.2f), ImVec2(-1, 40));
-    if (r.adaptive) {
-      ImGui::Text("adaptive: %s budgets, levels down to %u (desired %u)",
-                  r.view_still ? "still" : "moving", r.requested_level, r.desired_level);
-      ImGui::Text("per level %s, on the way %s, deferred %llu tiles",
-                  r.budget_bytes == UINT64_MAX ? "no limit" : formatBytes(r.budget_bytes).c_str(),
-                  formatBytes(r.requested_bytes).c_str(), (unsigned long long)r.deferred_tiles);
-      ImGui::Text("memory %s of %s", formatBytes(r.memory_bytes).c_str(),
-                  formatBytes(r.memory_budget_bytes).c_str());
-    } else {
-      ImGui::TextDisabled("adaptive scheduling off (--adaptive on)");
-    }
-    ImGui::Text("cancelled: %llu queued requests, %llu reads in flight",
-                (unsigned long long)r.cancelled_total, (unsigned long long)r.reads_cancelled_total);
-    if (r.parents_queued_total || r.parent_fallbacks_total || r.children_read_early_total)
-      ImGui::Text(
-          "ptm parents: %llu queued for children, %llu read again for a decode, "
-          "%llu children read during their load",
-          (unsigned long long)r.parents_queued_total, (unsigned long long)r.parent_fallbacks_total,
-          (unsigned long long)r.children_read_early_total);
-  }
-
-  if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen)) {
-    const CacheStats c = streamer.cacheStats();
-    const uint64_t lookups = c.hits + c.misses;
-    ImGui::Text("hits %llu, misses %llu (%.1f%% hits)", (unsigned long long)c.hits,
-                (unsigned long long)c.misses, lookups ? 100.0 * c.hits / lookups : 0.0);
-    ImGui::Text("%s of %s, %zu tiles, %zu pinned", formatBytes(c.bytes).c_str(),
-                formatBytes(cache_budget_bytes).c_str(), c.tiles, c.pinned);
-    ImGui::Text("evictions %llu", (unsigned long long)c.evictions);
-  }
-
-  if (ImGui::CollapsingHeader("Overlays", ImGuiTreeNodeFlags_DefaultOpen)) {
-    ImGui::Checkbox("levels in colour (L)", &v.overlays.levels);
-    ImGui::Checkbox("clip regions and field of view (C)", &v.overlays.clip_regions);
-    ImGui::Checkbox("tile grid (G)", &v.overlays.grid);
-    for (uint32_t level = 0; level < v.info.level_count; ++level) {
-      const LevelColour c = levelColour(level);
-      if (level > 0) ImGui::SameLine();
-      ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "%u", level);
-    }
-  }
-
+  if (ImGui::CollapsingHeader("Renderer", ImGuiTreeNodeFlags_DefaultOpen))
+    picked = panelRenderer(renderer);
+  if (ImGui::CollapsingHeader("View", ImGuiTreeNodeFlags_DefaultOpen)) panelView(v);
+  if (ImGui::CollapsingHeader("Streaming", ImGuiTreeNodeFlags_DefaultOpen))
+    panelStreaming(update.report, figures);
+  if (ImGui::CollapsingHeader("Link and scheduling", ImGuiTreeNodeFlags_DefaultOpen))
+    panelLink(update.report, figures);
+  if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen))
+    panelCache(streamer, cache_budget_bytes);
+  if (ImGui::CollapsingHeader("Overlays", ImGuiTreeNodeFlags_DefaultOpen)) panelOverlays(v);
   if (ImGui::Button("Screenshot (F12)")) v.screenshot_requested = true;
   if (!last_screenshot.empty()) {
     ImGui::SameLine();
@@ -394,12 +406,158 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
 
 // Hands the old renderer's tiles back to the streamer and creates the new one: the streamer
 // offers them again (from its cache) and the new renderer uploads them over the next frames.
-Result<std::unique_ptr<GlRenderer>> switchRenderer(
-    RendererKind kind, const ImageInfo& info, TileStreamer& streamer,
-    std::unordered_set<TileId, TileIdHash>& resident) {
-  for (const TileId& id : resident) streamer.released(id);
+Result<std::unique_ptr<Renderer>> switchRenderer(RendererKind kind, const ImageInfo& info,
+                                                 TileStreamer& streamer,
+                                                 std::unordered_set<TileId, TileIdHash>& resident) {
+  ApplyResult handed_back;
+  handed_back.dropped.assign(resident.begin(), resident.end());
+  streamer.acknowledge(handed_back);
   resident.clear();
-  return GlRenderer::create(kind, info);
+  return createRenderer(kind, info);
+}
+
+// Opens the archive to view, through a simulated link with --link (`over_link` then true).
+Result<std::shared_ptr<Archive>> openViewedArchive(const ViewArgs& args, bool& over_link) {
+  over_link = !args.link.empty();
+  if (!over_link) return openArchive(args.archive);
+  Result<LinkModel> model = parseLinkModel(args.link);
+  if (!model) return forwardError(model);
+  Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
+  if (!inner) return forwardError(inner);
+  return Archive::open(makeThrottledSource(*inner, *model));
+}
+
+// The first view (the whole image, in the fly-over with --perspective), the overlays asked
+// for, and the window's callbacks, which reach `v` through the window's user pointer.
+void startViewer(Viewer& v, const ViewArgs& args) {
+  v.view.image = args.image;
+  int fw = 0, fh = 0;
+  glfwGetFramebufferSize(v.window, &fw, &fh);
+  v.view.ortho = fitImage(v.info, uint32_t(std::max(1, fw)), uint32_t(std::max(1, fh)));
+  if (args.perspective) togglePerspective(v);
+  for (const std::string& name : args.overlays) {
+    v.overlays.levels |= name == "levels";
+    v.overlays.clip_regions |= name == "clip";
+    v.overlays.grid |= name == "grid";
+  }
+  glfwSetWindowUserPointer(v.window, &v);
+  glfwSetScrollCallback(v.window, onScroll);
+  glfwSetMouseButtonCallback(v.window, onMouseButton);
+  glfwSetCursorPosCallback(v.window, onCursor);
+  glfwSetKeyCallback(v.window, onKey);
+}
+
+// What the frames of a running viewer share. Render thread only.
+struct ViewerLoop {
+  const ViewArgs& args;
+  Viewer& v;
+  TileStreamer& streamer;
+  std::unique_ptr<Renderer> renderer;
+  ViewOverlay& overlay;
+  size_t cache_budget_bytes = 0;
+  /// The tiles the renderer holds, for the level overlay.
+  std::unordered_set<TileId, TileIdHash> resident;
+  FrameFigures figures;
+  std::string last_screenshot;  ///< its path, or the error that kept it from being written
+  int exit_code = kExitOk;
+  Clock::time_point started;
+};
+
+// One frame of the runtime: update, apply (acknowledged), draw, overlays.
+const FrameUpdate& streamAndDraw(ViewerLoop& loop, Clock::time_point now) {
+  Viewer& v = loop.v;
+  const FrameUpdate& update = loop.streamer.update(v.view);
+  loop.streamer.acknowledge(loop.renderer->apply(update));
+  // The renderer may drop tiles of its own accord (a clipmap slot taken by a newer tile),
+  // so the set keeps only what it still holds.
+  for (const auto& tile : update.uploads) loop.resident.insert(tile->id);
+  std::erase_if(loop.resident, [&](const TileId& id) { return !loop.renderer->resident(id); });
+  loop.figures.streaming_ms = update.report.update_ms + loop.renderer->stats().apply_cpu_ms;
+  loop.figures.read_rate.add(now, update.report.bytes_read_total);
+  loop.renderer->draw(v.view);
+  loop.overlay.draw(v.view, v.info, v.overlays, update, loop.resident, *loop.renderer);
+  return update;
+}
+
+// --frames: the last frame waits for the loader to settle (or 10 s) so its screenshot shows
+// the image at full detail rather than whatever had loaded by then.
+bool lastScriptedFrame(const ViewerLoop& loop, uint64_t frame, const FrameReport& r,
+                       Clock::time_point now) {
+  if (loop.args.frames == 0 || frame + 1 < loop.args.frames) return false;
+  const bool settled = r.queue_length == 0 && r.in_flight == 0 && r.uploads == 0 &&
+                       r.fully_covered && r.coverage_desired >= 1;
+  return settled || now - loop.started > std::chrono::seconds(10);
+}
+
+void saveScreenshot(ViewerLoop& loop) {
+  const std::string path = nextScreenshotPath(loop.args.screenshot_dir);
+  Result<void> written = writePng(loop.renderer->readPixels(), path);
+  if (written) {
+    loop.last_screenshot = path;
+    std::fprintf(stderr, "tessera view: wrote %s\n", path.c_str());
+  } else {
+    loop.last_screenshot = written.error().message;
+    loop.exit_code = reportError(written.error());
+  }
+}
+
+// The picture to the window with the panel over it; returns the renderer the panel picked.
+RendererKind presentFrame(ViewerLoop& loop, const FrameUpdate& update, int fw, int fh) {
+  glBindFramebuffer(GL_FRAMEBUFFER, 0);
+  glViewport(0, 0, fw, fh);
+  loop.renderer->present(uint32_t(fw), uint32_t(fh));
+  ImGui_ImplOpenGL3_NewFrame();
+  ImGui_ImplGlfw_NewFrame();
+  ImGui::NewFrame();
+  RendererKind picked = loop.renderer->kind();
+  if (loop.v.show_panel)
+    picked = drawPanel(loop.v, loop.args.archive, update, loop.streamer, *loop.renderer,
+                       loop.figures, loop.cache_budget_bytes, loop.last_screenshot);
+  ImGui::Render();
+  ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+  glfwSwapBuffers(loop.v.window);
+  return picked;
+}
+
+// Frames until the window closes (or --frames ends). Returns the exit code.
+int runViewerLoop(ViewerLoop& loop) {
+  Viewer& v = loop.v;
+  Clock::time_point last_frame = Clock::now();
+  loop.started = last_frame;
+  for (uint64_t frame = 0; !glfwWindowShouldClose(v.window); ++frame) {
+    glfwPollEvents();
+    const Clock::time_point now = Clock::now();
+    const double dt_s = std::chrono::duration<double>(now - last_frame).count();
+    last_frame = now;
+    applyHeldKeys(v, std::min(dt_s, 0.1));
+    int fw = 0, fh = 0;
+    glfwGetFramebufferSize(v.window, &fw, &fh);
+    if (fw <= 0 || fh <= 0) {  // minimised: nothing to draw until the window comes back
+      glfwWaitEventsTimeout(0.1);
+      continue;
+    }
+    v.view.ortho.viewport_w = v.view.perspective.viewport_w = uint32_t(fw);
+    v.view.ortho.viewport_h = v.view.perspective.viewport_h = uint32_t(fh);
+
+    const FrameUpdate& update = streamAndDraw(loop, now);
+    const bool last = lastScriptedFrame(loop, frame, update.report, now);
+    if (last) v.screenshot_requested = true;
+    if (v.screenshot_requested) {
+      v.screenshot_requested = false;
+      saveScreenshot(loop);
+    }
+    const RendererKind picked = presentFrame(loop, update, fw, fh);
+    loop.figures.push(std::chrono::duration<double, std::milli>(Clock::now() - now).count(),
+                      update.report.link_bytes_per_s);
+    if (picked != loop.renderer->kind()) {
+      Result<std::unique_ptr<Renderer>> switched =
+          switchRenderer(picked, v.info, loop.streamer, loop.resident);
+      if (!switched) return reportError(switched.error());
+      loop.renderer = std::move(*switched);
+    }
+    if (last) break;
+  }
+  return loop.exit_code;
 }
 
 }  // namespace
@@ -410,21 +568,12 @@ int runView(const ViewArgs& args) {
       window_h == 0 || window_w > 16384 || window_h > 16384)
     return reportError({ErrorCode::kInvalidArgument,
                         fmt::format("--size {}: expected WxH, e.g. 1280x720", args.size)});
-  const RendererKind kind =
-      args.renderer == "clipmap" ? RendererKind::kClipmap : RendererKind::kTileQuads;
-
-  Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
+  const std::optional<RendererKind> kind = rendererNamed(args.renderer);
+  if (!kind)
+    return reportError({ErrorCode::kInvalidArgument,
+                        fmt::format("--renderer {}: no such renderer", args.renderer)});
   bool over_link = false;
-  if (!args.link.empty()) {
-    Result<LinkModel> model = parseLinkModel(args.link);
-    if (!model) return reportError(model.error());
-    Result<std::shared_ptr<ByteSource>> inner = openByteSource(args.archive);
-    if (!inner) return reportError(inner.error());
-    archive = Archive::open(makeThrottledSource(*inner, *model));
-    over_link = true;
-  } else {
-    archive = openArchive(args.archive);
-  }
+  Result<std::shared_ptr<Archive>> archive = openViewedArchive(args, over_link);
   if (!archive) return reportError(archive.error());
   if (args.image >= (*archive)->images().size())
     return reportError(
@@ -436,7 +585,7 @@ int runView(const ViewArgs& args) {
   Result<std::unique_ptr<GlContext>> context =
       GlContext::createWindow(window_w, window_h, fmt::format("tessera view: {}", args.archive));
   if (!context) return reportError(context.error());
-  GLFWwindow* window = (*context)->window();
+  GLFWwindow* window = (*context)->window()->glfw;
   glfwSwapInterval(1);
 
   StreamerOptions options;
@@ -446,7 +595,7 @@ int runView(const ViewArgs& args) {
   if (args.adaptive != "auto") options.adaptive.enabled = args.adaptive == "on";
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
-  Result<std::unique_ptr<GlRenderer>> renderer = GlRenderer::create(kind, info);
+  Result<std::unique_ptr<Renderer>> renderer = createRenderer(*kind, info);
   if (!renderer) return reportError(renderer.error());
   Result<std::unique_ptr<ViewOverlay>> overlay = ViewOverlay::create();
   if (!overlay) return reportError(overlay.error());
@@ -454,106 +603,11 @@ int runView(const ViewArgs& args) {
   Viewer v;
   v.window = window;
   v.info = info;
-  v.view.image = args.image;
-  {
-    int fw = 0, fh = 0;
-    glfwGetFramebufferSize(window, &fw, &fh);
-    v.view.ortho = fitImage(info, uint32_t(std::max(1, fw)), uint32_t(std::max(1, fh)));
-  }
-  if (args.perspective) togglePerspective(v);
-  for (const std::string& name : args.overlays) {
-    v.overlays.levels |= name == "levels";
-    v.overlays.clip_regions |= name == "clip";
-    v.overlays.grid |= name == "grid";
-  }
-  glfwSetWindowUserPointer(window, &v);
-  glfwSetScrollCallback(window, onScroll);
-  glfwSetMouseButtonCallback(window, onMouseButton);
-  glfwSetCursorPosCallback(window, onCursor);
-  glfwSetKeyCallback(window, onKey);
+  startViewer(v, args);
   ImGuiSession imgui(window);
-
-  std::unordered_set<TileId, TileIdHash> resident;
-  FrameFigures figures;
-  std::string last_screenshot;
-  int exit_code = kExitOk;
-  Clock::time_point last_frame = Clock::now();
-  const Clock::time_point started = last_frame;
-  for (uint64_t frame = 0; !glfwWindowShouldClose(window); ++frame) {
-    glfwPollEvents();
-    const Clock::time_point now = Clock::now();
-    const double dt_s = std::chrono::duration<double>(now - last_frame).count();
-    last_frame = now;
-    applyHeldKeys(v, std::min(dt_s, 0.1));
-
-    int fw = 0, fh = 0;
-    glfwGetFramebufferSize(window, &fw, &fh);
-    if (fw <= 0 || fh <= 0) {  // minimised: nothing to draw until the window comes back
-      glfwWaitEventsTimeout(0.1);
-      continue;
-    }
-    v.view.ortho.viewport_w = v.view.perspective.viewport_w = uint32_t(fw);
-    v.view.ortho.viewport_h = v.view.perspective.viewport_h = uint32_t(fh);
-
-    const FrameUpdate& update = (*streamer)->update(v.view);
-    (*renderer)->apply(update, **streamer);
-    // The renderer may drop tiles of its own accord (a clipmap slot taken by a newer tile),
-    // so the set keeps only what it still holds.
-    for (const auto& tile : update.uploads) resident.insert(tile->id);
-    std::erase_if(resident, [&](const TileId& id) { return !(*renderer)->resident(id); });
-    figures.streaming_ms = update.report.update_ms + (*renderer)->stats().apply_cpu_ms;
-    figures.read_rate.add(now, update.report.bytes_read_total);
-
-    (*renderer)->draw(v.view);
-    (*overlay)->draw(v.view, info, v.overlays, update, resident, **renderer);
-
-    // --frames: the last frame waits for the loader to settle (or 10 s) so its screenshot
-    // shows the image at full detail rather than whatever had loaded by then.
-    bool last = false;
-    if (args.frames > 0 && frame + 1 >= args.frames) {
-      const FrameReport& r = update.report;
-      const bool settled = r.queue_length == 0 && r.in_flight == 0 && r.uploads == 0 &&
-                           r.fully_covered && r.coverage_desired >= 1;
-      last = settled || now - started > std::chrono::seconds(10);
-      if (last) v.screenshot_requested = true;
-    }
-    if (v.screenshot_requested) {
-      v.screenshot_requested = false;
-      const std::string path = nextScreenshotPath(args.screenshot_dir);
-      Result<void> written = writePng((*renderer)->readPixels(), path);
-      if (written) {
-        last_screenshot = path;
-        std::fprintf(stderr, "tessera view: wrote %s\n", path.c_str());
-      } else {
-        last_screenshot = written.error().message;
-        exit_code = reportError(written.error());
-      }
-    }
-
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
-    glViewport(0, 0, fw, fh);
-    (*renderer)->present(uint32_t(fw), uint32_t(fh));
-
-    ImGui_ImplOpenGL3_NewFrame();
-    ImGui_ImplGlfw_NewFrame();
-    ImGui::NewFrame();
-    RendererKind picked = (*renderer)->kind();
-    if (v.show_panel)
-      picked = drawPanel(v, args.archive, update, **streamer, **renderer, figures,
-                         options.cache_budget_bytes, last_screenshot);
-    ImGui::Render();
-    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
-    glfwSwapBuffers(window);
-    figures.push(std::chrono::duration<double, std::milli>(Clock::now() - now).count(),
-                 update.report.link_bytes_per_s);
-
-    if (picked != (*renderer)->kind()) {
-      renderer = switchRenderer(picked, info, **streamer, resident);
-      if (!renderer) return reportError(renderer.error());
-    }
-    if (last) break;
-  }
-  return exit_code;
+  ViewerLoop loop{args, v, **streamer, std::move(*renderer), **overlay};
+  loop.cache_budget_bytes = options.cache_budget_bytes;
+  return runViewerLoop(loop);
 }
 
 void registerViewCommand(CLI::App& app, int& exit_code) {

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <optional>
 
-#include "gl/renderers.h"
 #include "view_camera.h"
 
 namespace tessera::cli {
@@ -80,9 +79,9 @@ Result<std::unique_ptr<ViewOverlay>> ViewOverlay::create() {
 void ViewOverlay::draw(const View& view, const ImageInfo& info, const OverlayOptions& options,
                        const FrameUpdate& update,
                        const std::unordered_set<TileId, TileIdHash>& resident,
-                       const GlRenderer& renderer) {
+                       const Renderer& renderer) {
   if (!options.any()) return;
-  const gl::ViewTransform transform = gl::viewTransform(view, info);
+  const ViewProjection transform = viewProjection(view, info);
   triangles_.clear();
   lines_.clear();
   auto vertex = [&](double x, double y, uint32_t rgba) {
@@ -180,7 +179,7 @@ void ViewOverlay::draw(const View& view, const ImageInfo& info, const OverlayOpt
   glNamedBufferData(vertices_.get(), GLsizeiptr(all.size() * sizeof(Vertex)), all.data(),
                     GL_STREAM_DRAW);
   glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
-                            transform.view_projection);
+                            transform.matrix);
   glUseProgram(program_.get());
   glBindVertexArray(vertex_array_.get());
   glEnable(GL_BLEND);

@@ -8,7 +8,7 @@
 
 #include <tessera/cache.h>
 #include <tessera/format.h>
-#include <tessera/gl.h>
+#include <tessera/renderer.h>
 #include <tessera/result.h>
 #include <tessera/stream.h>
 
@@ -39,7 +39,7 @@ class ViewOverlay {
   /// frame's.
   void draw(const View& view, const ImageInfo& info, const OverlayOptions& options,
             const FrameUpdate& update, const std::unordered_set<TileId, TileIdHash>& resident,
-            const GlRenderer& renderer);
+            const Renderer& renderer);
 
  private:
   struct Vertex {

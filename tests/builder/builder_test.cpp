@@ -629,16 +629,25 @@ TEST(BuilderOutput, AnUnwritableDirectoryFailsNamingIt) {
 }
 
 TEST(BuilderOutput, ADiskFullFailsCleanly) {
-  const std::string dir = test::testTempDir() + "small";
+  const std::string root = test::testTempDir();
+  const std::string dir = root + "small";
   std::filesystem::create_directories(dir);
+  // Noise zstd cannot shrink: 1.4 MiB of payloads where the free-space check, which assumes
+  // zstd saves 70 %, expects 0.9 MiB for spool and archive together; so the disk fills mid-way.
+  std::vector<uint8_t> noise(600 * 600 * 3);
+  std::mt19937 random(7);
+  for (uint8_t& byte : noise) byte = uint8_t(random());
+  test::TiffSpec spec;
+  spec.width_px = spec.height_px = 600;
+  ASSERT_EQ(test::writeTiff(root + "noise.tif", spec, noise), "");
   if (::mount("tmpfs", dir.c_str(), "tmpfs", 0, "size=1m") != 0)
     GTEST_SKIP() << "cannot mount a 1 MiB tmpfs at " << dir
                  << " (needs root): " << std::strerror(errno);
   ASSERT_TRUE(test::writeFileBytes(dir + "/previous.tess", std::vector<uint8_t>(1000, 'p')));
   BuildOptions options;
-  options.inputs = {"synthetic:1024x1024:2:4"};  // 4 MiB of raw RGBA payloads
+  options.inputs = {root + "noise.tif"};
   options.output = dir + "/previous.tess";
-  options.codec = Codec::kRaw;
+  options.codec = Codec::kZstd;
   options.threads = 2;
   auto report = buildArchive(options);
   std::vector<std::string> listing = listDir(dir);
@@ -652,6 +661,37 @@ TEST(BuilderOutput, ADiskFullFailsCleanly) {
       << report.error().message;
   EXPECT_EQ(listing, std::vector<std::string>{"previous.tess"});
   EXPECT_EQ(previous, std::vector<uint8_t>(1000, 'p'));
+}
+
+TEST(BuilderOutput, ABuildThatCannotFitIsRefusedBeforeItStarts) {
+  const std::string root = test::testTempDir();
+  const std::string dir = root + "small";
+  std::filesystem::create_directories(dir);
+  std::filesystem::create_directories(root + "spool");
+  if (::mount("tmpfs", dir.c_str(), "tmpfs", 0, "size=1m") != 0)
+    GTEST_SKIP() << "cannot mount a 1 MiB tmpfs at " << dir
+                 << " (needs root): " << std::strerror(errno);
+  BuildOptions options;
+  options.inputs = {"synthetic:1024x1024:2:4"};  // 5.3 MiB of raw RGBA pyramid, twice
+  options.output = dir + "/out.tess";
+  options.codec = Codec::kRaw;
+  auto report = buildArchive(options);
+  std::vector<std::string> listing = listDir(dir);
+  // The spool elsewhere: the archive alone still does not fit.
+  options.spool_dir = root + "spool";
+  auto spooled_elsewhere = buildArchive(options);
+  ::umount(dir.c_str());
+  ASSERT_FALSE(report);
+  EXPECT_EQ(report.error().code, ErrorCode::kIo);
+  const std::string& message = report.error().message;
+  EXPECT_NE(message.find(options.output), std::string::npos) << message;
+  EXPECT_NE(message.find("10.7 MiB free in " + dir), std::string::npos) << message;
+  EXPECT_NE(message.find("--spool-dir"), std::string::npos) << message;
+  EXPECT_TRUE(listing.empty());
+  ASSERT_FALSE(spooled_elsewhere);
+  EXPECT_NE(spooled_elsewhere.error().message.find("archive's bytes need at least 5.3 MiB"),
+            std::string::npos)
+      << spooled_elsewhere.error().message;
 }
 
 // ---- Cancellation and previous files ---------------------------------------------------------

@@ -47,6 +47,16 @@ TEST(WorkerPool, RunsEveryJobExactlyOnce) {
   for (int i = 0; i < kJobs; ++i) ASSERT_EQ(runs[i].load(), 1) << "job " << i;
 }
 
+TEST(WorkerPool, StartGivesAPoolThatRunsEveryJob) {
+  auto pool = WorkerPool::start(3, 4);
+  ASSERT_TRUE(pool) << pool.error().message;
+  EXPECT_EQ((*pool)->threadCount(), 3u);
+  std::atomic<int> runs{0};
+  for (int i = 0; i < 50; ++i) (*pool)->submit([&](WorkerState&) { ++runs; });
+  (*pool)->waitIdle();
+  EXPECT_EQ(runs.load(), 50);
+}
+
 TEST(WorkerPool, WaitIdleReturnsOnlyAfterRunningJobsFinish) {
   WorkerPool pool(2, 8);
   Gate gate;

@@ -158,30 +158,21 @@ TEST(ProceduralFormat, DirectoryRejectsTruncationAndHostileFields) {
   EXPECT_TRUE(decodeProceduralDirectory(encodeProceduralDirectory(no_layer), testHeader(), 1, "d"));
 }
 
-TEST(ProceduralFormat, HeaderStampSetsMinorBlockAndChecksum) {
-  FileHeader header;
-  header.file_bytes = 1 << 20;
-  header.image_count = 1;
-  header.root = {128, 64, 1};
-  std::vector<uint8_t> bytes = encodeHeader(header);
-  stampProceduralHeader(bytes, {40000, 96, 0x55});
-  auto decoded = decodeHeader(bytes, "h.tess");
-  ASSERT_TRUE(decoded) << decoded.error().message;
-  EXPECT_EQ(decoded->version_minor, 1);
-  auto block = decodeProceduralHeader(bytes, *decoded, "h.tess");
+TEST(ProceduralFormat, ProceduralDirectoryIsTheSectionOfKind2) {
+  const SectionEntry sections[] = {
+      {1, {256, 128, 0x11}}, {2, {40000, 96, 0x55}}, {99, {512, 8, 0}}};
+  auto block = decodeProceduralRef(sections, "h.tess");
   ASSERT_TRUE(block) << block.error().message;
   EXPECT_EQ(*block, (BlockRef{40000, 96, 0x55}));
-  EXPECT_EQ(bytes[80], 0x40);  // 40000 = 0x9C40, little-endian
-  EXPECT_EQ(bytes[81], 0x9C);
-  // A 1.0 file has no procedural directory whatever bytes 80..103 hold.
-  FileHeader v10 = *decoded;
-  v10.version_minor = 0;
-  auto none = decodeProceduralHeader(bytes, v10, "h.tess");
+  // No section of kind 2: no procedural directory.
+  auto none = decodeProceduralRef(std::span(sections, 1), "h.tess");
   ASSERT_TRUE(none);
   EXPECT_EQ(none->length_bytes, 0u);
-  // Bytes 104..119 stay reserved in 1.1.
-  bytes[110] = 1;
-  EXPECT_FALSE(decodeProceduralHeader(bytes, *decoded, "h.tess"));
+  // Bounded like the metadata before anything reads it.
+  const SectionEntry huge[] = {{2, {40000, kMaxMetadataBytes + 1ull, 0}}};
+  auto too_large = decodeProceduralRef(huge, "h.tess");
+  ASSERT_FALSE(too_large);
+  EXPECT_EQ(too_large.error().code, ErrorCode::kTooLarge);
 }
 
 TEST(ProceduralFormat, ProceduralEntriesAreReadIn11AndRejectedIn10) {

@@ -2,12 +2,14 @@
 // streamer feeds a real renderer; pictures are read back and checked texel by texel.
 #include <algorithm>
 #include <map>
+#include <unordered_set>
 #include <memory>
 
 #include <gtest/gtest.h>
 
 #include <tessera/build.h>
 #include <tessera/gl.h>
+#include <tessera/renderer.h>
 #include <tessera/render.h>
 #include <tessera/stream.h>
 
@@ -63,7 +65,7 @@ struct Rig {
   std::shared_ptr<test::FaultSource> source;
   std::shared_ptr<Archive> archive;
   std::unique_ptr<TileStreamer> streamer;
-  std::unique_ptr<GlRenderer> renderer;
+  std::unique_ptr<Renderer> renderer;
 
   explicit Rig(const test::SyntheticArchiveSpec& spec, RendererKind kind) {
     sharedContext();
@@ -78,7 +80,7 @@ struct Rig {
     auto created = TileStreamer::create(archive, options);
     EXPECT_TRUE(created) << created.error().message;
     if (created) streamer = std::move(*created);
-    auto made = GlRenderer::create(kind, archive->images()[0]);
+    auto made = createRenderer(kind, archive->images()[0]);
     EXPECT_TRUE(made) << made.error().message;
     if (made) renderer = std::move(*made);
   }
@@ -93,7 +95,7 @@ struct Rig {
   /// One frame as a viewer runs it.
   const FrameUpdate& frame(const View& view) {
     const FrameUpdate& update = streamer->update(view);
-    renderer->apply(update, *streamer);
+    streamer->acknowledge(renderer->apply(update));
     renderer->draw(view);
     return update;
   }
@@ -328,7 +330,7 @@ TEST_P(Renderers, TileEdgesShowNoSeamsMagnifiedOrMinified) {
     StreamerOptions options;
     options.loader_threads = 2;
     auto streamer = TileStreamer::create(archive, options);
-    auto renderer = GlRenderer::create(GetParam(), archive->images()[0]);
+    auto renderer = createRenderer(GetParam(), archive->images()[0]);
     ASSERT_TRUE(streamer && renderer);
     for (double tpp : {0.25, 0.6, 1.0, 2.5, 3.7}) {
       SCOPED_TRACE(tpp);
@@ -336,7 +338,7 @@ TEST_P(Renderers, TileEdgesShowNoSeamsMagnifiedOrMinified) {
       const View view = orthoAt(256.3, 192.4, tpp, 160, 120);
       for (int i = 0; i < 200; ++i) {
         const FrameUpdate& update = (*streamer)->update(view);
-        (*renderer)->apply(update, **streamer);
+        (*streamer)->acknowledge((*renderer)->apply(update));
         if (update.uploads.empty() && update.report.queue_length == 0 &&
             update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
           break;
@@ -398,6 +400,45 @@ TEST_P(Renderers, AFastPanNeverUncoversThePictureAndEachFrameMatchesItsResidentL
   // The fallback was exercised.
   EXPECT_GT(frames_below_full_detail, 0u);
   rig.source->openGate();
+}
+
+TEST_P(Renderers, ApplyAnswersForEveryUploadAndHoldsWhatItAccepted) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, GetParam());
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  // A pan across the image and back: uploads, releases, and for the clipmap slots that wrap.
+  size_t accepted = 0;
+  for (int i = 0; i < 60; ++i) {
+    const double x = 100 + (info.width_px - 200.0) * (i < 30 ? i : 59 - i) / 29.0;
+    const View view = orthoAt(x, info.height_px / 2.0, 1, 128, 96);
+    const FrameUpdate& update = rig.streamer->update(view);
+    std::unordered_set<TileId, TileIdHash> uploads;
+    for (const auto& tile : update.uploads) uploads.insert(tile->id);
+    std::unordered_set<TileId, TileIdHash> held_before;
+    for (const TileId& id : test::allTiles(*rig.archive))
+      if (rig.renderer->resident(id)) held_before.insert(id);
+    const ApplyResult& result = rig.renderer->apply(update);
+    // Each upload is accepted or declined, never both, and nothing else is.
+    std::unordered_set<TileId, TileIdHash> answered(result.accepted.begin(), result.accepted.end());
+    for (const TileId& id : result.declined) EXPECT_TRUE(answered.insert(id).second);
+    EXPECT_EQ(answered, uploads);
+    for (const TileId& id : result.accepted) EXPECT_TRUE(rig.renderer->resident(id));
+    for (const TileId& id : result.declined) EXPECT_FALSE(rig.renderer->resident(id));
+    // Dropped tiles were held before this frame and are not any more.
+    for (const TileId& id : result.dropped) {
+      EXPECT_TRUE(held_before.count(id));
+      EXPECT_FALSE(rig.renderer->resident(id));
+    }
+    EXPECT_EQ(rig.renderer->stats().uploads, result.accepted.size());
+    EXPECT_EQ(rig.renderer->stats().declined, result.declined.size());
+    accepted += result.accepted.size();
+    rig.streamer->acknowledge(result);
+    rig.renderer->draw(view);
+    rig.streamer->waitIdleForTesting();
+  }
+  EXPECT_GT(accepted, 0u);
 }
 
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {

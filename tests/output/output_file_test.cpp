@@ -2,6 +2,14 @@
 // nothing behind, and commit replaces a previous file whole.
 #include "output/output_file.h"
 
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/sysmacros.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -131,6 +139,146 @@ TEST(TempFile, ARelativePathUsesTheCurrentDirectory) {
   }
   std::filesystem::current_path(previous);
   EXPECT_EQ(listDir(dir), std::vector<std::string>{"relative.tess"});
+}
+
+// ---- What is at the output path -------------------------------------------------------------
+
+/// The file type of `path` (not following a link), or 0 when nothing is there.
+mode_t fileType(const std::string& path) {
+  struct stat st {};
+  return ::lstat(path.c_str(), &st) == 0 ? st.st_mode & S_IFMT : 0;
+}
+
+TEST(TempFile, AFifoAtThePathIsRefusedAndKept) {
+  const std::string dir = test::testTempDir();
+  const std::string path = dir + "pipe";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0644), 0);
+  auto file = TempFile::create(path);
+  ASSERT_FALSE(file);
+  EXPECT_EQ(file.error().code, ErrorCode::kInvalidArgument);
+  EXPECT_NE(file.error().message.find(path + ": exists and is a FIFO (named pipe), not a regular "
+                                             "file; refusing to replace it"),
+            std::string::npos)
+      << file.error().message;
+  EXPECT_EQ(fileType(path), mode_t(S_IFIFO));
+  EXPECT_EQ(listDir(dir), std::vector<std::string>{"pipe"});
+}
+
+TEST(TempFile, ADeviceNodeAtThePathIsRefusedAndKept) {
+  const std::string dir = test::testTempDir();
+  const std::string path = dir + "null";
+  // A private copy of /dev/null (1, 3): the real one must never be at stake in a test.
+  if (::mknod(path.c_str(), S_IFCHR | 0666, makedev(1, 3)) != 0)
+    GTEST_SKIP() << "cannot make a device node (needs root): " << std::strerror(errno);
+  auto file = TempFile::create(path);
+  ASSERT_FALSE(file);
+  EXPECT_NE(file.error().message.find("is a character device"), std::string::npos)
+      << file.error().message;
+  EXPECT_EQ(fileType(path), mode_t(S_IFCHR));
+  EXPECT_EQ(writeFileAtomically(path, asBytes("data")).error().code, ErrorCode::kInvalidArgument);
+  EXPECT_EQ(fileType(path), mode_t(S_IFCHR));
+}
+
+TEST(TempFile, DevNullIsRefused) {
+  // Read-only: the check never writes, and nothing is created when it refuses.
+  Result<void> checked = checkOutputPath("/dev/null");
+  ASSERT_FALSE(checked);
+  EXPECT_NE(checked.error().message.find("/dev/null: exists and is a character device"),
+            std::string::npos)
+      << checked.error().message;
+}
+
+TEST(TempFile, ADirectoryASocketAndALinkToAFifoAreRefused) {
+  const std::string dir = test::testTempDir();
+  std::filesystem::create_directory(dir + "folder");
+  auto folder = TempFile::create(dir + "folder");
+  ASSERT_FALSE(folder);
+  EXPECT_NE(folder.error().message.find("is a directory, not a regular file"), std::string::npos)
+      << folder.error().message;
+
+  const std::string socket_path = dir + "sock";
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  ASSERT_LT(socket_path.size(), sizeof(address.sun_path));
+  std::strcpy(address.sun_path, socket_path.c_str());
+  ASSERT_EQ(::bind(fd, reinterpret_cast<const sockaddr*>(&address), sizeof(address)), 0);
+  auto socket_file = TempFile::create(socket_path);
+  ::close(fd);
+  ASSERT_FALSE(socket_file);
+  EXPECT_NE(socket_file.error().message.find("is a socket"), std::string::npos);
+  EXPECT_EQ(fileType(socket_path), mode_t(S_IFSOCK));
+
+  ASSERT_EQ(::mkfifo((dir + "pipe").c_str(), 0644), 0);
+  std::filesystem::create_symlink(dir + "pipe", dir + "link");
+  auto linked = TempFile::create(dir + "link");
+  ASSERT_FALSE(linked);
+  EXPECT_NE(linked.error().message.find("FIFO"), std::string::npos) << linked.error().message;
+  EXPECT_EQ(fileType(dir + "link"), mode_t(S_IFLNK));
+}
+
+TEST(TempFile, AFifoMadeWhileTheFileIsWrittenIsNotReplacedAtCommit) {
+  const std::string dir = test::testTempDir();
+  const std::string path = dir + "out.tess";
+  Result<void> committed;
+  {
+    auto file = TempFile::create(path);
+    ASSERT_TRUE(file);
+    ASSERT_TRUE(file->pwrite(0, asBytes("archive")));
+    ASSERT_EQ(::mkfifo(path.c_str(), 0644), 0);
+    committed = file->commit();
+  }
+  ASSERT_FALSE(committed);
+  EXPECT_NE(committed.error().message.find("FIFO"), std::string::npos);
+  EXPECT_EQ(fileType(path), mode_t(S_IFIFO));
+  EXPECT_EQ(listDir(dir), std::vector<std::string>{"out.tess"});
+}
+
+TEST(TempFile, ARegularFileAndAMissingPathAreAccepted) {
+  const std::string dir = test::testTempDir();
+  EXPECT_TRUE(checkOutputPath(dir + "missing.tess"));
+  ASSERT_TRUE(test::writeFileBytes(dir + "old.tess", {1}));
+  EXPECT_TRUE(checkOutputPath(dir + "old.tess"));
+  std::filesystem::create_symlink(dir + "gone", dir + "dangling");
+  EXPECT_TRUE(checkOutputPath(dir + "dangling"));
+}
+
+// ---- Scratch files and free space ------------------------------------------------------------
+
+TEST(TempFile, AScratchFileLivesInItsDirectoryAndLeavesNothing) {
+  const std::string dir = test::testTempDir();
+  std::filesystem::create_directory(dir + "spool");
+  {
+    auto scratch = TempFile::createScratch(dir + "spool", "out.tess: spool");
+    ASSERT_TRUE(scratch) << scratch.error().message;
+    ASSERT_TRUE(scratch->pwrite(0, asBytes("tiles")));
+    std::vector<uint8_t> back(5);
+    ASSERT_TRUE(scratch->pread(0, back));
+    EXPECT_EQ(std::string(back.begin(), back.end()), "tiles");
+  }
+  EXPECT_TRUE(listDir(dir + "spool").empty());
+  auto missing = TempFile::createScratch(dir + "nowhere", "out.tess: spool");
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.error().message.find("out.tess: spool: directory " + dir + "nowhere"),
+            std::string::npos)
+      << missing.error().message;
+}
+
+TEST(DiskSpace, ReportsTheFreeBytesAndTheFileSystem) {
+  const std::string dir = test::testTempDir();
+  std::filesystem::create_directory(dir + "sub");
+  auto here = diskSpaceAt(dir);
+  ASSERT_TRUE(here) << here.error().message;
+  EXPECT_GT(here->available_bytes, 0u);
+  auto sub = diskSpaceAt(dir + "sub");
+  ASSERT_TRUE(sub);
+  EXPECT_EQ(sub->device, here->device);
+  auto missing = diskSpaceAt(dir + "missing");
+  ASSERT_FALSE(missing);
+  EXPECT_NE(missing.error().message.find(dir + "missing"), std::string::npos);
+  EXPECT_EQ(directoryOf("out.tess"), ".");
+  EXPECT_EQ(directoryOf("/a/b/out.tess"), "/a/b");
 }
 
 }  // namespace

@@ -2,6 +2,8 @@
 // write.
 #include <tessera/picture_file.h>
 
+#include <sys/stat.h>
+
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -74,6 +76,19 @@ TEST(PictureFile, FailedRenameLeavesNoFile) {
   for ([[maybe_unused]] const auto& entry : std::filesystem::directory_iterator(dir)) ++files;
   EXPECT_EQ(files, 1u);  // only the directory
   EXPECT_TRUE(std::filesystem::is_directory(path));
+}
+
+TEST(PictureFile, WritePngToAFifoIsRefusedAndKeepsTheFifo) {
+  const std::string dir = test::testTempDir();
+  const std::string path = dir + "pipe.png";
+  ASSERT_EQ(::mkfifo(path.c_str(), 0644), 0);
+  Result<void> written = writePng(gradient(4, 4), path);
+  ASSERT_FALSE(written);
+  EXPECT_NE(written.error().message.find(path + ": exists and is a FIFO"), std::string::npos)
+      << written.error().message;
+  struct stat st {};
+  ASSERT_EQ(::lstat(path.c_str(), &st), 0);
+  EXPECT_TRUE(S_ISFIFO(st.st_mode));
 }
 
 TEST(PictureFile, WritePngRejectsAnEmptyPicture) {

@@ -82,6 +82,53 @@ TEST(ArchiveConcurrency, ConcurrentVerifyAndReadsAgree) {
   for (int f : faults) EXPECT_EQ(f, 0);
 }
 
+TEST(ArchiveConcurrency, ThreadsDecodingPtmTilesShareTheDecodedParents) {
+  // Every ptm tile below the coarsest level decodes against its parent, which the threads
+  // obtain through the archive's one cache of decoded parents: each in its own shuffled order,
+  // so they race to decode the same chains and fill the cache at once.
+  BuildOptions options;
+  options.tile_size_px = 64;
+  options.border_px = 1;
+  options.codec = Codec::kPtm;
+  options.threads = 2;
+  test::BuiltArchive built =
+      test::buildFromImage(test::makePatternImage(700, 500, 3, 9), options, test::testTempDir());
+  auto archive = Archive::open(makeMemorySource(built.bytes, "ptm.tess"));
+  ASSERT_TRUE(archive) << archive.error().message;
+  auto single = Archive::open(makeMemorySource(built.bytes, "single.tess"));
+  ASSERT_TRUE(single);
+  const ImageInfo info = (*archive)->images()[0];
+  ASSERT_GE(info.level_count, 3u);
+  std::vector<TileId> tiles;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    for (uint32_t y = 0; y < info.tilesY(level); ++y)
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) tiles.push_back({0, level, x, y});
+  std::vector<uint64_t> expected;
+  for (const TileId& tile : tiles) {
+    auto texels = (*single)->readTile(tile);
+    ASSERT_TRUE(texels) << texels.error().message;
+    expected.push_back(detail::checksum64(texels->texels));
+  }
+
+  constexpr int kThreads = 6;
+  std::barrier start(kThreads);
+  std::vector<int> mismatches(kThreads, 0);
+  std::vector<std::thread> threads;
+  for (int t = 0; t < kThreads; ++t)
+    threads.emplace_back([&, t] {
+      std::vector<size_t> order(tiles.size());
+      for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+      std::shuffle(order.begin(), order.end(), std::mt19937(100 + t));
+      start.arrive_and_wait();
+      for (size_t i : order) {
+        auto tile = (*archive)->readTile(tiles[i]);
+        if (!tile || detail::checksum64(tile->texels) != expected[i]) ++mismatches[t];
+      }
+    });
+  for (auto& thread : threads) thread.join();
+  for (int t = 0; t < kThreads; ++t) EXPECT_EQ(mismatches[t], 0) << "thread " << t;
+}
+
 TEST(ArchiveConcurrency, ThreadsWantingTheSamePageReadItOnce) {
   // After a jump every loader thread looks up tiles of the same directory pages at once; over
   // a network each duplicate page read costs a round trip and the page's bytes. Behind a

@@ -20,6 +20,7 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 using detail::AdaptiveScheduler;
+using detail::LinkEstimate;
 using detail::TileFacts;
 
 Clock::time_point at(double s) {
@@ -399,11 +400,9 @@ class AdaptiveStreamerTest : public testing::Test {
   FrameReport frame(const View& view) {
     const FrameUpdate& update = streamer_->update(view);
     FrameReport report = update.report;
-    std::vector<TileId> uploads;
-    for (const auto& tile : update.uploads) uploads.push_back(tile->id);
-    std::vector<TileId> releases = update.releases;
-    for (const TileId& id : uploads) streamer_->uploaded(id);
-    for (const TileId& id : releases) streamer_->released(id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer_->acknowledge(result);
     return report;
   }
   TileId tileAtOffset(uint64_t offset) const {

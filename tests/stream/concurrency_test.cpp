@@ -219,10 +219,9 @@ void flyRandomly(TileStreamer& streamer, uint32_t seed, int frames) {
       view.ortho = {position(random), position(random), std::exp2(zoom(random)), 320, 240, 0};
     }
     const FrameUpdate& update = streamer.update(view);
-    std::vector<TileId> uploads, releases = update.releases;
-    for (const auto& tile : update.uploads) uploads.push_back(tile->id);
-    for (const TileId& id : uploads) streamer.uploaded(id);
-    for (const TileId& id : releases) streamer.released(id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer.acknowledge(result);
   }
 }
 
@@ -232,11 +231,9 @@ FrameReport settle(TileStreamer& streamer, const View& view) {
     streamer.waitIdleForTesting();
     const FrameUpdate& update = streamer.update(view);
     report = update.report;
-    std::vector<TileId> uploads;
-    for (const auto& tile : update.uploads) uploads.push_back(tile->id);
-    std::vector<TileId> releases = update.releases;
-    for (const TileId& id : uploads) streamer.uploaded(id);
-    for (const TileId& id : releases) streamer.released(id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer.acknowledge(result);
     if (report.coverage_desired == 1 && report.uploads == 0 && report.queue_length == 0) break;
   }
   return report;

@@ -84,11 +84,12 @@ class TileStreamerTest : public testing::TestWithParam<Codec> {
     std::vector<TileId> uploads;
     for (const auto& tile : update.uploads) uploads.push_back(tile->id);
     std::vector<TileId> releases = update.releases;
-    for (const TileId& id : uploads) streamer_->uploaded(id);
+    ApplyResult result;
+    result.accepted = uploads;
+    streamer_->acknowledge(result);
     for (const TileId& id : releases) {
       EXPECT_NE(id.level, coarsest()) << "the coarsest level was released";
       resident_.erase(keyOf(id));
-      streamer_->released(id);
     }
     ++frames_;
     return report;
@@ -177,10 +178,10 @@ TEST_P(TileStreamerTest, TileStatesFollowTheLoadAndUploadLifeCycle) {
   std::vector<TileId> uploads;
   for (const auto& tile : update.uploads) uploads.push_back(tile->id);
   EXPECT_EQ(streamer.state(top), TileState::kLoaded);  // handed out, not yet confirmed
-  for (const TileId& id : uploads) {
-    streamer.uploaded(id);
-    resident_.insert(keyOf(id));
-  }
+  ApplyResult result;
+  result.accepted = uploads;
+  streamer.acknowledge(result);
+  for (const TileId& id : uploads) resident_.insert(keyOf(id));
   EXPECT_EQ(streamer.state(top), TileState::kLocked);
   settle(orthoView(512, 384));
   EXPECT_EQ(streamer.state(centre), TileState::kResident);
@@ -198,14 +199,36 @@ TEST_P(TileStreamerTest, ADeclinedTileStaysLoadedAndIsOfferedAgain) {
   for (const auto& tile : first.uploads)
     if (tile->id != declined) others.push_back(tile->id);
   // The renderer had no room for it: not resident, still in the cache.
-  streamer.declined(declined);
-  for (const TileId& id : others) streamer.uploaded(id);
+  ApplyResult result;
+  result.declined = {declined};
+  result.accepted = others;
+  streamer.acknowledge(result);
   EXPECT_EQ(streamer.state(declined), TileState::kLoaded);
   EXPECT_TRUE(streamer.cache().contains(declined));
   const FrameUpdate& second = streamer.update(view);
   EXPECT_TRUE(std::any_of(second.uploads.begin(), second.uploads.end(), [&](const auto& tile) {
     return tile->id == declined;
   })) << "a declined tile is offered again";
+}
+
+TEST_P(TileStreamerTest, ATileTheRendererDropsIsOfferedAgainFromTheCache) {
+  TileStreamer& streamer = start();
+  const View view = orthoView(512, 384);
+  settle(view);
+  const TileId centre{0, 0, 8, 6};
+  ASSERT_EQ(streamer.state(centre), TileState::kResident);
+  // The renderer gave it up on its own (a clipmap slot taken, say): no longer resident, still
+  // in the cache, and handed over again without a new read.
+  const uint64_t reads = streamer.update(view).report.reads_total;
+  ApplyResult result;
+  result.dropped = {centre};
+  streamer.acknowledge(result);
+  EXPECT_EQ(streamer.state(centre), TileState::kLoaded);
+  const FrameUpdate& again = streamer.update(view);
+  EXPECT_TRUE(std::any_of(again.uploads.begin(), again.uploads.end(), [&](const auto& tile) {
+    return tile->id == centre;
+  })) << "a dropped tile that is still wanted is offered again";
+  EXPECT_EQ(again.report.reads_total, reads);
 }
 
 TEST_P(TileStreamerTest, UploadsKeepTheTileBudgetAndGoParentBeforeChild) {
@@ -234,7 +257,9 @@ TEST_P(TileStreamerTest, UploadsKeepTheByteBudget) {
       EXPECT_LE(update.report.upload_bytes, options_.residency.upload_budget_bytes)
           << update.uploads.size() << " tiles in frame " << i;
     }
-    for (const auto& tile : update.uploads) streamer.uploaded(tile->id);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    streamer.acknowledge(result);
   }
 }
 

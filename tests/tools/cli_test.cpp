@@ -176,8 +176,8 @@ TEST_F(Cli, BuildInfoVerifyCorruptVerifyExtract) {
       run({"extract", archive_path, "--level", "0", "--tile",
            std::to_string(victim.x) + "," + std::to_string(victim.y), "-o", work_ + "tile.png"});
   ASSERT_EQ(tile_png.exit_code, 0) << tile_png.err;
-  RunResult rect_png = run({"extract", archive_path, "--level", "1", "--rect", "-5,10,100,60", "-o",
-                            work_ + "rect.png"});
+  RunResult rect_png = run({"extract", archive_path, "--level", "1", "--rect", "-5,10,100,60",
+                            "--with-padding", "-o", work_ + "rect.png"});
   ASSERT_EQ(rect_png.exit_code, 0) << rect_png.err;
   {
     Image tile = *(*archive)->readTile(victim);

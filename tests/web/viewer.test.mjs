@@ -16,6 +16,7 @@ import {
   startServe,
   tempDir,
 } from './lib/harness.mjs';
+import { writePngRgb } from './lib/png.mjs';
 
 // The page background (web/viewer/viewer.css) shows where the canvas is transparent.
 const BACKGROUND = [0x20, 0x20, 0x20];
@@ -35,6 +36,7 @@ let dir;
 let archive;
 let ocean;
 let packed;
+let patches;
 let server;
 let browser;
 let page;
@@ -47,7 +49,13 @@ before(async () => {
   ocean = await buildArchive('synthetic:3000x2000', path.join(dir, 'ocean.tess'), '--codec', 'png', '--border', '1');
   // A codec browsers cannot decode: tiles come as `?format=png` transcodes.
   packed = await buildArchive('synthetic:1000x700:3:3', path.join(dir, 'packed.tess'), '--codec', 'zstd', '--border', '1');
-  server = await startServe([archive, ocean, packed]);
+  // Tiles of sharply different colours, each also split by sharp steps through its middle, so
+  // that filtering sharp features inside tiles is the yardstick for filtering them across tile
+  // edges; without a border a seam shows as a larger difference there.
+  const source = path.join(dir, 'patches.png');
+  writePatches(source);
+  patches = await buildArchive(source, path.join(dir, 'patches.tess'), '--codec', 'png', '--tile', '128');
+  server = await startServe([archive, ocean, packed, patches]);
   browser = await launchChromium({ viewport: VIEWPORT, hasTouch: true });
   page = await browser.context.newPage();
   page.on('pageerror', (error) => console.error(`page error: ${error.message}`));
@@ -66,6 +74,48 @@ after(async () => {
   if (dir) fs.rmSync(dir, { recursive: true, force: true });
 });
 
+const PATCHES = { width: 1024, height: 768, tile: 128 };
+
+function writePatches(file) {
+  const { width, height, tile } = PATCHES;
+  const rgb = new Uint8Array(width * height * 3);
+  for (let y = 0; y < height; y += 1)
+    for (let x = 0; x < width; x += 1) {
+      const t = Math.floor(x / tile) * 7 + Math.floor(y / tile) * 13 + ((x % tile) * 2 >= tile ? 3 : 0) + ((y % tile) * 2 >= tile ? 5 : 0);
+      const base = [(t * 53) % 200, (t * 97 + 60) % 200, (t * 31 + 120) % 200];
+      for (let c = 0; c < 3; c += 1)
+        rgb[(y * width + x) * 3 + c] = base[c] + Math.floor((((x % tile) + (y % tile) * (c + 1)) % tile) / 3);
+    }
+  writePngRgb(file, width, height, rgb);
+}
+
+/**
+ * The largest channel difference between two pictures of the view `view` (no rotation), over
+ * the pixels within one texel of a tile edge of `levels` and over all the others.
+ */
+function edgeAndInteriorDifference(a, b, view, levels) {
+  let edge = 0;
+  let interior = 0;
+  for (let py = 0; py < view.height; py += 1)
+    for (let px = 0; px < view.width; px += 1) {
+      const u = view.cx + (px + 0.5 - view.width / 2) * view.tpp;
+      const v = view.cy + (py + 0.5 - view.height / 2) * view.tpp;
+      if (u < 0 || v < 0 || u >= PATCHES.width || v >= PATCHES.height) continue;
+      const nearEdge = levels.some((level) => {
+        const span = PATCHES.tile * 2 ** level;
+        const du = Math.abs(u - Math.round(u / span) * span);
+        const dv = Math.abs(v - Math.round(v / span) * span);
+        return Math.min(du, dv) <= 2 ** level + view.tpp;
+      });
+      const i = (py * view.width + px) * 4;
+      let d = 0;
+      for (let c = 0; c < 3; c += 1) d = Math.max(d, Math.abs(a.rgba[i + c] - b.rgba[i + c]));
+      if (nearEdge) edge = Math.max(edge, d);
+      else interior = Math.max(interior, d);
+    }
+  return { edge, interior };
+}
+
 const status = () => page.evaluate(() => window.tessera.status());
 const settle = () => page.waitForFunction(() => window.tessera.status().settled, null, { timeout: 60000 });
 
@@ -78,7 +128,7 @@ async function setView(view) {
 async function compareWithReference() {
   const { view, archive: name } = await status();
   const shot = screenshotPicture(await page.locator('#view').screenshot(), dir);
-  const reference = await referencePicture({ scene: archive, ocean, packed }[name], view, BACKGROUND, dir);
+  const reference = await referencePicture({ scene: archive, ocean, packed, patches }[name], view, BACKGROUND, dir);
   return { view, ...compare(shot, reference) };
 }
 
@@ -114,6 +164,27 @@ test('at rest the viewer draws the reference picture of its view', async () => {
   const coarse = await status();
   assert.equal(coarse.level, 2);
   assert.equal(coarse.requested - requested, 6 + 2 + 1);
+});
+
+test('without a border, tile edges are filtered from the neighbours: no seam, magnified or minified', async () => {
+  await page.evaluate(() => window.tessera.open('patches', 0));
+  const views = [
+    { view: { cx: 512, cy: 384, tpp: 1 / 7.8 }, levels: [0] }, // magnified at a tile corner
+    { view: { cx: 400.3, cy: 300.6, tpp: 0.61 }, levels: [0] }, // magnified, edges off centre
+    { view: { cx: 512, cy: 384, tpp: 3.7 }, levels: [1, 2] }, // minified: levels 1 and 2 blend
+  ];
+  for (const { view: wanted, levels } of views) {
+    await setView(wanted);
+    const s = await status();
+    assert.equal(s.missing, 0);
+    const shot = screenshotPicture(await page.locator('#view').screenshot(), dir);
+    const reference = await referencePicture(patches, s.view, BACKGROUND, dir);
+    const { edge, interior } = edgeAndInteriorDifference(shot, reference, s.view, levels);
+    const { psnr } = compare(shot, reference);
+    console.log(`patches ${JSON.stringify(wanted)}: across edges ${edge}, inside ${interior}, ${psnr.toFixed(1)} dB`);
+    assert.ok(psnr >= MIN_PSNR_DB, `view ${JSON.stringify(wanted)}: PSNR ${psnr.toFixed(1)} dB`);
+    assert.ok(edge <= Math.max(interior, 1), `view ${JSON.stringify(wanted)}: largest difference across tile edges ${edge}, inside tiles ${interior}`);
+  }
 });
 
 test('tiles are requested coarse level first, then centre-out', async () => {

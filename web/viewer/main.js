@@ -197,6 +197,19 @@ class Viewer {
     return new Set(this.lastNeeded ? this.lastNeeded.map((t) => t.key) : []);
   }
 
+  /**
+   * Without borders the renderer filters across tile edges from the resident tiles around
+   * each one (renderer.js): the 3 x 3 entries around (x, y), row-major, null where absent.
+   * With borders each tile carries its neighbours' texels and this is null.
+   */
+  neighbours(level, x, y) {
+    if (this.image.border > 0) return null;
+    const out = [];
+    for (let dy = -1; dy <= 1; dy += 1)
+      for (let dx = -1; dx <= 1; dx += 1) out.push(this.cache.peek(`${level}/${x + dx}/${y + dy}`) || null);
+    return out;
+  }
+
   /** Layers to draw, coarsest first: each level's resident tiles in view. */
   layers(blend) {
     const out = [];
@@ -208,7 +221,7 @@ class Viewer {
       for (let y = range[1]; y < range[3]; y += 1)
         for (let x = range[0]; x < range[2]; x += 1) {
           const entry = this.cache.get(`${level}/${x}/${y}`);
-          if (entry) tiles.push({ x, y, entry });
+          if (entry) tiles.push({ x, y, entry, neighbours: this.neighbours(level, x, y) });
         }
       // The desired level blends over the next coarser one by 1 - f (trilinear); every other
       // level covers what is below it.

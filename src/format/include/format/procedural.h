@@ -1,6 +1,6 @@
 #pragma once
 // Procedural tiles in the archive (docs/format.md, "Procedural tiles", format 1.1): the
-// procedural directory that the header's bytes 80..103 point to (brush images stored once,
+// procedural directory that the section table names as kind 2 (brush images stored once,
 // brush records, the underlying height layer), the instance page that a procedural tile entry
 // points to, and the entry itself. Pure: bytes in, structs out.
 
@@ -14,13 +14,13 @@
 #include <tessera/result.h>
 
 #include "format/header.h"
+#include "format/sections.h"
 
 namespace tessera::detail {
 
-/// The minor version that gives the header's bytes 80..103 and tile kind 3 their meaning.
+/// The minor version that gives tile kind 3 its meaning and adds the section table whose
+/// kProcedural entry is the procedural directory (format/sections.h).
 inline constexpr uint16_t kProceduralMinorVersion = 1;
-/// Where the procedural directory's BlockRef sits in the header.
-inline constexpr uint32_t kProceduralHeaderOffset = 80;
 
 inline constexpr uint8_t kProceduralDirectoryMagic[4] = {'T', 'P', 'R', 'C'};
 inline constexpr uint8_t kInstancePageMagic[4] = {'T', 'I', 'P', 'G'};
@@ -93,13 +93,11 @@ inline uint64_t instancePageBytes(size_t instances) {
   return kInstancePageHeaderBytes + uint64_t(instances) * kInstanceRecordBytes;
 }
 
-/// Writes the procedural directory's reference into an encoded 128-byte header (bytes
-/// 80..103), sets its minor version to 1 and recomputes its checksum.
-void stampProceduralHeader(std::span<uint8_t> header_bytes, const BlockRef& directory);
-/// The procedural directory's reference of a decoded header's bytes: absent (length 0) in files
-/// of minor 0; in minor 1 checked against the file like every block, bytes 104..119 zero.
-Result<BlockRef> decodeProceduralHeader(std::span<const uint8_t> header_bytes,
-                                        const FileHeader& header, const std::string& name);
+/// The procedural directory's reference among a decoded section table's entries: length 0
+/// when the table has none; otherwise at most kMaxMetadataBytes long (kTooLarge), like the
+/// metadata, so a hostile table cannot make a reader allocate much.
+Result<BlockRef> decodeProceduralRef(std::span<const SectionEntry> sections,
+                                     const std::string& name);
 
 /// A procedural tile entry (kind 3): the page's offset, length and checksum in the encoded
 /// entry's fields, codec 0. encodeTileEntries writes it as it is.

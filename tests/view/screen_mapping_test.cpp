@@ -1,6 +1,6 @@
 // textureAt and levelOfDetailAt: the camera half of the sampling rules, with hand-worked points
 // for orthographic and perspective views, and agreement with the runtime's footprint.
-#include <tessera/render.h>
+#include <tessera/view.h>
 
 #include <cmath>
 #include <limits>
@@ -41,12 +41,12 @@ Uv at(const View& view, double sx, double sy) {
   return p;
 }
 
-/// Screen-space size of one pixel at unit distance (as stream/residency.cpp's pixelAngle).
+/// Screen-space size of one pixel at unit distance, worked by hand (tessera::pixelAngle).
 double pixelAngle(double fov, uint32_t h) {
   return 2 * std::tan(fov / 2) / h;
 }
 
-TEST(RenderViewMath, OrthoPutsTheCentreMidScreenAtTheZoom) {
+TEST(ScreenMapping, OrthoPutsTheCentreMidScreenAtTheZoom) {
   const View view = orthoView(100, 50, 2, 8, 6);
   Uv p = at(view, 4, 3);
   EXPECT_TRUE(p.hit);
@@ -60,7 +60,7 @@ TEST(RenderViewMath, OrthoPutsTheCentreMidScreenAtTheZoom) {
   EXPECT_DOUBLE_EQ(p.v, 55);
 }
 
-TEST(RenderViewMath, OrthoRotationTurnsScreenXTowardsY) {
+TEST(ScreenMapping, OrthoRotationTurnsScreenXTowardsY) {
   // A quarter turn: u = cx - tpp dy, v = cy + tpp dx.
   View view = orthoView(100, 50, 3, 10, 10, kPi / 2);
   Uv p = at(view, 6, 5);  // one pixel right of the centre
@@ -77,7 +77,7 @@ TEST(RenderViewMath, OrthoRotationTurnsScreenXTowardsY) {
   EXPECT_NEAR(p.v, 1.8660254037844386, 1e-12);
 }
 
-TEST(RenderViewMath, OrthoLevelOfDetailIsLog2OfTheZoomEverywhere) {
+TEST(ScreenMapping, OrthoLevelOfDetailIsLog2OfTheZoomEverywhere) {
   for (double rotation : {0.0, 0.7}) {
     EXPECT_DOUBLE_EQ(levelOfDetailAt(orthoView(0, 0, 4, 16, 16, rotation), 0, 0), 2);
     EXPECT_DOUBLE_EQ(levelOfDetailAt(orthoView(0, 0, 4, 16, 16, rotation), 15, 9), 2);
@@ -86,7 +86,7 @@ TEST(RenderViewMath, OrthoLevelOfDetailIsLog2OfTheZoomEverywhere) {
   }
 }
 
-TEST(RenderViewMath, PerspectiveStraightDownIsLinearInPixels) {
+TEST(ScreenMapping, PerspectiveStraightDownIsLinearInPixels) {
   // Looking straight down with heading 0 (towards -y): screen right is +x, screen up is -y,
   // and one pixel is eye_z * pixelAngle texels.
   const double ez = 100, fov = 1.0;
@@ -105,7 +105,7 @@ TEST(RenderViewMath, PerspectiveStraightDownIsLinearInPixels) {
       EXPECT_NEAR(levelOfDetailAt(view, px, py), std::log2(step), 1e-9);
 }
 
-TEST(RenderViewMath, PerspectiveStraightDownFollowsTheHeading) {
+TEST(ScreenMapping, PerspectiveStraightDownFollowsTheHeading) {
   // Heading +x (yaw pi/2): the top of the screen is +x, its right +y.
   const View view = perspectiveView(0, 0, 50, kPi / 2, -kPi / 2, 0.8, 40, 40);
   const Uv centre = at(view, 20, 20), up = at(view, 20, 10), right = at(view, 30, 20);
@@ -118,7 +118,7 @@ TEST(RenderViewMath, PerspectiveStraightDownFollowsTheHeading) {
   EXPECT_GT(right.v, 1);
 }
 
-TEST(RenderViewMath, PerspectiveStraightDownMatchesTheOrthographicView) {
+TEST(ScreenMapping, PerspectiveStraightDownMatchesTheOrthographicView) {
   // Same centre, zoom eye_z * pixelAngle: the two cameras see the same texels.
   const double ez = 300, fov = 0.9;
   const View persp = perspectiveView(1000, 700, ez, 0, -kPi / 2, fov, 32, 20);
@@ -131,7 +131,7 @@ TEST(RenderViewMath, PerspectiveStraightDownMatchesTheOrthographicView) {
     }
 }
 
-TEST(RenderViewMath, PerspectiveCentreRayHitsAlongTheHeading) {
+TEST(ScreenMapping, PerspectiveCentreRayHitsAlongTheHeading) {
   // The centre ray leaves the eye at the pitch: it lands eye_z / tan(-pitch) ahead.
   const double ez = 120, pitch = -0.7;
   View view = perspectiveView(10, 20, ez, 0, pitch, 1.0, 64, 48);
@@ -145,7 +145,7 @@ TEST(RenderViewMath, PerspectiveCentreRayHitsAlongTheHeading) {
   EXPECT_NEAR(p.v, 20, 1e-9);
 }
 
-TEST(RenderViewMath, PerspectiveTiltedLevelGrowsTowardsTheHorizonAndRaysAboveItMiss) {
+TEST(ScreenMapping, PerspectiveTiltedLevelGrowsTowardsTheHorizonAndRaysAboveItMiss) {
   // Pitch -0.3 with a field of view of 1.0: the top half-angle reaches +0.2, above the
   // horizon; the bottom row looks 0.8 rad down.
   const View view = perspectiveView(0, 0, 100, 0, -0.3, 1.0, 64, 48);
@@ -179,7 +179,7 @@ TEST(RenderViewMath, PerspectiveTiltedLevelGrowsTowardsTheHorizonAndRaysAboveItM
   EXPECT_GT(rows_hit, 20);
 }
 
-TEST(RenderViewMath, PerspectiveLevelMatchesCentralDifferences) {
+TEST(ScreenMapping, PerspectiveLevelMatchesCentralDifferences) {
   const View view = perspectiveView(-40, 75, 80, 0.6, -0.5, 1.1, 96, 64);
   for (uint32_t py : {20u, 40u, 63u}) {
     for (uint32_t px : {0u, 50u, 95u}) {
@@ -195,7 +195,7 @@ TEST(RenderViewMath, PerspectiveLevelMatchesCentralDifferences) {
   }
 }
 
-TEST(RenderViewMath, EyeBelowThePlaneSeesNothing) {
+TEST(ScreenMapping, EyeBelowThePlaneSeesNothing) {
   const View view = perspectiveView(0, 0, -5, 0, -0.8, 1.0, 16, 16);
   EXPECT_FALSE(at(view, 8, 15).hit);
   EXPECT_EQ(levelOfDetailAt(view, 8, 15), std::numeric_limits<double>::infinity());
@@ -210,7 +210,7 @@ ImageInfo squareImage(uint32_t side_px, uint32_t tile_px, uint32_t levels) {
   return info;
 }
 
-TEST(RenderViewMath, StraightDownLevelIsTheFootprintsDesiredLevel) {
+TEST(ScreenMapping, StraightDownLevelIsTheFootprintsDesiredLevel) {
   // eye_z * pixelAngle = 5 texels per pixel: lambda = log2(5) = 2.32, level 2.
   const ImageInfo info = squareImage(8192, 256, 6);
   const double fov = 1.0;
@@ -226,7 +226,7 @@ TEST(RenderViewMath, StraightDownLevelIsTheFootprintsDesiredLevel) {
             detail::footprintOf(ortho, info).desired_level);
 }
 
-TEST(RenderViewMath, TiltedViewNeverNeedsFinerThanTheFootprintsLevel) {
+TEST(ScreenMapping, TiltedViewNeverNeedsFinerThanTheFootprintsLevel) {
   // The runtime loads the footprint's desired level as its finest: no pixel may ask for
   // finer, and some pixel asks for exactly that level.
   const ImageInfo info = squareImage(65536, 256, 9);

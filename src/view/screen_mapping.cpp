@@ -1,10 +1,10 @@
-#include "view_math.h"
+// The screen-to-texture half of the camera (docs/rendering.md, "Screen and texture
+// coordinates" and "Level of detail").
+#include "view/screen_mapping.h"
 
 #include <algorithm>
 #include <cmath>
 #include <limits>
-
-#include <tessera/render.h>
 
 namespace tessera::detail {
 
@@ -17,8 +17,7 @@ constexpr double kInfinity = std::numeric_limits<double>::infinity();
 ScreenMapping::ScreenMapping(const View& view) {
   if (view.kind == View::Kind::kOrtho) {
     const OrthoView& o = view.ortho;
-    // The runtime's footprint reads a non-positive zoom as 1 (footprintOf); so do we.
-    const double tpp = o.texels_per_pixel > 0 ? o.texels_per_pixel : 1;
+    const double tpp = texelsPerPixelOf(o);
     const double c = std::cos(o.rotation_rad), s = std::sin(o.rotation_rad);
     // u = cx + tpp (c dx - s dy), v = cy + tpp (s dx + c dy), (dx, dy) = (sx - w/2, sy - h/2).
     a_x_ = tpp * c;
@@ -33,21 +32,15 @@ ScreenMapping::ScreenMapping(const View& view) {
   }
   ortho_ = false;
   const PerspectiveView& p = view.perspective;
-  // The runtime's basis (stream/residency.cpp, basisOf): forward f and right r. Its up is
-  // r x f, which in this left-handed frame (x right, y down the image, z up) points below the
-  // horizon; its footprint is symmetric in screen y, so that does not matter there, but a
-  // picture drawn with it is upside down. The camera's up is f x r: with the top row at
-  // screen y = +1, a camera that looks down shows the horizon at the top.
-  const double f[3] = {std::sin(p.yaw_rad) * std::cos(p.pitch_rad),
-                       -std::cos(p.yaw_rad) * std::cos(p.pitch_rad), std::sin(p.pitch_rad)};
-  const double r[3] = {std::cos(p.yaw_rad), std::sin(p.yaw_rad), 0};
-  const double up[3] = {f[1] * r[2] - f[2] * r[1], f[2] * r[0] - f[0] * r[2],
-                        f[0] * r[1] - f[1] * r[0]};
+  const CameraBasis basis = cameraBasis(p);
+  const double f[3] = {basis.forward.x, basis.forward.y, basis.forward.z};
+  const double r[3] = {basis.right.x, basis.right.y, basis.right.z};
+  const double up[3] = {basis.up.x, basis.up.y, basis.up.z};
   const double w = std::max(1u, p.viewport_w), h = std::max(1u, p.viewport_h);
   const double aspect = w / h;
   const double tan_half = std::tan(p.fov_y_rad / 2);
-  // d = f + (r ndc_x aspect + up ndc_y) tan_half with ndc_x = 2 sx / w - 1 and
-  // ndc_y = 1 - 2 sy / h, written as linear in (sx, sy). Both steps are pixelAngle long.
+  // rayDirection with ndc_x = 2 sx / w - 1 and ndc_y = 1 - 2 sy / h, written as linear in
+  // (sx, sy). Both steps are pixelAngle long.
   for (int i = 0; i < 3; ++i) {
     c_[i] = f[i] + (-r[i] * aspect + up[i]) * tan_half;
     dx_[i] = r[i] * aspect * tan_half * 2 / w;

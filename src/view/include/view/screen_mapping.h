@@ -1,9 +1,9 @@
 #pragma once
-// Screen-to-texture mapping of a view, with its constants computed once: the camera half of
-// the sampling rules (docs/rendering.md, "Sampling rules"). Pure arithmetic; owned by one
-// thread, cheap to copy.
+// A view's screen-to-texture mapping with its constants computed once, for loops over many
+// pixels (the CPU reference renderer); `tessera::textureAt` and `levelOfDetailAt` are the
+// one-point forms. Pure arithmetic; owned by one thread, cheap to copy.
 
-#include <tessera/stream.h>
+#include <tessera/view.h>
 
 namespace tessera::detail {
 

@@ -1,0 +1,103 @@
+#pragma once
+/// \file
+/// The backend-neutral renderer: what draws views of one image from the tiles `TileStreamer`
+/// hands over. A renderer mirrors the streamer's residency and never decides policy: each
+/// frame it takes the uploads and releases of a `FrameUpdate`, answers with the tiles it
+/// accepted and declined (`ApplyResult`, which the caller gives back to
+/// `TileStreamer::acknowledge`), and draws what it holds by the sampling rules of
+/// tessera/render.h (docs/rendering.md).
+///
+/// Backends are the rows of one table, `RendererKind` to the function that creates it (as
+/// bgfx's renderer table, checked by a static_assert); the OpenGL renderers (tessera/gl.h,
+/// library tessera::gl) are its first rows. A typical frame, on the render thread:
+///
+///     const FrameUpdate& update = streamer.update(view);
+///     streamer.acknowledge(renderer.apply(update));
+///     renderer.draw(view);
+
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string_view>
+
+#include <tessera/format.h>
+#include <tessera/render.h>
+#include <tessera/result.h>
+#include <tessera/stream.h>
+#include <tessera/view.h>
+
+namespace tessera {
+
+/// The rows of the backend table, in its order; `kCount` is its size.
+enum class RendererKind : uint8_t {
+  /// OpenGL 4.5 (Backes et al., section 7): one quad per resident tile, coarse levels first
+  /// and finer ones over them, tiles in a texture array.
+  kTileQuads,
+  /// OpenGL 4.5 (Luo & Duan, sections 3.3 and 3.5): one texture-array layer per clip level,
+  /// updated toroidally, the level chosen per fragment from screen-space derivatives.
+  kClipmap,
+  kCount,
+};
+
+/// The name tools take for `kind` ("tile-quads", "clipmap"); "unknown" outside the table.
+/// Thread-safe.
+const char* rendererName(RendererKind kind);
+/// The kind `rendererName` calls `name`, or nullopt. Thread-safe.
+std::optional<RendererKind> rendererNamed(std::string_view name);
+
+/// What a renderer did in its last `apply` and `draw`.
+struct RenderStats {
+  uint32_t uploads = 0;         ///< tiles uploaded by the last apply
+  uint64_t upload_bytes = 0;    ///< their texel bytes
+  uint32_t declined = 0;        ///< tiles the last apply declined
+  uint32_t resident_tiles = 0;  ///< tiles the renderer holds now
+  uint32_t tiles_drawn = 0;     ///< tiles (quads) the last draw drew, after culling
+  uint64_t gpu_bytes = 0;       ///< texture memory allocated for tiles
+  double apply_cpu_ms = 0;      ///< render-thread time of the last apply
+  double draw_cpu_ms = 0;       ///< render-thread time of the last draw (commands issued)
+};
+
+/// Sizes a renderer starts with; each grows on demand.
+struct RendererOptions {
+  /// Tile quads: tile layers allocated at first; the array grows by doubling up to the
+  /// driver's limit.
+  uint32_t initial_layers = 64;
+  /// Clipmap: tiles along a level layer's side at first (n of Backes et al., eq. 3); a frame
+  /// whose clip regions are larger reallocates the layers. 0: the first frame's size.
+  uint32_t initial_clip_tiles = 0;
+};
+
+/// Draws views of one image. Render thread only: the thread on which its backend's context
+/// (for the GL rows, a `GlContext`) is current, for its whole life, destruction included.
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+
+  /// Applies a frame: drops `update.releases` and takes `update.uploads` (the GL backends
+  /// copy them all into one staging buffer, then update one texture region per tile). Returns
+  /// which uploads it accepted and which it declined (no room, or not this image's tiles),
+  /// and the resident tiles it dropped on its own; valid until the next apply. Never waits
+  /// for the streamer, and never calls it.
+  [[nodiscard]] virtual const ApplyResult& apply(const FrameUpdate& update) = 0;
+  /// Draws `view` into the renderer's own colour target, at the view's viewport size.
+  virtual void draw(const View& view) = 0;
+  /// The last drawn picture, read back (waits for the GPU to finish drawing it).
+  virtual Picture readPixels() = 0;
+  /// Copies the last drawn picture to the window's back buffer, scaled to its size.
+  virtual void present(uint32_t window_width, uint32_t window_height) = 0;
+  /// True when the renderer holds `tile`.
+  virtual bool resident(const TileId& tile) const = 0;
+  virtual const RenderStats& stats() const = 0;
+  virtual RendererKind kind() const = 0;
+};
+
+/// Creates the renderer of row `kind` for image `info` (1-4 channels, any border), for
+/// views of that image only. The GL rows need a current `GlContext`, and are defined by
+/// tessera::gl, which holds the table. Fails (kInvalidArgument) for a kind outside the table
+/// or an image no renderer can hold, or with the backend's error (kUnsupported: no OpenGL
+/// 4.5; kTooLarge: no GPU memory for the first tiles).
+[[nodiscard]] Result<std::unique_ptr<Renderer>> createRenderer(RendererKind kind,
+                                                               const ImageInfo& info,
+                                                               const RendererOptions& options = {});
+
+}  // namespace tessera

@@ -1,0 +1,128 @@
+// What both GL renderers share: target, apply bookkeeping, staged uploads, program setup.
+#include "renderer_base.h"
+
+#include <algorithm>
+#include <string>
+#include <vector>
+
+namespace tessera::gl {
+
+namespace {
+
+const char* const kVersionGlsl = "#version 450 core\n";
+
+// The start of every renderer's fragment shader.
+const char* const kFragmentPreludeGlsl = R"(#define MAX_LEVELS 32
+uniform ivec2 u_level_size[MAX_LEVELS];  // each level's width and height in texels
+// The level of detail (Luo & Duan, eq. 2, in OpenGL's form): log2 of the longer screen-axis
+// derivative of the level-0 texel coordinate.
+float levelOfDetail(vec2 world) {
+  return log2(max(length(dFdx(world)), length(dFdy(world))));
+}
+)";
+
+static_assert(kMaxShaderLevels == 32, "MAX_LEVELS in kFragmentPreludeGlsl");
+
+}  // namespace
+
+RendererBase::RendererBase(const ImageInfo& info, const RendererOptions& options)
+    : info_(info), options_(options) {}
+
+Picture RendererBase::readPixels() {
+  Picture picture;
+  picture.width = target_.width();
+  picture.height = target_.height();
+  target_.read(picture.rgba);
+  return picture;
+}
+
+void RendererBase::present(uint32_t window_width, uint32_t window_height) {
+  target_.blitToWindow(window_width, window_height);
+}
+
+Result<void> RendererBase::linkRendererProgram(const char* name, const char* vertex_body,
+                                               const char* fragment_body) {
+  Result<Program> program =
+      linkProgram(name, std::string(kVersionGlsl) + vertex_body,
+                  std::string(kVersionGlsl) + kFragmentPreludeGlsl + fragment_body);
+  if (!program) return forwardError(program);
+  program_ = std::move(*program);
+  const GLuint p = program_.get();
+  view_projection_uniform_ = glGetUniformLocation(p, "u_view_projection");
+  std::vector<GLint> sizes;
+  for (uint32_t level = 0; level < std::min(info_.level_count, kMaxShaderLevels); ++level) {
+    sizes.push_back(GLint(info_.levelWidthPx(level)));
+    sizes.push_back(GLint(info_.levelHeightPx(level)));
+  }
+  glProgramUniform2iv(p, glGetUniformLocation(p, "u_level_size"), GLsizei(sizes.size() / 2),
+                      sizes.data());
+  return {};
+}
+
+void RendererBase::beginApply() {
+  result_.accepted.clear();
+  result_.declined.clear();
+  result_.dropped.clear();
+  stats_.uploads = 0;
+  stats_.upload_bytes = 0;
+  stats_.declined = 0;
+}
+
+bool RendererBase::holds(const DecodedTile& tile) const {
+  return tile.texels.channels == info_.channels &&
+         tile.texels.width_px == info_.storedTileSidePx() &&
+         tile.texels.height_px == info_.storedTileSidePx() && tile.id.level < info_.level_count;
+}
+
+void RendererBase::decline(const TileId& id) {
+  result_.declined.push_back(id);
+  ++stats_.declined;
+}
+
+void RendererBase::drop(const TileId& id) {
+  result_.dropped.push_back(id);
+}
+
+void RendererBase::uploadStaged(
+    std::span<const PendingUpload> pending,
+    const std::function<void(const DecodedTile&, uint32_t, size_t)>& write) {
+  if (pending.empty()) return;
+  sources_.clear();
+  for (const PendingUpload& p : pending)
+    if (p.tile) sources_.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
+  staging_.stage(sources_);
+  size_t offset = 0;  // staged one after the other, in this order
+  for (const PendingUpload& p : pending) {
+    if (!p.tile) continue;
+    write(*p.tile, p.place, offset);
+    offset += p.tile->texels.texels.size();
+    result_.accepted.push_back(p.tile->id);
+    ++stats_.uploads;
+    stats_.upload_bytes += p.tile->texels.texels.size();
+  }
+  staging_.unbind();
+}
+
+const ApplyResult& RendererBase::endApply(Clock::time_point started, size_t resident_tiles) {
+  stats_.resident_tiles = uint32_t(resident_tiles);
+  stats_.apply_cpu_ms = msSince(started);
+  return result_;
+}
+
+ViewProjection RendererBase::beginDraw(const View& view) {
+  target_.bind(view.viewportWidth(), view.viewportHeight());
+  glClearColor(0, 0, 0, 0);
+  glClear(GL_COLOR_BUFFER_BIT);
+  glDisable(GL_DEPTH_TEST);
+  glDisable(GL_BLEND);
+  const ViewProjection projection = viewProjection(view, info_);
+  glProgramUniformMatrix4fv(program_.get(), view_projection_uniform_, 1, GL_FALSE,
+                            projection.matrix);
+  return projection;
+}
+
+double RendererBase::msSince(Clock::time_point start) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+}
+
+}  // namespace tessera::gl
