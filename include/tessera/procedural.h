@@ -152,8 +152,10 @@ struct TileGeometry {
   uint32_t sidePx() const { return tile_size_px + 2 * border_px; }
 };
 
-/// The tile's texels and its query box: the level-0 area whose instances can touch the tile
-/// (the stored tile's texels grown by one texel of the level, for bilinear footprints).
+/// The tile's query box: the level-0 area whose instances can touch the tile. The stored
+/// tile's texels grown by three texels of the level: an instance draws up to its `reach`
+/// (docs/procedural.md, "Compositing"), which passes instanceBounds by up to three texels of
+/// the level where the fringe of a magnified brush image leaves the bounds' corner.
 BoxPx tileQueryBox(const TileGeometry& tile);
 
 /// The stored-tile texels one instance of a tile's page may change: [x0, x1) x [y0, y1), in
@@ -184,12 +186,13 @@ struct TileClip {
 
 /// The procedural side of an archive of format 1.1 (docs/format.md, "Procedural tiles"): its
 /// brush set, loaded once, and the compositing of procedural tiles from their instance pages.
-/// Immutable after `open`: thread-safe, any thread may composite. Until the reader learns
-/// format 1.1 (docs/procedural.md, "Status"), `tileEntry` reads directory pages itself.
+/// Immutable after `open`: thread-safe, any thread may composite. Archive::procedural() holds
+/// one per archive and Archive::decodeTile composites through it, so most callers never name
+/// this class.
 class ProceduralTiles {
  public:
-  /// Reads the header's procedural directory, every brush image and the height layer (each
-  /// checksummed and decoded), and prepares the brush set. kNotFound when the archive has no
+  /// Reads the section table's procedural directory, every brush image and the height layer
+  /// (each checksummed and decoded), and prepares the brush set. kNotFound when the archive has no
   /// procedural tiles (format 1.0, or a 1.1 file without the directory); errors name the
   /// archive and the block.
   [[nodiscard]] static Result<std::shared_ptr<const ProceduralTiles>> open(const Archive& archive);
@@ -203,20 +206,20 @@ class ProceduralTiles {
   /// Bytes of the brush images and layer as stored (the "stored once" cost).
   uint64_t storedBrushBytes() const;
 
-  /// A tile's entry, procedural entries included (format 1.1 rules), read from its directory
-  /// page through the archive's byte source and checked like Archive::tileEntry does.
-  [[nodiscard]] Result<TileEntry> tileEntry(const Archive& archive, const TileId& tile) const;
-
   /// Reads a procedural tile's instance page, verifies its checksum, decodes it and composites
   /// the stored tile (4 channels). A page that fails its checksum or structure, or an instance
   /// naming a brush the archive lacks, fails this tile (kCorrupt, naming it): never a picture.
   [[nodiscard]] Result<void> compositeTile(const Archive& archive, const TileId& tile,
                                            const TileEntry& entry, Image& out) const;
   /// The same from page bytes the caller read (and has not verified): checks length and
-  /// checksum against `entry` first.
+  /// checksum against `entry` first. `out` is resized to the stored tile (4 channels).
   [[nodiscard]] Result<void> compositePage(const Archive& archive, const TileId& tile,
                                            const TileEntry& entry, std::span<const uint8_t> page,
                                            Image& out) const;
+  /// Checks a page without compositing it (verify's fast mode): length and checksum against
+  /// `entry`, the page's structure, and that every instance names a brush the archive stores.
+  [[nodiscard]] Result<void> checkPage(const Archive& archive, const TileId& tile,
+                                       const TileEntry& entry, std::span<const uint8_t> page) const;
 
   struct Impl;
 

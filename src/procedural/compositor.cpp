@@ -94,9 +94,13 @@ BoxPx tileQueryBox(const TileGeometry& tile) {
   const double x0 = double(levelTexel(tile.x, tile.tile_size_px, tile.border_px, 0));
   const double y0 = double(levelTexel(tile.y, tile.tile_size_px, tile.border_px, 0));
   const double side = tile.sidePx();
-  // One texel of the level on every side: a bilinear footprint reaches that far.
-  return {(x0 - 1) * level_px, (y0 - 1) * level_px, (x0 + side + 1) * level_px,
-          (y0 + side + 1) * level_px};
+  // Three texels of the level on every side. An instance draws level texels x with
+  // |x - x_c| <= reach, x_c = floor(X / L), reach = floor(E / L) + 2 (setupInstance), E its
+  // bounds' half side: so from (X - E) / L - 3 to (X + E) / L + 2 in level texels. A box grown
+  // by one texel (a bilinear footprint) missed a large instance's fringe at coarse levels,
+  // where the fringe of its magnified brush image passes the bounds' corner.
+  return {(x0 - 3) * level_px, (y0 - 3) * level_px, (x0 + side + 3) * level_px,
+          (y0 + side + 3) * level_px};
 }
 
 Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,

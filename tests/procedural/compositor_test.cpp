@@ -251,6 +251,48 @@ TEST(Compositor, EqualsBruteForceReferenceAtEveryLevel) {
   EXPECT_GT(compared, 20u);
 }
 
+// Every instance that draws a texel of a tile meets the tile's query box: the spatial query
+// never misses an instance. The first case is the one that a mixed archive with a base layer
+// found: a large base instance whose magnified brush fringe passes its box's corner at level 1.
+TEST(Compositor, QueryBoxContainsEveryInstanceThatDraws) {
+  const uint32_t w = 700, h = 500;
+  auto set = prepare(testBrushes(), w, h, testing::heightLayer(70, 50));
+  std::vector<BrushInstance> instances =
+      randomInstances(300, w, h, uint32_t(set->brushes().size()), 29);
+  BrushInstance fringe;
+  fringe.brush = 0;  // a 16 x 16 opaque square, magnified 31 times
+  fringe.x_px = 152.17090668363255;
+  fringe.y_px = 100.49979043598249;
+  fringe.radius_px = 261.02401733398438f;
+  fringe.scale = 0.95978057384490967f;
+  for (float rotation : {0.f, 0.4f, 0.785f, 1.2f, 2.5f, -0.785f}) {
+    fringe.rotation_rad = rotation;
+    instances.push_back(fringe);
+  }
+  const uint32_t levels = levelCountFor(w, h, 128);
+  uint64_t checked = 0;
+  for (const BrushInstance& instance : instances) {
+    for (uint32_t level = 0; level < levels; ++level) {
+      const uint32_t tiles_x = (std::max(1u, (w + (1u << level) - 1) >> level) + 127) / 128;
+      const uint32_t tiles_y = (std::max(1u, (h + (1u << level) - 1) >> level) + 127) / 128;
+      for (uint32_t ty = 0; ty < tiles_y; ++ty)
+        for (uint32_t tx = 0; tx < tiles_x; ++tx) {
+          const TileGeometry tile = tileAt(level, tx, ty, w, h, 128, 1);
+          if (instanceBounds(instance).intersects(tileQueryBox(tile))) continue;
+          Image alone;
+          ASSERT_TRUE(compositeTileReference(*set, tile, std::span(&instance, 1), alone));
+          const bool draws = std::any_of(alone.texels.begin(), alone.texels.end(),
+                                         [](uint8_t t) { return t != 0; });
+          ASSERT_FALSE(draws) << "instance " << instance.id << " rotation " << instance.rotation_rad
+                              << " draws into tile (" << level << "," << tx << "," << ty
+                              << ") outside its query box";
+          ++checked;
+        }
+    }
+  }
+  EXPECT_GT(checked, 1000u);  // (instance, tile) pairs outside the boxes
+}
+
 // Pinned from this implementation: any change to the arithmetic, the mip rule or the sine and
 // cosine changes this hash, and every machine must produce it.
 TEST(Compositor, OutputIsPinnedToTheBit) {

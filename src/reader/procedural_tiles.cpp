@@ -27,6 +27,22 @@ struct ProceduralTiles::Impl {
   std::shared_ptr<const BrushSet> brushes;
   uint64_t stored_bytes = 0;
   std::string name;
+
+  /// A page's instances (and clips when `clips` is set) after checking that the tile's image
+  /// is the procedural one, the page's length and checksum, its structure and that every
+  /// instance names a stored brush: whatever fails fails the tile (kCorrupt, naming it).
+  Result<std::vector<BrushInstance>> decodePage(const TileId& tile, const TileEntry& entry,
+                                                std::span<const uint8_t> page,
+                                                const std::string& what,
+                                                std::vector<TileClip>* clips) const {
+    if (tile.image != directory.image)
+      return fail(ErrorCode::kCorrupt, what + ": procedural, but its image has no brush set");
+    if (page.size() != entry.length_bytes || checksum64(page) != entry.checksum)
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: instance page checksum mismatch at "
+                                                   "offset {}",
+                                                   what, entry.offset_bytes));
+    return decodeInstancePage(page, uint32_t(directory.brushes.size()), what, clips);
+  }
 };
 
 namespace {
@@ -132,33 +148,11 @@ Result<std::shared_ptr<const ProceduralTiles>> ProceduralTiles::open(const Archi
   return std::shared_ptr<const ProceduralTiles>(new ProceduralTiles(std::move(impl)));
 }
 
-Result<TileEntry> ProceduralTiles::tileEntry(const Archive& archive, const TileId& tile) const {
-  if (tile.image >= impl_->records.size())
-    return fail(ErrorCode::kInvalidArgument, archive.tileName(tile) + ": no such image");
-  const ImageRecord& record = impl_->records[tile.image];
-  const ImageInfo& info = record.info;
-  if (tile.level >= info.level_count || tile.x >= info.tilesX(tile.level) ||
-      tile.y >= info.tilesY(tile.level))
-    return fail(ErrorCode::kInvalidArgument, archive.tileName(tile) + ": outside the pyramid");
-  const BlockRef& index = record.levels[tile.level].page_index;
-  if (index.length_bytes == 0) return TileEntry{};
-  const uint32_t page_x = tile.x >> info.page_tiles_log2, page_y = tile.y >> info.page_tiles_log2;
-  const uint32_t page_index = page_y * pagesX(info, tile.level) + page_x;
-  std::vector<uint8_t> ref_bytes(kPageRefBytes);
-  TESSERA_TRY(
-      archive.source().read(index.offset_bytes + uint64_t(page_index) * kPageRefBytes, ref_bytes));
-  TESSERA_ASSIGN_OR_RETURN(
-      PageRef ref, decodePageRef(ref_bytes, info, tile.level, page_index, impl_->header.file_bytes,
-                                 archive.tileName(tile)));
-  if (ref.length_bytes == 0) return TileEntry{};
-  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> page,
-                           readVerified(archive.source(), ref, archive.tileName(tile) + ": page"));
-  TESSERA_ASSIGN_OR_RETURN(
-      std::vector<TileEntry> entries,
-      decodeTileEntriesProcedural(page, info, impl_->header, archive.tileName(tile) + ": page"));
-  PageGeometry geometry = pageGeometry(info, tile.level, page_x, page_y);
-  return entries[size_t(tile.y - geometry.first_tile_y) * geometry.columns +
-                 (tile.x - geometry.first_tile_x)];
+Result<void> ProceduralTiles::checkPage(const Archive& archive, const TileId& tile,
+                                        const TileEntry& entry,
+                                        std::span<const uint8_t> page) const {
+  TESSERA_TRY(impl_->decodePage(tile, entry, page, archive.tileName(tile), nullptr));
+  return {};
 }
 
 Result<void> ProceduralTiles::compositeTile(const Archive& archive, const TileId& tile,
@@ -174,15 +168,9 @@ Result<void> ProceduralTiles::compositePage(const Archive& archive, const TileId
                                             const TileEntry& entry, std::span<const uint8_t> page,
                                             Image& out) const {
   const std::string what = archive.tileName(tile);
-  if (tile.image != impl_->directory.image)
-    return fail(ErrorCode::kCorrupt, what + ": procedural, but its image has no brush set");
-  if (page.size() != entry.length_bytes || checksum64(page) != entry.checksum)
-    return fail(ErrorCode::kCorrupt, fmt::format("{}: instance page checksum mismatch at offset {}",
-                                                 what, entry.offset_bytes));
   std::vector<TileClip> clips;
-  TESSERA_ASSIGN_OR_RETURN(
-      std::vector<BrushInstance> instances,
-      decodeInstancePage(page, uint32_t(impl_->directory.brushes.size()), what, &clips));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<BrushInstance> instances,
+                           impl_->decodePage(tile, entry, page, what, &clips));
   const ImageInfo& info = impl_->records[tile.image].info;
   TileGeometry geometry{tile.level,     tile.x,        tile.y,        info.tile_size_px,
                         info.border_px, info.width_px, info.height_px};
