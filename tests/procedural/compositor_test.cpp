@@ -259,12 +259,12 @@ TEST(Compositor, QueryBoxContainsEveryInstanceThatDraws) {
   auto set = prepare(testBrushes(), w, h, testing::heightLayer(70, 50));
   std::vector<BrushInstance> instances =
       randomInstances(300, w, h, uint32_t(set->brushes().size()), 29);
-  BrushInstance fringe;
-  fringe.brush = 0;  // a 16 x 16 opaque square, magnified 31 times
-  fringe.x_px = 152.17090668363255;
-  fringe.y_px = 100.49979043598249;
-  fringe.radius_px = 261.02401733398438f;
-  fringe.scale = 0.95978057384490967f;
+  // Instance 241 of the base test's set (seed 29): brush 0, a 16 x 16 opaque square magnified
+  // about 31 times, centre (152, 100), radius * scale 250; then the same at other rotations.
+  BrushInstance fringe = randomInstances(500, w, h, uint32_t(set->brushes().size()), 29)[240];
+  ASSERT_EQ(fringe.brush, 0u);
+  ASSERT_NEAR(fringe.x_px, 152.17, 0.01);
+  instances.push_back(fringe);
   for (float rotation : {0.f, 0.4f, 0.785f, 1.2f, 2.5f, -0.785f}) {
     fringe.rotation_rad = rotation;
     instances.push_back(fringe);

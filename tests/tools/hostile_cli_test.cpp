@@ -339,7 +339,7 @@ TEST_F(HostileCli, AMisspeltSubcommandGetsTheNearestOne) {
   EXPECT_EQ(result.exit_code, 2);
   EXPECT_EQ(result.err,
             "tessera: unknown subcommand 'biuld' (did you mean 'build'?); it must be one of "
-            "build, info, verify, extract, fly, demo, view, render or serve\n");
+            "build, info, verify, extract, fly, demo, view, render, serve or brushes\n");
   Outcome far = run({"frobnicate"});
   EXPECT_EQ(far.exit_code, 2);
   EXPECT_EQ(far.err.find("did you mean"), std::string::npos) << far.err;
