@@ -211,6 +211,16 @@ inline void drawTexel(const InstanceSetup& setup, bool plain, int64_t u, int64_t
 }
 
 #if defined(__SSE2__)
+/// The colour lanes kFirst..kFirst + 2 of a pair register as finishTexel takes them (16 bits
+/// apart). A template because _mm_extract_epi16 needs a constant lane: clang rejects a lane
+/// that is only constant after inlining, which GCC accepts.
+template <int kFirst>
+inline uint64_t colourLanes(__m128i colour) {
+  return uint64_t(_mm_extract_epi16(colour, kFirst)) |
+         uint64_t(_mm_extract_epi16(colour, kFirst + 1)) << 16 |
+         uint64_t(_mm_extract_epi16(colour, kFirst + 2)) << 32;
+}
+
 /// Two texels (k and k + 1) in one register; falls back to finishTexel per texel unless both
 /// draw over an opaque backdrop.
 template <BlendMode kMode>
@@ -256,14 +266,9 @@ inline void drawPair(const InstanceSetup& setup, bool plain, int64_t u, int64_t 
     _mm_storel_epi64(reinterpret_cast<__m128i*>(d), _mm_packus_epi16(out, out));
     return;
   }
-  auto lanes = [&](int first) {
-    return uint64_t(_mm_extract_epi16(colour, first)) |
-           uint64_t(_mm_extract_epi16(colour, first + 1)) << 16 |
-           uint64_t(_mm_extract_epi16(colour, first + 2)) << 32;
-  };
   // Masks are applied already: finish without them.
-  if (alpha_a) finishTexel<kMode>(setup, lanes(0), alpha_a, nullptr, d);
-  if (alpha_b) finishTexel<kMode>(setup, lanes(4), alpha_b, nullptr, d + 4);
+  if (alpha_a) finishTexel<kMode>(setup, colourLanes<0>(colour), alpha_a, nullptr, d);
+  if (alpha_b) finishTexel<kMode>(setup, colourLanes<4>(colour), alpha_b, nullptr, d + 4);
 }
 #endif
 
