@@ -12,6 +12,10 @@ packages=(
   libepoxy-dev libegl-dev libglfw3-dev libegl-mesa0 libgl1-mesa-dri libimgui-dev
   xvfb nginx-light openssl
   chromium
+  libsqlite3-dev
+  libpq-dev
+  postgresql
+  postgresql-15-postgis-3
   libtinygltf-dev
   libassimp-dev
   libmeshoptimizer-dev

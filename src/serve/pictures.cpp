@@ -179,7 +179,7 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
       return Picture{std::string(payload.begin(), payload.end()), true};
     }
     std::vector<uint8_t> payload;
-    if (entry.kind == TileKind::kEncoded) {
+    if (entry.hasPayload()) {
       TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(id, entry));
     }
     TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(id, entry, payload));
@@ -246,7 +246,7 @@ Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
                                     PictureFormat format, int jpeg_quality) {
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
-  if (entry.kind == TileKind::kEncoded) {
+  if (entry.hasPayload()) {
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
   }
   TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));

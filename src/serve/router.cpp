@@ -543,7 +543,9 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   response.set(http::field::cache_control, kImmutable);
   response.set("X-Tessera-Tile-Kind", tileKindName(entry->kind));
   if (entry->kind != TileKind::kEncoded) {
-    // No payload to send: the kind (and colour) say everything; ?format= gives pixels.
+    // No payload to send: the kind (and colour) say everything; ?format= gives pixels. A
+    // procedural tile's instance page is no picture: readers of the archive file fetch it by
+    // range and composite it, and ?format= gives its composited pixels.
     response.result(http::status::no_content);
     if (entry->kind == TileKind::kUniform) {
       // Channel 0 first (rrggbbaa), the order people read colours in, whatever the

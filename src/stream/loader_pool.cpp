@@ -633,7 +633,7 @@ void LoaderPool::hintReadAhead(std::span<const TileId> tiles) {
     lock.unlock();
     for (const TileId& id : tiles) {
       Result<TileEntry> entry = room ? archive_->tileEntry(id) : Result<TileEntry>(TileEntry{});
-      if (!entry || entry->kind != TileKind::kEncoded || room == 0) {
+      if (!entry || !entry->hasPayload() || room == 0) {
         not_hinted.push_back(id);
         continue;
       }
@@ -783,8 +783,7 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     return;
   }
   batch.items.push_back({batch.first, *first_entry});
-  if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty())
-    addNeighbours(batch, *first_entry);
+  if (first_entry->hasPayload() && !batch.candidates.empty()) addNeighbours(batch, *first_entry);
   const BatchReads reads = readBatch(batch);
   const size_t tile_bytes = archive.images()[batch.first.image].storedTileBytes();
   last_tile_bytes_.store(tile_bytes, std::memory_order_relaxed);
@@ -809,7 +808,7 @@ void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
   std::vector<BatchItem> neighbours;
   for (const TileId& id : batch.candidates) {
     Result<TileEntry> entry = archive_->tileEntry(id);
-    if (entry && entry->kind == TileKind::kEncoded) neighbours.push_back({id, *entry});
+    if (entry && entry->hasPayload()) neighbours.push_back({id, *entry});
   }
   std::sort(neighbours.begin(), neighbours.end(), [](const auto& a, const auto& b) {
     return a.entry.offset_bytes < b.entry.offset_bytes;
@@ -842,7 +841,7 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
   // bad read, and the loader must count the reads and bytes it makes.
   std::vector<const BatchItem*> encoded;
   for (const auto& item : batch.items)
-    if (item.entry.kind == TileKind::kEncoded) encoded.push_back(&item);
+    if (item.entry.hasPayload()) encoded.push_back(&item);
   std::sort(encoded.begin(), encoded.end(), [](const BatchItem* a, const BatchItem* b) {
     return a->entry.offset_bytes < b->entry.offset_bytes;
   });
@@ -854,7 +853,7 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
         spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
   std::vector<std::vector<TileId>> run_tiles(spans.size());
   for (size_t i = 0; i < batch.items.size(); ++i)
-    if (batch.items[i].entry.kind == TileKind::kEncoded)
+    if (batch.items[i].entry.hasPayload())
       run_tiles[reads.run_of_item[i]].push_back(batch.items[i].id);
   reads.runs.resize(spans.size());
   for (size_t i = 0; i < spans.size(); ++i) {
@@ -902,7 +901,7 @@ void LoaderPool::readRun(BatchReads& reads, size_t index, std::vector<TileId> ti
 Result<std::span<const uint8_t>> LoaderPool::payloadOf(const BatchItem& item,
                                                        const BatchReads& reads,
                                                        size_t index) const {
-  if (item.entry.kind != TileKind::kEncoded) return std::span<const uint8_t>();
+  if (!item.entry.hasPayload()) return std::span<const uint8_t>();
   const BatchReads::Run& run = reads.runs[reads.run_of_item[index]];
   if (!run.read) return forwardError(run.read);
   const auto payload = std::span<const uint8_t>(run.bytes).subspan(

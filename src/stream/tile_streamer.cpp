@@ -77,7 +77,7 @@ uint64_t TileStreamer::Impl::payloadBytes(const TileId& id) {
     // Bounded like the archive's own page cache: a long flight over a terapixel image would
     // otherwise remember every tile it passed. The per-level means survive.
     if (payload_sizes.size() >= kMaxKnownSizes) payload_sizes.clear();
-    const uint32_t bytes = entry->kind == TileKind::kEncoded ? entry->length_bytes : 0;
+    const uint32_t bytes = entry->hasPayload() ? entry->length_bytes : 0;
     payload_sizes.emplace(id, bytes);
     sums[id.level].first += bytes;
     sums[id.level].second += 1;

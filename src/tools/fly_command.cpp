@@ -114,7 +114,7 @@ Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> til
     Result<TileEntry> entry = archive.tileEntry(w.id);
     if (!entry) return forwardError(entry);
     w.entry = *entry;
-    if (w.entry.kind == TileKind::kEncoded) {
+    if (w.entry.hasPayload()) {
       Result<std::vector<uint8_t>> payload = archive.readPayload(w.id, w.entry);
       if (!payload) return forwardError(payload);
       w.payload = std::move(*payload);

@@ -14,6 +14,7 @@
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "procedural_cli.h"
 
 namespace tessera::cli {
 
@@ -178,6 +179,7 @@ int main(int argc, char** argv) {
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
   registerServeCommand(app, exit_code);
+  registerBrushesCommand(app, exit_code);
   registerExportCommand(app, exit_code);
   if (reportUnknownSubcommand(app, argc, argv)) return kExitUsage;
   // The subcommands run inside parse: whatever escapes them (an allocation the estimates did
