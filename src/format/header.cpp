@@ -16,18 +16,19 @@ namespace {
 constexpr uint32_t kHeaderChecksumOffset = 120;
 constexpr uint32_t kMinHeaderRegionBytes = 4096;
 
-void storeBlock(uint8_t* p, const BlockRef& block) {
+}  // namespace
+
+void storeBlockRef(uint8_t* p, const BlockRef& block) {
   storeU64(p, block.offset_bytes);
   storeU64(p + 8, block.length_bytes);
   storeU64(p + 16, block.checksum);
 }
 
-BlockRef loadBlock(const uint8_t* p) {
+BlockRef loadBlockRef(const uint8_t* p) {
   return {loadU64(p), loadU64(p + 8), loadU64(p + 16)};
 }
 
-// A block is either absent (all zero) or lies after the fixed header and inside the file.
-Result<void> checkBlock(const BlockRef& block, uint64_t file_bytes, const std::string& what) {
+Result<void> checkBlockInFile(const BlockRef& block, uint64_t file_bytes, const std::string& what) {
   if (block.length_bytes == 0) {
     if (block.offset_bytes != 0 || block.checksum != 0)
       return fail(ErrorCode::kCorrupt, what + ": empty block with non-zero offset or checksum");
@@ -41,8 +42,6 @@ Result<void> checkBlock(const BlockRef& block, uint64_t file_bytes, const std::s
   return {};
 }
 
-}  // namespace
-
 std::vector<uint8_t> encodeHeader(const FileHeader& header) {
   std::vector<uint8_t> bytes(kHeaderBytes, 0);
   uint8_t* p = bytes.data();
@@ -52,8 +51,8 @@ std::vector<uint8_t> encodeHeader(const FileHeader& header) {
   storeU32(p + 12, header.header_region_bytes);
   storeU64(p + 16, header.file_bytes);
   storeU32(p + 24, header.image_count);
-  storeBlock(p + 32, header.root);
-  storeBlock(p + 56, header.metadata);
+  storeBlockRef(p + 32, header.root);
+  storeBlockRef(p + 56, header.metadata);
   storeU64(p + kHeaderChecksumOffset, checksum64({p, kHeaderChecksumOffset}));
   return bytes;
 }
@@ -88,8 +87,8 @@ Result<FileHeader> decodeHeader(std::span<const uint8_t> bytes, const std::strin
   header.file_bytes = loadU64(p + 16);
   header.image_count = loadU32(p + 24);
   uint32_t flags = loadU32(p + 28);
-  header.root = loadBlock(p + 32);
-  header.metadata = loadBlock(p + 56);
+  header.root = loadBlockRef(p + 32);
+  header.metadata = loadBlockRef(p + 56);
   bool known_minor = header.version_minor <= kFormatVersionMinor;
   if (known_minor && (flags != 0 || !allZero(p + 80, 40)))
     return fail(ErrorCode::kCorrupt, name + ": reserved header fields are not zero");
@@ -104,8 +103,8 @@ Result<FileHeader> decodeHeader(std::span<const uint8_t> bytes, const std::strin
   if (header.image_count == 0 || header.image_count > kMaxImages)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: image count {} out of bounds 1..{}", name,
                                                  header.image_count, kMaxImages));
-  TESSERA_TRY(checkBlock(header.root, header.file_bytes, name + ": root directory"));
-  TESSERA_TRY(checkBlock(header.metadata, header.file_bytes, name + ": metadata"));
+  TESSERA_TRY(checkBlockInFile(header.root, header.file_bytes, name + ": root directory"));
+  TESSERA_TRY(checkBlockInFile(header.metadata, header.file_bytes, name + ": metadata"));
   uint64_t min_root = uint64_t(header.image_count) * (kImageRecordBytes + kLevelRecordBytes);
   uint64_t max_root =
       uint64_t(header.image_count) * (kImageRecordBytes + kMaxLevels * kLevelRecordBytes);
@@ -174,7 +173,7 @@ std::vector<uint8_t> encodeRootDirectory(const std::vector<ImageRecord>& images)
     p[14] = info.srgb_downsample ? 1 : 0;
     p += kImageRecordBytes;
     for (const auto& level : image.levels) {
-      storeBlock(p, level.page_index);
+      storeBlockRef(p, level.page_index);
       storeU64(p + 24, level.payload_bytes);
       p += kLevelRecordBytes;
     }
@@ -221,10 +220,10 @@ Result<std::vector<ImageRecord>> decodeRootDirectory(std::span<const uint8_t> by
       return fail(ErrorCode::kCorrupt, what + ": root directory ends inside the level records");
     for (uint32_t level = 0; level < level_count; ++level) {
       const uint8_t* q = bytes.data() + pos;
-      LevelRecord level_record{loadBlock(q), loadU64(q + 24)};
+      LevelRecord level_record{loadBlockRef(q), loadU64(q + 24)};
       std::string level_what = fmt::format("{} level {}", what, level);
       TESSERA_TRY(
-          checkBlock(level_record.page_index, header.file_bytes, level_what + " page index"));
+          checkBlockInFile(level_record.page_index, header.file_bytes, level_what + " page index"));
       uint64_t pages = uint64_t(pagesX(info, level)) * pagesY(info, level);
       uint64_t length = level_record.page_index.length_bytes;
       if (length != 0 && length != pages * kPageRefBytes)

@@ -14,16 +14,6 @@ namespace tessera::detail {
 
 namespace {
 
-void storeBlockRef(uint8_t* p, const BlockRef& block) {
-  storeU64(p, block.offset_bytes);
-  storeU64(p + 8, block.length_bytes);
-  storeU64(p + 16, block.checksum);
-}
-
-BlockRef loadBlockRef(const uint8_t* p) {
-  return {loadU64(p), loadU64(p + 8), loadU64(p + 16)};
-}
-
 Result<void> checkPayloadBlock(const BlockRef& block, const FileHeader& header,
                                const std::string& what) {
   if (block.length_bytes == 0) return fail(ErrorCode::kCorrupt, what + ": empty block");

@@ -22,15 +22,6 @@ float loadF32(const uint8_t* p) {
   return std::bit_cast<float>(loadU32(p));
 }
 
-void storeBlockRef(uint8_t* p, const BlockRef& block) {
-  storeU64(p, block.offset_bytes);
-  storeU64(p + 8, block.length_bytes);
-  storeU64(p + 16, block.checksum);
-}
-BlockRef loadBlockRef(const uint8_t* p) {
-  return {loadU64(p), loadU64(p + 8), loadU64(p + 16)};
-}
-
 void storeBox(uint8_t* p, const SceneBox& box) {
   for (int a = 0; a < 3; ++a) {
     storeF32(p + 4 * a, box.min[a]);
@@ -51,21 +42,6 @@ Result<void> checkBox(const SceneBox& box, const std::string& what) {
     if (!std::isfinite(box.min[a]) || !std::isfinite(box.max[a]) || box.min[a] > box.max[a])
       return fail(ErrorCode::kCorrupt, what + ": bounds not finite or min above max");
   }
-  return {};
-}
-
-// Absent (all zero) or inside [kHeaderBytes, file_bytes).
-Result<void> checkSceneBlock(const BlockRef& block, uint64_t file_bytes, const std::string& what) {
-  if (block.length_bytes == 0) {
-    if (block.offset_bytes != 0 || block.checksum != 0)
-      return fail(ErrorCode::kCorrupt, what + ": empty block with non-zero offset or checksum");
-    return {};
-  }
-  if (block.offset_bytes < kHeaderBytes || block.offset_bytes > file_bytes ||
-      block.length_bytes > file_bytes - block.offset_bytes)
-    return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: block [{}, +{}) outside the file of {} bytes", what,
-                            block.offset_bytes, block.length_bytes, file_bytes));
   return {};
 }
 
@@ -208,9 +184,9 @@ Result<SceneDirectory> decodeSceneDirectory(std::span<const uint8_t> bytes,
     return fail(ErrorCode::kCorrupt, fmt::format("{}: fan-out {} or leaf capacity {} out of bounds",
                                                  what, d.max_children, d.leaf_capacity));
   TESSERA_TRY(checkBox(d.bounds, what));
-  TESSERA_TRY(checkSceneBlock(d.node_table, header.file_bytes, what + " node table"));
-  TESSERA_TRY(checkSceneBlock(d.texture_table, header.file_bytes, what + " texture table"));
-  TESSERA_TRY(checkSceneBlock(d.coarse, header.file_bytes, what + " coarse block"));
+  TESSERA_TRY(checkBlockInFile(d.node_table, header.file_bytes, what + " node table"));
+  TESSERA_TRY(checkBlockInFile(d.texture_table, header.file_bytes, what + " texture table"));
+  TESSERA_TRY(checkBlockInFile(d.coarse, header.file_bytes, what + " coarse block"));
   if (d.node_table.length_bytes != uint64_t(d.node_count) * kNodeRecordBytes)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: node table of {} bytes for {} nodes", what,
                                                  d.node_table.length_bytes, d.node_count));

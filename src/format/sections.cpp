@@ -11,16 +11,6 @@ namespace {
 
 constexpr uint32_t kHeaderChecksumOffset = 120;
 
-void storeBlockRef(uint8_t* p, const BlockRef& block) {
-  storeU64(p, block.offset_bytes);
-  storeU64(p + 8, block.length_bytes);
-  storeU64(p + 16, block.checksum);
-}
-
-BlockRef loadBlockRef(const uint8_t* p) {
-  return {loadU64(p), loadU64(p + 8), loadU64(p + 16)};
-}
-
 bool insideFile(const BlockRef& block, uint64_t file_bytes) {
   return block.offset_bytes >= kHeaderBytes && block.offset_bytes <= file_bytes &&
          block.length_bytes <= file_bytes - block.offset_bytes;

@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <span>
+#include <string>
 #include <vector>
 
 #include <tessera/format.h>
@@ -32,6 +33,14 @@ struct BlockRef {
   uint64_t checksum = 0;
   friend bool operator==(const BlockRef&, const BlockRef&) = default;
 };
+
+/// A BlockRef's 24 bytes: offset, length, checksum, each u64 little-endian.
+inline constexpr size_t kBlockRefBytes = 24;
+void storeBlockRef(uint8_t* p, const BlockRef& block);
+BlockRef loadBlockRef(const uint8_t* p);
+/// A block is either absent (all zero) or lies after the fixed header and inside a file of
+/// `file_bytes`; kCorrupt naming `what` otherwise.
+Result<void> checkBlockInFile(const BlockRef& block, uint64_t file_bytes, const std::string& what);
 
 /// The 128-byte header at offset 0.
 struct FileHeader {
