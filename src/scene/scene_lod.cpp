@@ -1,0 +1,83 @@
+#include "scene_lod.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace tessera::detail {
+namespace {
+
+Vec3 combine(const Vec3& a, double sa, const Vec3& b, double sb) {
+  return {a.x * sa + b.x * sb, a.y * sa + b.y * sb, a.z * sa + b.z * sb};
+}
+
+double longestSide(const Box3& box) {
+  return std::max({double(box.max[0]) - box.min[0], double(box.max[1]) - box.min[1],
+                   double(box.max[2]) - box.min[2]});
+}
+
+}  // namespace
+
+Frustum frustumOf(const PerspectiveView& camera) {
+  const CameraBasis basis = cameraBasis(camera);
+  const double tan_half = std::tan(camera.fov_y_rad / 2);
+  const double aspect =
+      camera.viewport_h == 0 ? 1.0 : double(camera.viewport_w) / camera.viewport_h;
+  Frustum frustum;
+  frustum.eye = {camera.eye_x, camera.eye_y, camera.eye_z};
+  // A side plane through the eye holds the forward axis tilted by the half field of view:
+  // its outward normal is the side axis minus forward times the tangent.
+  frustum.normal[0] = combine(basis.right, -1, basis.forward, -aspect * tan_half);
+  frustum.normal[1] = combine(basis.right, 1, basis.forward, -aspect * tan_half);
+  frustum.normal[2] = combine(basis.up, -1, basis.forward, -tan_half);
+  frustum.normal[3] = combine(basis.up, 1, basis.forward, -tan_half);
+  frustum.normal[4] = combine(basis.forward, -1, basis.forward, 0);
+  return frustum;
+}
+
+bool boxMayBeVisible(const Frustum& frustum, const Box3& box) {
+  for (const Vec3& n : frustum.normal) {
+    // The box corner furthest inside this plane: outside when even it is outside.
+    const double x = (n.x > 0 ? box.min[0] : box.max[0]) - frustum.eye.x;
+    const double y = (n.y > 0 ? box.min[1] : box.max[1]) - frustum.eye.y;
+    const double z = (n.z > 0 ? box.min[2] : box.max[2]) - frustum.eye.z;
+    if (n.x * x + n.y * y + n.z * z > 0) return false;
+  }
+  return true;
+}
+
+double distanceToBox(const PerspectiveView& camera, const Box3& box) {
+  const double eye[3] = {camera.eye_x, camera.eye_y, camera.eye_z};
+  double sum = 0;
+  for (int a = 0; a < 3; ++a) {
+    const double outside = std::max({0.0, box.min[a] - eye[a], eye[a] - box.max[a]});
+    sum += outside * outside;
+  }
+  return std::sqrt(sum);
+}
+
+ObjectLod objectLod(const PerspectiveView& camera, const Box3& bounds, const ImageInfo& texture,
+                    double lod_bias) {
+  ObjectLod lod;
+  const uint32_t coarsest = texture.level_count == 0 ? 0 : texture.level_count - 1;
+  const double viewport = double(camera.viewport_w) * camera.viewport_h;
+  const double side = longestSide(bounds);
+  const double distance = distanceToBox(camera, bounds);
+  const double pixel_angle = pixelAngle(camera);
+  if (!(side > 0)) {
+    lod.level = coarsest;
+    return lod;
+  }
+  if (distance <= 0) {
+    lod.level = std::min<uint32_t>(coarsest, uint32_t(std::max(0.0, std::floor(lod_bias))));
+    lod.pixels = uint64_t(viewport);
+    return lod;
+  }
+  const double pixels_across = side / (distance * pixel_angle);
+  lod.pixels = uint64_t(std::min(viewport, pixels_across * pixels_across));
+  const double rho = double(std::max(texture.width_px, texture.height_px)) / pixels_across;
+  const double level = std::floor(std::log2(rho) + lod_bias);
+  lod.level = level <= 0 ? 0 : uint32_t(std::min<double>(coarsest, level));
+  return lod;
+}
+
+}  // namespace tessera::detail
