@@ -55,29 +55,44 @@ double distanceToBox(const PerspectiveView& camera, const Box3& box) {
   return std::sqrt(sum);
 }
 
-ObjectLod objectLod(const PerspectiveView& camera, const Box3& bounds, const ImageInfo& texture,
-                    double lod_bias) {
+LodFrame lodFrame(const PerspectiveView& camera, double lod_bias) {
+  LodFrame frame;
+  frame.camera = camera;
+  frame.pixel_angle = pixelAngle(camera);
+  frame.viewport_px = double(camera.viewport_w) * camera.viewport_h;
+  frame.bias_scale = std::exp2(lod_bias);
+  return frame;
+}
+
+ObjectLod objectLod(const LodFrame& frame, const Box3& bounds, const ImageInfo& texture) {
   ObjectLod lod;
   const uint32_t coarsest = texture.level_count == 0 ? 0 : texture.level_count - 1;
-  const double viewport = double(camera.viewport_w) * camera.viewport_h;
   const double side = longestSide(bounds);
-  const double distance = distanceToBox(camera, bounds);
-  const double pixel_angle = pixelAngle(camera);
+  const double distance = distanceToBox(frame.camera, bounds);
   if (!(side > 0)) {
     lod.level = coarsest;
     return lod;
   }
+  double rho;
   if (distance <= 0) {
-    lod.level = std::min<uint32_t>(coarsest, uint32_t(std::max(0.0, std::floor(lod_bias))));
-    lod.pixels = uint64_t(viewport);
-    return lod;
+    lod.pixels = uint64_t(frame.viewport_px);
+    rho = 1;  // the finest level (and no finer than the bias allows)
+  } else {
+    const double pixels_across = side / (distance * frame.pixel_angle);
+    lod.pixels = uint64_t(std::min(frame.viewport_px, pixels_across * pixels_across));
+    rho = double(std::max(texture.width_px, texture.height_px)) / pixels_across;
   }
-  const double pixels_across = side / (distance * pixel_angle);
-  lod.pixels = uint64_t(std::min(viewport, pixels_across * pixels_across));
-  const double rho = double(std::max(texture.width_px, texture.height_px)) / pixels_across;
-  const double level = std::floor(std::log2(rho) + lod_bias);
-  lod.level = level <= 0 ? 0 : uint32_t(std::min<double>(coarsest, level));
+  // floor(log2(rho) + bias) as the binary exponent of rho * 2^bias (ilogb is exact floor).
+  const double scaled = rho * frame.bias_scale;
+  const int level =
+      scaled >= 1 && std::isfinite(scaled) ? std::ilogb(scaled) : (scaled >= 1 ? int(coarsest) : 0);
+  lod.level = std::min<uint32_t>(coarsest, uint32_t(std::max(0, level)));
   return lod;
+}
+
+ObjectLod objectLod(const PerspectiveView& camera, const Box3& bounds, const ImageInfo& texture,
+                    double lod_bias) {
+  return objectLod(lodFrame(camera, lod_bias), bounds, texture);
 }
 
 }  // namespace tessera::detail

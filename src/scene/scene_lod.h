@@ -44,4 +44,16 @@ struct ObjectLod {
 ObjectLod objectLod(const PerspectiveView& camera, const Box3& bounds, const ImageInfo& texture,
                     double lod_bias);
 
+/// What objectLod computes once per frame, for the per-object loop of a frame with thousands
+/// of objects (no tan or log2 per object).
+struct LodFrame {
+  PerspectiveView camera;
+  double pixel_angle = 0;  ///< pixelAngle(camera)
+  double viewport_px = 0;  ///< w * h
+  double bias_scale = 1;   ///< 2^lod_bias: floor(log2(rho) + bias) = floor(log2(rho * scale))
+};
+LodFrame lodFrame(const PerspectiveView& camera, double lod_bias);
+/// objectLod with the frame's constants; the same result.
+ObjectLod objectLod(const LodFrame& frame, const Box3& bounds, const ImageInfo& texture);
+
 }  // namespace tessera::detail

@@ -1,6 +1,7 @@
 #include "scene_residency.h"
 
 #include <algorithm>
+#include <functional>
 #include <tuple>
 
 #include <tessera/check.h>
@@ -81,30 +82,37 @@ bool SceneResidency::loaded(const LevelRef& level) {
 
 std::vector<LevelRef> SceneResidency::evictTo(uint64_t budget_bytes) {
   std::vector<LevelRef> dropped;
-  while (budgeted_bytes_ > budget_bytes && !refined_.empty()) {
-    // Eviction rank, smallest first: (wanted now?, frame last seen, -bytes) for excess levels,
-    // then pixels for wanted ones.
-    size_t best = 0;
-    auto rank = [&](uint32_t t) {
-      const TextureState& state = textures_[t];
-      const bool needed = state.resident >= state.wanted;
-      const uint64_t bytes = level_bytes_[t][state.resident];
-      return std::make_tuple(needed, needed ? state.pixels : state.last_seen_frame,
-                             needed ? 0 : ~bytes, t);
-    };
-    for (size_t i = 1; i < refined_.size(); ++i) {
-      if (rank(refined_[i]) < rank(refined_[best])) best = i;
-    }
-    const uint32_t t = refined_[best];
+  if (budgeted_bytes_ <= budget_bytes) return dropped;
+  // Eviction rank, smallest first: levels the texture does not want now (out of view: oldest
+  // seen first; then larger levels first), then wanted levels of the fewest pixels. A heap of
+  // the refined textures' finest levels, a texture pushed again while it has one to drop.
+  using Rank = std::tuple<bool, uint64_t, uint64_t, uint32_t>;
+  auto rank = [&](uint32_t t) {
+    const TextureState& state = textures_[t];
+    const bool needed = state.resident >= state.wanted;
+    const uint64_t bytes = level_bytes_[t][state.resident];
+    return Rank(needed, needed ? state.pixels : state.last_seen_frame, needed ? 0 : ~bytes, t);
+  };
+  std::vector<Rank> heap;
+  heap.reserve(refined_.size());
+  for (uint32_t t : refined_) heap.push_back(rank(t));
+  std::make_heap(heap.begin(), heap.end(), std::greater<>());
+  while (budgeted_bytes_ > budget_bytes && !heap.empty()) {
+    std::pop_heap(heap.begin(), heap.end(), std::greater<>());
+    const uint32_t t = std::get<3>(heap.back());
+    heap.pop_back();
     TextureState& state = textures_[t];
     dropped.push_back({t, state.resident});
     budgeted_bytes_ -= level_bytes_[t][state.resident];
     ++state.resident;
-    if (state.resident == state.coarsest) {
-      refined_[best] = refined_.back();
-      refined_.pop_back();
+    if (state.resident < state.coarsest) {
+      heap.push_back(rank(t));
+      std::push_heap(heap.begin(), heap.end(), std::greater<>());
     }
   }
+  // Textures back at their coarsest leave the candidates.
+  std::erase_if(refined_,
+                [&](uint32_t t) { return textures_[t].resident == textures_[t].coarsest; });
   return dropped;
 }
 

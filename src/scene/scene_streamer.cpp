@@ -109,6 +109,10 @@ struct SceneStreamer::Impl {
   std::vector<uint32_t> drawable;
   std::vector<uint32_t> visible_leaves;
   std::vector<detail::TextureDemand> demands;
+  /// The planner's view of every node, kept between frames: only `wanted` and `pieces`
+  /// change, and only for the nodes in `plan_touched`, reset after each plan.
+  std::vector<PlanNode> plan;
+  std::vector<uint32_t> plan_touched;
   SceneStreamTotals totals;
 
   explicit Impl(std::vector<std::vector<uint64_t>> level_bytes)
@@ -125,10 +129,13 @@ struct SceneStreamer::Impl {
   void evict(uint64_t budget, SceneFrameStats& stats);
   void planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
                      SceneFrameStats& stats);
-  std::vector<detail::LevelJob> addRefinements(uint64_t budget, bool moving, uint32_t slots,
-                                               std::vector<PlanNode>& plan);
-  void submitPlan(const PerspectiveView& camera, std::vector<PlanNode>& plan,
-                  std::vector<detail::LevelJob>& refinements, SceneFrameStats& stats);
+  void want(uint32_t node) {
+    if (!plan[node].wanted) plan_touched.push_back(node);
+    plan[node].wanted = true;
+  }
+  std::vector<detail::LevelJob> addRefinements(uint64_t budget, bool moving, uint32_t slots);
+  void submitPlan(const PerspectiveView& camera, std::vector<detail::LevelJob>& refinements,
+                  SceneFrameStats& stats);
 };
 
 SceneStreamer::SceneStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -167,6 +174,12 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   impl->coarsest_known.assign(texture_count, false);
   impl->levels.resize(texture_count);
   impl->level_busy.assign(texture_count, false);
+  impl->plan.resize(node_count);
+  for (uint32_t i = 0; i < node_count; ++i) {
+    impl->plan[i].subtree_nodes = impl->nodes[i].subtree_nodes;
+    impl->plan[i].own = impl->nodes[i].own;
+    impl->plan[i].subtree = impl->nodes[i].subtree;
+  }
   impl->context = context;
   impl->pool = std::make_unique<detail::SceneLoaderPool>(context, options.worker_threads);
   return std::unique_ptr<SceneStreamer>(new SceneStreamer(std::move(impl)));
@@ -239,6 +252,7 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
                                          const detail::Frustum& frustum, SceneFrameStats& stats) {
   demands.clear();
   drawable.clear();
+  const detail::LodFrame lod_frame = detail::lodFrame(camera, options.lod_bias);
   for (uint32_t leaf : visible_leaves) {
     if (node_state[leaf] != NodeState::kKnown) {
       ++stats.waiting_leaves;
@@ -252,7 +266,7 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
       for (uint32_t t : object.textures) {
         if (t == kNoTexture || t >= coarsest_known.size()) continue;
         const detail::ObjectLod lod =
-            detail::objectLod(camera, object.bounds, context->textures[t].info, options.lod_bias);
+            detail::objectLod(lod_frame, object.bounds, context->textures[t].info);
         demands.push_back({t, lod.level, lod.pixels});
         textured = textured && coarsest_known[t];
         if (residency.resident(t) > lod.level) stats.missing_pixels += lod.pixels;
@@ -273,8 +287,7 @@ void SceneStreamer::Impl::evict(uint64_t budget, SceneFrameStats& stats) {
 }
 
 std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budget, bool moving,
-                                                                  uint32_t slots,
-                                                                  std::vector<PlanNode>& plan) {
+                                                                  uint32_t slots) {
   std::vector<detail::LevelJob> jobs;
   const LinkCost cost = link();
   const double limit_s =
@@ -288,7 +301,7 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
     // Seed 003 part III: a level that would take longer than the limit waits for a stiller
     // camera (or a faster link).
     if (detail::readCost(cost, hull.length_bytes) > limit_s) continue;
-    plan[holder].wanted = true;
+    want(holder);
     plan[holder].pieces.push_back(hull);
     jobs.push_back({ref.texture, ref.level, hull, entry->info, entry->levels[ref.level]});
     level_busy[ref.texture] = true;
@@ -296,7 +309,7 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
   return jobs;
 }
 
-void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera, std::vector<PlanNode>& plan,
+void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
                                      std::vector<detail::LevelJob>& refinements,
                                      SceneFrameStats& stats) {
   std::vector<PlannedRead> reads = detail::planReads(plan, link());
@@ -343,31 +356,24 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   const uint32_t pending = pool->pending();
   if (pending >= options.max_reads_in_flight) return;
   uint32_t slots = options.max_reads_in_flight - pending;
-  std::vector<PlanNode> plan(nodes.size());
-  bool any = false;
   uint32_t leaves = 0;
   for (uint32_t leaf : visible_leaves) {
     if (node_state[leaf] != NodeState::kUnknown || leaves >= slots) continue;
     ++leaves;
     // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
     for (uint32_t n = leaf;; n = parent[n]) {
-      if (node_state[n] == NodeState::kUnknown) plan[n].wanted = any = true;
+      if (node_state[n] == NodeState::kUnknown) want(n);
       if (n == 0) break;
     }
   }
   std::vector<detail::LevelJob> refinements =
-      addRefinements(budget, moving, slots - std::min(slots, leaves), plan);
-  if (!any && refinements.empty()) return;
-  for (uint32_t i = 0; i < nodes.size(); ++i) {
-    plan[i].subtree_nodes = nodes[i].subtree_nodes;
-    plan[i].own = nodes[i].own;
-    plan[i].subtree = nodes[i].subtree;
-    // Known nodes are served by their pieces or a node read; in-flight ones are not asked again.
-    if (node_state[i] == NodeState::kInFlight || node_state[i] == NodeState::kFailed) {
-      plan[i].wanted = false;
-    }
+      addRefinements(budget, moving, slots - std::min(slots, leaves));
+  if (!plan_touched.empty()) submitPlan(camera, refinements, stats);
+  for (uint32_t n : plan_touched) {
+    plan[n].wanted = false;
+    plan[n].pieces.clear();
   }
-  submitPlan(camera, plan, refinements, stats);
+  plan_touched.clear();
 }
 
 SceneFrameStats SceneStreamer::update(const PerspectiveView& camera) {
