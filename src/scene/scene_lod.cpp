@@ -45,6 +45,17 @@ bool boxMayBeVisible(const Frustum& frustum, const Box3& box) {
   return true;
 }
 
+bool boxInside(const Frustum& frustum, const Box3& box) {
+  for (const Vec3& n : frustum.normal) {
+    // The corner furthest outside this plane: inside when even it is inside.
+    const double x = (n.x > 0 ? box.max[0] : box.min[0]) - frustum.eye.x;
+    const double y = (n.y > 0 ? box.max[1] : box.min[1]) - frustum.eye.y;
+    const double z = (n.z > 0 ? box.max[2] : box.min[2]) - frustum.eye.z;
+    if (n.x * x + n.y * y + n.z * z > 0) return false;
+  }
+  return true;
+}
+
 double distanceToBox(const PerspectiveView& camera, const Box3& box) {
   const double eye[3] = {camera.eye_x, camera.eye_y, camera.eye_z};
   double sum = 0;
@@ -64,30 +75,38 @@ LodFrame lodFrame(const PerspectiveView& camera, double lod_bias) {
   return frame;
 }
 
-ObjectLod objectLod(const LodFrame& frame, const Box3& bounds, const ImageInfo& texture) {
-  ObjectLod lod;
-  const uint32_t coarsest = texture.level_count == 0 ? 0 : texture.level_count - 1;
+ObjectScale objectScale(const LodFrame& frame, const Box3& bounds) {
+  ObjectScale scale;
   const double side = longestSide(bounds);
+  if (!(side > 0)) return scale;
   const double distance = distanceToBox(frame.camera, bounds);
-  if (!(side > 0)) {
-    lod.level = coarsest;
-    return lod;
-  }
-  double rho;
   if (distance <= 0) {
-    lod.pixels = uint64_t(frame.viewport_px);
-    rho = 1;  // the finest level (and no finer than the bias allows)
-  } else {
-    const double pixels_across = side / (distance * frame.pixel_angle);
-    lod.pixels = uint64_t(std::min(frame.viewport_px, pixels_across * pixels_across));
-    rho = double(std::max(texture.width_px, texture.height_px)) / pixels_across;
+    scale.eye_inside = true;
+    scale.pixels = uint64_t(frame.viewport_px);
+    return scale;
   }
+  scale.pixels_across = side / (distance * frame.pixel_angle);
+  scale.pixels = uint64_t(std::min(frame.viewport_px, scale.pixels_across * scale.pixels_across));
+  return scale;
+}
+
+uint32_t levelFor(const LodFrame& frame, const ObjectScale& scale, const ImageInfo& texture) {
+  const uint32_t coarsest = texture.level_count == 0 ? 0 : texture.level_count - 1;
+  if (!scale.eye_inside && !(scale.pixels_across > 0)) return coarsest;
+  // rho = 1 inside the box: the finest level (no finer than the bias allows).
+  const double rho = scale.eye_inside ? 1.0
+                                      : double(std::max(texture.width_px, texture.height_px)) /
+                                            scale.pixels_across;
   // floor(log2(rho) + bias) as the binary exponent of rho * 2^bias (ilogb is exact floor).
   const double scaled = rho * frame.bias_scale;
-  const int level =
-      scaled >= 1 && std::isfinite(scaled) ? std::ilogb(scaled) : (scaled >= 1 ? int(coarsest) : 0);
-  lod.level = std::min<uint32_t>(coarsest, uint32_t(std::max(0, level)));
-  return lod;
+  if (!(scaled >= 1)) return 0;
+  if (!std::isfinite(scaled)) return coarsest;
+  return std::min<uint32_t>(coarsest, uint32_t(std::ilogb(scaled)));
+}
+
+ObjectLod objectLod(const LodFrame& frame, const Box3& bounds, const ImageInfo& texture) {
+  const ObjectScale scale = objectScale(frame, bounds);
+  return {levelFor(frame, scale, texture), scale.pixels};
 }
 
 ObjectLod objectLod(const PerspectiveView& camera, const Box3& bounds, const ImageInfo& texture,

@@ -24,6 +24,9 @@ Frustum frustumOf(const PerspectiveView& camera);
 /// may be reported visible).
 bool boxMayBeVisible(const Frustum& frustum, const Box3& box);
 
+/// True when the whole box is inside every plane: its contents need no test of their own.
+bool boxInside(const Frustum& frustum, const Box3& box);
+
 /// Distance from the eye to the nearest point of the box; 0 inside it.
 double distanceToBox(const PerspectiveView& camera, const Box3& box);
 
@@ -55,5 +58,15 @@ struct LodFrame {
 LodFrame lodFrame(const PerspectiveView& camera, double lod_bias);
 /// objectLod with the frame's constants; the same result.
 ObjectLod objectLod(const LodFrame& frame, const Box3& bounds, const ImageInfo& texture);
+
+/// The part of objectLod that depends on the object only, computed once for its textures.
+struct ObjectScale {
+  double pixels_across = 0;  ///< screen pixels the longest side spans; 0: no extent
+  bool eye_inside = false;
+  uint64_t pixels = 0;
+};
+ObjectScale objectScale(const LodFrame& frame, const Box3& bounds);
+/// objectLod's level from the object's scale.
+uint32_t levelFor(const LodFrame& frame, const ObjectScale& scale, const ImageInfo& texture);
 
 }  // namespace tessera::detail

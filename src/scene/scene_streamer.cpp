@@ -108,6 +108,7 @@ struct SceneStreamer::Impl {
   uint32_t still_frames = 0;
   std::vector<uint32_t> drawable;
   std::vector<uint32_t> visible_leaves;
+  std::vector<bool> leaf_inside;  ///< per visible leaf: wholly inside the frustum
   std::vector<detail::TextureDemand> demands;
   /// The planner's view of every node, kept between frames: only `wanted` and `pieces`
   /// change, and only for the nodes in `plan_touched`, reset after each plan.
@@ -234,16 +235,24 @@ void SceneStreamer::Impl::applyResults(SceneFrameStats& stats) {
 
 void SceneStreamer::Impl::queryVisible(const detail::Frustum& frustum) {
   visible_leaves.clear();
-  // Depth-first: a node's children start at index + 1 and follow each other's subtrees.
-  uint32_t i = 0;
+  leaf_inside.clear();
+  // Depth-first: a node's children start at index + 1 and follow each other's subtrees. A
+  // subtree wholly inside the frustum is taken without testing below it (inside_end).
+  uint32_t i = 0, inside_end = 0;
   const uint32_t count = uint32_t(nodes.size());
   while (i < count) {
     const SceneNode& node = nodes[i];
-    if (!detail::boxMayBeVisible(frustum, node.bounds)) {
-      i += node.subtree_nodes;
-      continue;
+    if (i >= inside_end) {
+      if (!detail::boxMayBeVisible(frustum, node.bounds)) {
+        i += node.subtree_nodes;
+        continue;
+      }
+      if (detail::boxInside(frustum, node.bounds)) inside_end = i + node.subtree_nodes;
     }
-    if (node.isLeaf()) visible_leaves.push_back(i);
+    if (node.isLeaf()) {
+      visible_leaves.push_back(i);
+      leaf_inside.push_back(i < inside_end);
+    }
     ++i;
   }
 }
@@ -253,23 +262,24 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
   demands.clear();
   drawable.clear();
   const detail::LodFrame lod_frame = detail::lodFrame(camera, options.lod_bias);
-  for (uint32_t leaf : visible_leaves) {
+  for (size_t v = 0; v < visible_leaves.size(); ++v) {
+    const uint32_t leaf = visible_leaves[v];
     if (node_state[leaf] != NodeState::kKnown) {
       ++stats.waiting_leaves;
       continue;
     }
     for (uint32_t o : leaf_objects[leaf]) {
       const SceneObject& object = objects[o];
-      if (!detail::boxMayBeVisible(frustum, object.bounds)) continue;
+      if (!leaf_inside[v] && !detail::boxMayBeVisible(frustum, object.bounds)) continue;
       ++stats.visible_objects;
       bool textured = true;
+      const detail::ObjectScale scale = detail::objectScale(lod_frame, object.bounds);
       for (uint32_t t : object.textures) {
         if (t == kNoTexture || t >= coarsest_known.size()) continue;
-        const detail::ObjectLod lod =
-            detail::objectLod(lod_frame, object.bounds, context->textures[t].info);
-        demands.push_back({t, lod.level, lod.pixels});
+        const uint32_t level = detail::levelFor(lod_frame, scale, context->textures[t].info);
+        demands.push_back({t, level, scale.pixels});
         textured = textured && coarsest_known[t];
-        if (residency.resident(t) > lod.level) stats.missing_pixels += lod.pixels;
+        if (residency.resident(t) > level) stats.missing_pixels += scale.pixels;
       }
       // Drawn only with its geometry and at least the coarsest level of every texture.
       if (textured && object.mesh < meshes.size() && meshes[object.mesh]) drawable.push_back(o);

@@ -1,6 +1,7 @@
 // Per-object levels against hand-computed cases, and the frustum test.
 #include "scene_lod.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <gtest/gtest.h>
@@ -71,6 +72,29 @@ TEST(SceneLod, FrustumKeepsWhatIsInFrontAndDropsWhatIsBehindOrAside) {
   EXPECT_FALSE(boxMayBeVisible(frustum, Box3{{60, -5, 0}, {70, 5, 0}}));
   EXPECT_TRUE(boxMayBeVisible(frustum, Box3{{45, -5, 0}, {70, 5, 0}}));
   EXPECT_FALSE(boxMayBeVisible(frustum, Box3{{-5, -70, 0}, {5, -60, 0}}));
+  // Wholly inside: the central box; not the one straddling the edge at x = 50.
+  EXPECT_TRUE(boxInside(frustum, kTenUnits));
+  EXPECT_FALSE(boxInside(frustum, Box3{{45, -5, 0}, {70, 5, 0}}));
+  EXPECT_FALSE(boxInside(frustum, Box3{{-5, -5, 50}, {5, 5, 150}})) << "reaches behind the eye";
+}
+
+TEST(SceneLod, PerObjectScaleGivesTheSameLevelsAsObjectLod) {
+  const ImageInfo info = texture1024x512();
+  for (double eye_z : {0.0, 5.0, 10.0, 40.0, 100.0, 333.0, 10000.0}) {
+    for (double bias : {-1.0, 0.0, 0.5, 2.0}) {
+      const LodFrame frame = lodFrame(downFrom(eye_z), bias);
+      const ObjectScale scale = objectScale(frame, kTenUnits);
+      const ObjectLod lod = objectLod(downFrom(eye_z), kTenUnits, info, bias);
+      EXPECT_EQ(levelFor(frame, scale, info), lod.level) << eye_z << " " << bias;
+      EXPECT_EQ(scale.pixels, lod.pixels);
+      // floor(log2(rho) + bias) by hand where the eye is outside the box.
+      if (eye_z > 0) {
+        const double rho = 1024 / (10 / (eye_z * 0.001));
+        const double expected = std::clamp(std::floor(std::log2(rho) + bias), 0.0, 4.0);
+        EXPECT_EQ(lod.level, uint32_t(expected)) << eye_z << " " << bias;
+      }
+    }
+  }
 }
 
 }  // namespace
