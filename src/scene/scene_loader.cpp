@@ -114,6 +114,12 @@ Result<void> parseNodes(const LoaderContext& context, const ReadJob& job,
       if (texture.texture >= wanted.size() || wanted[texture.texture] == UINT32_MAX) continue;
       // Coarse to fine, so the streamer's chain of resident levels grows one level at a time.
       for (uint32_t level = texture.info.level_count - 1; level-- > wanted[texture.texture];) {
+        if (level >= texture.levels.size()) {
+          return fail(
+              ErrorCode::kCorrupt,
+              fmt::format("{}: texture {} has {} levels of tile entries, not {}", archive.name(),
+                          texture.texture, texture.levels.size(), texture.info.level_count));
+        }
         TESSERA_ASSIGN_OR_RETURN(std::vector<Image> tiles,
                                  decodeLevel(archive, texture.texture, texture.info, level,
                                              texture.levels[level], buffer, base, scratch));

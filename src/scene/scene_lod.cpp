@@ -10,12 +10,12 @@ Vec3 combine(const Vec3& a, double sa, const Vec3& b, double sb) {
   return {a.x * sa + b.x * sb, a.y * sa + b.y * sb, a.z * sa + b.z * sb};
 }
 
+}  // namespace
+
 double longestSide(const Box3& box) {
   return std::max({double(box.max[0]) - box.min[0], double(box.max[1]) - box.min[1],
                    double(box.max[2]) - box.min[2]});
 }
-
-}  // namespace
 
 Frustum frustumOf(const PerspectiveView& camera) {
   const CameraBasis basis = cameraBasis(camera);

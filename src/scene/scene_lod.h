@@ -27,6 +27,9 @@ bool boxMayBeVisible(const Frustum& frustum, const Box3& box);
 /// True when the whole box is inside every plane: its contents need no test of their own.
 bool boxInside(const Frustum& frustum, const Box3& box);
 
+/// The longest of the box's three sides.
+double longestSide(const Box3& box);
+
 /// Distance from the eye to the nearest point of the box; 0 inside it.
 double distanceToBox(const PerspectiveView& camera, const Box3& box);
 

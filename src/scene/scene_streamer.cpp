@@ -1,6 +1,7 @@
 #include <tessera/scene_stream.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include <fmt/format.h>
 
@@ -90,7 +91,11 @@ struct SceneStreamer::Impl {
   std::vector<SceneNode> nodes;
   std::vector<uint32_t> parent;  ///< parent[0] == 0
   std::vector<NodeState> node_state;
-  std::vector<std::vector<uint32_t>> leaf_objects;      ///< per node, once known
+  std::vector<std::vector<uint32_t>> leaf_objects;  ///< per node, once known
+  /// Per node, once known: min over its objects' textures of max(w, h) / (longest side *
+  /// 2^coarsest). A leaf at distance d with d * pixelAngle * 2^bias * ratio >= 1 needs only
+  /// coarsest levels (levelFor), so its objects skip the per-texture work.
+  std::vector<double> leaf_coarse_ratio;
   std::vector<std::vector<NodeTexture>> node_textures;  ///< per node, once known
   std::vector<const NodeTexture*> holder_entry;         ///< per texture, once its node is known
   std::vector<SceneObject> objects;
@@ -166,6 +171,7 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   impl->nodes = std::move(nodes);
   impl->node_state.assign(node_count, NodeState::kUnknown);
   impl->leaf_objects.resize(node_count);
+  impl->leaf_coarse_ratio.assign(node_count, INFINITY);
   impl->node_textures.resize(node_count);
   impl->holder_entry.assign(texture_count, nullptr);
   impl->objects.resize(archive->summary().objects);
@@ -201,6 +207,14 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
       objects[object.index] = object;
       object_known[object.index] = true;
       leaf_objects[parsed.node].push_back(object.index);
+      const double side = detail::longestSide(object.bounds);
+      for (uint32_t t : object.textures) {
+        if (t == kNoTexture || t >= context->textures.size() || !(side > 0)) continue;
+        const ImageInfo& info = context->textures[t].info;
+        const double ratio = double(std::max(info.width_px, info.height_px)) /
+                             std::ldexp(side, int(std::max(1u, info.level_count) - 1));
+        leaf_coarse_ratio[parsed.node] = std::min(leaf_coarse_ratio[parsed.node], ratio);
+      }
     }
     node_textures[parsed.node] = std::move(parsed.contents.textures);
     for (const NodeTexture& texture : node_textures[parsed.node]) {
@@ -268,14 +282,23 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
       ++stats.waiting_leaves;
       continue;
     }
+    // Far enough that every texture of every object wants its coarsest: no demand to make.
+    const bool far = detail::distanceToBox(camera, nodes[leaf].bounds) * lod_frame.pixel_angle *
+                         lod_frame.bias_scale * leaf_coarse_ratio[leaf] >=
+                     1;
     for (uint32_t o : leaf_objects[leaf]) {
       const SceneObject& object = objects[o];
       if (!leaf_inside[v] && !detail::boxMayBeVisible(frustum, object.bounds)) continue;
       ++stats.visible_objects;
       bool textured = true;
-      const detail::ObjectScale scale = detail::objectScale(lod_frame, object.bounds);
+      const detail::ObjectScale scale =
+          far ? detail::ObjectScale{} : detail::objectScale(lod_frame, object.bounds);
       for (uint32_t t : object.textures) {
         if (t == kNoTexture || t >= coarsest_known.size()) continue;
+        if (far) {
+          textured = textured && coarsest_known[t];
+          continue;
+        }
         const uint32_t level = detail::levelFor(lod_frame, scale, context->textures[t].info);
         demands.push_back({t, level, scale.pixels});
         textured = textured && coarsest_known[t];

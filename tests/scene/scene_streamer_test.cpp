@@ -3,6 +3,9 @@
 // comes closer.
 #include <tessera/scene_stream.h>
 
+#include <algorithm>
+#include <cmath>
+
 #include <gtest/gtest.h>
 
 #include <tessera/scene_build.h>
@@ -98,6 +101,48 @@ TEST(SceneStreamer, EveryDrawnObjectHasGeometryAndEveryTextureResident) {
            ++level) {
         EXPECT_FALSE((*streamer)->levelTiles(t, level)->empty());
       }
+    }
+  }
+}
+
+TEST(SceneStreamer, WantedLevelIsTheFinestAnyVisibleObjectNeeds) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "400:40:7"));
+  ASSERT_TRUE(scene.archive);
+  auto streamer = SceneStreamer::open(scene.archive);
+  ASSERT_TRUE(streamer.has_value());
+  auto textures = scene.archive->textures(0, scene.archive->summary().textures);
+  ASSERT_TRUE(textures.has_value());
+  // Near (every level matters) and far (leaves take the all-coarsest shortcut).
+  for (double height : {15.0, 200.0, 3000.0}) {
+    const PerspectiveView camera = above(scene.archive->summary(), height);
+    settle(**streamer, camera);
+    std::vector<uint32_t> expected(textures->size());
+    for (const SceneTexture& t : *textures) expected[t.index] = t.info.level_count - 1;
+    for (uint32_t o : (*streamer)->drawableObjects()) {
+      const SceneObject* object = (*streamer)->object(o);
+      for (uint32_t t : object->textures) {
+        if (t == kNoTexture) continue;
+        // floor(log2(rho)), rho = max(w, h) * d * pixelAngle / longest side (docs/scenes.md).
+        const Box3& b = object->bounds;
+        double side = 0, d2 = 0;
+        const double eye[3] = {camera.eye_x, camera.eye_y, camera.eye_z};
+        for (int a = 0; a < 3; ++a) {
+          side = std::max(side, double(b.max[a]) - b.min[a]);
+          const double out = std::max({0.0, b.min[a] - eye[a], eye[a] - b.max[a]});
+          d2 += out * out;
+        }
+        const ImageInfo& info = (*textures)[t].info;
+        const double rho =
+            std::max(info.width_px, info.height_px) * std::sqrt(d2) * pixelAngle(camera) / side;
+        const double level =
+            std::clamp(std::floor(std::log2(rho)), 0.0, double(info.level_count - 1));
+        expected[t] = std::min(expected[t], uint32_t(level));
+      }
+    }
+    for (uint32_t t = 0; t < expected.size(); ++t) {
+      EXPECT_EQ((*streamer)->wantedLevel(t), expected[t])
+          << "height " << height << " texture " << t;
     }
   }
 }
