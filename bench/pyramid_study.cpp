@@ -7,10 +7,9 @@
 // codec and reports, against the raw base level (level 0 tiles as stored, padding included):
 // the whole pyramid's bytes, ptm's overhead over its own base level, and single-thread decode
 // and encode throughput in megapixels of pyramid per second (ptm decoded coarse to fine against
-// the decoded parents, as a reader does). `--levels` adds each level's bits per texel, and
-// `--groups` the default's bits by a texel's place in its 2x2 block (printSymbolGroups). JPEG XL
-// lossless (libjxl, single-threaded) is a row when the build found libjxl-dev; it is not an
-// archive codec.
+// the decoded parents, as a reader does). ptm's rows are its efforts as `tessera build` writes
+// them. `--levels` adds each level's bits per texel. JPEG XL lossless (libjxl, single-threaded)
+// is a row when the build found libjxl-dev; it is not an archive codec.
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -20,7 +19,6 @@
 #include <map>
 #include <optional>
 #include <string>
-#include <tuple>
 #include <vector>
 
 #include <fmt/format.h>
@@ -34,7 +32,6 @@
 #include "builder/downsample.h"
 #include "codecs/encode.h"
 #include "ptm/ptm_codec.h"
-#include "ptm/ptm_walk.h"
 
 using namespace tessera;
 using namespace tessera::detail;
@@ -194,17 +191,8 @@ struct Variant {
   std::string name;
   Codec codec;
   int effort;
-  Predictor predictor;    ///< ptm only
-  PtmCoder coder;         ///< ptm only
-  bool smallest = false;  ///< ptm only: per tile, the smallest of kTriedPredictors
-  bool jxl = false;       ///< libjxl lossless at `effort` instead of `codec`
-  bool as_built = false;  ///< ptm only: the codec's own encoder at `effort`, as `tessera build`
-  /// ptm predictor 5 only: the weights fitted without predictor 4's estimate.
-  bool without_estimate = false;
+  bool jxl = false;  ///< libjxl lossless at `effort` instead of `codec`
 };
-
-constexpr Predictor kTriedPredictors[] = {Predictor::kParentNearest, Predictor::kNeighbourMedian,
-                                          Predictor::kParentCorrected};
 
 struct Tiles {
   std::vector<std::vector<Image>> levels;  ///< [level][y * tiles_x + x]
@@ -231,94 +219,7 @@ ParentTexels parentOf(const Tiles& tiles, const std::vector<Image>& parents, siz
   return {parents[(y / 2) * tiles.tiles_x[l + 1] + x / 2].view(), x & 1, y & 1, kTilePx, 0};
 }
 
-// `--groups`: where the bits of a ptm pyramid go, for the payloads `payloads` holds (the
-// default's, which are all rANS-coded). Each tile below the coarsest level is walked again with
-// its payload's predictor and coder, and its symbols pooled over the level by coder, channel
-// slot and context; the same tiles are walked on their own (predictor 0, the same coder) for
-// comparison. A pool costs its empirical entropy: the code length of one static model per
-// context fitted to the whole level, without model bytes, so that the groups compare without
-// the tiles' side information. Symbols are grouped by their texel's place in its 2x2 block: a,
-// b on top, c and d below. In the pyramid d is eq. 3's remainder; on its own d is coded like
-// the others, and the pools split by place too, since the places of an enlarged image differ.
-void printSymbolGroups(const Tiles& tiles,
-                       const std::vector<std::vector<std::vector<uint8_t>>>& payloads,
-                       CodecScratch& scratch) {
-  using Pools = std::map<std::tuple<int, int, int>, std::array<uint64_t, 256>>;
-  // In the pyramid, groups 0-3 are the residuals of block positions 0-3 (3 only where a block
-  // crosses the tile's edge) and 4 the remainders; on its own, groups 0-3 are the texels of
-  // each block position (a, b, c, d) and 4 is empty.
-  constexpr int kGroups = 5;
-  using Grouped = std::array<Pools, kGroups>;
-  auto poolInPyramid = [](const PtmRecording& recording, Grouped& pools) {
-    for (size_t k = 0; k < recording.symbols.size(); ++k) {
-      const int context = recording.symbol_contexts[k];
-      const int group =
-          context < int(ptm::kCodedContexts) ? context / int(ptm::kActivityClasses) : 4;
-      ++pools[size_t(group)][{int(recording.coder), int(k % recording.channels), context}]
-             [recording.symbols[k]];
-    }
-  };
-  // Without a parent every texel is coded, in raster order.
-  auto poolAlone = [](const PtmRecording& recording, uint32_t width, Grouped& pools) {
-    for (size_t k = 0; k < recording.symbols.size(); ++k) {
-      const size_t texel = k / recording.channels;
-      const int group = int(texel % width % 2 + 2 * (texel / width % 2));
-      ++pools[size_t(group)][{int(recording.coder), int(k % recording.channels),
-                              recording.symbol_contexts[k]}][recording.symbols[k]];
-    }
-  };
-  // Bits per symbol of each group, and the groups' bits in all.
-  auto entropies = [](const Grouped& pools, double(&per_symbol)[kGroups]) {
-    double all = 0;
-    for (int g = 0; g < kGroups; ++g) {
-      double bits = 0, symbols = 0;
-      for (const auto& [key, counts] : pools[size_t(g)]) {
-        double n = 0;
-        for (uint64_t c : counts) n += double(c);
-        for (uint64_t c : counts)
-          if (c != 0) bits -= double(c) * std::log2(double(c) / n);
-        symbols += n;
-      }
-      per_symbol[g] = symbols > 0 ? bits / symbols : 0;
-      all += bits;
-    }
-    return all;
-  };
-  fmt::print(
-      "\n| level | a | b | c | d: remainder (alone: the texel) | level, bits per texel |\n"
-      "|---|---:|---:|---:|---:|---:|\n");
-  for (size_t l = 0; l + 1 < tiles.levels.size(); ++l) {
-    Grouped in_pyramid, alone;
-    for (size_t i = 0; i < tiles.levels[l].size(); ++i) {
-      const std::vector<uint8_t>& payload = payloads[l][i];
-      const auto coder = PtmCoder(payload[1] & ~kPtmTablesFlag);
-      if (!isRansCoder(coder)) continue;
-      const Image& tile = tiles.levels[l][i];
-      const ParentTexels parent = parentOf(tiles, tiles.levels[l + 1], l, i);
-      PtmRecording recording;
-      if (recordPtm(tile.view(), &parent, Predictor(payload[0]), coder, &scratch, nullptr,
-                    recording))
-        poolInPyramid(recording, in_pyramid);
-      if (recordPtm(tile.view(), nullptr, Predictor::kRoot, coder, &scratch, nullptr, recording))
-        poolAlone(recording, tile.width_px, alone);
-    }
-    const double texels = double(tiles.levels[l].size()) * kTilePx * kTilePx;
-    double pyramid_bits[kGroups], alone_bits[kGroups];
-    const double pyramid_all = entropies(in_pyramid, pyramid_bits);
-    const double alone_all = entropies(alone, alone_bits);
-    fmt::print("| {} in the pyramid | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} |\n", l,
-               pyramid_bits[0], pyramid_bits[1], pyramid_bits[2], pyramid_bits[4],
-               pyramid_all / texels);
-    fmt::print("| {} alone | {:.3f} | {:.3f} | {:.3f} | {:.3f} | {:.3f} |\n", l, alone_bits[0],
-               alone_bits[1], alone_bits[2], alone_bits[3], alone_all / texels);
-  }
-  fmt::print(
-      "(a, b, c, d: bits per symbol, one per channel of a texel of that place in its block;"
-      " every figure an empirical entropy over the level)\n");
-}
-
-void study(const std::string& input, double min_seconds, const std::string& only, bool per_level,
-           bool groups) {
+void study(const std::string& input, double min_seconds, const std::string& only, bool per_level) {
   Image level0 = readInput(input);
   if (level0.texels.empty()) {
     fmt::print(stderr, "{}: cannot read\n", input);
@@ -336,88 +237,22 @@ void study(const std::string& input, double min_seconds, const std::string& only
       "| codec | pyramid / raw base | raw base : pyramid | pyramid over base coded alone | decode "
       "MP/s per core | encode MP/s per core |\n|---|---:|---:|---:|---:|---:|\n");
   const std::vector<Variant> variants = {
-    {"raw", Codec::kRaw, 0, Predictor::kRoot, PtmCoder::kZstd},
-    {"lz4", Codec::kLz4, 0, Predictor::kRoot, PtmCoder::kZstd},
-    {"zstd-1", Codec::kZstd, 1, Predictor::kRoot, PtmCoder::kZstd},
-    {"zstd-3", Codec::kZstd, 3, Predictor::kRoot, PtmCoder::kZstd},
-    {"zstd-9", Codec::kZstd, 9, Predictor::kRoot, PtmCoder::kZstd},
-    {"png (effort 2)", Codec::kPng, 0, Predictor::kRoot, PtmCoder::kZstd},
-    {"webp-lossless (effort 1)", Codec::kWebp, 0, Predictor::kRoot, PtmCoder::kZstd},
+    {"raw", Codec::kRaw, 0},
+    {"lz4", Codec::kLz4, 0},
+    {"zstd-1", Codec::kZstd, 1},
+    {"zstd-3", Codec::kZstd, 3},
+    {"zstd-9", Codec::kZstd, 9},
+    {"png (effort 2)", Codec::kPng, 0},
+    {"webp-lossless (effort 1)", Codec::kWebp, 0},
     // libwebp's own default preset: 5-8x slower to encode than the archive's default, smaller.
-    {"webp-lossless (effort 6)", Codec::kWebp, 6, Predictor::kRoot, PtmCoder::kZstd},
-    {"ptm nearest-parent + zstd", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kZstd},
-    {"ptm bilinear-parent + zstd", Codec::kPtm, 0, Predictor::kParentBilinear, PtmCoder::kZstd},
-    {"ptm neighbour-median + zstd", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kZstd},
-    {"ptm parent-corrected + zstd", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kZstd},
-    {"ptm nearest-parent + rANS", Codec::kPtm, 0, Predictor::kParentNearest, PtmCoder::kRans},
-    {"ptm neighbour-median + rANS", Codec::kPtm, 0, Predictor::kNeighbourMedian, PtmCoder::kRans},
-    {"ptm nearest-parent + rANS lanes", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansLanes},
-    {"ptm neighbour-median + rANS lanes", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-     PtmCoder::kRansLanes},
-    {"ptm parent-corrected + rANS lanes", Codec::kPtm, 0, Predictor::kParentCorrected,
-     PtmCoder::kRansLanes},
-    {"ptm parent-corrected + rANS", Codec::kPtm, 0, Predictor::kParentCorrected, PtmCoder::kRans},
-    {"ptm smallest of 1/3/4 + zstd", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kZstd, true},
-    {"ptm smallest of 1/3/4 + rANS", Codec::kPtm, 0, Predictor::kRoot, PtmCoder::kRans, true},
-    {"ptm nearest-parent + rANS chained", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansChained},
-    {"ptm neighbour-median + rANS chained", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-     PtmCoder::kRansChained},
-    {"ptm parent-corrected + rANS chained", Codec::kPtm, 0, Predictor::kParentCorrected,
-     PtmCoder::kRansChained},
-    {"ptm smallest of 1/3/4 + rANS chained", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansChained, true},
-    {"ptm nearest-parent + rANS mixture", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansMixture},
-    {"ptm neighbour-median + rANS mixture", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-     PtmCoder::kRansMixture},
-    {"ptm parent-corrected + rANS mixture", Codec::kPtm, 0, Predictor::kParentCorrected,
-     PtmCoder::kRansMixture},
-    {"ptm smallest of 1/3/4 + rANS mixture", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansMixture, true},
-    {"ptm nearest-parent + rANS mixture chained", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansMixtureChained},
-    {"ptm neighbour-median + rANS mixture chained", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-     PtmCoder::kRansMixtureChained},
-    {"ptm parent-corrected + rANS mixture chained", Codec::kPtm, 0, Predictor::kParentCorrected,
-     PtmCoder::kRansMixtureChained},
-    {"ptm smallest of 1/3/4 + rANS mixture chained", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansMixtureChained, true},
-    {"ptm nearest-parent + rANS mixture chained errors", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansMixtureChainedErrors},
-    {"ptm neighbour-median + rANS mixture chained errors", Codec::kPtm, 0,
-     Predictor::kNeighbourMedian, PtmCoder::kRansMixtureChainedErrors},
-    {"ptm parent-corrected + rANS mixture chained errors", Codec::kPtm, 0,
-     Predictor::kParentCorrected, PtmCoder::kRansMixtureChainedErrors},
-    {"ptm smallest of 1/3/4 + rANS mixture chained errors", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansMixtureChainedErrors, true},
-    {"ptm nearest-parent + rANS parent errors", Codec::kPtm, 0, Predictor::kParentNearest,
-     PtmCoder::kRansParentErrors},
-    {"ptm neighbour-median + rANS parent errors", Codec::kPtm, 0, Predictor::kNeighbourMedian,
-     PtmCoder::kRansParentErrors},
-    {"ptm parent-corrected + rANS parent errors", Codec::kPtm, 0, Predictor::kParentCorrected,
-     PtmCoder::kRansParentErrors},
-    {"ptm smallest of 1/3/4 + rANS parent errors", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansParentErrors, true},
-    {"ptm least-squares + zstd", Codec::kPtm, 0, Predictor::kLeastSquares, PtmCoder::kZstd},
-    {"ptm least-squares + rANS lanes", Codec::kPtm, 0, Predictor::kLeastSquares,
-     PtmCoder::kRansLanes},
-    {"ptm least-squares without predictor 4's estimate + rANS lanes", Codec::kPtm, 0,
-     Predictor::kLeastSquares, PtmCoder::kRansLanes, false, false, false, true},
-    {"ptm least-squares + rANS parent errors", Codec::kPtm, 0, Predictor::kLeastSquares,
-     PtmCoder::kRansParentErrors},
-    {"ptm effort 2 (nearest parent + zstd, or rANS lanes with nearest parent, the median, "
-     "parent corrected or least squares)",
-     Codec::kPtm, 2, Predictor::kRoot, PtmCoder::kRansLanes, false, false, true},
-    {"ptm effort 3 (the default's rule without least squares)", Codec::kPtm, 3, Predictor::kRoot,
-     PtmCoder::kRansMixtureChained, false, false, true},
-    {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0, Predictor::kRoot,
-     PtmCoder::kRansMixtureChained, false, false, true},
+    {"webp-lossless (effort 6)", Codec::kWebp, 6},
+    {"ptm effort 1 (nearest parent + zstd)", Codec::kPtm, 1},
+    {"ptm effort 2 (nearest parent + zstd, or the lanes)", Codec::kPtm, 2},
+    {"ptm default (tessera build --codec ptm)", Codec::kPtm, 0},
 #if TESSERA_STUDY_JXL
     // libjxl's default effort is 7; 3 is its fast lossless setting.
-    {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, Predictor::kRoot, PtmCoder::kZstd, false, true},
-    {"jpeg-xl lossless (effort 7)", Codec::kRaw, 7, Predictor::kRoot, PtmCoder::kZstd, false, true},
+    {"jpeg-xl lossless (effort 3)", Codec::kRaw, 3, true},
+    {"jpeg-xl lossless (effort 7)", Codec::kRaw, 7, true},
 #endif
   };
 #if TESSERA_STUDY_JXL
@@ -436,25 +271,12 @@ void study(const std::string& input, double min_seconds, const std::string& only
       return std::move(*payload);
     }
 #endif
-    if (variant.as_built)
-      return encodeTile(Codec::kPtm, tile.view(), options, parent ? &*parent : nullptr, &scratch);
-    if (variant.smallest)
-      return encodePtmSmallest(tile.view(), options, parent ? &*parent : nullptr, kTriedPredictors,
-                               variant.coder, &scratch);
-    if (variant.codec == Codec::kPtm) {
-      PtmLeastSquaresFit fit;
-      fit.without_estimate = variant.without_estimate;
-      return encodePtm(tile.view(), options, parent ? &*parent : nullptr, variant.predictor,
-                       variant.coder, &scratch, &fit);
-    }
-    return encodeTile(variant.codec, tile.view(), options, nullptr, &scratch);
+    return encodeTile(variant.codec, tile.view(), options, parent ? &*parent : nullptr, &scratch);
   };
-  // A level coded on its own: for ptm its parentless mode with the variant's entropy coder
-  // (seed 003's reference for the overhead), for the rest the variant itself.
+  // A level coded on its own: for ptm the effort's mode without a parent (seed 003's reference
+  // for the overhead), for the rest the codec itself.
   auto encodeAlone = [&](const Variant& variant, const Image& tile, const EncodeOptions& options) {
-    return variant.codec == Codec::kPtm && !variant.as_built
-               ? encodePtm(tile.view(), options, nullptr, Predictor::kRoot, variant.coder, &scratch)
-               : encodeVariant(variant, tile, options, std::nullopt);
+    return encodeVariant(variant, tile, options, std::nullopt);
   };
   auto decodeVariant = [&](const Variant& variant, const std::vector<uint8_t>& payload, Image& out,
                            const std::optional<ParentTexels>& parent) -> bool {
@@ -537,7 +359,7 @@ void study(const std::string& input, double min_seconds, const std::string& only
       smallest_peer_bytes = total;
       smallest_peer = variant.name;
     }
-    if (ptm && variant.as_built) {
+    if (ptm) {
       // What the default chose: its share of the pyramid's bytes per (predictor, coder).
       std::map<std::pair<int, int>, double> chosen;
       for (const auto& level : payloads)
@@ -552,20 +374,16 @@ void study(const std::string& input, double min_seconds, const std::string& only
                         key.first, key.second & ~int(kPtmTablesFlag | kPtmGreenLedFlag),
                         (key.second & kPtmGreenLedFlag) != 0 ? " green-led" : "",
                         (key.second & kPtmTablesFlag) != 0 ? "+tables" : "", 100.0 * bytes / total);
-      fmt::print(
-          "\n({}'s bytes by predictor and coder: {})\n",
-          variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort),
-          shares);
+      const std::string mode =
+          variant.effort == 0 ? std::string("default") : fmt::format("effort {}", variant.effort);
+      fmt::print("\n({}'s bytes by predictor and coder: {})\n", mode, shares);
+      fmt::print("({}: {:.0f} bytes; its base level alone: {:.0f} bytes)\n", mode, total,
+                 base_alone);
       if (smallest_peer_bytes > 0 && variant.effort == 0)
-        fmt::print("(default: {:.0f} bytes; {}: {:.0f} bytes; the default is {:.2f} % {})\n", total,
-                   smallest_peer, smallest_peer_bytes,
+        fmt::print("(the default is {:.2f} % {} than {}, {:.0f} bytes)\n",
                    100.0 * std::abs(total - smallest_peer_bytes) / smallest_peer_bytes,
-                   total <= smallest_peer_bytes ? "smaller" : "larger");
-      else if (variant.effort == 0)
-        fmt::print("(default: {:.0f} bytes)\n", total);
-      if (variant.effort == 0)
-        fmt::print("(default's base level alone: {:.0f} bytes)\n", base_alone);
-      if (groups) printSymbolGroups(tiles, payloads, scratch);
+                   total <= smallest_peer_bytes ? "smaller" : "larger", smallest_peer,
+                   smallest_peer_bytes);
       fmt::print("\n");
     }
     if (per_level) {
@@ -589,21 +407,15 @@ void study(const std::string& input, double min_seconds, const std::string& only
 
 int main(int argc, char** argv) {
   if (argc < 2) {
-    fmt::print(stderr,
-               "usage: {} [--seconds S] [--only NAME-PART] [--levels] [--groups] INPUT...\n",
-               argv[0]);
+    fmt::print(stderr, "usage: {} [--seconds S] [--only NAME-PART] [--levels] INPUT...\n", argv[0]);
     return 2;
   }
   double seconds = 0.5;
   std::string only;
-  bool per_level = false, groups = false;
+  bool per_level = false;
   for (int i = 1; i < argc; ++i) {
     if (std::string(argv[i]) == "--levels") {
       per_level = true;
-      continue;
-    }
-    if (std::string(argv[i]) == "--groups") {
-      groups = true;
       continue;
     }
     if (std::string(argv[i]) == "--only" && i + 1 < argc) {
@@ -614,7 +426,7 @@ int main(int argc, char** argv) {
       seconds = std::atof(argv[++i]);
       continue;
     }
-    study(argv[i], seconds, only, per_level, groups);
+    study(argv[i], seconds, only, per_level);
   }
   return 0;
 }

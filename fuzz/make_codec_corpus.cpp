@@ -12,7 +12,7 @@
 
 #include "codec_fuzz_input.h"
 #include "codecs/encode.h"
-#include "ptm/ptm_codec.h"
+#include "ptm/ptm_encode.h"
 
 namespace {
 
@@ -88,21 +88,20 @@ int main(int argc, char** argv) {
       bytes += input.size();
     }
   }
-  // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode:
-  // the encoder at efforts 1 (nearest parent, zstd), 2 (nearest parent with zstd or coder 7)
-  // and 3 (smallest, rANS, whichever coder the default picks), and each rANS coder
-  // forced ("c1" to "c6"), so all are seeded whatever the default picks for these small tiles;
-  // the neighbour median and the parent-corrected predictor with coder 7, the lane coder ("m7",
-  // "p7"); predictor 5 (least squares, whose weights follow the header) with zstd, with coder
-  // 6 and with coder 7 ("l0", "l6", "l7"), and with coder 7 fitted without predictor 4's
-  // estimate ("w7"); and the default on
-  // 64 x 64 texels rounded down to multiples of 16 ("t0"), residuals on a comb, whose payloads
-  // carry explicit tables; and coder 7 with nearest parent on the same comb with a table
-  // wherever one saves any bytes ("t7": the encoder's own rule sends none on tiles this small;
-  // with 3 and 4 channels some save); and coder 7 with the median and green-led contexts, with
-  // a table wherever one saves any bytes ("g7", 3 and 4 channels: the others have no green).
-  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c5", "c6",
-                               "m7", "p7", "l0", "l6", "l7", "w7", "t0", "t7", "g7"};
+  // ptm coded against the fuzzer's parent (fuzzParentTexels), for each quarter, in each mode of
+  // the kept variants (docs/codecs.md, "ptm (6)"): the encoder at efforts 1 (nearest parent,
+  // zstd), 2 (nearest parent with zstd or coder 7) and 3 (the default); each rANS coder forced
+  // ("c1" to "c4", "c6") with the predictor of 1, 3 and 4 whose estimate is smallest, so all are
+  // seeded whatever the default picks for these small tiles; the neighbour median and the
+  // parent-corrected predictor with coder 7 ("m7", "p7"); predictor 5, whose weights follow the
+  // header, with zstd and with coder 6 ("l0", "l6"), and with coder 7 fitted without predictor
+  // 4's estimate ("w7"); the default on 64 x 64 texels rounded down to multiples of 16 ("t0"),
+  // residuals on a comb, whose payloads carry explicit tables; coder 7 with nearest parent on
+  // the same comb with a table wherever one saves any bytes ("t7"); and coder 7 with the median
+  // and green-led contexts, with a table wherever one saves any bytes ("g7", 3 and 4 channels).
+  const std::string modes[] = {"e1", "e2", "e3", "c1", "c2", "c3", "c4", "c6",
+                               "m7", "p7", "l0", "l6", "w7", "t0", "t7", "g7"};
+  using tessera::detail::Predictor, tessera::detail::PtmCoder;
   for (const std::string& mode : modes) {
     for (uint32_t channels = 1; channels <= 4; ++channels) {
       if (mode == "g7" && channels < 3) continue;
@@ -114,49 +113,46 @@ int main(int argc, char** argv) {
         const Image parent_texels = tessera::fuzz::fuzzParentTexels(side, channels);
         const tessera::detail::ParentTexels parent{parent_texels.view(), quadrant, quadrant, side,
                                                    0};
-        constexpr tessera::detail::Predictor kCandidates[] = {
-            tessera::detail::Predictor::kParentNearest,
-            tessera::detail::Predictor::kNeighbourMedian,
-            tessera::detail::Predictor::kParentCorrected};
+        const PtmCoder coder = PtmCoder(mode[1] - '0');
         auto encode = [&]() -> tessera::Result<std::vector<uint8_t>> {
           tessera::detail::EncodeOptions options;
-          if (mode == "t7") {
-            tessera::detail::PtmRecording recording;
-            TESSERA_TRY(tessera::detail::recordPtm(
-                tile.view(), &parent, tessera::detail::Predictor::kParentNearest,
-                tessera::detail::PtmCoder::kRans, nullptr, nullptr, recording));
-            return tessera::detail::encodeRecordedPtm(
-                recording, tessera::detail::PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
-          }
-          if (mode == "g7") {
+          if (mode == "t7" || mode == "g7") {
             tessera::detail::PtmRecording recording, led;
             TESSERA_TRY(tessera::detail::recordPtm(
-                tile.view(), &parent, tessera::detail::Predictor::kNeighbourMedian,
-                tessera::detail::PtmCoder::kRansLanes, nullptr, nullptr, recording));
-            tessera::detail::leadRecordingByGreen(recording, led);
-            return tessera::detail::encodeRecordedPtm(led, tessera::detail::PtmCoder::kRansLanes,
-                                                      nullptr, nullptr, 0.0);
+                tile.view(), &parent,
+                mode == "t7" ? Predictor::kParentNearest : Predictor::kNeighbourMedian,
+                PtmCoder::kRansLanes, nullptr, nullptr, recording));
+            if (mode == "g7") tessera::detail::leadRecordingByGreen(recording, led);
+            return tessera::detail::encodeRecordedPtm(mode == "g7" ? led : recording,
+                                                      PtmCoder::kRansLanes, nullptr, nullptr, 0.0);
           }
           if (mode[0] == 'e' || mode[0] == 't') {
             options.effort = mode[1] - '0';
             return tessera::detail::encodeTile(Codec::kPtm, tile.view(), options, &parent);
           }
-          if (mode[0] == 'l' || mode[0] == 'w') {
-            tessera::detail::PtmLeastSquaresFit fit;
-            fit.without_estimate = mode[0] == 'w';
-            return tessera::detail::encodePtm(
-                tile.view(), options, &parent, tessera::detail::Predictor::kLeastSquares,
-                tessera::detail::PtmCoder(mode[1] - '0'), nullptr, &fit);
+          tessera::detail::PtmLeastSquaresFit fit;
+          fit.without_estimate = mode[0] == 'w';
+          if (mode[0] == 'l' || mode[0] == 'w' || mode[0] == 'm' || mode[0] == 'p') {
+            const Predictor predictor = mode[0] == 'm'   ? Predictor::kNeighbourMedian
+                                        : mode[0] == 'p' ? Predictor::kParentCorrected
+                                                         : Predictor::kLeastSquares;
+            return tessera::detail::encodePtm(tile.view(), options, &parent, predictor, coder,
+                                              nullptr, &fit);
           }
-          if (mode[0] == 'm' || mode[0] == 'p')
-            return tessera::detail::encodePtm(tile.view(), options, &parent,
-                                              mode[0] == 'm'
-                                                  ? tessera::detail::Predictor::kNeighbourMedian
-                                                  : tessera::detail::Predictor::kParentCorrected,
-                                              tessera::detail::PtmCoder(mode[1] - '0'), nullptr);
-          return tessera::detail::encodePtmSmallest(tile.view(), options, &parent, kCandidates,
-                                                    tessera::detail::PtmCoder(mode[1] - '0'),
-                                                    nullptr);
+          Predictor smallest = Predictor::kParentNearest;
+          size_t smallest_bytes = SIZE_MAX;
+          for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
+                                      Predictor::kParentCorrected}) {
+            TESSERA_ASSIGN_OR_RETURN(const size_t estimate,
+                                     tessera::detail::estimatePtmBytes(
+                                         tile.view(), options, &parent, predictor, coder, nullptr));
+            if (estimate < smallest_bytes) {
+              smallest = predictor;
+              smallest_bytes = estimate;
+            }
+          }
+          return tessera::detail::encodePtm(tile.view(), options, &parent, smallest, coder,
+                                            nullptr);
         };
         auto payload = encode();
         if (!payload) {

@@ -18,6 +18,8 @@
 
 namespace tessera {
 
+class ProceduralTiles;
+
 /// What `Archive::verify` found.
 struct VerifyReport {
   uint64_t tiles_checked = 0;     ///< directory entries examined
@@ -76,7 +78,8 @@ class Archive {
   /// loaded yet or the address is outside the image.
   std::optional<TileEntry> tileEntryIfCached(const TileId& tile) const;
 
-  /// Reads a tile's payload and verifies its checksum. Only for kEncoded tiles.
+  /// Reads a tile's payload and verifies its checksum: an encoded payload, or a procedural
+  /// tile's instance page. Only for tiles whose entry hasPayload().
   [[nodiscard]] Result<std::vector<uint8_t>> readPayload(const TileId& tile,
                                                          const TileEntry& entry) const;
 
@@ -120,6 +123,11 @@ class Archive {
   /// tileEntry + readPayload + decodeTile.
   [[nodiscard]] Result<Image> readTile(const TileId& tile, CodecScratch* scratch = nullptr) const;
 
+  /// The archive's procedural side (format 1.1): its brush set, read, checksummed and prepared
+  /// on the first call (later calls return it at no cost). kNotFound when the archive has no
+  /// procedural directory; a damaged brush block is kCorrupt naming it, and is retried by the
+  /// next call. decodeTile composites procedural tiles through it.
+  [[nodiscard]] Result<std::shared_ptr<const ProceduralTiles>> procedural() const;
   /// Reads `rect` of `level` of `image` into RGBA (gray replicated, alpha 255 when absent).
   /// Texels outside the level read as transparent black. The rectangle may be at most
   /// 16384 x 16384 px (kTooLarge beyond).
@@ -131,7 +139,10 @@ class Archive {
                                          const PixelRect& rect) const;
 
   /// Checks every checksum and structural invariant: page indexes, pages, payload checksums,
-  /// that every payload decodes, that blocks lie inside the file and no two overlap. Keeps
+  /// that every payload decodes, that blocks lie inside the file and no two overlap. In a
+  /// format 1.1 archive with procedural tiles, also the brush images and height layer
+  /// (checksums, decoding), and every instance page (checksum, structure, brush references;
+  /// composited when `decode_payloads`); a page shared by several tiles is checked once. Keeps
   /// going after a fault. `on_progress(done, total)` is called per level when set.
   VerifyReport verify(bool decode_payloads = true,
                       const std::function<void(uint64_t, uint64_t)>& on_progress = {}) const;

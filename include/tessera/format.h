@@ -28,10 +28,11 @@ inline constexpr uint32_t kMaxImages = 65536;
 
 /// How a tile's texels are stored (docs/format.md, "Tile entries").
 enum class TileKind : uint8_t {
-  kEmpty = 0,       ///< no data: decodes to all-zero texels (transparent where there is alpha)
-  kUniform = 1,     ///< every texel, border and padding included, has the colour in the entry
-  kEncoded = 2,     ///< a payload in the file, decoded by the entry's codec
-  kProcedural = 3,  ///< reserved: generated at run time (Demeulemeester et al.); v1 readers reject
+  kEmpty = 0,    ///< no data: decodes to all-zero texels (transparent where there is alpha)
+  kUniform = 1,  ///< every texel, border and padding included, has the colour in the entry
+  kEncoded = 2,  ///< a payload in the file, decoded by the entry's codec
+  kProcedural =
+      3,  ///< format 1.1: composited at load time from an instance page (docs/procedural.md)
 };
 
 /// Payload codecs. Values are stable on disk; new codecs take new numbers.
@@ -79,10 +80,13 @@ struct TileId {
 struct TileEntry {
   TileKind kind = TileKind::kEmpty;
   Codec codec = Codec::kRaw;
-  uint64_t offset_bytes = 0;  ///< payload offset in the file; 0 unless kind is kEncoded
-  uint32_t length_bytes = 0;  ///< payload length; 0 unless kind is kEncoded
-  uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless kind is kEncoded
+  uint64_t offset_bytes = 0;  ///< payload offset in the file; 0 unless hasPayload()
+  uint32_t length_bytes = 0;  ///< payload length; 0 unless hasPayload()
+  uint64_t checksum = 0;      ///< xxh3-64 of the payload; 0 unless hasPayload()
   uint32_t uniform_rgba = 0;  ///< kUniform: channel c of the colour is byte c (little-endian)
+  /// Whether the tile has bytes in the file to read (and verify) before it can be decoded: an
+  /// encoded payload, or a procedural tile's instance page. Loaders fetch exactly these.
+  bool hasPayload() const { return kind == TileKind::kEncoded || kind == TileKind::kProcedural; }
 };
 
 /// Geometry of one image of an archive. Level dimensions follow from it:

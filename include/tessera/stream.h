@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include <tessera/archive.h>
@@ -120,6 +121,10 @@ struct FrameReport {
   uint64_t parents_queued_total = 0;
   uint64_t parent_fallbacks_total = 0;
   uint64_t children_read_early_total = 0;
+  /// LoaderPriority::kAuto: times the normal-priority helpers began loading because the
+  /// idle-priority loader threads got no core, and the batches they loaded.
+  uint64_t loader_rescues_total = 0;
+  uint64_t rescued_batches_total = 0;
 
   // Adaptive scheduling (StreamerOptions::adaptive; Marvie & Bouatouch, part III).
   bool adaptive = false;    ///< the adaptive policy chose this frame's requests
@@ -132,6 +137,17 @@ struct FrameReport {
   uint64_t memory_bytes = 0;         ///< decoded bytes of the wanted tiles held or requested
   uint64_t requested_bytes = 0;      ///< payload bytes requested and not yet arrived
   uint64_t deferred_tiles = 0;       ///< wanted tiles not requested (beyond the budgets)
+};
+
+/// A load that failed (a read, a checksum, a decode): the loader retries it after a backoff
+/// while the tile is wanted, so one tile may fail many times.
+struct LoadFailure {
+  TileId id;
+  ErrorCode code = ErrorCode::kIo;
+  /// Names the archive, the tile and the problem; for a URL, the server's status and reason
+  /// ("http://h/s.tess: tile (0,3,7): bytes=81234-93000: HTTP 503 Service Unavailable (after
+  /// 4 attempts)").
+  std::string message;
 };
 
 /// What the renderer should do this frame.
@@ -152,6 +168,9 @@ struct FrameUpdate {
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
   FrameReport report;
+  /// Loads that failed since the last update, in the order they failed
+  /// (FrameReport::load_failures_total counts them all).
+  std::vector<LoadFailure> failures;
 };
 
 /// A renderer's answer to a FrameUpdate (`Renderer::apply`), for `TileStreamer::acknowledge`.
@@ -197,16 +216,31 @@ struct AdaptiveOptions {
   std::function<std::chrono::steady_clock::time_point()> clock;
 };
 
+/// How loader threads share the CPU with the render thread and the rest of the machine
+/// (docs/runtime.md, "Loader priority").
+enum class LoaderPriority : uint8_t {
+  /// The default: loader threads under SCHED_IDLE, which give way at once to any thread of
+  /// normal priority, the render thread first; and as many helper threads of normal priority
+  /// as cores (at most the loader threads), which sleep until ready work has waited 16 ms with
+  /// no idle-priority thread taking any, and then load until nothing is ready. On a free
+  /// machine the helpers never run; when other programs keep every core busy, where idle
+  /// threads would starve, the helpers load at their fair share of the cores.
+  kAuto,
+  /// Every loader thread under SCHED_IDLE, no helpers: a decode never delays a normal thread,
+  /// and nothing loads while other threads keep every core busy.
+  kIdle,
+  /// Every loader thread at niceness 5.
+  kNice,
+};
+
 /// Everything `TileStreamer::create` can set.
 struct StreamerOptions {
   size_t cache_budget_bytes = size_t(512) << 20;
   bool viewer_shift_eviction = true;  ///< else LRU
   uint32_t loader_threads = 0;        ///< 0 = all cores
-  /// Loader threads run under SCHED_IDLE: any thread of normal priority, the render thread
-  /// first, preempts a decode at once, so a frame never waits for one. Set false in a program
-  /// whose other threads keep every core busy, where idle-priority loaders would starve; they
-  /// then run at niceness 5 (docs/runtime.md, "Loader pool").
-  bool loader_idle_priority = true;
+  /// The loader threads' scheduling (LoaderPriority): by default idle-priority threads, so a
+  /// frame never waits for a decode, with normal-priority help when they starve.
+  LoaderPriority loader_priority = LoaderPriority::kAuto;
   /// Tile buffers kept idle for the next decodes: those of evicted tiles, and fresh ones the
   /// loaders fault in while they have nothing to do (only into room the cache budget still
   /// has), so the tiles after a jump skip the page faults of fresh memory (docs/runtime.md).

@@ -147,23 +147,8 @@ bool operator==(const TextureRecord& a, const TextureRecord& b) {
          entry_equal(a.coarsest, b.coarsest);
 }
 
-std::vector<uint8_t> encodeSceneHeader(const FileHeader& header, const BlockRef& scene) {
-  TESSERA_CHECK(header.version_minor >= kSceneVersionMinor) << "a scene header is version 1.1+";
-  std::vector<uint8_t> bytes = encodeHeader(header);
-  storeBlockRef(bytes.data() + kSceneRefOffset, scene);
-  storeU64(bytes.data() + 120, checksum64({bytes.data(), 120}));
-  return bytes;
-}
-
-Result<BlockRef> decodeSceneRef(std::span<const uint8_t> header_bytes, const FileHeader& header,
-                                const std::string& name) {
-  TESSERA_CHECK(header_bytes.size() >= kHeaderBytes) << "a header is 128 bytes";
-  if (header.version_minor < kSceneVersionMinor) return BlockRef{};
-  const uint8_t* p = header_bytes.data();
-  if (header.version_minor == kSceneVersionMinor && !allZero(p + 104, 16))
-    return fail(ErrorCode::kCorrupt, name + ": reserved header bytes 104..119 are not zero");
-  BlockRef scene = loadBlockRef(p + kSceneRefOffset);
-  TESSERA_TRY(checkSceneBlock(scene, header.file_bytes, name + ": scene directory"));
+Result<BlockRef> decodeSceneRef(std::span<const SectionEntry> sections, const std::string& name) {
+  const BlockRef scene = findSection(sections, SectionKind::kScene);
   if (scene.length_bytes != 0 && scene.length_bytes != kSceneDirectoryBytes)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: scene directory of {} bytes, expected {}",
                                                  name, scene.length_bytes, kSceneDirectoryBytes));

@@ -10,6 +10,8 @@
 #include "codecs/decode.h"
 #include "format/checksum.h"
 #include "format/metadata.h"
+#include "format/procedural.h"
+#include "format/sections.h"
 #include "reader/parent_chain.h"
 
 namespace tessera {
@@ -86,6 +88,16 @@ Result<PageRef> Archive::Impl::pageRef(uint32_t image, uint32_t level, uint32_t 
   return (*shared)[page_index];
 }
 
+Result<std::vector<TileEntry>> Archive::Impl::decodeEntries(std::span<const uint8_t> bytes,
+                                                            const ImageInfo& info,
+                                                            const std::string& what) const {
+  // Kind-3 (procedural) entries are valid from minor 1 on; the 1.1 decoder applies the 1.0
+  // rules to everything else.
+  if (header.version_minor >= detail::kProceduralMinorVersion)
+    return detail::decodeTileEntriesProcedural(bytes, info, header, what);
+  return detail::decodeTileEntries(bytes, info, header, what);
+}
+
 Archive::Impl::PageResult Archive::Impl::page(uint32_t image, uint32_t level, uint32_t page_x,
                                               uint32_t page_y) {
   const ImageInfo& info = infos[image];
@@ -114,8 +126,7 @@ Archive::Impl::PageResult Archive::Impl::page(uint32_t image, uint32_t level, ui
       std::string what =
           fmt::format("image {} level {} page ({},{})", image, level, page_x, page_y);
       TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes, readBlock(ref, what));
-      TESSERA_ASSIGN_OR_RETURN(entries,
-                               detail::decodeTileEntries(bytes, info, header, name + ": " + what));
+      TESSERA_ASSIGN_OR_RETURN(entries, decodeEntries(bytes, info, name + ": " + what));
     }
     return std::make_shared<const std::vector<TileEntry>>(std::move(entries));
   };
@@ -172,6 +183,17 @@ Result<std::shared_ptr<Archive>> Archive::open(std::shared_ptr<ByteSource> sourc
                              detail::parseMetadata(json_bytes, impl->records.size(), name));
   }
   impl->metadata_json = std::move(metadata.json);
+  TESSERA_ASSIGN_OR_RETURN(impl->section_table,
+                           detail::decodeSectionTableRef(impl->header_region, header, name));
+  if (impl->section_table.length_bytes != 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> table_bytes,
+                             impl->readBlock(impl->section_table, "section table"));
+    TESSERA_ASSIGN_OR_RETURN(std::vector<detail::SectionEntry> entries,
+                             detail::decodeSectionTable(table_bytes, header, name));
+    // Other kinds (a scene) are other readers' business; the image reader skips them.
+    TESSERA_ASSIGN_OR_RETURN(impl->procedural_directory,
+                             detail::decodeProceduralRef(entries, name));
+  }
   for (size_t i = 0; i < impl->records.size(); ++i) {
     ImageInfo info = impl->records[i].info;
     info.name = std::move(metadata.image_names[i]);
@@ -253,7 +275,7 @@ Result<void> Archive::verifyPayload(const TileId& tile, const TileEntry& entry,
 
 Result<std::vector<uint8_t>> Archive::readPayload(const TileId& tile,
                                                   const TileEntry& entry) const {
-  TESSERA_CHECK(entry.kind == TileKind::kEncoded) << "readPayload on a tile without payload";
+  TESSERA_CHECK(entry.hasPayload()) << "readPayload on a tile without payload";
   std::vector<uint8_t> payload(entry.length_bytes);
   TESSERA_TRY(impl_->source->read(entry.offset_bytes, payload));
   TESSERA_TRY(verifyPayload(tile, entry, payload));
@@ -339,16 +361,29 @@ Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entr
                     fmt::format("{}: {}", impl_->tileName(tile), decoded.error().message));
       break;
     }
-    case TileKind::kProcedural:
-      return fail(ErrorCode::kUnsupported, impl_->tileName(tile) + " is procedural");
+    case TileKind::kProcedural: {
+      TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<const ProceduralTiles> tiles, procedural());
+      return tiles->compositePage(*this, tile, entry, payload, image);
+    }
   }
   return {};
+}
+
+Result<std::shared_ptr<const ProceduralTiles>> Archive::procedural() const {
+  std::lock_guard lock(impl_->procedural_mutex);
+  if (impl_->procedural_tiles) return impl_->procedural_tiles;
+  if (impl_->procedural_directory.length_bytes == 0)
+    return fail(ErrorCode::kNotFound, impl_->name + ": the archive has no procedural directory");
+  // Not cached on failure: a transient read error (a remote source) is retried by the next
+  // procedural tile; a damaged block fails each of them with the same message.
+  TESSERA_ASSIGN_OR_RETURN(impl_->procedural_tiles, ProceduralTiles::open(*this));
+  return impl_->procedural_tiles;
 }
 
 Result<Image> Archive::readTile(const TileId& tile, CodecScratch* scratch) const {
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, tileEntry(tile));
   std::vector<uint8_t> payload;
-  if (entry.kind == TileKind::kEncoded) {
+  if (entry.hasPayload()) {
     TESSERA_ASSIGN_OR_RETURN(payload, readPayload(tile, entry));
   }
   return decodeTile(tile, entry, payload, scratch);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <tessera/archive.h>
+#include <tessera/procedural.h>
 
 #include "format/directory.h"
 #include "format/header.h"
@@ -41,6 +42,10 @@ struct Archive::Impl {
   /// Reads a block (from header_region when inside it) and verifies its checksum.
   Result<std::vector<uint8_t>> readBlock(const detail::BlockRef& block,
                                          const std::string& what) const;
+  /// A directory page's entries by the rules of the file's minor version (kind 3 from 1.1 on).
+  Result<std::vector<TileEntry>> decodeEntries(std::span<const uint8_t> bytes,
+                                               const ImageInfo& info,
+                                               const std::string& what) const;
   /// The page reference for a page of a level.
   Result<detail::PageRef> pageRef(uint32_t image, uint32_t level, uint32_t page_index);
   using PageResult = Result<std::shared_ptr<const std::vector<TileEntry>>>;
@@ -51,6 +56,17 @@ struct Archive::Impl {
   /// Pages being read now, by key (under cache_mutex).
   std::unordered_map<uint64_t, std::shared_future<PageResult>> pages_loading;
   std::string tileName(const TileId& tile) const;
+
+  /// The section table (format 1.1) and its procedural directory (kind 2); length 0 when the
+  /// archive has none.
+  detail::BlockRef section_table;
+  detail::BlockRef procedural_directory;
+  /// The brush set and compositing of procedural tiles (Archive::procedural), loaded on the
+  /// first procedural tile so that opening an archive reads no brush image, and a damaged brush
+  /// block fails only the procedural tiles (each, naming the block), never open() or the baked
+  /// tiles. Locked after cache_mutex is released, never inside it.
+  std::mutex procedural_mutex;  // guards procedural_tiles; held while it loads (one load)
+  std::shared_ptr<const ProceduralTiles> procedural_tiles;
 
   /// Decoded parents of parent-coded (ptm) tiles for decodeTile without a parent (regions,
   /// verify, extract, the server). The loader passes its own decoded-tile cache instead.

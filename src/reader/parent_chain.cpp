@@ -39,7 +39,7 @@ Result<std::shared_ptr<const Image>> decodeLink(const Archive& archive, const Ch
                                                 const Image* parent, CodecScratch* scratch,
                                                 ChainReads& reads) {
   std::vector<uint8_t> payload;
-  if (link.entry.kind == TileKind::kEncoded) {
+  if (link.entry.hasPayload()) {
     ++reads.reads;
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(link.id, link.entry));
     reads.bytes_read += payload.size();

@@ -3,6 +3,8 @@
 #include <tessera/archive.h>
 
 #include <algorithm>
+#include <set>
+#include <tuple>
 
 #include <fmt/format.h>
 
@@ -24,6 +26,43 @@ void addFault(VerifyReport& report, std::string message) {
     report.faults.push_back(std::move(message));
 }
 
+// What verify carries from tile to tile.
+struct TileChecks {
+  VerifyReport& report;
+  std::vector<Extent>& extents;
+  CodecScratch scratch;
+  /// Instance pages already checked, by (offset, length, checksum): several procedural entries
+  /// may share one page (stored once), which is read, listed as an extent and counted once.
+  std::set<std::tuple<uint64_t, uint32_t, uint64_t>> pages_seen;
+};
+
+// One tile's payload: read and checksummed; decoded (encoded) or composited (procedural)
+// when `decode_payloads`, else a procedural page is still parsed and its brush references
+// checked against the archive's brush set.
+void verifyTile(const Archive& archive, const TileId& tile, const TileEntry& entry,
+                bool decode_payloads, TileChecks& checks) {
+  if (entry.kind == TileKind::kProcedural &&
+      !checks.pages_seen.emplace(entry.offset_bytes, entry.length_bytes, entry.checksum).second)
+    return;
+  checks.extents.push_back({entry.offset_bytes, entry.length_bytes, archive.tileName(tile)});
+  auto payload = archive.readPayload(tile, entry);
+  ++checks.report.payloads_checked;
+  if (!payload) {
+    addFault(checks.report, payload.error().message);
+    return;
+  }
+  checks.report.payload_bytes += payload->size();
+  if (decode_payloads) {
+    auto decoded = archive.decodeTile(tile, entry, *payload, &checks.scratch);
+    if (!decoded) addFault(checks.report, decoded.error().message);
+  } else if (entry.kind == TileKind::kProcedural) {
+    auto tiles = archive.procedural();
+    Result<void> checked = tiles ? (*tiles)->checkPage(archive, tile, entry, *payload)
+                                 : Result<void>(forwardError(tiles));
+    if (!checked) addFault(checks.report, checked.error().message);
+  }
+}
+
 }  // namespace
 
 VerifyReport Archive::verify(bool decode_payloads,
@@ -37,9 +76,19 @@ VerifyReport Archive::verify(bool decode_payloads,
   if (impl.header.metadata.length_bytes)
     extents.push_back(
         {impl.header.metadata.offset_bytes, impl.header.metadata.length_bytes, "metadata"});
+  if (impl.section_table.length_bytes)
+    extents.push_back(
+        {impl.section_table.offset_bytes, impl.section_table.length_bytes, "section table"});
+  if (impl.procedural_directory.length_bytes) {
+    extents.push_back({impl.procedural_directory.offset_bytes,
+                       impl.procedural_directory.length_bytes, "procedural directory"});
+    // Every brush image and the height layer, read, checksummed and decoded once here.
+    auto tiles = procedural();
+    if (!tiles) addFault(report, tiles.error().message);
+  }
   uint64_t levels_total = 0, levels_done = 0;
   for (const ImageInfo& info : impl.infos) levels_total += info.level_count;
-  CodecScratch scratch;
+  TileChecks checks{report, extents, {}, {}};
 
   for (uint32_t image = 0; image < impl.infos.size(); ++image) {
     const ImageInfo& info = impl.infos[image];
@@ -81,8 +130,7 @@ VerifyReport Archive::verify(bool decode_payloads,
             addFault(report, bytes.error().message);
             continue;
           }
-          auto decoded =
-              detail::decodeTileEntries(*bytes, info, impl.header, impl.name + ": " + page_name);
+          auto decoded = impl.decodeEntries(*bytes, info, impl.name + ": " + page_name);
           if (!decoded) {
             addFault(report, decoded.error().message);
             continue;
@@ -94,20 +142,9 @@ VerifyReport Archive::verify(bool decode_payloads,
           TileId tile{image, level, geometry.first_tile_x + uint32_t(i % geometry.columns),
                       geometry.first_tile_y + uint32_t(i / geometry.columns)};
           ++report.tiles_checked;
-          if (entry.kind != TileKind::kEncoded) continue;
+          if (!entry.hasPayload()) continue;
           level_payload_bytes += entry.length_bytes;
-          extents.push_back({entry.offset_bytes, entry.length_bytes, impl.tileName(tile)});
-          auto payload = readPayload(tile, entry);
-          ++report.payloads_checked;
-          if (!payload) {
-            addFault(report, payload.error().message);
-            continue;
-          }
-          report.payload_bytes += payload->size();
-          if (decode_payloads) {
-            auto decoded = decodeTile(tile, entry, *payload, &scratch);
-            if (!decoded) addFault(report, decoded.error().message);
-          }
+          verifyTile(*this, tile, entry, decode_payloads, checks);
         }
       }
       if (level_payload_bytes != impl.records[image].levels[level].payload_bytes)

@@ -14,6 +14,7 @@
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/scene.h"
+#include "format/sections.h"
 #include "scene/geometry.h"
 
 namespace tessera {
@@ -179,13 +180,20 @@ Result<std::shared_ptr<SceneArchive>> SceneArchive::open(std::shared_ptr<ByteSou
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: header records {} bytes but the file has {} (truncated?)",
                             impl->name, impl->header.file_bytes, size));
-  TESSERA_ASSIGN_OR_RETURN(BlockRef scene,
-                           decodeSceneRef(impl->header_region, impl->header, impl->name));
+  TESSERA_ASSIGN_OR_RETURN(const BlockRef table,
+                           decodeSectionTableRef(impl->header_region, impl->header, impl->name));
+  impl->source = std::move(source);
+  std::vector<SectionEntry> sections;
+  if (table.length_bytes != 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> table_bytes,
+                             impl->readVerified(table, "section table"));
+    TESSERA_ASSIGN_OR_RETURN(sections, decodeSectionTable(table_bytes, impl->header, impl->name));
+  }
+  TESSERA_ASSIGN_OR_RETURN(BlockRef scene, decodeSceneRef(sections, impl->name));
   if (scene.length_bytes == 0)
     return fail(ErrorCode::kNotFound,
                 fmt::format("{}: a version {}.{} archive without a scene", impl->name,
                             impl->header.version_major, impl->header.version_minor));
-  impl->source = std::move(source);
   TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes,
                            impl->readVerified(scene, "scene directory"));
   TESSERA_ASSIGN_OR_RETURN(impl->directory, decodeSceneDirectory(bytes, impl->header, impl->name));

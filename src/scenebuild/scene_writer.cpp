@@ -8,6 +8,7 @@
 #include "format/checksum.h"
 #include "format/directory.h"
 #include "format/header.h"
+#include "format/sections.h"
 #include "geometry_encode.h"
 #include "output/file_appender.h"
 
@@ -263,9 +264,12 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
     TESSERA_ASSIGN_OR_RETURN(block.ref.offset_bytes, s.appender.append(block.bytes));
     return {};
   };
-  // The scene directory's size is fixed: reserve it first so it is always in the region.
+  // The scene directory and the one-entry section table that points at it have fixed sizes:
+  // reserve them first so they are always in the region (one read opens a scene).
   const uint64_t scene_offset = region_used;
   region_used += kSceneDirectoryBytes;
+  const uint64_t sections_offset = region_used;
+  region_used += kSectionEntryBytes;
   PlacedBlock node_table = makeBlock(encodeNodeRecords(s.nodes));
   PlacedBlock texture_table = makeBlock(encodeTextureRecords(texture_records));
   TESSERA_TRY(place(node_table));
@@ -294,6 +298,10 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
   std::vector<uint8_t> directory_bytes = encodeSceneDirectory(directory);
   std::memcpy(region.data() + scene_offset, directory_bytes.data(), directory_bytes.size());
   const BlockRef scene{scene_offset, directory_bytes.size(), checksum64(directory_bytes)};
+  const SectionEntry section{uint32_t(SectionKind::kScene), scene};
+  const std::vector<uint8_t> table_bytes = encodeSectionTable({&section, 1});
+  std::memcpy(region.data() + sections_offset, table_bytes.data(), table_bytes.size());
+  const BlockRef table{sections_offset, table_bytes.size(), checksum64(table_bytes)};
 
   FileHeader header;
   header.version_minor = kSceneVersionMinor;
@@ -303,7 +311,9 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
   header.metadata = metadata.ref;
   // The region without the header first, the header last (the commit marker).
   TESSERA_TRY(out.pwrite(kHeaderBytes, std::span(region).subspan(kHeaderBytes)));
-  TESSERA_TRY(out.pwrite(0, encodeSceneHeader(header, scene)));
+  std::vector<uint8_t> header_bytes = encodeHeader(header);
+  stampSectionTableRef(header_bytes, table);
+  TESSERA_TRY(out.pwrite(0, header_bytes));
   s.result.file_bytes = header.file_bytes;
   return s.result;
 }

@@ -1,4 +1,4 @@
-#include "pictures.h"
+#include "serve/pictures.h"
 
 #include <algorithm>
 #include <bit>
@@ -119,6 +119,19 @@ PictureFormat dziFormat(const ImageInfo& info) {
   return info.default_codec == Codec::kJpeg && !alpha ? PictureFormat::kJpeg : PictureFormat::kPng;
 }
 
+const char* dziExtension(PictureFormat format) {
+  return format == PictureFormat::kPng ? "png" : "jpg";
+}
+
+std::string dziDescriptor(const ImageInfo& info) {
+  return fmt::format(
+      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
+      "<Image xmlns=\"http://schemas.microsoft.com/deepzoom/2008\" TileSize=\"{}\" "
+      "Overlap=\"{}\" Format=\"{}\">\n  <Size Width=\"{}\" Height=\"{}\"/>\n</Image>\n",
+      info.tile_size_px, dziOverlap(info), dziExtension(dziFormat(info)), info.width_px,
+      info.height_px);
+}
+
 uint32_t xyzMaxZoom(const ImageInfo& info) {
   const uint32_t side = std::max(info.width_px, info.height_px);
   return ceilLog2((side + kXyzTileSizePx - 1) / kXyzTileSizePx);
@@ -163,10 +176,10 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
     if (whole_stored_tile && entry.kind == TileKind::kEncoded &&
         browserReady(info, entry.codec, format)) {
       TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload, archive.readPayload(id, entry));
-      return Picture{std::string(payload.begin(), payload.end())};
+      return Picture{std::string(payload.begin(), payload.end()), true};
     }
     std::vector<uint8_t> payload;
-    if (entry.kind == TileKind::kEncoded) {
+    if (entry.hasPayload()) {
       TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(id, entry));
     }
     TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(id, entry, payload));
@@ -205,7 +218,7 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
     TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(id));
     if (entry.kind == TileKind::kEncoded && browserReady(info, entry.codec, format)) {
       TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload, archive.readPayload(id, entry));
-      return Picture{std::string(payload.begin(), payload.end())};
+      return Picture{std::string(payload.begin(), payload.end()), true};
     }
   }
   TESSERA_ASSIGN_OR_RETURN(
@@ -233,7 +246,7 @@ Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
                                     PictureFormat format, int jpeg_quality) {
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
-  if (entry.kind == TileKind::kEncoded) {
+  if (entry.hasPayload()) {
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
   }
   TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));

@@ -12,7 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "byte_ranges.h"
-#include "pictures.h"
+#include "serve/pictures.h"
 #include "viewer_assets.h"
 
 namespace tessera::detail {
@@ -492,12 +492,7 @@ Response Router::picture(const Request& request, const ServedArchive& served,
 Response Router::dziDescriptor(const Request& request, const ServedArchive& served,
                                uint32_t image) {
   const ImageInfo& info = served.archive->images()[image];
-  std::string xml = fmt::format(
-      "<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n"
-      "<Image xmlns=\"http://schemas.microsoft.com/deepzoom/2008\" TileSize=\"{}\" "
-      "Overlap=\"{}\" Format=\"{}\">\n  <Size Width=\"{}\" Height=\"{}\"/>\n</Image>\n",
-      info.tile_size_px, dziOverlap(info), dziFormat(info) == PictureFormat::kPng ? "png" : "jpg",
-      info.width_px, info.height_px);
+  std::string xml = detail::dziDescriptor(info);
   return bytesResponse(request, shared(std::move(xml)), "application/xml",
                        derivedEtag(served, fmt::format("dzi/{}", image)), kRevalidate);
 }
@@ -548,7 +543,9 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   response.set(http::field::cache_control, kImmutable);
   response.set("X-Tessera-Tile-Kind", tileKindName(entry->kind));
   if (entry->kind != TileKind::kEncoded) {
-    // No payload to send: the kind (and colour) say everything; ?format= gives pixels.
+    // No payload to send: the kind (and colour) say everything; ?format= gives pixels. A
+    // procedural tile's instance page is no picture: readers of the archive file fetch it by
+    // range and composite it, and ?format= gives its composited pixels.
     response.result(http::status::no_content);
     if (entry->kind == TileKind::kUniform) {
       // Channel 0 first (rrggbbaa), the order people read colours in, whatever the

@@ -7,6 +7,9 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <limits>
 
 #include <fmt/format.h>
 
@@ -22,6 +25,15 @@ namespace {
 
 /// Niceness of loader threads (0 is the default, 19 the lowest priority).
 constexpr int kLoaderNiceness = 5;
+
+/// LoaderPriority::kAuto: the window over which the helpers judge whether the idle-priority
+/// workers starve (waited for a core at least half of it, from /proc's schedstat; where /proc
+/// does not say, ready work waited this long while none took any), and the age at which a
+/// tile a starving worker holds is loaded again by a helper. One frame at 60 fps.
+constexpr std::chrono::milliseconds kStarvedAfter{16};
+/// A rescue ends after this, to see whether the idle workers get a core again (the machine
+/// may be free by now); if not, the next window starts another.
+constexpr std::chrono::milliseconds kRescueProbe{500};
 
 /// Requests of the same level considered for merging with the one a worker takes.
 constexpr size_t kMergeCandidates = 32;
@@ -65,11 +77,71 @@ class CachedParents final : public ParentStore {
 /// spends on hints before its own read.
 constexpr size_t kReadAheadTilesPerCall = 512;
 
+/// Sets the calling thread's scheduling: SCHED_IDLE when `idle`, else niceness `nice`.
+/// Lowering one's own priority needs no privilege; a failure leaves the default (and an idle
+/// thread that cannot be made idle runs at kLoaderNiceness).
+void setThreadPriority(bool idle, int nice) {
+  if (idle) {
+    sched_param param{};
+    if (::pthread_setschedparam(::pthread_self(), SCHED_IDLE, &param) == 0) return;
+    nice = kLoaderNiceness;
+  }
+  if (nice != 0) ::setpriority(PRIO_PROCESS, pid_t(::syscall(SYS_gettid)), nice);
+}
+
+/// Thread `tid`'s ThreadTimes from /proc/self/task/TID/schedstat.
+ThreadTimes threadTimes(pid_t tid) {
+  char path[64];
+  std::snprintf(path, sizeof path, "/proc/self/task/%d/schedstat", int(tid));
+  FILE* file = std::fopen(path, "re");
+  if (!file) return {};
+  unsigned long long on_cpu_ns = 0, waited_ns = 0;
+  const int fields = std::fscanf(file, "%llu %llu", &on_cpu_ns, &waited_ns);
+  std::fclose(file);
+  return fields == 2 ? ThreadTimes{int64_t(on_cpu_ns), int64_t(waited_ns)} : ThreadTimes{};
+}
+
+/// True when thread `tid` of this process is running or waiting for a core (state R), false
+/// when it sleeps (on I/O, a lock, a network read) or /proc does not say.
+bool threadRunnable(pid_t tid) {
+  char path[64];
+  std::snprintf(path, sizeof path, "/proc/self/task/%d/stat", int(tid));
+  FILE* file = std::fopen(path, "re");
+  if (!file) return false;
+  char line[512];
+  const bool read = std::fgets(line, sizeof line, file) != nullptr;
+  std::fclose(file);
+  const char* name_end = read ? std::strrchr(line, ')') : nullptr;
+  return name_end && name_end[1] == ' ' && name_end[2] == 'R';
+}
+
+/// `error` as the failed load of tile `id`, its message naming the archive and the tile
+/// first: a byte source names only its file or URL and the range it read ("http://h/s.tess:
+/// bytes=0-99: HTTP 503 Service Unavailable" becomes "http://h/s.tess: tile (0,3,7):
+/// bytes=0-99: HTTP 503 Service Unavailable").
+LoadEvent failedLoad(const Archive& archive, const TileId& id, const Error& error) {
+  const std::string tile = archive.tileName(id);
+  std::string message = error.message;
+  if (message.find(tile) == std::string::npos) {
+    const std::string prefix = archive.name() + ": ";
+    if (message.starts_with(prefix)) message.erase(0, prefix.size());
+    message = tile + ": " + message;
+  }
+  LoadEvent event;
+  event.id = id;
+  event.error = std::move(message);
+  event.code = error.code;
+  return event;
+}
+
 }  // namespace
 
 struct LoaderPool::Batch {
   TileId first;
   bool early = false;  ///< taken while its first tile's parent was loading (takeBatchLocked)
+  /// The idle-priority worker that took it (its index), or -1 for a helper or a niceness-5
+  /// worker: a starving idle worker's tiles are loaded again by the helpers.
+  int32_t idle_worker = -1;
   std::vector<TileId> candidates;
   std::vector<BatchItem> items;
 };
@@ -81,12 +153,18 @@ LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
       options_(options),
       thread_count_(options.threads ? options.threads
                                     : std::max(1u, std::thread::hardware_concurrency())),
+      helper_count_(options.priority == LoaderPriority::kAuto
+                        ? std::min(thread_count_, std::max(1u, std::thread::hardware_concurrency()))
+                        : 0),
       texel_pool_(std::make_shared<TexelPool>(options.recycled_bytes)) {
   for (const ImageInfo& info : archive_->images()) {
     dependent_images_.push_back(codecNeedsParent(info.default_codec) && info.level_count > 1);
     any_dependent_ = any_dependent_ || dependent_images_.back();
   }
+  idle_tids_.assign(thread_count_, 0);
+  idle_times_.assign(thread_count_, {});
   for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
+  for (uint32_t i = 0; i < helper_count_; ++i) workers_.emplace_back([this, i] { runHelper(i); });
 }
 
 LoaderPool::~LoaderPool() {
@@ -96,6 +174,8 @@ LoaderPool::~LoaderPool() {
     queue_.clear();
   }
   work_ready_.notify_all();
+  helpers_wake_.notify_all();
+  rescue_over_.notify_all();
   for (std::thread& worker : workers_) worker.join();
 }
 
@@ -138,6 +218,8 @@ void LoaderPool::setWanted(std::span<const TileRequest> requests) {
       it = wanted_.count(it->first) ? std::next(it) : retries_.erase(it);
     stats_.queued = queue_.size();
     noteIdleLocked();
+    // Helpers with nothing ready sleep until work comes; they then time the idle workers.
+    if (helpers_asleep_ && !queue_.empty()) helpers_wake_.notify_all();
   }
   work_ready_.notify_all();
 }
@@ -253,7 +335,7 @@ void LoaderPool::waitIdle() {
   });
 }
 
-bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
+bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now, bool may_wait) {
   // Dependent codecs: a tile whose parent is loading or queued waits for it, so it decodes
   // against the cached parent instead of reading the parent a second time. When nothing else
   // is ready, a worker takes a tile whose parent is loading (the second pass): it reads the
@@ -265,7 +347,7 @@ bool LoaderPool::takeBatchLocked(Batch& batch, Clock::time_point now) {
   queued_ids_valid_ = false;
   for (const bool early : {false, true}) {
     // One worker always stays free of waits, for the work the next frame may bring.
-    if (early && (!any_dependent_ || early_batches_ + 1 >= thread_count_)) break;
+    if (early && (!may_wait || !any_dependent_ || early_batches_ + 1 >= thread_count_)) break;
     for (size_t i = 0; i < queue_.size(); ++i) {
       auto retry = retries_.find(queue_[i].id);
       if (retry != retries_.end() && retry->second.not_before > now) continue;
@@ -283,6 +365,8 @@ void LoaderPool::takeLocked(Batch& batch, size_t index, bool early, Clock::time_
   const uint32_t first_urgency = queue_[index].urgency;
   batch.candidates.clear();
   batch.items.clear();
+  if (batch.idle_worker >= 0)
+    idle_held_[batch.first] = {queue_[index].priority, now, uint32_t(batch.idle_worker)};
   queue_.erase(queue_.begin() + ptrdiff_t(index));
   in_flight_.insert(batch.first);
   if (early) {
@@ -306,26 +390,27 @@ void LoaderPool::takeLocked(Batch& batch, size_t index, bool early, Clock::time_
   stats_.queued = queue_.size();
 }
 
-void LoaderPool::run(uint32_t) {
-  // Loader threads yield the CPU to the render thread: on a machine with fewer free cores
-  // than threads, a frame must not wait for a decode to be preempted. At niceness 5 the
-  // scheduler still let a decode finish its slice first (render-thread p99 1.1 ms, max 2.6 ms
-  // in an evicting flight on 2 cores); SCHED_IDLE threads give way at once (p99 0.21 ms, same
-  // load times). Lowering one's own priority needs no privilege; failure leaves the default.
-  bool idle = false;
-  if (options_.idle_priority) {
-    sched_param param{};
-    idle = ::pthread_setschedparam(::pthread_self(), SCHED_IDLE, &param) == 0;
-  }
-  if (!idle) ::setpriority(PRIO_PROCESS, pid_t(::syscall(SYS_gettid)), kLoaderNiceness);
+void LoaderPool::run(uint32_t worker_index) {
+  // Loader threads yield the CPU to the render thread (LoaderPriority, docs/runtime.md): with
+  // fewer free cores than threads, a frame must not wait for a decode to be preempted.
+  const bool idle = options_.priority != LoaderPriority::kNice;
+  setThreadPriority(idle, idle ? 0 : kLoaderNiceness);
   CodecScratch scratch;
   Batch batch;
   std::vector<TileId> read_ahead;
   std::unique_lock lock(mutex_);
+  idle_tids_[worker_index] = pid_t(::syscall(SYS_gettid));
   for (;;) {
     if (stopping_) return;
     auto now = Clock::now();
-    if (!takeBatchLocked(batch, now)) {
+    // While the helpers rescue, a starving worker would only hold tiles they must then load
+    // again: it waits for the rescue to end.
+    if (rescuing_) {
+      rescue_over_.wait(lock);
+      continue;
+    }
+    batch.idle_worker = idle ? int32_t(worker_index) : -1;
+    if (!takeBatchLocked(batch, now, true)) {
       // Idle: fault in buffers for the next decodes while nothing waits, so the first tiles
       // after a jump skip the page faults and clearing of fresh memory (about 80 us a 256-px
       // RGB tile here). Up to the pool's cap, and only into room the cache budget still has.
@@ -337,28 +422,186 @@ void LoaderPool::run(uint32_t) {
         idle_.notify_all();
         continue;
       }
-      // Sleep until new work, or until the earliest backoff ends.
-      auto wake = Clock::time_point::max();
-      for (const Pending& pending : queue_) {
-        auto it = retries_.find(pending.id);
-        if (it != retries_.end()) wake = std::min(wake, it->second.not_before);
-      }
       idle_.notify_all();
-      if (wake == Clock::time_point::max())
-        work_ready_.wait(lock);
-      else
-        work_ready_.wait_until(lock, wake);
+      sleepUntilWorkLocked(lock, work_ready_);
       continue;
     }
-    collectReadAheadLocked(read_ahead);
-    lock.unlock();
-    // Before this worker's own read: a cold disk then serves the tiles queued behind it
-    // while this one reads and decodes, instead of one read at a time per worker.
-    hintReadAhead(read_ahead);
-    loadBatch(batch, scratch);
-    lock.lock();
-    if (batch.early) --early_batches_;
+    idle_took_at_ = now;
+    loadTakenBatch(lock, batch, scratch, read_ahead);
   }
+}
+
+void LoaderPool::runHelper(uint32_t helper_index) {
+  // Normal priority: a helper loads only while the idle-priority workers starve, when other
+  // threads keep every core busy, and then takes its fair share of a core like theirs. The
+  // first helper watches; the others sleep until it starts a rescue.
+  CodecScratch scratch;
+  Batch batch;
+  std::vector<TileId> read_ahead;
+  std::unique_lock lock(mutex_);
+  for (;;) {
+    if (stopping_) return;
+    auto now = Clock::now();
+    if (queue_.empty() && in_flight_.empty()) {
+      endRescueLocked();
+      helpers_asleep_ = true;
+      helpers_wake_.wait(lock);
+      helpers_asleep_ = false;
+      check_from_ = Clock::now();  // the window starts when work comes
+      sampleIdleWaitLocked();
+      continue;
+    }
+    if (!rescuing_) {
+      if (helper_index != 0) {
+        helpers_wake_.wait(lock);
+        continue;
+      }
+      if (now < check_from_ + kStarvedAfter) {
+        helpers_wake_.wait_until(lock, check_from_ + kStarvedAfter);
+        continue;
+      }
+      if (!idleWorkersStarvedLocked(now)) continue;
+      rescuing_ = true;
+      rescue_began_ = now;
+      ++stats_.rescues;
+      helpers_wake_.notify_all();
+    } else if (now > rescue_began_ + kRescueProbe) {
+      endRescueLocked();
+      continue;
+    }
+    batch.idle_worker = -1;
+    // A starving worker's tiles were the best of the queue when it took them (the view's
+    // tiles, after a jump): they go before queued tiles of lower priority, else the view
+    // waits for the whole queue, or for the starving worker.
+    constexpr double kAny = std::numeric_limits<double>::infinity();
+    const double queue_best = queue_.empty() ? kAny : queue_.front().priority;
+    if (takeHostageLocked(batch, now, queue_best) || takeBatchLocked(batch, now, false) ||
+        takeHostageLocked(batch, now, kAny)) {
+      ++stats_.rescued_batches;
+      loadTakenBatch(lock, batch, scratch, read_ahead);
+      continue;
+    }
+    // Nothing a helper may take: what is left is in flight (or waits for a backoff, or for
+    // its parent); a tile a starving worker holds may be old enough to load again soon.
+    auto wake = now + kStarvedAfter / 4;
+    helpers_wake_.wait_until(lock, std::min(wake, rescue_began_ + kRescueProbe));
+  }
+}
+
+void LoaderPool::endRescueLocked() {
+  if (!rescuing_) return;
+  rescuing_ = false;
+  check_from_ = Clock::now();
+  sampleIdleWaitLocked();
+  rescue_over_.notify_all();  // the idle workers take work again
+}
+
+void LoaderPool::sampleIdleWaitLocked() {
+  for (size_t i = 0; i < idle_tids_.size(); ++i)
+    idle_times_[i] = idle_tids_[i] ? threadTimes(idle_tids_[i]) : ThreadTimes{};
+}
+
+bool LoaderPool::idleWorkersStarvedLocked(Clock::time_point now) {
+  const int64_t window_ns =
+      std::chrono::duration_cast<std::chrono::nanoseconds>(now - check_from_).count();
+  // Per worker, the share of the window it starved: for one that wants a core now (runnable),
+  // the part it did not get one; for one that sleeps, the waits that ended in the window.
+  double starved = 0;
+  bool known = window_ns > 0;
+  for (size_t i = 0; i < idle_tids_.size() && known; ++i) {
+    const ThreadTimes before = idle_times_[i];
+    const ThreadTimes after = idle_tids_[i] ? threadTimes(idle_tids_[i]) : ThreadTimes{};
+    idle_times_[i] = after;
+    known = before.waited_ns >= 0 && after.waited_ns >= before.waited_ns &&
+            after.on_cpu_ns >= before.on_cpu_ns;
+    if (!known) break;
+    const double waited = double(after.waited_ns - before.waited_ns) / double(window_ns);
+    const double ran = double(after.on_cpu_ns - before.on_cpu_ns) / double(window_ns);
+    starved += threadRunnable(idle_tids_[i]) ? std::max(waited, 1 - ran) : std::min(waited, 1.0);
+  }
+  check_from_ = now;
+  if (known) return starved * 2 >= double(idle_tids_.size());  // half the window, on average
+  // Without /proc: ready work waited the whole window and no idle worker took any.
+  const Clock::time_point ready_since = readySinceLocked(now);
+  return ready_since != Clock::time_point::max() &&
+         now - std::max(idle_took_at_, ready_since) >= kStarvedAfter;
+}
+
+bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now, double up_to) {
+  // The best tile an idle worker took more than kStarvedAfter ago and still holds, not being
+  // loaded again already, while that worker waits for a core (a worker waiting on a read is
+  // not starving, and its read is not made twice).
+  const TileId* best = nullptr;
+  double best_priority = 0;
+  std::vector<int8_t> runnable(idle_tids_.size(), -1);
+  for (const auto& [id, held] : idle_held_) {
+    if (held.taken_at + kStarvedAfter > now || held.priority > up_to || duplicated_.count(id) ||
+        !wanted_.count(id))
+      continue;
+    if (best && held.priority >= best_priority) continue;
+    if (any_dependent_ && needsParent(id) && in_flight_.count(Archive::parentTile(id))) continue;
+    // A holder that sleeps waits on a read, or on the pool's lock that a starving thread
+    // holds: the latter is told by its age.
+    int8_t& state = runnable[held.worker];
+    if (state < 0) state = threadRunnable(idle_tids_[held.worker]) ? 1 : 0;
+    if (state == 0 && held.taken_at + 4 * kStarvedAfter > now) continue;
+    best = &id;
+    best_priority = held.priority;
+  }
+  if (!best) return false;
+  batch.first = *best;
+  batch.early = false;
+  batch.candidates.clear();
+  batch.items.clear();
+  duplicated_.insert(*best);
+  ++stats_.tiles_loaded_twice;
+  return true;
+}
+
+bool LoaderPool::claimLocked(const TileId& id) {
+  if (auto it = silenced_.find(id); it != silenced_.end()) {
+    if (--it->second == 0) silenced_.erase(it);
+    return false;
+  }
+  if (duplicated_.erase(id)) ++silenced_[id];
+  idle_held_.erase(id);
+  return true;
+}
+
+Clock::time_point LoaderPool::readySinceLocked(Clock::time_point now) const {
+  for (const Pending& pending : queue_) {
+    auto retry = retries_.find(pending.id);
+    if (retry != retries_.end() && retry->second.not_before > now) continue;
+    auto wanted = wanted_.find(pending.id);
+    return wanted == wanted_.end() ? now : wanted->second;
+  }
+  return Clock::time_point::max();
+}
+
+void LoaderPool::sleepUntilWorkLocked(std::unique_lock<std::mutex>& lock,
+                                      std::condition_variable& wake_up) {
+  // Until new work, or until the earliest backoff ends.
+  auto wake = Clock::time_point::max();
+  for (const Pending& pending : queue_) {
+    auto it = retries_.find(pending.id);
+    if (it != retries_.end()) wake = std::min(wake, it->second.not_before);
+  }
+  if (wake == Clock::time_point::max())
+    wake_up.wait(lock);
+  else
+    wake_up.wait_until(lock, wake);
+}
+
+void LoaderPool::loadTakenBatch(std::unique_lock<std::mutex>& lock, Batch& batch,
+                                CodecScratch& scratch, std::vector<TileId>& read_ahead) {
+  collectReadAheadLocked(read_ahead);
+  lock.unlock();
+  // Before this worker's own read: a cold disk then serves the tiles queued behind it
+  // while this one reads and decodes, instead of one read at a time per worker.
+  hintReadAhead(read_ahead);
+  loadBatch(batch, scratch);
+  lock.lock();
+  if (batch.early) --early_batches_;
 }
 
 void LoaderPool::collectReadAheadLocked(std::vector<TileId>& out) {
@@ -390,7 +633,7 @@ void LoaderPool::hintReadAhead(std::span<const TileId> tiles) {
     lock.unlock();
     for (const TileId& id : tiles) {
       Result<TileEntry> entry = room ? archive_->tileEntry(id) : Result<TileEntry>(TileEntry{});
-      if (!entry || entry->kind != TileKind::kEncoded || room == 0) {
+      if (!entry || !entry->hasPayload() || room == 0) {
         not_hinted.push_back(id);
         continue;
       }
@@ -434,8 +677,9 @@ bool LoaderPool::shouldPrewarm() const {
   return cache.bytes + cache.reserved_bytes + idle + bytes <= cache_.budgetBytes();
 }
 
-void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed) {
+void LoaderPool::finish(const TileId& id, LoadEvent event, bool failed, bool claimed) {
   std::lock_guard lock(mutex_);
+  if (!claimed && !claimLocked(id)) return;  // the later of a duplicated tile's two loads
   in_flight_.erase(id);
   forgetHintLocked(id);
   if (failed) {
@@ -535,12 +779,11 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
   const Archive& archive = *archive_;
   Result<TileEntry> first_entry = archive.tileEntry(batch.first);
   if (!first_entry) {
-    finish(batch.first, {batch.first, false, false, first_entry.error().message}, true);
+    finish(batch.first, failedLoad(*archive_, batch.first, first_entry.error()), true);
     return;
   }
   batch.items.push_back({batch.first, *first_entry});
-  if (first_entry->kind == TileKind::kEncoded && !batch.candidates.empty())
-    addNeighbours(batch, *first_entry);
+  if (first_entry->hasPayload() && !batch.candidates.empty()) addNeighbours(batch, *first_entry);
   const BatchReads reads = readBatch(batch);
   const size_t tile_bytes = archive.images()[batch.first.image].storedTileBytes();
   last_tile_bytes_.store(tile_bytes, std::memory_order_relaxed);
@@ -549,10 +792,10 @@ void LoaderPool::loadBatch(Batch& batch, CodecScratch& scratch) {
     Result<std::span<const uint8_t>> payload = payloadOf(item, reads, i);
     if (!payload) {
       // An abandoned read is no failure: its tiles left the wanted set.
-      const bool cancelled = payload.error().code == ErrorCode::kCancelled;
-      finish(item.id,
-             {item.id, false, cancelled, cancelled ? "" : payload.error().message, cancelled},
-             !cancelled);
+      if (payload.error().code == ErrorCode::kCancelled)
+        finish(item.id, {item.id, false, true, "", true}, false);
+      else
+        finish(item.id, failedLoad(archive, item.id, payload.error()), true);
       continue;
     }
     decodeAndDeliver(item, *payload, tile_bytes, scratch);
@@ -565,7 +808,7 @@ void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
   std::vector<BatchItem> neighbours;
   for (const TileId& id : batch.candidates) {
     Result<TileEntry> entry = archive_->tileEntry(id);
-    if (entry && entry->kind == TileKind::kEncoded) neighbours.push_back({id, *entry});
+    if (entry && entry->hasPayload()) neighbours.push_back({id, *entry});
   }
   std::sort(neighbours.begin(), neighbours.end(), [](const auto& a, const auto& b) {
     return a.entry.offset_bytes < b.entry.offset_bytes;
@@ -580,6 +823,8 @@ void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
     auto it = std::find_if(queue_.begin(), queue_.end(),
                            [&](const Pending& p) { return p.id == item.id; });
     if (it == queue_.end()) continue;
+    if (batch.idle_worker >= 0)
+      idle_held_[item.id] = {it->priority, now, uint32_t(batch.idle_worker)};
     queue_.erase(it);
     in_flight_.insert(item.id);
     if (any_dependent_ && needsParent(item.id) && in_flight_.count(Archive::parentTile(item.id)))
@@ -596,7 +841,7 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
   // bad read, and the loader must count the reads and bytes it makes.
   std::vector<const BatchItem*> encoded;
   for (const auto& item : batch.items)
-    if (item.entry.kind == TileKind::kEncoded) encoded.push_back(&item);
+    if (item.entry.hasPayload()) encoded.push_back(&item);
   std::sort(encoded.begin(), encoded.end(), [](const BatchItem* a, const BatchItem* b) {
     return a->entry.offset_bytes < b->entry.offset_bytes;
   });
@@ -608,7 +853,7 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
         spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
   std::vector<std::vector<TileId>> run_tiles(spans.size());
   for (size_t i = 0; i < batch.items.size(); ++i)
-    if (batch.items[i].entry.kind == TileKind::kEncoded)
+    if (batch.items[i].entry.hasPayload())
       run_tiles[reads.run_of_item[i]].push_back(batch.items[i].id);
   reads.runs.resize(spans.size());
   for (size_t i = 0; i < spans.size(); ++i) {
@@ -656,7 +901,7 @@ void LoaderPool::readRun(BatchReads& reads, size_t index, std::vector<TileId> ti
 Result<std::span<const uint8_t>> LoaderPool::payloadOf(const BatchItem& item,
                                                        const BatchReads& reads,
                                                        size_t index) const {
-  if (item.entry.kind != TileKind::kEncoded) return std::span<const uint8_t>();
+  if (!item.entry.hasPayload()) return std::span<const uint8_t>();
   const BatchReads::Run& run = reads.runs[reads.run_of_item[index]];
   if (!run.read) return forwardError(run.read);
   const auto payload = std::span<const uint8_t>(run.bytes).subspan(
@@ -675,7 +920,12 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
   }
   // The budget counts buffers in flight: no room means try again later, not an error.
   if (!cache_.reserve(tile_bytes)) {
-    finish(item.id, {item.id, false, false, "tile cache full of pinned tiles"}, true);
+    finish(item.id,
+           failedLoad(*archive_, item.id,
+                      {ErrorCode::kTooLarge,
+                       fmt::format("tile cache full of pinned tiles ({} bytes budget)",
+                                   cache_.budgetBytes())}),
+           true);
     return;
   }
   const auto started = Clock::now();
@@ -687,18 +937,21 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
   cache_.unreserve(tile_bytes);
   if (!decoded) {
     texel_pool_->give(std::move(texels.texels));
-    finish(item.id, {item.id, false, false, decoded.error().message}, true);
+    finish(item.id, failedLoad(*archive_, item.id, decoded.error()), true);
     return;
   }
-  bool wanted;
+  bool claimed = false, wanted = false;
   {
     std::lock_guard lock(mutex_);
-    wanted = wanted_.count(item.id) > 0;
+    // Of a tile loaded twice (a helper's second load of a starving worker's tile), the first
+    // load to finish delivers; the other is dropped unseen.
+    claimed = claimLocked(item.id);
+    wanted = claimed && wanted_.count(item.id) > 0;
     stats_.decode_ns += decode_ns;
     if (wanted) {
       ++stats_.tiles_loaded;
       stats_.payload_bytes += item.entry.length_bytes;
-    } else {
+    } else if (claimed) {
       ++stats_.stale_dropped;
     }
   }
@@ -707,7 +960,7 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
     cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
   else
     texel_pool_->give(std::move(texels.texels));
-  finish(item.id, {item.id, wanted, !wanted, ""}, false);
+  if (claimed) finish(item.id, {item.id, wanted, !wanted, ""}, false, true);
 }
 
 }  // namespace tessera::detail

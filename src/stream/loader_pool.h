@@ -4,6 +4,8 @@
 // payloads are adjacent in the file into one read), verify checksums, decode and insert into
 // the tile cache; the render thread polls their results and never waits for them.
 
+#include <sys/types.h>
+
 #include <atomic>
 #include <chrono>
 #include <condition_variable>
@@ -33,11 +35,19 @@ struct LoaderOptions {
   uint64_t max_merged_read_bytes = 4 << 20;
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
-  bool idle_priority = true;  ///< StreamerOptions::loader_idle_priority
+  LoaderPriority priority = LoaderPriority::kAuto;  ///< StreamerOptions::loader_priority
   /// StreamerOptions::recycled_buffer_bytes.
   uint64_t recycled_bytes = 64u << 20;
   /// StreamerOptions::read_ahead_bytes.
   uint64_t read_ahead_bytes = 4u << 20;
+};
+
+/// A thread's scheduling figures from /proc's schedstat: nanoseconds on a core, and waiting
+/// on a run queue for one (the kernel adds a wait only when it ends, so a thread that never
+/// gets a core shows none). Negative where /proc does not say.
+struct ThreadTimes {
+  int64_t on_cpu_ns = -1;
+  int64_t waited_ns = -1;
 };
 
 /// A finished request, reported once to the render thread.
@@ -47,6 +57,7 @@ struct LoadEvent {
   bool stale = false;      ///< decoded but no longer wanted: dropped, not cached
   std::string error;       ///< names the archive, the tile and the problem
   bool cancelled = false;  ///< its read was abandoned in flight (also stale): not a failure
+  ErrorCode code = ErrorCode::kIo;  ///< a failure's kind (neither ok nor stale)
 };
 
 struct LoaderStats {
@@ -73,6 +84,12 @@ struct LoaderStats {
   /// payloads are read during the parent's load, and they decode after it (docs/runtime.md,
   /// "Dependent codecs").
   uint64_t children_read_early = 0;
+  /// LoaderPriority::kAuto: times the normal-priority helpers began loading because the
+  /// idle-priority workers starved, and the batches they loaded.
+  uint64_t rescues = 0;
+  uint64_t rescued_batches = 0;
+  /// Of those, tiles a starving idle worker held, loaded a second time by a helper.
+  uint64_t tiles_loaded_twice = 0;
   LinkEstimate link;  ///< throughput, latency and queue wait measured on every read
   /// When the queue and in-flight set last became empty together (the end of a load).
   std::chrono::steady_clock::time_point idle_since{};
@@ -136,8 +153,38 @@ class LoaderPool {
   };
   /// True when any of `tiles` is wanted. Under mutex_.
   bool anyWantedLocked(std::span<const TileId> tiles) const;
+  /// Loader thread `worker_index` (LoaderOptions::priority).
   void run(uint32_t worker_index);
-  bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now);
+  /// A normal-priority helper (LoaderPriority::kAuto): loads while the idle workers starve.
+  /// Helper 0 watches them every kStarvedAfter while there is work.
+  void runHelper(uint32_t helper_index);
+  /// Ends a rescue: the idle workers take work again, and a new window starts. Under mutex_.
+  void endRescueLocked();
+  /// Records each idle worker's run-queue wait, starting a window. Under mutex_.
+  void sampleIdleWaitLocked();
+  /// True when the idle workers waited for a core at least half the window since the last
+  /// sample (without /proc's schedstat: ready work waited kStarvedAfter and none took it);
+  /// starts the next window. Under mutex_.
+  bool idleWorkersStarvedLocked(std::chrono::steady_clock::time_point now);
+  /// Takes, as a batch of its own, the best tile a starving idle worker has held for
+  /// kStarvedAfter, of priority `up_to` or better (lower), to load it a second time. Under
+  /// mutex_.
+  bool takeHostageLocked(Batch& batch, std::chrono::steady_clock::time_point now, double up_to);
+  /// Whether a finished load of `id` counts: false for the later of a duplicated tile's two
+  /// loads, which is dropped unseen. Under mutex_.
+  bool claimLocked(const TileId& id);
+  /// When the best ready request (not waiting out a backoff) was first wanted; max() when
+  /// nothing is ready. Under mutex_.
+  std::chrono::steady_clock::time_point readySinceLocked(
+      std::chrono::steady_clock::time_point now) const;
+  /// Waits on `wake_up` until notified or the earliest retry backoff ends. Under mutex_.
+  void sleepUntilWorkLocked(std::unique_lock<std::mutex>& lock, std::condition_variable& wake_up);
+  /// Loads a batch taken under `lock`, which it releases meanwhile.
+  void loadTakenBatch(std::unique_lock<std::mutex>& lock, Batch& batch, CodecScratch& scratch,
+                      std::vector<TileId>& read_ahead);
+  /// Takes the best ready request with the candidates it may merge with. `may_wait`: it may be
+  /// a tile whose parent is loading (its worker then waits for the parent before decoding).
+  bool takeBatchLocked(Batch& batch, std::chrono::steady_clock::time_point now, bool may_wait);
   /// Moves queue_[index] into `batch` (in flight) with the candidates it may merge with; an
   /// `early` batch (its tile's parent loading) may take siblings whose parent is loading too.
   void takeLocked(Batch& batch, size_t index, bool early,
@@ -195,7 +242,9 @@ class LoaderPool {
   Result<void> decodeItem(const TileId& id, const TileEntry& entry,
                           std::span<const uint8_t> payload, Image& texels, size_t tile_bytes,
                           CodecScratch& scratch);
-  void finish(const TileId& id, LoadEvent event, bool failed);
+  /// Ends a tile's load: the event for the render thread, retries, the in-flight set.
+  /// `claimed`: claimLocked was called for this load already (and said it counts).
+  void finish(const TileId& id, LoadEvent event, bool failed, bool claimed = false);
   /// Queued tiles at the head of the queue not hinted yet, if the read-ahead window has room;
   /// marks them hinted (size unknown yet). Under mutex_.
   void collectReadAheadLocked(std::vector<TileId>& out);
@@ -213,6 +262,7 @@ class LoaderPool {
   TileCache& cache_;
   LoaderOptions options_;
   const uint32_t thread_count_;  ///< set before the workers start; they read it unlocked
+  const uint32_t helper_count_;  ///< normal-priority helpers (LoaderPriority::kAuto), or 0
   /// Per image: whether its tiles are coded against their parents (ptm). Constant.
   std::vector<bool> dependent_images_;
   bool any_dependent_ = false;  ///< any of dependent_images_; constant
@@ -222,6 +272,29 @@ class LoaderPool {
   mutable std::mutex mutex_;  // guards every member below
   std::condition_variable work_ready_;
   std::condition_variable idle_;
+  // LoaderPriority::kAuto's rescue (docs/runtime.md, "Loader priority").
+  std::condition_variable helpers_wake_;  ///< the helpers wait on it, not on work_ready_
+  /// The idle workers wait on it during a rescue: woken every frame, a starving thread would
+  /// take the lock and, preempted holding it, stall the helpers and the render thread.
+  std::condition_variable rescue_over_;
+  bool rescuing_ = false;        ///< the helpers load; the idle workers take nothing
+  bool helpers_asleep_ = false;  ///< a helper waits for work (setWanted wakes it)
+  std::chrono::steady_clock::time_point rescue_began_{};
+  std::chrono::steady_clock::time_point check_from_{};    ///< the current window's start
+  std::chrono::steady_clock::time_point idle_took_at_{};  ///< an idle worker's last batch
+  std::vector<pid_t> idle_tids_;         ///< by worker index, once each has started (else 0)
+  std::vector<ThreadTimes> idle_times_;  ///< theirs at the window's start
+  /// A tile an idle worker took, with its priority, when and which worker.
+  struct Held {
+    double priority = 0;
+    std::chrono::steady_clock::time_point taken_at;
+    uint32_t worker = 0;
+  };
+  std::unordered_map<TileId, Held, TileIdHash> idle_held_;  ///< until its load finishes
+  /// Held tiles a helper loads a second time; the first load to finish delivers and the
+  /// later ones, counted in silenced_, are dropped unseen.
+  std::unordered_set<TileId, TileIdHash> duplicated_;
+  std::unordered_map<TileId, uint32_t, TileIdHash> silenced_;
   std::vector<Pending> queue_;  ///< sorted by priority
   /// Wanted tiles with the moment each became wanted (for the queue-wait estimate).
   std::unordered_map<TileId, std::chrono::steady_clock::time_point, TileIdHash> wanted_;

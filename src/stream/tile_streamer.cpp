@@ -52,7 +52,8 @@ struct TileStreamer::Impl {
   uint64_t payloadBytes(const TileId& id);
 
   // The steps of update(), in order.
-  /// Drains the loader's finished loads into `loaded` (failures counted).
+  /// Drains the loader's finished loads into `loaded`, and the failed ones into
+  /// update.failures.
   void pollLoads();
   /// The residency manager of `image`, made on first use.
   detail::ResidencyManager& residencyOf(uint32_t image);
@@ -76,7 +77,7 @@ uint64_t TileStreamer::Impl::payloadBytes(const TileId& id) {
     // Bounded like the archive's own page cache: a long flight over a terapixel image would
     // otherwise remember every tile it passed. The per-level means survive.
     if (payload_sizes.size() >= kMaxKnownSizes) payload_sizes.clear();
-    const uint32_t bytes = entry->kind == TileKind::kEncoded ? entry->length_bytes : 0;
+    const uint32_t bytes = entry->hasPayload() ? entry->length_bytes : 0;
     payload_sizes.emplace(id, bytes);
     sums[id.level].first += bytes;
     sums[id.level].second += 1;
@@ -119,7 +120,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
       options.viewer_shift_eviction ? makeViewerShiftPolicy() : makeLruPolicy());
   detail::LoaderOptions loader_options;
   loader_options.threads = options.loader_threads;
-  loader_options.idle_priority = options.loader_idle_priority;
+  loader_options.priority = options.loader_priority;
   loader_options.recycled_bytes = options.recycled_buffer_bytes;
   loader_options.batch_gap_bytes = options.batch_gap_bytes;
   loader_options.merge_gap_bytes = options.merge_gap_bytes;
@@ -138,11 +139,13 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
 void TileStreamer::Impl::pollLoads() {
   events.clear();
   loader->poll(events);
-  for (const detail::LoadEvent& event : events)
-    if (event.ok)
+  for (detail::LoadEvent& event : events)
+    if (event.ok) {
       loaded.insert(event.id);
-    else if (!event.stale)
+    } else if (!event.stale) {
       ++load_failures;
+      update.failures.push_back({event.id, event.code, std::move(event.error)});
+    }
 }
 
 detail::ResidencyManager& TileStreamer::Impl::residencyOf(uint32_t image) {
@@ -267,6 +270,8 @@ void TileStreamer::Impl::reportLoader(FrameReport& report) const {
   report.parents_queued_total = stats.parents_queued;
   report.parent_fallbacks_total = stats.parent_fallbacks;
   report.children_read_early_total = stats.children_read_early;
+  report.loader_rescues_total = stats.rescues;
+  report.rescued_batches_total = stats.rescued_batches;
 }
 
 const FrameUpdate& TileStreamer::update(const View& view) {
@@ -276,6 +281,7 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   out.uploads.clear();
   out.releases.clear();
   out.regions.clear();
+  out.failures.clear();
   s.pollLoads();
 
   const uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));

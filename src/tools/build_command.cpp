@@ -8,6 +8,7 @@
 #include <tessera/build.h>
 
 #include "cli.h"
+#include "procedural_cli.h"
 #include "output/output_file.h"
 #include "scene_command.h"
 
@@ -164,8 +165,7 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("build",
                                      "Build an archive from TIFF/BigTIFF, PNG, JPEG or "
                                      "synthetic:WxH[:seed[:channels]]");
-  cmd->add_option("inputs", args->options.inputs, "Source image(s); several make a texture set")
-      ->required();
+  cmd->add_option("inputs", args->options.inputs, "Source image(s); several make a texture set");
   cmd->add_option("-o,--output", args->options.output, "Archive to write (atomically)")->required();
   cmd->add_option("--tile", args->options.tile_size_px,
                   "Tile size in pixels (power of two, 64..2048)")
@@ -205,7 +205,12 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   addSceneBuildOptions(*cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress and no summary");
   cmd->add_flag("--json", args->json, "Print the build report as JSON");
-  cmd->callback([args, &exit_code] { exit_code = runBuild(*args); });
+  auto procedural = addProceduralBuildOptions(cmd);
+  cmd->callback([args, procedural, &exit_code] {
+    exit_code = procedural->requested() ? runProceduralBuild(*procedural, args->options,
+                                                             args->codec, args->quiet, args->json)
+                                        : runBuild(*args);
+  });
 }
 
 }  // namespace tessera::cli

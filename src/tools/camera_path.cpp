@@ -9,6 +9,14 @@
 
 namespace tessera::cli {
 
+namespace {
+
+/// The longest path: a day. Longer keyframe times are surely typos, and a built-in path's
+/// keyframes grow with its duration.
+constexpr double kMaxPathS = 86400;
+
+}  // namespace
+
 OrthoView CameraPath::at(double t_s, uint32_t viewport_w, uint32_t viewport_h) const {
   OrthoView view;
   view.viewport_w = viewport_w;
@@ -42,9 +50,19 @@ Result<CameraPath> builtinPath(const std::string& name, const ImageInfo& image, 
   path.name = name;
   const double w = image.width_px, h = image.height_px;
   const double half_w = viewport_w / 2.0, half_h = viewport_h / 2.0;
+  if (!(speed_px_s > 0) || !std::isfinite(speed_px_s) || !(duration_s > 0) ||
+      !(duration_s <= kMaxPathS))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("path '{}': speed {} and duration {} must be finite and above 0 "
+                            "(duration at most {:g} s)",
+                            name, speed_px_s, duration_s, kMaxPathS));
   if (name == "pan") {
     // Left to right through the middle at full detail, bouncing at the edges.
     double x0 = std::min(half_w, w / 2), x1 = std::max(w - half_w, w / 2);
+    if (x1 - x0 < 1) {  // the image fits the view: nowhere to go (and no leg to bounce on)
+      path.keys = {{0, x0, h / 2, 1}, {duration_s, x0, h / 2, 1}};
+      return path;
+    }
     double t = 0, x = x0;
     bool forward = true;
     path.keys.push_back({0, x, h / 2, 1});
@@ -100,10 +118,10 @@ Result<CameraPath> loadPathFile(const std::string& file) {
   while (std::getline(in, line)) {
     ++line_number;
     if (auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
+    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;  // blank or comment
     std::istringstream fields(line);
     Keyframe key;
-    if (!(fields >> key.t_s)) continue;  // blank or comment line
-    if (!(fields >> key.x >> key.y >> key.texels_per_pixel))
+    if (!(fields >> key.t_s >> key.x >> key.y >> key.texels_per_pixel))
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}:{}: expected 't x y texels_per_pixel [rotation] [jump]'", file,
                               line_number));
@@ -119,13 +137,26 @@ Result<CameraPath> loadPathFile(const std::string& file) {
               ErrorCode::kInvalidArgument,
               fmt::format("{}:{}: '{}' is neither a rotation nor 'jump'", file, line_number, word));
         }
-        if (fields >> word) key.jump = word == "jump";
+        if (fields >> word) {
+          if (word != "jump")
+            return fail(ErrorCode::kInvalidArgument,
+                        fmt::format("{}:{}: '{}' is not 'jump'", file, line_number, word));
+          key.jump = true;
+        }
       }
+      if (fields >> word)
+        return fail(ErrorCode::kInvalidArgument,
+                    fmt::format("{}:{}: '{}' after the last field", file, line_number, word));
     }
-    if (!(key.texels_per_pixel > 0) || !std::isfinite(key.x) || !std::isfinite(key.y))
+    if (!(key.texels_per_pixel > 0) || !std::isfinite(key.texels_per_pixel) ||
+        !std::isfinite(key.x) || !std::isfinite(key.y) || !std::isfinite(key.rotation_rad))
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}:{}: texels_per_pixel must be > 0 and positions finite", file,
                               line_number));
+    if (!(key.t_s >= 0 && key.t_s <= kMaxPathS))
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}:{}: time {} is not in [0, {:g}] seconds", file, line_number,
+                              key.t_s, kMaxPathS));
     if (!path.keys.empty() && key.t_s < path.keys.back().t_s)
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}:{}: times must not decrease", file, line_number));

@@ -23,6 +23,8 @@ enum ExitCode : int {
   kExitCancelled = 130,   ///< interrupted by SIGINT (128 + 2)
   kExitTerminated = 143,  ///< stopped by SIGTERM (128 + 15)
 };
+/// `fly`: the flight ran and wrote its outputs, but tiles failed to load (docs/fly.md).
+inline constexpr int kExitLoadFailures = 4;
 
 /// Prints "tessera: <message>" to stderr and returns the exit code for the error.
 int reportError(const Error& error);
@@ -75,5 +77,6 @@ void registerViewCommand(CLI::App& app, int& exit_code);
 void registerDemoCommand(CLI::App& app, int& exit_code);
 void registerRenderCommand(CLI::App& app, int& exit_code);
 void registerServeCommand(CLI::App& app, int& exit_code);
+void registerExportCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

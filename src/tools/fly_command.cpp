@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <thread>
+#include <unordered_map>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -33,6 +34,17 @@ namespace tessera::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
+
+/// Bounds of --duration and --still-after (a day), --speed and --threads.
+constexpr double kMaxDurationS = 86400;
+constexpr double kMaxSpeedPxS = 1e9;
+constexpr uint32_t kMaxLoaderThreads = 1024;
+
+/// A flight that took this much longer than its path is noted as slower than real time.
+constexpr double kSlowdownNoted = 1.05;
+
+/// Failed loads whose messages summary.json keeps.
+constexpr size_t kFailuresKept = 10;
 
 /// Without --render, what a renderer with room for everything answers: every upload accepted.
 ApplyResult acceptEverything(const FrameUpdate& update) {
@@ -102,7 +114,7 @@ Result<double> decodeBoundMs(const Archive& archive, std::span<const TileId> til
     Result<TileEntry> entry = archive.tileEntry(w.id);
     if (!entry) return forwardError(entry);
     w.entry = *entry;
-    if (w.entry.kind == TileKind::kEncoded) {
+    if (w.entry.hasPayload()) {
       Result<std::vector<uint8_t>> payload = archive.readPayload(w.id, w.entry);
       if (!payload) return forwardError(payload);
       w.payload = std::move(*payload);
@@ -143,6 +155,34 @@ struct FlightSetup {
   CameraPath path;
 };
 
+/// The bounds of the numeric options (NaN fails every comparison, so each is written to
+/// reject it): a NaN speed made the pan's keyframe loop endless, a NaN or negative duration
+/// flew one frame and reported success.
+Result<void> checkFlyArgs(const FlyArgs& args) {
+  if (!(args.fps > 0 && args.fps <= 1000))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--fps {}: must be in (0, 1000]", args.fps));
+  if (!(args.speed_px_s > 0 && args.speed_px_s <= kMaxSpeedPxS))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--speed {}: must be in (0, {:g}] level-0 px/s", args.speed_px_s,
+                            kMaxSpeedPxS));
+  if (!(args.duration_s > 0 && args.duration_s <= kMaxDurationS))
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("--duration {}: must be in (0, {:g}] seconds", args.duration_s, kMaxDurationS));
+  if (!(args.still_after_s >= 0 && args.still_after_s <= kMaxDurationS))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--still-after {}: must be in [0, {:g}] seconds", args.still_after_s,
+                            kMaxDurationS));
+  if (args.upload_budget == 0)
+    return fail(ErrorCode::kInvalidArgument,
+                "--upload-budget 0: at least one tile a frame, or nothing is ever drawn");
+  if (args.threads > kMaxLoaderThreads)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--threads {}: at most {}", args.threads, kMaxLoaderThreads));
+  return {};
+}
+
 /// Checks `args`, opens the archive (through the simulated link with --link, the header too,
 /// as a remote client would read it) and builds the camera path.
 Result<FlightSetup> setUpFlight(const FlyArgs& args) {
@@ -151,8 +191,7 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
       setup.viewport_w == 0 || setup.viewport_h == 0 || setup.viewport_w > 16384 ||
       setup.viewport_h > 16384)
     return fail(ErrorCode::kInvalidArgument, "--viewport must be WxH, e.g. 1920x1080");
-  if (!(args.fps > 0 && args.fps <= 1000))
-    return fail(ErrorCode::kInvalidArgument, "--fps must be in (0, 1000]");
+  TESSERA_TRY(checkFlyArgs(args));
   const auto open_start = Clock::now();
   Result<std::shared_ptr<Archive>> archive = fail(ErrorCode::kInternal, "not opened");
   if (!args.link.empty()) {
@@ -170,8 +209,6 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
   setup.open_ms = std::chrono::duration<double, std::milli>(Clock::now() - open_start).count();
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
-  if (!(args.still_after_s >= 0))
-    return fail(ErrorCode::kInvalidArgument, "--still-after must be >= 0 seconds");
   setup.remote = setup.link || isRemoteUri(args.archive);
   setup.adaptive = args.adaptive == "on" || (args.adaptive == "auto" && setup.remote);
   if (args.image >= setup.archive->images().size())
@@ -199,7 +236,9 @@ StreamerOptions flightStreamerOptions(const FlyArgs& args, const FlightSetup& se
   if (args.merge_gap_kib) options.merge_gap_bytes = *args.merge_gap_kib << 10;
   if (!setup.remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
     options.read_ahead_bytes = args.read_ahead_kib << 10;
-  options.loader_idle_priority = args.loader_priority == "idle";
+  options.loader_priority = args.loader_priority == "idle"   ? LoaderPriority::kIdle
+                            : args.loader_priority == "nice" ? LoaderPriority::kNice
+                                                             : LoaderPriority::kAuto;
   options.adaptive.enabled = setup.adaptive;
   options.adaptive.still_after_s = args.still_after_s;
   if (args.batch_gap_kib) options.batch_gap_bytes = *args.batch_gap_kib << 10;
@@ -225,12 +264,35 @@ struct FlightLog {
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
   FrameReport last{};
+  /// Loads that failed, as the frames saw them: per tile whether it loaded on a later try,
+  /// and the first kFailuresKept failures with their messages.
+  uint64_t failures_seen = 0;
+  std::unordered_map<TileId, bool, TileIdHash> failed_tiles;
+  std::vector<LoadFailure> first_failures;
+  /// Wall time from the first frame to the last, against the path's own length: the flight
+  /// ran slower than real time when frames took longer than 1/fps.
+  double wall_s = 0;
+  size_t late_frames = 0;  ///< frames shown more than a frame interval after their time
+
+  /// Notes the frame's failed loads, and the uploads of tiles that had failed before.
+  void noteLoads(const FrameUpdate& update) {
+    for (const LoadFailure& failure : update.failures) {
+      ++failures_seen;
+      failed_tiles.try_emplace(failure.id, false).first->second = false;
+      if (first_failures.size() < kFailuresKept) first_failures.push_back(failure);
+    }
+    if (failed_tiles.empty()) return;
+    for (const auto& tile : update.uploads)
+      if (auto it = failed_tiles.find(tile->id); it != failed_tiles.end()) it->second = true;
+  }
 
   /// Records frame `k`, seen `now_s` after `start`.
   void record(uint64_t k, double now_s, Clock::time_point start, const View& view,
-              const FrameReport& r, double frame_render_ms) {
+              const FrameReport& r, double frame_render_ms, double fps) {
     last = r;
     update_ms.push_back(r.update_ms);
+    wall_s = now_s;
+    late_frames += now_s > double(k + 1) / fps;
     ++frames;
     frames_full_detail += r.coverage_desired >= 1.0;
     if (startup_ms < 0 && r.fully_covered) startup_ms = now_s * 1000;
@@ -296,16 +358,22 @@ Result<void> captureFlightPictures(const FlyArgs& args, const FlightSetup& setup
   if (!reference) return forwardError(reference);
   Result<PictureDifference> difference = comparePictures(picture, *reference);
   if (!difference) return forwardError(difference);
-  log.jumps.back().rest_psnr_db = difference->psnr_db;
+  // Identical pictures have an infinite PSNR: shown, stored and compared as kIdenticalPsnrDb.
+  const double psnr_db = std::min(difference->psnr_db, kIdenticalPsnrDb);
+  log.jumps.back().rest_psnr_db = psnr_db;
   log.jumps.back().rest_max_abs = difference->max_abs;
-  TESSERA_TRY(
-      saveFlightPicture(args, log, picture, fmt::format("rest-{}.png", index),
-                        fmt::format("at rest before jump {}: {:.1f} dB against the CPU reference",
-                                    index + 1, std::min(difference->psnr_db, 99.0))));
+  const std::string when = next_t > setup.path.durationS()
+                               ? std::string("at the end of the flight")
+                               : fmt::format("before jump {}", index + 1);
+  TESSERA_TRY(saveFlightPicture(
+      args, log, picture, fmt::format("rest-{}.png", index),
+      fmt::format("At rest {}: {} against the CPU reference", when, formatPsnr(psnr_db))));
   Result<Picture> tinted = levelOverlay(picture, *setup.archive, view, reference_options.available);
   if (!tinted) return forwardError(tinted);
-  return saveFlightPicture(args, log, *tinted, fmt::format("rest-{}-levels.png", index),
-                           "the same, tinted by the level that draws each pixel");
+  TESSERA_TRY(saveFlightPicture(args, log, *tinted, fmt::format("rest-{}-levels.png", index),
+                                "The same, each pixel tinted by the level that draws it"));
+  if (args.report) log.report_pictures.back().levels = true;
+  return {};
 }
 
 /// Flies the path in real time at args.fps, one streamer update (and with `gpu`, one apply and
@@ -339,7 +407,8 @@ Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStream
     } else {
       streamer.acknowledge(acceptEverything(update));  // no GPU: a renderer of infinite room
     }
-    log.record(k, now_s, start, view, update.report, frame_render_ms);
+    log.noteLoads(update);
+    log.record(k, now_s, start, view, update.report, frame_render_ms, args.fps);
     if (gpu) TESSERA_TRY(captureFlightPictures(args, setup, *gpu, view, k, t_s, log));
   }
   return {};
@@ -377,9 +446,8 @@ nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rende
         {"clip_region_ms",
          j.clip_region_ms < 0 ? nlohmann::json() : nlohmann::json(j.clip_region_ms)}};
     if (rendered) {
-      entry["rest_psnr_db"] = j.rest_psnr_db < 0           ? nlohmann::json()
-                              : std::isinf(j.rest_psnr_db) ? nlohmann::json(999.0)
-                                                           : nlohmann::json(j.rest_psnr_db);
+      entry["rest_psnr_db"] =
+          j.rest_psnr_db < 0 ? nlohmann::json() : nlohmann::json(j.rest_psnr_db);
       entry["rest_max_abs"] = j.rest_max_abs;
     }
     if (args.decode_bound) {
@@ -390,6 +458,29 @@ nlohmann::json flightJumps(const FlyArgs& args, const FlightLog& log, bool rende
     jump_list.push_back(std::move(entry));
   }
   return jump_list;
+}
+
+/// The median over the jumps (the start included) of the time to full detail, of those that
+/// got there; null when none did.
+nlohmann::json medianFullDetailMs(const FlightLog& log) {
+  std::vector<double> times;
+  for (const JumpTiming& jump : log.jumps)
+    if (jump.full_detail_ms >= 0) times.push_back(jump.full_detail_ms);
+  if (times.empty()) return nullptr;
+  return percentile(times, 50);
+}
+
+/// summary.json's failures: the first ones, each naming its tile and the problem.
+nlohmann::json flightFailures(const FlightLog& log) {
+  nlohmann::json list = nlohmann::json::array();
+  for (const LoadFailure& failure : log.first_failures)
+    list.push_back({{"image", failure.id.image},
+                    {"level", failure.id.level},
+                    {"x", failure.id.x},
+                    {"y", failure.id.y},
+                    {"code", errorCodeName(failure.code)},
+                    {"message", failure.message}});
+  return list;
 }
 
 /// summary.json (docs/fly.md, "summary.json").
@@ -403,6 +494,7 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"archive", args.archive},
       {"path", setup.path.name},
       {"codec", codecName(setup.info.default_codec)},
+      {"levels", setup.info.level_count},
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"speed_px_s", args.speed_px_s},
@@ -416,6 +508,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"eviction", policy_name},
       {"cache_budget_bytes", options.cache_budget_bytes},
       {"frames", frames},
+      {"path_s", setup.path.durationS()},
+      {"wall_s", log.wall_s},
+      {"slowdown", setup.path.durationS() > 0 ? log.wall_s / setup.path.durationS() : 1.0},
+      {"late_frames_pct", frames ? 100.0 * log.late_frames / frames : 0},
       {"frames_full_detail_pct", frames ? 100.0 * log.frames_full_detail / frames : 0},
       {"startup_frames", log.startup_frames},
       {"open_ms", setup.open_ms},
@@ -425,6 +521,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
            ? 100.0 * log.frames_covered / double(frames - log.startup_frames)
            : 0},
       {"update_ms", flightPercentiles(log.update_ms)},
+      {"full_detail_ms_median", medianFullDetailMs(log)},
+      {"jumps_at_full_detail",
+       std::count_if(log.jumps.begin(), log.jumps.end(),
+                     [](const JumpTiming& jump) { return jump.full_detail_ms >= 0; })},
       {"jumps", std::move(jumps)},
       {"bytes_read", last.bytes_read_total},
       {"reads", last.reads_total},
@@ -433,7 +533,11 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"read_amplification",
        log.uploaded_payload_bytes ? double(last.bytes_read_total) / log.uploaded_payload_bytes : 0},
       {"tiles_loaded", last.tiles_loaded_total},
-      {"load_failures", last.load_failures_total},
+      {"load_failures", std::max(last.load_failures_total, log.failures_seen)},
+      {"failed_tiles", log.failed_tiles.size()},
+      {"failed_tiles_loaded_later", std::count_if(log.failed_tiles.begin(), log.failed_tiles.end(),
+                                                  [](const auto& tile) { return tile.second; })},
+      {"failures", flightFailures(log)},
       {"decode_ms_total", last.decode_ms_total},
       {"cache",
        {{"hits", cache.hits},
@@ -451,7 +555,10 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"reads_cancelled", last.reads_cancelled_total},
       {"parents_queued", last.parents_queued_total},
       {"parent_fallbacks", last.parent_fallbacks_total},
-      {"children_read_early", last.children_read_early_total}};
+      {"children_read_early", last.children_read_early_total},
+      {"loader_priority", args.loader_priority},
+      {"loader_rescues", last.loader_rescues_total},
+      {"rescued_batches", last.rescued_batches_total}};
   if (setup.adaptive) summary["still_after_s"] = args.still_after_s;
   return summary;
 }
@@ -487,21 +594,38 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
   summary["gl"] = gpu.description();
   summary["render_ms"] = flightPercentiles(log.render_ms);
   summary["gpu_ms"] = flightPercentiles(gpu_ms);
+  nlohmann::json psnr_min;  // null until a picture at rest was compared
+  for (const JumpTiming& jump : log.jumps)
+    if (jump.rest_psnr_db >= 0 && (psnr_min.is_null() || jump.rest_psnr_db < psnr_min))
+      psnr_min = jump.rest_psnr_db;
+  summary["rest_psnr_db_min"] = psnr_min;
 }
 
 /// The one or two lines `tessera fly` prints unless --json or --quiet.
 void printFlightSummary(const FlyArgs& args, const FlightSetup& setup, const FlightLog& log,
                         const nlohmann::json& summary) {
   const FrameReport& last = log.last;
+  const double first_full_ms = log.jumps[0].full_detail_ms;
   std::printf(
       "%s: %zu frames, %.1f%% at full detail, %.1f%% covered; update p50 %.3f ms p99 "
-      "%.3f ms; read %s (amplification %.2f); first full detail after %.1f ms; wrote "
-      "%s/frames.csv and summary.json\n",
+      "%.3f ms; read %s (amplification %.2f); %s; wrote %s/frames.csv and summary.json\n",
       args.archive.c_str(), log.frames, summary["frames_full_detail_pct"].get<double>(),
       summary["frames_fully_covered_pct"].get<double>(), percentile(log.update_ms, 50),
       percentile(log.update_ms, 99), formatBytes(last.bytes_read_total).c_str(),
-      summary["read_amplification"].get<double>(), log.jumps[0].full_detail_ms,
+      summary["read_amplification"].get<double>(),
+      first_full_ms < 0 ? "never at full detail before the first jump"
+                        : fmt::format("first full detail after {:.1f} ms", first_full_ms).c_str(),
       args.out_dir.c_str());
+  if (const uint64_t failures = summary["load_failures"].get<uint64_t>(); failures > 0)
+    std::printf("FAILED: %llu loads of %zu tiles failed (%lld loaded on a later try)\n",
+                (unsigned long long)failures, log.failed_tiles.size(),
+                (long long)summary["failed_tiles_loaded_later"].get<int64_t>());
+  if (const double slowdown = summary["slowdown"].get<double>(); slowdown > kSlowdownNoted)
+    std::printf(
+        "slower than real time: the %.1f-s path took %.1f s (%.0f%% of frames late); times "
+        "to full detail are wall-clock times\n",
+        summary["path_s"].get<double>(), summary["wall_s"].get<double>(),
+        summary["late_frames_pct"].get<double>());
   if (setup.link)
     std::printf(
         "link %s: %s crossed it, %llu reads abandoned in flight; estimate %s/s, %.1f ms "
@@ -526,8 +650,9 @@ Result<void> startFramesCsv(const FlyArgs& args) {
   return {};
 }
 
-/// runFly after the archive is open: fly, then write what the flight recorded.
-Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
+/// runFly after the archive is open: fly, then write what the flight recorded. Returns the
+/// summary (summary.json).
+Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) {
   const StreamerOptions options = flightStreamerOptions(args, setup);
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
   if (!streamer) return forwardError(streamer);
@@ -574,7 +699,7 @@ Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
     std::printf("%s\n", summary.dump(2).c_str());
   else if (!args.quiet)
     printFlightSummary(args, setup, log, summary);
-  return {};
+  return summary;
 }
 
 }  // namespace
@@ -582,9 +707,20 @@ Result<void> runFlight(const FlyArgs& args, const FlightSetup& setup) {
 int runFly(const FlyArgs& args) {
   Result<FlightSetup> setup = setUpFlight(args);
   if (!setup) return reportError(setup.error());
-  Result<void> flown = runFlight(args, *setup);
+  Result<nlohmann::json> flown = runFlight(args, *setup);
   if (!flown) return reportError(flown.error());
-  return kExitOk;
+  const nlohmann::json& summary = *flown;
+  const uint64_t failures = summary["load_failures"].get<uint64_t>();
+  if (failures == 0) return kExitOk;
+  // The flight ran and wrote its outputs, but the picture missed tiles: not a success.
+  const nlohmann::json& first = summary["failures"];
+  const size_t tiles = summary["failed_tiles"].get<size_t>();
+  std::fprintf(stderr, "tessera: %s: %s%s%s\n", args.archive.c_str(),
+               tiles ? fmt::format("{} tiles failed to load ({} failures)", tiles, failures).c_str()
+                     : fmt::format("{} loads failed", failures).c_str(),
+               first.empty() ? "" : "; the first: ",
+               first.empty() ? "" : first[0]["message"].get<std::string>().c_str());
+  return kExitLoadFailures;
 }
 
 void registerFlyCommand(CLI::App& app, int& exit_code) {
@@ -614,8 +750,9 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
                   "Most texel MiB uploaded per frame (0 = no byte limit)")
       ->capture_default_str();
   cmd->add_option("--loader-priority", args->loader_priority,
-                  "idle (SCHED_IDLE, the default) or nice (niceness 5)")
-      ->check(CLI::IsMember({"idle", "nice"}))
+                  "auto (SCHED_IDLE, with normal-priority helpers while those starve), idle "
+                  "(SCHED_IDLE only) or nice (niceness 5); docs/runtime.md")
+      ->check(CLI::IsMember({"auto", "idle", "nice"}))
       ->capture_default_str();
   cmd->add_option("--merge-gap-kib", args->merge_gap_kib,
                   "Reads of tiles closer than this in the file are merged into one (default: 16, "

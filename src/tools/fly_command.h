@@ -28,7 +28,7 @@ struct FlyArgs {
   uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;
   std::optional<uint64_t> batch_gap_kib;  ///< unset: StreamerOptions' default, or the remote one
   std::optional<uint64_t> max_read_kib;   ///< unset: likewise
-  std::string loader_priority = "idle";
+  std::string loader_priority = "auto";   ///< auto, idle or nice: LoaderPriority
   uint32_t image = 0;
   std::string out_dir = "fly-out";
   bool json = false;

@@ -76,11 +76,52 @@ struct ReportFrame {
 struct ReportPicture {
   std::string caption;
   std::vector<uint8_t> png;
+  bool levels = false;  ///< tinted by level (levelOverlay): shown beside the one before it
 };
 
+/// PSNR of identical pictures (infinite) as summary.json, the report and the demo state it.
+inline constexpr double kIdenticalPsnrDb = 99;
+/// The share of frames at full detail a flight should reach (issue 31's target).
+inline constexpr double kFullDetailTargetPct = 95;
+
+/// "56.3 dB", or "99.0 dB (identical)".
+std::string formatPsnr(double psnr_db);
+/// `text` safe inside HTML text and quoted attributes.
+std::string htmlEscape(const std::string& text);
+/// True when summary.json's `gl` names a renderer that draws on the CPU (llvmpipe, ...).
+bool softwareRenderer(const nlohmann::json& summary);
+
+/// One headline figure of a flight against its target (docs/demo.md, "What good looks
+/// like"): the report, the demo page and the demo's printed lines all show these, so the
+/// numbers are the same everywhere.
+struct HeadlineFigure {
+  std::string pointer;  ///< where summary.json holds it (a JSON pointer: "/update_ms/p99")
+  std::string label;
+  std::string short_label;  ///< for one-line summaries
+  double value = 0;         ///< summary.json's number there
+  std::string text;         ///< as shown: "81.3 %", "0.44 ms"
+  std::string target;       ///< "≥ 95 %"
+  enum class Verdict { kPass, kFail, kNotJudged } verdict = Verdict::kNotJudged;
+  std::string note;  ///< why it is not judged (a figure a GPU sets, on a software renderer)
+};
+/// The headline figures of `summary` (summary.json), those it holds, in a fixed order.
+std::vector<HeadlineFigure> headlineFigures(const nlohmann::json& summary);
+/// A sentence on how much slower than real time the flight ran and why, or "" when it kept
+/// up (within 5 %).
+std::string slowdownNote(const nlohmann::json& summary);
+/// The figures as an HTML table (figure, measured, target, pass/fail) with the notes; each
+/// value cell carries data-figure (the pointer) and data-value (summary.json's number).
+std::string figureTableHtml(const std::vector<HeadlineFigure>& figures);
+/// The colours of levels 0 to level_count - 1 as levelOverlay tints them, in HTML.
+std::string levelLegendHtml(uint32_t level_count);
+/// The style sheet of the report and the demo page.
+const char* reportCss();
+
 /// Writes a self-contained HTML page (inline SVG plots and pictures, no scripts, nothing
-/// fetched): the summary, frame time per frame (as Backes et al., Fig. 5), coverage and bytes
-/// read over time, and the pictures. Fails naming the path.
+/// fetched): what flew, the headline figures against their targets, a note when the flight
+/// ran slower than real time, the failures, the jumps, frame time per frame (as Backes et al.,
+/// Fig. 5), coverage, bytes read, the link and the levels over time, and the pictures with
+/// the level legend. Fails naming the path.
 [[nodiscard]] Result<void> writeFlyReport(const std::string& path, const nlohmann::json& summary,
                                           const std::vector<ReportFrame>& frames,
                                           const std::vector<ReportPicture>& pictures);

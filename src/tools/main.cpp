@@ -14,6 +14,7 @@
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "procedural_cli.h"
 
 namespace tessera::cli {
 
@@ -164,7 +165,8 @@ int main(int argc, char** argv) {
   CLI::App app{
       "tessera: streams textures far larger than memory.\n"
       "Exit codes: 0 success, 1 failure, 2 usage error (a bad option or value), 3 verify found "
-      "faults, 130 interrupted by SIGINT, 143 stopped by SIGTERM (docs/cli.md)."};
+      "faults, 4 fly or demo: tiles failed to load, 130 interrupted by SIGINT, 143 stopped by "
+      "SIGTERM (docs/cli.md)."};
   app.require_subcommand(1);
   app.set_version_flag("--version", "tessera 0.1.0 (archive format 1.0)");
   int exit_code = kExitOk;
@@ -177,6 +179,8 @@ int main(int argc, char** argv) {
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
   registerServeCommand(app, exit_code);
+  registerBrushesCommand(app, exit_code);
+  registerExportCommand(app, exit_code);
   if (reportUnknownSubcommand(app, argc, argv)) return kExitUsage;
   // The subcommands run inside parse: whatever escapes them (an allocation the estimates did
   // not foresee, a library's exception) ends here as one line and exit 1, never an abort.

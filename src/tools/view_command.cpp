@@ -31,6 +31,7 @@
 #include "view_camera.h"
 #include "view_command.h"
 #include "view_overlay.h"
+#include "view_panel.h"
 #include "view_screenshot.h"
 
 namespace tessera::cli {
@@ -51,6 +52,10 @@ struct Viewer {
   OverlayOptions overlays;
   bool show_panel = true;
   bool screenshot_requested = false;
+  /// The panel's box at the last frame, px (x, y, width, height): --frames reports it.
+  struct {
+    float x = 0, y = 0, width = 0, height = 0;
+  } panel_box;
   bool dragging = false;
   double last_cursor_x = 0, last_cursor_y = 0;  ///< framebuffer pixels
   // Windowed placement, restored when fullscreen ends.
@@ -317,10 +322,11 @@ void panelLink(const FrameReport& r, const FrameFigures& figures) {
   ImGui::Text("throughput %s/s, latency %.1f ms, queue wait %.1f ms",
               formatBytes(uint64_t(r.link_bytes_per_s)).c_str(), r.link_latency_ms,
               r.queue_wait_ms);
-  float link_max = 0;
-  for (float mb_s : figures.link_mb_s) link_max = std::max(link_max, mb_s);
-  ImGui::PlotLines("##link", figures.link_mb_s.data(), int(kFrameHistory), int(figures.next),
-                   "MB/s", 0.0f, std::max(0.1f, link_max * 1.2f), ImVec2(-1, 40));
+  const PlotWindow link =
+      plotWindow(figures.link_mb_s.data(), kFrameHistory, figures.next, figures.count, 0.1f);
+  const std::string link_label = fmt::format("MB/s, max {:.2f}", link.largest);
+  ImGui::PlotLines("##link", figures.link_mb_s.data(), link.count, link.offset, link_label.c_str(),
+                   0.0f, link.max, ImVec2(ImGui::GetContentRegionAvail().x, 40));
   if (r.adaptive) {
     ImGui::Text("adaptive: %s budgets, levels down to %u (desired %u)",
                 r.view_still ? "still" : "moving", r.requested_level, r.desired_level);
@@ -367,39 +373,71 @@ void panelOverlays(Viewer& v) {
 RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUpdate& update,
                        const TileStreamer& streamer, const Renderer& renderer,
                        const FrameFigures& figures, size_t cache_budget_bytes,
-                       const std::string& last_screenshot) {
+                       const std::string& last_screenshot, int fw, int fh) {
   RendererKind picked = renderer.kind();
-  ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
-  ImGui::SetNextWindowSize(ImVec2(360, 0), ImGuiCond_FirstUseEver);
+  // A fixed width (text wraps at it) and the height of the open sections, within the window;
+  // the picture shows through a little.
+  const PanelLayout layout = panelLayout(fw, fh);
+  ImGui::SetNextWindowPos(ImVec2(layout.x, layout.y), ImGuiCond_FirstUseEver);
+  ImGui::SetNextWindowSize(ImVec2(layout.width, 0), ImGuiCond_Always);
+  ImGui::SetNextWindowSizeConstraints(ImVec2(0, 0), ImVec2(layout.width, layout.max_height));
+  ImGui::SetNextWindowBgAlpha(0.8f);
   ImGui::Begin("tessera view");
+  ImGui::PushTextWrapPos(0.0f);
   ImGui::Text("%s: %ux%u, %u levels, %u px tiles", archive_name.c_str(), v.info.width_px,
               v.info.height_px, v.info.level_count, v.info.tile_size_px);
   const double mean_ms = figures.meanMs();
-  ImGui::Text("%.1f fps, %.2f ms/frame (mean of %zu)", mean_ms > 0 ? 1000 / mean_ms : 0, mean_ms,
-              figures.count);
-  // The graph reads the ring from its oldest entry.
-  ImGui::PlotLines("##frame_ms", figures.frame_ms.data(), int(kFrameHistory), int(figures.next),
-                   "frame ms", 0.0f, std::max(33.3f, float(mean_ms * 3)), ImVec2(-1, 60));
-  ImGui::Text("streaming on the render thread: %.3f ms", figures.streaming_ms);
-  if (ImGui::CollapsingHeader("Renderer", ImGuiTreeNodeFlags_DefaultOpen))
-    picked = panelRenderer(renderer);
-  if (ImGui::CollapsingHeader("View", ImGuiTreeNodeFlags_DefaultOpen)) panelView(v);
-  if (ImGui::CollapsingHeader("Streaming", ImGuiTreeNodeFlags_DefaultOpen))
-    panelStreaming(update.report, figures);
-  if (ImGui::CollapsingHeader("Link and scheduling", ImGuiTreeNodeFlags_DefaultOpen))
-    panelLink(update.report, figures);
-  if (ImGui::CollapsingHeader("Cache", ImGuiTreeNodeFlags_DefaultOpen))
-    panelCache(streamer, cache_budget_bytes);
-  if (ImGui::CollapsingHeader("Overlays", ImGuiTreeNodeFlags_DefaultOpen)) panelOverlays(v);
-  if (ImGui::Button("Screenshot (F12)")) v.screenshot_requested = true;
-  if (!last_screenshot.empty()) {
-    ImGui::SameLine();
-    ImGui::TextUnformatted(last_screenshot.c_str());
+  ImGui::Text("%.1f fps, %.2f ms/frame (mean of %zu); streaming %.3f ms",
+              mean_ms > 0 ? 1000 / mean_ms : 0, mean_ms, figures.count, figures.streaming_ms);
+  // Only the frames recorded so far, oldest first, on a scale that fits them.
+  const PlotWindow frames =
+      plotWindow(figures.frame_ms.data(), kFrameHistory, figures.next, figures.count, 20.0f);
+  const std::string frames_label = fmt::format("frame ms, max {:.1f}", frames.largest);
+  // An explicit width: ImGui 1.86 (Debian's) draws nothing for a negative one.
+  ImGui::PlotLines("##frame_ms", figures.frame_ms.data(), frames.count, frames.offset,
+                   frames_label.c_str(), 0.0f, frames.max,
+                   ImVec2(ImGui::GetContentRegionAvail().x, 48));
+  // One section at a time, under tabs: all of them open at once covered a quarter of the
+  // picture.
+  if (ImGui::BeginTabBar("sections", ImGuiTabBarFlags_FittingPolicyScroll)) {
+    if (ImGui::BeginTabItem("Streaming")) {
+      panelStreaming(update.report, figures);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("Renderer")) {
+      picked = panelRenderer(renderer);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("View")) {
+      panelView(v);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("Link")) {
+      panelLink(update.report, figures);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("Cache")) {
+      panelCache(streamer, cache_budget_bytes);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("Overlays")) {
+      panelOverlays(v);
+      ImGui::EndTabItem();
+    }
+    if (ImGui::BeginTabItem("Keys")) {
+      ImGui::TextDisabled(
+          "drag: pan | wheel: zoom | arrows/WASD: pan | +/-: zoom | Home: fit | P: fly-over | "
+          "fly-over: WASD move, drag look, wheel or +/- altitude | F/F11: fullscreen | F1: "
+          "panel | L C G: overlays | F12, Ctrl+S: screenshot | Q/Esc: quit");
+      ImGui::EndTabItem();
+    }
+    ImGui::EndTabBar();
   }
-  ImGui::TextDisabled(
-      "drag: pan | wheel: zoom | arrows/WASD: pan | +/-: zoom | Home: fit | P: fly-over\n"
-      "fly-over: WASD move, drag look, wheel or +/- altitude\n"
-      "F/F11: fullscreen | F1: panel | Q/Esc: quit");
+  if (ImGui::Button("Screenshot (F12)")) v.screenshot_requested = true;
+  if (!last_screenshot.empty()) ImGui::TextUnformatted(last_screenshot.c_str());
+  const ImVec2 at = ImGui::GetWindowPos(), size = ImGui::GetWindowSize();
+  v.panel_box = {at.x, at.y, size.x, size.y};
+  ImGui::PopTextWrapPos();
   ImGui::End();
   return picked;
 }
@@ -512,7 +550,7 @@ RendererKind presentFrame(ViewerLoop& loop, const FrameUpdate& update, int fw, i
   RendererKind picked = loop.renderer->kind();
   if (loop.v.show_panel)
     picked = drawPanel(loop.v, loop.args.archive, update, loop.streamer, *loop.renderer,
-                       loop.figures, loop.cache_budget_bytes, loop.last_screenshot);
+                       loop.figures, loop.cache_budget_bytes, loop.last_screenshot, fw, fh);
   ImGui::Render();
   ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
   glfwSwapBuffers(loop.v.window);
@@ -555,7 +593,13 @@ int runViewerLoop(ViewerLoop& loop) {
       if (!switched) return reportError(switched.error());
       loop.renderer = std::move(*switched);
     }
-    if (last) break;
+    if (last) {
+      // For tests: how much of the picture the panel covers.
+      if (v.show_panel)
+        std::fprintf(stderr, "tessera view: panel at %.0f,%.0f, %.0fx%.0f of %dx%d\n",
+                     v.panel_box.x, v.panel_box.y, v.panel_box.width, v.panel_box.height, fw, fh);
+      break;
+    }
   }
   return loop.exit_code;
 }

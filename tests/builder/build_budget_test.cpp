@@ -43,8 +43,8 @@ MemoryEstimate estimateFor(const std::string& source, Codec codec, uint32_t thre
 
 TEST(BuildBudget, AWideImageIsEstimatedAboveItsMeasuredPeak) {
   // docs/builder.md: synthetic:131072x4096:1:4 with 256-px tiles peaked at 409 MiB on 2 threads
-  // (398 MiB in an earlier session), most of it the input band (128 MiB) and the pyramid's bands (250 MiB: the
-  // levels of 256 rows and more, then the short ones).
+  // (398 MiB in an earlier session), most of it the input band (128 MiB) and the pyramid's bands
+  // (250 MiB: the levels of 256 rows and more, then the short ones).
   const MemoryEstimate estimate = estimateFor("synthetic:131072x4096:1:4", Codec::kJpeg, 2);
   EXPECT_GE(estimate.rows_bytes, 378 * kMiB);
   EXPECT_LE(estimate.rows_bytes, 400 * kMiB);

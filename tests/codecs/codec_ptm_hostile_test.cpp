@@ -8,7 +8,7 @@
 #include <gtest/gtest.h>
 
 #include "codecs/encode.h"
-#include "ptm/ptm_codec.h"
+#include "ptm/ptm_encode.h"
 #include "ptm_test_fixtures.h"
 
 namespace tessera::detail {
@@ -78,13 +78,13 @@ std::vector<ChildPayload> everyKindOfChildPayload(uint32_t channels) {
   for (PtmCoder coder : kCoders)
     for (Predictor predictor : kParentPredictors)
       payloads.push_back(makeChildPayload(channels, predictor, coder));
-  // Coder 7 codes every predictor but 2 (ptm_lanes.h).
-  for (Predictor predictor : {Predictor::kParentNearest, Predictor::kNeighbourMedian,
-                              Predictor::kParentCorrected, Predictor::kLeastSquares})
+  // Coder 7 with every predictor (predictor 5 without predictor 4's estimate, the only weights
+  // it has).
+  for (Predictor predictor : kParentPredictors)
     payloads.push_back(makeChildPayload(channels, predictor, PtmCoder::kRansLanes));
-  // Predictor 5 without predictor 4's estimate, which its decoders then skip.
-  for (PtmCoder coder : {PtmCoder::kRans, PtmCoder::kRansLanes})
-    payloads.push_back(makeChildPayload(channels, Predictor::kLeastSquares, coder, 1, true));
+  // Predictor 5 without predictor 4's estimate with coder 1, whose walk then skips it.
+  payloads.push_back(
+      makeChildPayload(channels, Predictor::kLeastSquares, PtmCoder::kRans, 1, true));
   // And payloads that carry explicit tables: the default's of a comb, and coder 7's.
   payloads.push_back(makeChildPayload(channels, {}, PtmCoder::kRans, 8));
   EXPECT_TRUE(hasTables(payloads.back().payload)) << channels << " channels";
@@ -177,6 +177,33 @@ TEST(PtmCodec, DecodeRejectsUnknownPredictorReservedByteAndAMissingParent) {
   auto orphan = decodeTile(Codec::kPtm, tile.payload, out, nullptr);
   ASSERT_FALSE(orphan.has_value());
   EXPECT_NE(orphan.error().message.find("parent"), std::string::npos);
+}
+
+TEST(PtmCodec, DecodeRejectsRemovedVariantsByName) {
+  // Format 1.0 removed predictor 2 (the bilinear parent) and coder 5 (coder 6's activity
+  // without the parent), which no effort wrote: refused as unsupported, by name. (Coder 7 with
+  // predictor 5's estimate term: ptm_lanes_test.cpp.)
+  ChildPayload tile = makeChildPayload(3, Predictor::kNeighbourMedian, PtmCoder::kRansMixture);
+  ParentTexels parent = parentOf(tile.parent, 1, 1, kSweepTilePx, 1);
+  Image out(kSweepSide, kSweepSide, 3);
+  struct Removed {
+    uint8_t predictor, coder;
+    const char* named;
+  };
+  for (const Removed removed :
+       {Removed{2, tile.payload[1], "predictor 2"}, Removed{tile.payload[0], 5, "coder 5"},
+        Removed{tile.payload[0], 5 | kPtmTablesFlag, "coder 5"}}) {
+    std::vector<uint8_t> bad = tile.payload;
+    bad[0] = removed.predictor;
+    bad[1] = removed.coder;
+    auto refused = decodeTile(Codec::kPtm, bad, out, &parent);
+    ASSERT_FALSE(refused.has_value()) << removed.named;
+    EXPECT_EQ(refused.error().code, ErrorCode::kUnsupported) << removed.named;
+    const std::string& message = refused.error().message;
+    EXPECT_NE(message.find("ptm payload"), std::string::npos) << message;
+    EXPECT_NE(message.find(removed.named), std::string::npos) << message;
+    EXPECT_NE(message.find("removed in format 1.0"), std::string::npos) << message;
+  }
 }
 
 TEST(PtmCodec, AParentThatDoesNotFitIsRefusedNotRead) {

@@ -1,7 +1,7 @@
 // ptm's lane coder (coder 7, ptm_lanes.h): whole pyramids round-trip bit-exactly with both of
-// its decoders, the SIMD one (where the processor has AVX2) and the scalar one every processor
-// runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it exists for
-// every predictor but 2 (bilinear parent). Hostile payloads of coder 7 are in
+// its decoders, the SIMD one (where the processor has AVX-512) and the walk every processor
+// runs; it codes coder 1's symbols, so its size follows coder 1's estimate; and it has
+// predictor 5 without predictor 4's estimate only. Hostile payloads of coder 7 are in
 // codec_ptm_hostile_test.cpp.
 #include <algorithm>
 #include <cmath>
@@ -13,7 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "codecs/encode.h"
-#include "ptm/ptm_codec.h"
+#include "ptm/ptm_encode.h"
 #include "ptm/ptm_lanes.h"
 #include "ptm/ptm_walk.h"
 #include "ptm_test_fixtures.h"
@@ -69,10 +69,9 @@ uint32_t escapeBytes(std::span<const uint8_t> payload, uint32_t channels) {
   return total;
 }
 
-// Decodes a coder-7 payload by `path`: with the scalar lanes, as decodePtm would where AVX2 is
-// missing, or with the AVX2 build of the SIMD decoder, as it would where AVX-512 is. The SIMD
-// builds get a walk without predictor 4's planes, as decodePtm gives them; the scalar lanes
-// one with them, and they must refuse one without.
+// Decodes a coder-7 payload by `path`: the walk in the lanes' order, as decodePtm would where
+// AVX-512 is missing, or the fastest. The SIMD decoder gets a walk without predictor 4's planes,
+// as decodePtm gives it; the walk one with them, and it must refuse one without.
 Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
                       const ParentTexels* parent, ptm::lanes::Path path) {
   Image out(side, side, channels);
@@ -81,21 +80,20 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
   PtmState state;
   ptm::AxisMap columns, rows;
   const auto* weights = reinterpret_cast<const int8_t*>(payload.data() + ptm::kHeaderBytes);
-  const bool planes = path == ptm::lanes::Path::kScalar;
+  const bool planes = path == ptm::lanes::Path::kScalar || !ptm::lanes::simdAvailable();
   auto walk =
       ptm::prepareWalk(out.texels.data(), side, side, channels, has_parent ? parent : nullptr,
                        predictor, PtmCoder::kRansLanes, weights, state, columns, rows, planes);
   EXPECT_TRUE(walk.has_value());
   if (!walk) return out;
-  // Predictor 4's estimate exactly where the weights need it, and its planes where asked for.
-  const bool estimates = predictor == Predictor::kParentCorrected ||
-                         (predictor == Predictor::kLeastSquares && usesEstimate(weights, channels));
+  // Predictor 4's estimate for predictor 4 only: coder 7's predictor 5 has none.
+  const bool estimates = predictor == Predictor::kParentCorrected;
   EXPECT_EQ(walk->estimates, estimates);
   EXPECT_EQ(walk->upsampled != nullptr, estimates && planes);
   const LaneModels models = laneModels(payload, channels);
   const bool green_led = (payload[1] & kPtmGreenLedFlag) != 0;
   std::vector<uint8_t> padded;
-  if (estimates && planes) {
+  if (estimates && path == ptm::lanes::Path::kScalar) {
     Image scratch_out(side, side, channels);
     PtmState other;
     ptm::AxisMap other_columns, other_rows;
@@ -106,7 +104,7 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
     if (without) {
       EXPECT_FALSE(ptm::lanes::decode(payload.subspan(models.section_at), *without, channels,
                                       predictor, models.context_models, green_led, padded, path))
-          << "the scalar lanes without predictor 4's planes";
+          << "the walk without predictor 4's planes";
     }
   }
   EXPECT_TRUE(ptm::lanes::decode(payload.subspan(models.section_at), *walk, channels, predictor,
@@ -114,18 +112,15 @@ Image decodeWithLanes(std::span<const uint8_t> payload, uint32_t side, uint32_t 
   return out;
 }
 
-// The round trip checked the fastest decoder; the scalar lanes, and the AVX2 build where the
-// fastest is the AVX-512 one, must give the same texels.
+// The round trip checked the fastest decoder; the walk must give the same texels.
 void expectEveryDecoderAgrees(std::span<const uint8_t> payload, uint32_t side, uint32_t channels,
                               const ParentTexels* parent, const Image& tile) {
   EXPECT_EQ(decodeWithLanes(payload, side, channels, parent, ptm::lanes::Path::kScalar).texels,
             tile.texels)
-      << "scalar lanes";
-  if (ptm::lanes::avx512Available()) {
-    EXPECT_EQ(decodeWithLanes(payload, side, channels, parent, ptm::lanes::Path::kAvx2).texels,
-              tile.texels)
-        << "the AVX2 build";
-  }
+      << "the walk";
+  EXPECT_EQ(decodeWithLanes(payload, side, channels, parent, ptm::lanes::Path::kFastest).texels,
+            tile.texels)
+      << "the fastest decoder";
 }
 
 TEST(PtmLanes, PyramidsRoundTripBitExactlyWithEveryDecoder) {
@@ -139,9 +134,7 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithEveryDecoder) {
     bool extreme = false;
   };
   if (!ptm::lanes::simdAvailable())
-    GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
-  else if (!ptm::lanes::avx512Available())
-    GTEST_LOG_(INFO) << "no AVX-512 here: the fastest path is the AVX2 build";
+    GTEST_LOG_(INFO) << "no AVX-512 here: the fastest path is the walk";
   for (const Case& c : {Case{133, 77, 0, 32, false}, Case{97, 130, 1, 32, false},
                         Case{71, 69, 2, 32, false}, Case{101, 99, 3, 32, true},
                         Case{300, 270, 1, 128, true}, Case{67, 45, 1, 32, true, true}}) {
@@ -199,12 +192,12 @@ TEST(PtmLanes, PyramidsRoundTripBitExactlyWithEveryDecoder) {
 }
 
 TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
-  // Predictor 5's weights are any bytes a payload holds: the extremes (-128 and 127) and random
-  // ones push every term of its sum to its bounds, on a source of 0s and 255s. Random weights
-  // that give predictor 4's estimate none take the decoders' paths without predictor 4's work,
-  // and so does a fit without the estimate, recorded by an encoder that walked with it.
+  // Predictor 5's weights are any bytes a payload holds but the estimate's, which coder 7 does
+  // not have: the extremes (-128 and 127) and random ones push every term of its sum to its
+  // bounds, on a source of 0s and 255s; and the fit without the estimate, from an encoder that
+  // walked with it.
   if (!ptm::lanes::simdAvailable())
-    GTEST_LOG_(INFO) << "no AVX2 here: the fastest path is the scalar one";
+    GTEST_LOG_(INFO) << "no AVX-512 here: the fastest path is the walk";
   for (uint32_t channels = 1; channels <= 4; ++channels) {
     PyramidTiles pyramid = makePyramid(75, 69, channels, 32, 1, channels + 11);
     uint32_t seed = 7 * channels;
@@ -212,12 +205,10 @@ TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
     for (size_t l = 1; l < pyramid.levels.size(); ++l)
       pyramid.levels[l] = floorDownsample(pyramid.levels[l - 1]);
     const uint32_t side = 32 + 2;
-    enum Kind { kLowest, kHighest, kRandom, kRandomWithoutEstimate, kFittedWithoutEstimate };
-    for (const Kind kind :
-         {kLowest, kHighest, kRandom, kRandomWithoutEstimate, kFittedWithoutEstimate}) {
+    enum Kind { kLowest, kHighest, kRandom, kFitted };
+    for (const Kind kind : {kLowest, kHighest, kRandom, kFitted}) {
       PtmLeastSquaresFit fit;
-      fit.fitted = kind != kFittedWithoutEstimate;
-      fit.without_estimate = kind == kRandomWithoutEstimate || kind == kFittedWithoutEstimate;
+      fit.fitted = kind != kFitted;
       for (int8_t& weight : fit.weights)
         weight = kind == kLowest    ? int8_t(-128)
                  : kind == kHighest ? int8_t(127)
@@ -231,12 +222,12 @@ TEST(PtmLanes, LeastSquaresRoundTripsWithAnyWeights) {
             auto payload = encodePtm(tile.view(), {}, parent, Predictor::kLeastSquares,
                                      PtmCoder::kRansLanes, nullptr, &fit);
             // Each tile fits its own weights.
-            if (kind == kFittedWithoutEstimate) fit.fitted = fitted;
+            if (kind == kFitted) fit.fitted = fitted;
             if (payload && parent != nullptr) {
               EXPECT_EQ((*payload)[0], uint8_t(Predictor::kLeastSquares));
               const auto* weights =
                   reinterpret_cast<const int8_t*>(payload->data() + ptm::kHeaderBytes);
-              EXPECT_EQ(usesEstimate(weights, channels), !fit.without_estimate);
+              EXPECT_FALSE(usesEstimate(weights, channels));
               expectEveryDecoderAgrees(*payload, side, channels, parent, tile);
             }
             return payload;
@@ -261,8 +252,8 @@ TEST(PtmLanes, ExplicitTablesRoundTripWithEveryDecoderAndPayForThemselves) {
           comb, channels,
           [&](const Image& tile, const ParentTexels* parent) -> Result<std::vector<uint8_t>> {
             PtmRecording recording;
-            TESSERA_TRY(recordPtm(tile.view(), parent, predictor, PtmCoder::kRans, nullptr, nullptr,
-                                  recording));
+            TESSERA_TRY(recordPtm(tile.view(), parent, predictor, PtmCoder::kRansLanes, nullptr,
+                                  nullptr, recording));
             std::vector<uint8_t> payload = lanesPayloadWithAnyTables(recording);
             // With green-led contexts, whose decoders read green's frequency of zero from
             // the tables too.
@@ -347,47 +338,53 @@ TEST(PtmLanes, CodesCoderOnesSymbolsToWithinItsStates) {
       // header holds carry up to two bytes each of what the symbols' bits counted.
       const double states = 3.0 * ptm::lanes::kLanes;
       EXPECT_LE(std::abs(double(*estimate) - double(lanes->size())), 2 * states + 3 * 2 + 1);
-      // A walk recorded for coder 1 encodes coder 7 as encodePtm does.
+      // A walk recorded for coder 1, with the weights coder 7 takes, encodes coder 7 as
+      // encodePtm does.
+      PtmLeastSquaresFit fit;
+      fit.without_estimate = true;
       PtmRecording recording;
       ASSERT_TRUE(
-          recordPtm(child.view(), with, predictor, PtmCoder::kRans, nullptr, nullptr, recording)
+          recordPtm(child.view(), with, predictor, PtmCoder::kRans, nullptr, &fit, recording)
               .has_value());
       EXPECT_TRUE(walksAlike(PtmCoder::kRans, PtmCoder::kRansLanes));
       EXPECT_EQ(encodeRecordedPtm(recording, PtmCoder::kRansLanes, nullptr), *lanes);
     }
 }
 
-TEST(PtmLanes, CodesEveryPredictorButTheBilinearParent) {
+TEST(PtmLanes, ToggledFlagsAndTheEstimatesWeightAreRefused) {
   PyramidTiles pyramid = makePyramid(128, 128, 3, 64, 0, 5);
   const Image child = pyramid.tile(0, 1, 0);
   const Image parent_tile = pyramid.tile(1, 0, 0);
   ParentTexels parent = parentOf(parent_tile, 1, 0, 64, 0);
-  auto refused = encodePtm(child.view(), {}, &parent, Predictor::kParentBilinear,
-                           PtmCoder::kRansLanes, nullptr);
-  ASSERT_FALSE(refused.has_value());
-  EXPECT_EQ(refused.error().code, ErrorCode::kInvalidArgument);
   auto payload = encodePtm(child.view(), {}, &parent, Predictor::kNeighbourMedian,
                            PtmCoder::kRansLanes, nullptr);
   ASSERT_TRUE(payload.has_value());
   Image out(64, 64, 3);
-  // Another predictor's byte on a coder-7 payload, or the tables flag toggled (the section
-  // read where there is none, or skipped where there is one), is corrupt.
-  std::vector<uint8_t> bad = *payload;
-  bad[0] = uint8_t(Predictor::kParentBilinear);
-  auto decoded = decodeTile(Codec::kPtm, bad, out, &parent);
-  ASSERT_FALSE(decoded.has_value());
-  EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
-  EXPECT_NE(decoded.error().message.find("lanes"), std::string::npos);
-  bad = *payload;
-  bad[1] = uint8_t(bad[1] ^ kPtmTablesFlag);
-  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
-  // The green-led flag toggled reads red's and blue's symbols under other models: the streams
-  // do not end where the symbols do.
-  bad = *payload;
-  bad[1] = uint8_t(bad[1] ^ kPtmGreenLedFlag);
-  EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value());
+  // The tables flag toggled (the section read where there is none, or skipped where there is
+  // one) is corrupt; the green-led flag toggled reads red's and blue's symbols under other
+  // models, so the streams do not end where the symbols do.
+  for (const uint8_t flag : {kPtmTablesFlag, kPtmGreenLedFlag}) {
+    std::vector<uint8_t> bad = *payload;
+    bad[1] = uint8_t(bad[1] ^ flag);
+    EXPECT_FALSE(decodeTile(Codec::kPtm, bad, out, &parent).has_value()) << int(flag);
+  }
   ASSERT_TRUE(decodeTile(Codec::kPtm, *payload, out, &parent).has_value());
   EXPECT_EQ(out.texels, child.texels);
+  // Predictor 5 with coder 7 takes the weights without predictor 4's estimate, whatever the fit
+  // asks for; a payload that gives the estimate a weight is refused by name.
+  PtmLeastSquaresFit fit;
+  auto least_squares = encodePtm(child.view(), {}, &parent, Predictor::kLeastSquares,
+                                 PtmCoder::kRansLanes, nullptr, &fit);
+  ASSERT_TRUE(least_squares.has_value());
+  EXPECT_FALSE(usesEstimate(reinterpret_cast<const int8_t*>(least_squares->data() + 2), 3));
+  EXPECT_EQ(decodeOrDie(*least_squares, 64, 3, &parent).texels, child.texels);
+  std::vector<uint8_t> bad = *least_squares;
+  bad[ptm::kHeaderBytes + kLsTerms - 1] = 1;
+  auto refused = decodeTile(Codec::kPtm, bad, out, &parent);
+  ASSERT_FALSE(refused.has_value());
+  EXPECT_EQ(refused.error().code, ErrorCode::kUnsupported);
+  EXPECT_NE(refused.error().message.find("coder 7"), std::string::npos);
+  EXPECT_NE(refused.error().message.find("removed"), std::string::npos);
 }
 
 TEST(PtmLanes, GreenLeadsRedAndBlueInCodedTexelsOnly) {
@@ -434,8 +431,8 @@ TEST(PtmLanes, GreenLeadsRedAndBlueInCodedTexelsOnly) {
                                          before[14],
                                          before[15]};
   EXPECT_EQ(contexts, expected);
-  EXPECT_EQ(ptm::lanes::greenLedClass(0, true), 0u);
-  EXPECT_EQ(ptm::lanes::greenLedClass(6, false), kActivityClasses - 1);
+  EXPECT_EQ(ptm::greenLedClass(0, true), 0u);
+  EXPECT_EQ(ptm::greenLedClass(6, false), kActivityClasses - 1);
 }
 
 TEST(PtmLanes, GreenLedContextsCodeColourThatErrsTogetherSmaller) {

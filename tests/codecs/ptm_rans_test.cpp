@@ -1,5 +1,5 @@
-// The rANS coder under ptm's coders 1-6 (ptm_rans.h): every model of both families is a proper
-// distribution whose bucket tables find every slot, the mixture family pays off on residuals
+// The rANS coder under ptm's coders 1-4 and 6 (ptm_rans.h): every model of both families is a
+// proper distribution whose bucket tables find every slot, the mixture family pays off on residuals
 // drawn from two spreads, and payloads written with family 1 before family 2 existed still
 // decode and encode byte for byte.
 #include <algorithm>
@@ -11,7 +11,7 @@
 #include <gtest/gtest.h>
 
 #include "codecs/encode.h"
-#include "ptm/ptm_codec.h"
+#include "ptm/ptm_encode.h"
 #include "ptm/ptm_rans.h"
 #include "support/test_images.h"
 
@@ -218,7 +218,7 @@ TEST(PtmRans, ATableCodesWhatNoFamilyModelFitsAndDecodesExactly) {
     std::vector<uint8_t> params;
     const double family_bits = rans::chooseModels(family, counts, params);
     rans::Tables tables;
-    ASSERT_TRUE(rans::chooseTables(family, counts, params, tables));
+    ASSERT_TRUE(rans::chooseTables(family, counts, params, tables, 0));
     ASSERT_EQ(tables.models.size(), 1u);  // the comb's context only
     EXPECT_EQ(tables.section[0], 0b10);
     EXPECT_LT(tables.bits + 8.0 * double(tables.section.size()), family_bits * 0.9)
@@ -258,7 +258,7 @@ TEST(PtmRans, AMalformedTablesSectionIsRefused) {
   std::vector<uint8_t> params;
   rans::chooseModels(rans::FamilyId::kMixture15, counts, params);
   rans::Tables tables;
-  ASSERT_TRUE(rans::chooseTables(rans::FamilyId::kMixture15, counts, params, tables));
+  ASSERT_TRUE(rans::chooseTables(rans::FamilyId::kMixture15, counts, params, tables, 0));
   const std::vector<uint8_t> good = tables.section;
   auto read = [](std::vector<uint8_t> section) {
     std::vector<rans::Model> models;

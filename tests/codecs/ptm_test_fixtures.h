@@ -13,7 +13,7 @@
 #include <gtest/gtest.h>
 
 #include "codecs/encode.h"
-#include "ptm/ptm_codec.h"
+#include "ptm/ptm_encode.h"
 #include "support/test_images.h"
 
 namespace tessera::detail {
@@ -179,20 +179,16 @@ inline void expectCoarseToFineRoundTrip(const PyramidTiles& pyramid, uint32_t ch
 }
 
 inline constexpr Predictor kParentPredictors[] = {
-    Predictor::kParentNearest, Predictor::kParentBilinear, Predictor::kNeighbourMedian,
-    Predictor::kParentCorrected, Predictor::kLeastSquares};
+    Predictor::kParentNearest, Predictor::kNeighbourMedian, Predictor::kParentCorrected,
+    Predictor::kLeastSquares};
 inline constexpr PtmCoder kCoders[] = {PtmCoder::kZstd,
                                        PtmCoder::kRans,
                                        PtmCoder::kRansChained,
                                        PtmCoder::kRansMixture,
                                        PtmCoder::kRansMixtureChained,
-                                       PtmCoder::kRansMixtureChainedErrors,
                                        PtmCoder::kRansParentErrors};
-inline constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans,
-                                           PtmCoder::kRansChained,
-                                           PtmCoder::kRansMixture,
-                                           PtmCoder::kRansMixtureChained,
-                                           PtmCoder::kRansMixtureChainedErrors,
+inline constexpr PtmCoder kRansCoders[] = {PtmCoder::kRans, PtmCoder::kRansChained,
+                                           PtmCoder::kRansMixture, PtmCoder::kRansMixtureChained,
                                            PtmCoder::kRansParentErrors};
 
 }  // namespace tessera::detail

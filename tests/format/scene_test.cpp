@@ -1,5 +1,5 @@
 // The scene section (docs/format.md, "Scenes"): golden bytes written by hand from the spec's
-// tables, round trips, the header's scene reference read by the 1.0 header decoder, every
+// tables, round trips, the scene directory found in the section table, every
 // prefix of a node head rejected, and the node table's tree rules.
 #include "format/scene.h"
 
@@ -55,33 +55,20 @@ TEST(SceneFormat, DirectoryGoldenBytes) {
   EXPECT_EQ(*decoded, goldenDirectory());
 }
 
-TEST(SceneFormat, HeaderCarriesTheSceneReferenceThatVersion10ReadersIgnore) {
-  FileHeader header = sceneHeader();
+TEST(SceneFormat, SceneDirectoryIsTheSectionOfKind1) {
   const BlockRef scene{256, 128, 0x0123456789ABCDEFull};
-  std::vector<uint8_t> bytes = encodeSceneHeader(header, scene);
-  // Bytes 8..11: version 1.1; 80..103: the scene reference; 120..127 the checksum of 0..119.
-  EXPECT_EQ(loadU16(bytes.data() + 10), 1);
-  EXPECT_EQ(loadU64(bytes.data() + 80), 256u);
-  EXPECT_EQ(loadU64(bytes.data() + 88), 128u);
-  EXPECT_EQ(loadU64(bytes.data() + 96), 0x0123456789ABCDEFull);
-  EXPECT_EQ(loadU64(bytes.data() + 120), checksum64({bytes.data(), 120}));
-  Result<FileHeader> decoded = decodeHeader(bytes, "s.tess");  // the 1.0 decoder
-  ASSERT_TRUE(decoded.has_value()) << decoded.error().message;
-  Result<BlockRef> ref = decodeSceneRef(bytes, *decoded, "s.tess");
+  const SectionEntry sections[] = {{2, {40000, 96, 0x55}}, {1, scene}};
+  Result<BlockRef> ref = decodeSceneRef(sections, "s.tess");
   ASSERT_TRUE(ref.has_value()) << ref.error().message;
   EXPECT_EQ(*ref, scene);
-  // A 1.0 header has no scene.
-  FileHeader plain = header;
-  plain.version_minor = 0;
-  std::vector<uint8_t> v10 = encodeHeader(plain);
-  EXPECT_EQ(decodeSceneRef(v10, *decodeHeader(v10, "p.tess"), "p.tess")->length_bytes, 0u);
+  // No section of kind 1 (or no section table at all): no scene.
+  EXPECT_EQ(decodeSceneRef(std::span(sections, 1), "p.tess")->length_bytes, 0u);
+  EXPECT_EQ(decodeSceneRef({}, "p.tess")->length_bytes, 0u);
 }
 
 TEST(SceneFormat, SceneReferenceOfTheWrongLengthIsRejected) {
-  std::vector<uint8_t> bytes = encodeSceneHeader(sceneHeader(), {256, 100, 1});
-  auto header = decodeHeader(bytes, "s.tess");
-  ASSERT_TRUE(header.has_value());
-  auto ref = decodeSceneRef(bytes, *header, "s.tess");
+  const SectionEntry sections[] = {{1, {256, 100, 1}}};
+  auto ref = decodeSceneRef(sections, "s.tess");
   ASSERT_FALSE(ref.has_value());
   EXPECT_NE(ref.error().message.find("scene directory of 100 bytes"), std::string::npos);
 }

@@ -59,20 +59,18 @@ void upsampleParent(const ImageView& parent, const AxisMap& columns, const AxisM
   }
 }
 
-// Coders 5 and 6's error plane in `state`, sized to the tile; null for the other coders.
+// Coder 6's error plane in `state`, sized to the tile; null for the other coders.
 uint16_t* errorPlane(PtmCoder coder, uint32_t width, uint32_t height, PtmState& state) {
   if (!isErrorActivityCoder(coder)) return nullptr;
   state.errors.resize(size_t(width) * height);
   return state.errors.data();
 }
 
-// The parent bilinearly upsampled to every child texel into `out`, and `detail` sized to
-// match it. One entry more than the tile's: the lane decoder reads an entry with a 32-bit
-// gather, two bytes past it.
+// The parent bilinearly upsampled to every child texel into `out`, and `detail` sized to match.
 void upsample(uint32_t channels, const ImageView& parent, const AxisMap& columns,
               const AxisMap& rows, std::vector<int16_t>& out, std::vector<int16_t>& detail,
               std::vector<int16_t>& blend) {
-  out.resize(columns.parent.size() * rows.parent.size() * channels + 1);
+  out.resize(columns.parent.size() * rows.parent.size() * channels);
   detail.resize(out.size());
   switch (channels) {
     case 1: return upsampleParent<1>(parent, columns, rows, out.data(), blend);
@@ -104,22 +102,13 @@ Result<void> mapParent(const ImageView& parent_view, const ParentTexels& parent,
 
 }  // namespace
 
-rans::FamilyId familyOf(PtmCoder coder) {
-  return coder == PtmCoder::kRans || coder == PtmCoder::kRansChained ||
-                 coder == PtmCoder::kRansLanes
-             ? rans::FamilyId::kGeometric12
-             : rans::FamilyId::kMixture15;
-}
-
-SymbolCounts countSymbols(uint32_t width, uint32_t height, const AxisMap* columns,
-                          const AxisMap* rows) {
-  const size_t total = size_t(width) * height;
-  if (columns == nullptr) return {total, 0};
+SymbolCounts countSymbols(const Walk& walk) {
+  const size_t total = size_t(walk.width) * walk.height;
+  if (walk.parent == nullptr) return {total, 0};
   size_t derived_columns = 0, derived_rows = 0;
-  for (uint8_t d : columns->derived) derived_columns += d;
-  for (uint8_t d : rows->derived) derived_rows += d;
-  const size_t derived = derived_columns * derived_rows;
-  return {total - derived, derived};
+  for (uint8_t d : walk.columns->derived) derived_columns += d;
+  for (uint8_t d : walk.rows->derived) derived_rows += d;
+  return {total - derived_columns * derived_rows, derived_columns * derived_rows};
 }
 
 Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint32_t channels,
@@ -146,7 +135,6 @@ Result<Walk> prepareWalk(uint8_t* texels, uint32_t width, uint32_t height, uint3
               upsampled ? state.detail.data() : nullptr,
               errorPlane(coder, width, height, state),
               ls_weights,
-              nullptr,
               estimates};
 }
 

@@ -15,14 +15,14 @@
 #include <tessera/result.h>
 
 #include "format/header.h"
+#include "format/sections.h"
 
 namespace tessera::detail {
 
 /// The minor version that adds scenes. Version 1.0 readers open such a file and see its
-/// textures as ordinary images; the scene reference lives in header bytes they ignore.
+/// textures as ordinary images; the scene directory is the section of kind kScene in the
+/// section table (format/sections.h) that header bytes they ignore point to.
 inline constexpr uint16_t kSceneVersionMinor = 1;
-/// Where the scene BlockRef sits in the 128-byte header (bytes 80..103, reserved in 1.0).
-inline constexpr uint32_t kSceneRefOffset = 80;
 inline constexpr uint32_t kSceneDirectoryBytes = 128;
 inline constexpr uint32_t kNodeRecordBytes = 96;
 inline constexpr uint32_t kTextureRecordBytes = 64;
@@ -165,13 +165,9 @@ struct NodeHead {
   std::vector<NodeTextureRecord> textures;
 };
 
-/// encodeHeader plus the scene reference at bytes 80..103; the version minor must be 1.
-std::vector<uint8_t> encodeSceneHeader(const FileHeader& header, const BlockRef& scene);
-/// The scene reference of a header that decodeHeader accepted: absent (length 0) for a 1.0
-/// file. Checks the block against the file and its length, and for minor 1 that bytes
-/// 104..119 are zero.
-Result<BlockRef> decodeSceneRef(std::span<const uint8_t> header_bytes, const FileHeader& header,
-                                const std::string& name);
+/// The scene directory's reference among a decoded section table's entries: length 0 when the
+/// table has no scene section; otherwise checked to be exactly kSceneDirectoryBytes long.
+Result<BlockRef> decodeSceneRef(std::span<const SectionEntry> sections, const std::string& name);
 
 std::vector<uint8_t> encodeSceneDirectory(const SceneDirectory& directory);
 /// Checks counts, depth, fan-out, bounds (finite, min <= max) and every block against the file.

@@ -1,0 +1,167 @@
+// PMTiles v3 in one pass: the header and a root directory reserved in the first 16 KiB, tile
+// blobs after it in tile id order (identical blobs stored once, runs of them as one entry),
+// then the metadata and, when the root would not fit, leaf directories.
+#include <algorithm>
+#include <map>
+
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include "export/pmtiles.h"
+#include "export_writers.h"
+#include "format/checksum.h"
+#include "output/file_appender.h"
+#include "output/output_file.h"
+
+namespace tessera::detail {
+
+namespace {
+
+using pmtiles::Entry;
+
+std::span<const uint8_t> asBytes(std::string_view text) {
+  return {reinterpret_cast<const uint8_t*>(text.data()), text.size()};
+}
+
+struct Directories {
+  std::vector<uint8_t> root;
+  std::vector<uint8_t> leaves;
+};
+
+// The root alone when it fits beside the header (and no leaf size is asked for); else leaves
+// of `per_leaf` entries (default 4096), doubled until the root of leaf pointers fits.
+Directories layoutDirectories(const std::vector<Entry>& entries, uint32_t leaf_entries) {
+  const uint64_t root_room = pmtiles::kRootWindowBytes - pmtiles::kHeaderBytes;
+  Directories out;
+  out.root = pmtiles::encodeDirectory(entries);
+  if (leaf_entries == 0 && out.root.size() <= root_room) return out;
+  for (size_t per_leaf = leaf_entries ? leaf_entries : 4096;; per_leaf *= 2) {
+    std::vector<Entry> pointers;
+    out.leaves.clear();
+    for (size_t first = 0; first < entries.size(); first += per_leaf) {
+      const size_t last = std::min(entries.size(), first + per_leaf);
+      const std::vector<uint8_t> leaf = pmtiles::encodeDirectory(std::vector<Entry>(
+          entries.begin() + ptrdiff_t(first), entries.begin() + ptrdiff_t(last)));
+      pointers.push_back({entries[first].tile_id, out.leaves.size(), uint32_t(leaf.size()), 0});
+      out.leaves.insert(out.leaves.end(), leaf.begin(), leaf.end());
+    }
+    out.root = pmtiles::encodeDirectory(pointers);
+    if (out.root.size() <= root_room) return out;
+  }
+}
+
+// Blobs already written, by checksum and length; equal bytes are confirmed before sharing.
+class BlobStore {
+ public:
+  BlobStore(const TempFile& out, uint64_t start)
+      : out_(out), appender_(out, start), start_(start) {}
+  // Offset from the start of the tile data, and whether the bytes were new.
+  Result<std::pair<uint64_t, bool>> put(std::string_view bytes) {
+    const uint64_t key = checksum64(asBytes(bytes));
+    auto [first, last] = seen_.equal_range({key, bytes.size()});
+    for (auto it = first; it != last; ++it) {
+      TESSERA_TRY(appender_.flush());
+      std::string stored(bytes.size(), '\0');
+      TESSERA_TRY(out_.pread(start_ + it->second,
+                             {reinterpret_cast<uint8_t*>(stored.data()), stored.size()}));
+      if (stored == bytes) return std::pair{it->second, false};
+    }
+    TESSERA_ASSIGN_OR_RETURN(uint64_t at, appender_.append(asBytes(bytes)));
+    seen_.insert({{key, bytes.size()}, at - start_});
+    return std::pair{at - start_, true};
+  }
+  FileAppender& appender() { return appender_; }
+
+ private:
+  const TempFile& out_;
+  FileAppender appender_;
+  uint64_t start_;
+  std::multimap<std::pair<uint64_t, size_t>, uint64_t> seen_;
+};
+
+std::string metadataJson(const Archive& archive, const ImageInfo& info,
+                         const std::string& tile_format) {
+  nlohmann::json json = {{"name", info.name.empty() ? archive.name() : info.name},
+                         {"format", tile_format},
+                         {"type", "baselayer"},
+                         {"tessera", {{"width", info.width_px}, {"height", info.height_px}}}};
+  return json.dump();
+}
+
+}  // namespace
+
+Result<ExportReport> exportPmtiles(const Archive& archive, const std::string& out_path,
+                                   const ExportOptions& options) {
+  const ImageInfo& info = archive.images()[options.image];
+  const PictureFormat format = dziFormat(info);
+  std::vector<XyzTile> tiles = xyzTilesOf(info);
+  std::vector<std::pair<uint64_t, XyzTile>> ordered;
+  for (const XyzTile& t : tiles) ordered.push_back({pmtiles::tileId(t.z, t.x, t.y), t});
+  std::sort(ordered.begin(), ordered.end(),
+            [](const auto& a, const auto& b) { return a.first < b.first; });
+
+  TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(out_path));
+  BlobStore blobs(out, pmtiles::kRootWindowBytes);
+  std::vector<Entry> entries;
+  ExportReport report;
+  report.tile_format = dziExtension(format);
+  uint64_t contents = 0;
+  for (const auto& [id, t] : ordered) {
+    Result<Picture> picture =
+        renderXyzTile(archive, options.image, t.z, t.x, t.y, format, options.jpeg_quality);
+    if (!picture)
+      return fail(picture.error().code, fmt::format("{}: XYZ tile {}/{}/{}: {}", out_path, t.z, t.x,
+                                                    t.y, picture.error().message));
+    TESSERA_ASSIGN_OR_RETURN(auto placed, blobs.put(picture->bytes));
+    contents += placed.second ? 1 : 0;
+    Entry* last = entries.empty() ? nullptr : &entries.back();
+    if (last && last->offset == placed.first && last->tile_id + last->run_length == id)
+      ++last->run_length;
+    else
+      entries.push_back({id, placed.first, uint32_t(picture->bytes.size()), 1});
+    report.tiles_copied += picture->copied ? 1 : 0;
+    ++report.tiles;
+    if (options.on_progress) options.on_progress(report.tiles, ordered.size());
+  }
+  FileAppender& appender = blobs.appender();
+  pmtiles::Header header;
+  header.tile_data_offset = pmtiles::kRootWindowBytes;
+  header.tile_data_bytes = appender.end() - pmtiles::kRootWindowBytes;
+  const Directories directories = layoutDirectories(entries, options.pmtiles_leaf_entries);
+  const std::string metadata = metadataJson(archive, info, report.tile_format);
+  TESSERA_ASSIGN_OR_RETURN(header.metadata_offset, appender.append(asBytes(metadata)));
+  header.metadata_bytes = metadata.size();
+  TESSERA_ASSIGN_OR_RETURN(header.leaves_offset, appender.append(directories.leaves));
+  header.leaves_bytes = directories.leaves.size();
+  TESSERA_TRY(appender.flush());
+  header.root_offset = pmtiles::kHeaderBytes;
+  header.root_bytes = directories.root.size();
+  header.addressed_tiles = ordered.size();
+  header.tile_entries = entries.size();
+  header.tile_contents = contents;
+  header.tile_type =
+      format == PictureFormat::kPng ? pmtiles::TileType::kPng : pmtiles::TileType::kJpeg;
+  header.max_zoom = uint8_t(xyzMaxZoom(info));
+  std::vector<uint8_t> head = pmtiles::encodeHeader(header);
+  head.insert(head.end(), directories.root.begin(), directories.root.end());
+  head.resize(pmtiles::kRootWindowBytes, 0);
+  TESSERA_TRY(out.pwrite(0, head));
+  report.bytes = appender.end();
+  TESSERA_TRY(out.commit());
+  return report;
+}
+
+std::vector<XyzTile> xyzTilesOf(const ImageInfo& info) {
+  std::vector<XyzTile> tiles;
+  const uint32_t max_zoom = xyzMaxZoom(info);
+  for (uint32_t z = 0; z <= max_zoom; ++z) {
+    const uint32_t scale = max_zoom - z;
+    const uint32_t cols = (scaledWidthPx(info, scale) + kXyzTileSizePx - 1) / kXyzTileSizePx;
+    const uint32_t rows = (scaledHeightPx(info, scale) + kXyzTileSizePx - 1) / kXyzTileSizePx;
+    for (uint32_t y = 0; y < rows; ++y)
+      for (uint32_t x = 0; x < cols; ++x) tiles.push_back({z, x, y});
+  }
+  return tiles;
+}
+
+}  // namespace tessera::detail

@@ -1,0 +1,201 @@
+// A tiled pyramidal BigTIFF, as `vips tiffsave --tile --pyramid` and COGs lay it out: level 0
+// in the first directory, each coarser level in the next one (a reduced-resolution image),
+// tiles the archive's tile size. Tessera's levels are padded to whole tiles exactly as TIFF's
+// are, so a JPEG archive without border has its payloads written as they are, edge tiles
+// included (TIFF readers ignore the padding); other archives are decoded and stored with
+// Deflate and the horizontal predictor, losslessly.
+#include <tiffio.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <memory>
+
+#include <fmt/format.h>
+
+#include "codecs/encode.h"
+#include "export_writers.h"
+
+namespace tessera::detail {
+
+namespace {
+
+struct TiffCloser {
+  void operator()(TIFF* tiff) const { TIFFClose(tiff); }
+};
+using TiffFile = std::unique_ptr<TIFF, TiffCloser>;
+
+struct Sampling {
+  uint16_t horizontal = 0, vertical = 0;  ///< of the luma component; 0 when not found
+  friend bool operator==(const Sampling&, const Sampling&) = default;
+};
+
+// The first component's sampling factors in a JPEG stream's frame header (SOF0..SOF2).
+Sampling jpegSampling(std::span<const uint8_t> bytes) {
+  for (size_t i = 2; i + 11 < bytes.size();) {
+    if (bytes[i] != 0xFF) return {};
+    const uint8_t marker = bytes[i + 1];
+    const size_t length = (size_t(bytes[i + 2]) << 8) | bytes[i + 3];
+    if (marker >= 0xC0 && marker <= 0xC2) {
+      if (i + 11 >= bytes.size() || bytes[i + 9] < 1) return {};
+      const uint8_t factors = bytes[i + 11];
+      return {uint16_t(factors >> 4), uint16_t(factors & 0x0F)};
+    }
+    i += 2 + length;
+  }
+  return {};
+}
+
+// How a level's tiles are stored: JPEG payloads as they are, or decoded texels with Deflate.
+struct LevelPlan {
+  bool copy_jpeg = false;
+  Sampling sampling{2, 2};
+};
+
+Result<LevelPlan> planLevel(const Archive& archive, const ImageInfo& info, uint32_t image,
+                            uint32_t level) {
+  LevelPlan plan;
+  plan.copy_jpeg = info.default_codec == Codec::kJpeg && info.border_px == 0 &&
+                   (info.channels == 1 || info.channels == 3);
+  if (!plan.copy_jpeg || info.channels == 1) return plan;
+  // The file states one subsampling per level: that of the first stored JPEG payload.
+  for (uint32_t y = 0; y < info.tilesY(level); ++y) {
+    for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+      const TileId tile{image, level, x, y};
+      TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
+      if (entry.kind != TileKind::kEncoded || entry.codec != Codec::kJpeg) continue;
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload, archive.readPayload(tile, entry));
+      const Sampling sampling = jpegSampling(payload);
+      if (sampling.horizontal != 0) plan.sampling = sampling;
+      return plan;
+    }
+  }
+  return plan;
+}
+
+void setLevelTags(TIFF* tiff, const ImageInfo& info, uint32_t level, const LevelPlan& plan) {
+  TIFFSetField(tiff, TIFFTAG_SUBFILETYPE, level == 0 ? 0 : FILETYPE_REDUCEDIMAGE);
+  TIFFSetField(tiff, TIFFTAG_IMAGEWIDTH, info.levelWidthPx(level));
+  TIFFSetField(tiff, TIFFTAG_IMAGELENGTH, info.levelHeightPx(level));
+  TIFFSetField(tiff, TIFFTAG_TILEWIDTH, info.tile_size_px);
+  TIFFSetField(tiff, TIFFTAG_TILELENGTH, info.tile_size_px);
+  TIFFSetField(tiff, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tiff, TIFFTAG_SAMPLESPERPIXEL, info.channels);
+  TIFFSetField(tiff, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
+  TIFFSetField(tiff, TIFFTAG_SOFTWARE, "tessera export");
+  const bool color = info.channels >= 3;
+  if (plan.copy_jpeg) {
+    TIFFSetField(tiff, TIFFTAG_COMPRESSION, COMPRESSION_JPEG);
+    // Each tile is a whole JPEG stream with its own tables.
+    TIFFSetField(tiff, TIFFTAG_JPEGTABLESMODE, 0);
+    TIFFSetField(tiff, TIFFTAG_PHOTOMETRIC, color ? PHOTOMETRIC_YCBCR : PHOTOMETRIC_MINISBLACK);
+    if (color)
+      TIFFSetField(tiff, TIFFTAG_YCBCRSUBSAMPLING, plan.sampling.horizontal,
+                   plan.sampling.vertical);
+    return;
+  }
+  TIFFSetField(tiff, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
+  TIFFSetField(tiff, TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
+  TIFFSetField(tiff, TIFFTAG_PHOTOMETRIC, color ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
+  if (info.channels == 2 || info.channels == 4) {
+    const uint16_t alpha = EXTRASAMPLE_UNASSALPHA;
+    TIFFSetField(tiff, TIFFTAG_EXTRASAMPLES, 1, &alpha);
+  }
+}
+
+// The tile's texels without the archive's border, tile_size square.
+Image withoutBorder(const Image& stored, const ImageInfo& info) {
+  if (info.border_px == 0) return stored;
+  Image out(info.tile_size_px, info.tile_size_px, stored.channels);
+  const size_t row_bytes = size_t(info.tile_size_px) * stored.channels;
+  for (uint32_t y = 0; y < info.tile_size_px; ++y)
+    std::copy_n(stored.row(y + info.border_px) + size_t(info.border_px) * stored.channels,
+                row_bytes, out.row(y));
+  return out;
+}
+
+// One tile's bytes as the level stores them, and whether they are the payload as stored.
+Result<std::pair<std::vector<uint8_t>, bool>> tileBytes(const Archive& archive,
+                                                        const ImageInfo& info, const TileId& tile,
+                                                        const LevelPlan& plan, int quality) {
+  TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
+  std::vector<uint8_t> payload;
+  if (entry.kind == TileKind::kEncoded) {
+    TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
+    if (plan.copy_jpeg && entry.codec == Codec::kJpeg &&
+        (info.channels == 1 || jpegSampling(payload) == plan.sampling))
+      return std::pair{std::move(payload), true};
+  }
+  TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));
+  Image texels = withoutBorder(stored, info);
+  if (!plan.copy_jpeg) return std::pair{std::move(texels.texels), false};
+  EncodeOptions options;
+  options.quality = quality;
+  options.chroma_subsampling = plan.sampling.horizontal == 2;
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> encoded,
+                           encodeTile(Codec::kJpeg, texels.view(), options));
+  return std::pair{std::move(encoded), false};
+}
+
+Result<void> writeLevel(TIFF* tiff, const std::string& path, const Archive& archive,
+                        const ExportOptions& options, uint32_t level, ExportReport& report,
+                        uint64_t total) {
+  const ImageInfo& info = archive.images()[options.image];
+  TESSERA_ASSIGN_OR_RETURN(LevelPlan plan, planLevel(archive, info, options.image, level));
+  setLevelTags(tiff, info, level, plan);
+  for (uint32_t y = 0; y < info.tilesY(level); ++y) {
+    for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+      const TileId tile{options.image, level, x, y};
+      TESSERA_ASSIGN_OR_RETURN(auto bytes,
+                               tileBytes(archive, info, tile, plan, options.jpeg_quality));
+      const uint32_t index =
+          TIFFComputeTile(tiff, x * info.tile_size_px, y * info.tile_size_px, 0, 0);
+      const tmsize_t written =
+          plan.copy_jpeg
+              ? TIFFWriteRawTile(tiff, index, bytes.first.data(), tmsize_t(bytes.first.size()))
+              : TIFFWriteEncodedTile(tiff, index, bytes.first.data(), tmsize_t(bytes.first.size()));
+      if (written < 0)
+        return fail(ErrorCode::kIo,
+                    fmt::format("{}: writing {} failed", path, archive.tileName(tile)));
+      report.tiles_copied += bytes.second ? 1 : 0;
+      ++report.tiles;
+      if (options.on_progress) options.on_progress(report.tiles, total);
+    }
+  }
+  if (!TIFFWriteDirectory(tiff))
+    return fail(ErrorCode::kIo,
+                fmt::format("{}: writing level {}'s directory failed", path, level));
+  return {};
+}
+
+}  // namespace
+
+Result<ExportReport> exportTiff(const Archive& archive, const std::string& out_path,
+                                const ExportOptions& options) {
+  const ImageInfo& info = archive.images()[options.image];
+  uint64_t total = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    total += uint64_t(info.tilesX(level)) * info.tilesY(level);
+  ExportReport report;
+  report.tile_format = info.default_codec == Codec::kJpeg && info.border_px == 0 &&
+                               (info.channels == 1 || info.channels == 3)
+                           ? "jpeg"
+                           : "deflate";
+  const auto write = [&](const std::string& partial) -> Result<void> {
+    TiffFile tiff(TIFFOpen(partial.c_str(), "w8"));
+    if (!tiff) return fail(ErrorCode::kIo, fmt::format("{}: cannot create", partial));
+    for (uint32_t level = 0; level < info.level_count; ++level)
+      TESSERA_TRY(writeLevel(tiff.get(), out_path, archive, options, level, report, total));
+    TIFF* raw = tiff.release();
+    // TIFFClose flushes; its failure (a full disk) is only visible through TIFFFlush.
+    const bool flushed = TIFFFlush(raw) == 1;
+    TIFFClose(raw);
+    if (!flushed) return fail(ErrorCode::kIo, fmt::format("{}: flush failed", out_path));
+    return {};
+  };
+  TESSERA_TRY(writeThroughPartialFile(out_path, write));
+  std::error_code error;
+  report.bytes = std::filesystem::file_size(out_path, error);
+  return report;
+}
+
+}  // namespace tessera::detail
