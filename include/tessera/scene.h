@@ -220,4 +220,24 @@ class SceneArchive {
   std::unique_ptr<Impl> impl_;
 };
 
+/// What verifyScene found.
+struct SceneVerifyReport {
+  uint64_t nodes_checked = 0;   ///< node heads and pages read and checksummed
+  uint64_t meshes_checked = 0;  ///< mesh blobs checksummed (and decoded when asked)
+  uint64_t objects_checked = 0;
+  uint64_t textures_checked = 0;  ///< texture records matched against the image records
+  uint64_t fault_count = 0;
+  std::vector<std::string> faults;  ///< the first 100, each naming the archive and the item
+  bool ok() const { return fault_count == 0; }
+};
+
+/// Walks the scene of a scene archive: the node table (validateNodeTable), every node's head
+/// and pages, every mesh blob (checksum; decoded when `decode`), every object's mesh and
+/// texture references and its holders (an ancestor of its leaf), and the texture table
+/// against the image records a 1.0 reader sees (`images`: size, channels, tile size, levels;
+/// each texture stored at exactly the node that lists it, its coarsest tile inside the coarse
+/// block). Texture payloads are Archive::verify's. Blocking; thread-safe like the archive.
+SceneVerifyReport verifyScene(const SceneArchive& scene, const std::vector<ImageInfo>& images,
+                              bool decode);
+
 }  // namespace tessera

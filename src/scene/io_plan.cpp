@@ -1,0 +1,97 @@
+#include "io_plan.h"
+
+#include <algorithm>
+#include <limits>
+
+#include <tessera/check.h>
+
+namespace tessera::detail {
+namespace {
+
+// The least-cost cover of one subtree and the reads that reach it.
+struct SubtreePlan {
+  double cost = 0;
+  std::vector<PlannedRead> reads;
+};
+
+class Planner {
+ public:
+  Planner(const std::vector<PlanNode>& nodes, const LinkCost& link) : nodes_(nodes), link_(link) {}
+
+  // Seed 004's choice at node i, exactly: either one read of the whole subtree, or the
+  // node's own part (nothing, its block, or its pieces one read each) plus the best plan of
+  // every child subtree. Children of i start at i + 1 and follow each other's subtrees.
+  SubtreePlan plan(uint32_t i) {
+    const PlanNode& node = nodes_[i];
+    SubtreePlan split;
+    bool any_wanted = node.wanted;
+    if (node.wanted) addOwn(i, split);
+    const uint32_t end = i + node.subtree_nodes;
+    for (uint32_t child = i + 1; child < end; child += nodes_[child].subtree_nodes) {
+      SubtreePlan sub = plan(child);
+      if (!sub.reads.empty()) any_wanted = true;
+      split.cost += sub.cost;
+      split.reads.insert(split.reads.end(), sub.reads.begin(), sub.reads.end());
+    }
+    if (!any_wanted) return {};
+    const double whole = readCost(link_, node.subtree.length_bytes);
+    // A leaf's subtree is its block: call that read a node read. A tie (up to rounding: every
+    // node below wanted) goes to the finer reads, which fetch nothing unwanted.
+    if (node.subtree_nodes > 1 && whole < split.cost * (1 - 1e-12)) {
+      return {whole, {{ReadGranularity::kSubtree, i, node.subtree}}};
+    }
+    return split;
+  }
+
+ private:
+  void addOwn(uint32_t i, SubtreePlan& out) const {
+    const PlanNode& node = nodes_[i];
+    const double block = readCost(link_, node.own.length_bytes);
+    double pieces = std::numeric_limits<double>::infinity();
+    if (!node.pieces.empty()) {
+      pieces = 0;
+      for (const FileRange& piece : node.pieces) pieces += readCost(link_, piece.length_bytes);
+    }
+    if (pieces < block) {
+      out.cost += pieces;
+      for (const FileRange& piece : node.pieces) {
+        out.reads.push_back({ReadGranularity::kObject, i, piece});
+      }
+    } else {
+      out.cost += block;
+      out.reads.push_back({ReadGranularity::kNode, i, node.own});
+    }
+  }
+
+  const std::vector<PlanNode>& nodes_;
+  const LinkCost& link_;
+};
+
+}  // namespace
+
+double readCost(const LinkCost& link, uint64_t bytes) {
+  return link.latency_s + double(bytes) / link.bandwidth_bytes_per_s;
+}
+
+std::vector<PlannedRead> planReads(const std::vector<PlanNode>& nodes, const LinkCost& link) {
+  TESSERA_CHECK(link.bandwidth_bytes_per_s > 0) << "planReads: bandwidth must be positive";
+  Planner planner(nodes, link);
+  std::vector<PlannedRead> reads;
+  for (uint32_t root = 0; root < nodes.size(); root += nodes[root].subtree_nodes) {
+    TESSERA_CHECK(nodes[root].subtree_nodes >= 1) << "planReads: node " << root << " empty";
+    SubtreePlan sub = planner.plan(root);
+    reads.insert(reads.end(), sub.reads.begin(), sub.reads.end());
+  }
+  std::sort(reads.begin(), reads.end(), [](const PlannedRead& a, const PlannedRead& b) {
+    return a.range.offset_bytes < b.range.offset_bytes;
+  });
+  return reads;
+}
+
+double planCost(const std::vector<PlannedRead>& reads, const LinkCost& link) {
+  double cost = 0;
+  for (const PlannedRead& read : reads) cost += readCost(link, read.range.length_bytes);
+  return cost;
+}
+
+}  // namespace tessera::detail

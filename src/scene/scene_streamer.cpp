@@ -1,0 +1,488 @@
+#include <tessera/scene_stream.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <fmt/format.h>
+
+#include <tessera/check.h>
+
+#include "io_plan.h"
+#include "scene_loader.h"
+#include "scene_lod.h"
+#include "scene_residency.h"
+
+namespace tessera {
+
+using detail::LevelRef;
+using detail::PlanNode;
+
+const char* readGranularityName(ReadGranularity granularity) {
+  switch (granularity) {
+    case ReadGranularity::kObject: return "object";
+    case ReadGranularity::kNode: return "node";
+    case ReadGranularity::kSubtree: return "subtree";
+  }
+  return "?";
+}
+
+LinkCost measureLinkCost(const ByteSource& source, const LinkCost& fallback) {
+  const std::optional<LinkStats> stats = source.linkStats();
+  if (!stats || stats->recent.size() < 4) return fallback;
+  std::vector<double> first_byte;
+  double bytes = 0, transfer_s = 0;
+  for (const LinkSample& sample : stats->recent) {
+    first_byte.push_back(sample.first_byte_seconds);
+    bytes += double(sample.bytes);
+    transfer_s += std::max(0.0, sample.seconds - sample.first_byte_seconds);
+  }
+  std::nth_element(first_byte.begin(), first_byte.begin() + first_byte.size() / 2,
+                   first_byte.end());
+  LinkCost cost;
+  cost.latency_s = first_byte[first_byte.size() / 2];
+  // Transfers too short to time (a cached response) say nothing about the bandwidth.
+  cost.bandwidth_bytes_per_s =
+      transfer_s > 1e-4 ? bytes / transfer_s : fallback.bandwidth_bytes_per_s;
+  return cost;
+}
+
+namespace {
+
+enum class NodeState : uint8_t { kUnknown, kInFlight, kKnown, kFailed };
+
+bool sameCamera(const PerspectiveView& a, const PerspectiveView& b) {
+  return a.eye_x == b.eye_x && a.eye_y == b.eye_y && a.eye_z == b.eye_z && a.yaw_rad == b.yaw_rad &&
+         a.pitch_rad == b.pitch_rad && a.fov_y_rad == b.fov_y_rad && a.viewport_w == b.viewport_w &&
+         a.viewport_h == b.viewport_h;
+}
+
+// Texel bytes of every level, 4 per texel whatever the channels (what a GPU holds).
+std::vector<std::vector<uint64_t>> levelBytes(const std::vector<SceneTexture>& textures) {
+  std::vector<std::vector<uint64_t>> out(textures.size());
+  for (size_t t = 0; t < textures.size(); ++t) {
+    const ImageInfo& info = textures[t].info;
+    for (uint32_t level = 0; level < std::max(1u, info.level_count); ++level) {
+      out[t].push_back(uint64_t(info.levelWidthPx(level)) * info.levelHeightPx(level) * 4);
+    }
+  }
+  return out;
+}
+
+// The byte hull of a level's encoded tiles: one object-granularity read (a node stores a
+// texture's level contiguously, coarse to fine across its textures).
+// A level of uniform tiles only has no bytes: an empty range at `fallback_offset` (its node's
+// block) so that the read serving that node carries it.
+FileRange levelHull(const std::vector<TileEntry>& tiles, uint64_t fallback_offset) {
+  uint64_t begin = UINT64_MAX, end = 0;
+  for (const TileEntry& tile : tiles) {
+    if (tile.kind != TileKind::kEncoded) continue;
+    begin = std::min(begin, tile.offset_bytes);
+    end = std::max(end, tile.offset_bytes + tile.length_bytes);
+  }
+  return begin == UINT64_MAX ? FileRange{fallback_offset, 0} : FileRange{begin, end - begin};
+}
+
+}  // namespace
+
+struct SceneStreamer::Impl {
+  SceneStreamOptions options;
+  std::shared_ptr<const SceneArchive> archive;
+  std::shared_ptr<const detail::LoaderContext> context;
+  std::vector<SceneNode> nodes;
+  std::vector<uint32_t> parent;  ///< parent[0] == 0
+  std::vector<NodeState> node_state;
+  std::vector<std::vector<uint32_t>> leaf_objects;  ///< per node, once known
+  /// Per node, once known: min over its objects' textures of max(w, h) / (longest side *
+  /// 2^coarsest). A leaf at distance d with d * pixelAngle * 2^bias * ratio >= 1 needs only
+  /// coarsest levels (levelFor), so its objects skip the per-texture work.
+  std::vector<double> leaf_coarse_ratio;
+  std::vector<std::vector<NodeTexture>> node_textures;  ///< per node, once known
+  std::vector<const NodeTexture*> holder_entry;         ///< per texture, once its node is known
+  std::vector<SceneObject> objects;
+  std::vector<bool> object_known;
+  std::vector<std::unique_ptr<MeshData>> meshes;
+  std::vector<Image> coarsest;
+  std::vector<bool> coarsest_known;
+  std::vector<std::vector<std::vector<Image>>> levels;  ///< [texture][level] tiles
+  detail::SceneResidency residency;
+  std::vector<bool> level_busy;  ///< a refinement of the texture is queued or running
+  std::unique_ptr<detail::SceneLoaderPool> pool;  // last: its workers stop before the rest goes
+
+  PerspectiveView last_camera;
+  bool first_frame = true;
+  uint32_t still_frames = 0;
+  std::vector<uint32_t> drawable;
+  std::vector<uint32_t> visible_leaves;
+  std::vector<bool> leaf_inside;  ///< per visible leaf: wholly inside the frustum
+  std::vector<detail::TextureDemand> demands;
+  /// The planner's view of every node, kept between frames: only `wanted` and `pieces`
+  /// change, and only for the nodes in `plan_touched`, reset after each plan.
+  std::vector<PlanNode> plan;
+  std::vector<uint32_t> plan_touched;
+  SceneStreamTotals totals;
+
+  explicit Impl(std::vector<std::vector<uint64_t>> level_bytes)
+      : residency(std::move(level_bytes)) {}
+
+  LinkCost link() const {
+    return options.link ? *options.link : measureLinkCost(archive->source());
+  }
+  void applyResults(SceneFrameStats& stats);
+  void applyResult(detail::ReadResult& result);
+  void queryVisible(const detail::Frustum& frustum);
+  void collectDemands(const PerspectiveView& camera, const detail::Frustum& frustum,
+                      SceneFrameStats& stats);
+  void evict(uint64_t budget, SceneFrameStats& stats);
+  void planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
+                     SceneFrameStats& stats);
+  void want(uint32_t node) {
+    if (!plan[node].wanted) plan_touched.push_back(node);
+    plan[node].wanted = true;
+  }
+  std::vector<detail::LevelJob> addRefinements(uint64_t budget, bool moving, uint32_t slots);
+  void submitPlan(const PerspectiveView& camera, std::vector<detail::LevelJob>& refinements,
+                  SceneFrameStats& stats);
+};
+
+SceneStreamer::SceneStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+SceneStreamer::~SceneStreamer() = default;
+
+Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
+    std::shared_ptr<const SceneArchive> archive, const SceneStreamOptions& options) {
+  TESSERA_CHECK(archive != nullptr) << "SceneStreamer::open: null archive";
+  auto context = std::make_shared<detail::LoaderContext>();
+  context->archive = archive;
+  TESSERA_ASSIGN_OR_RETURN(std::vector<SceneNode> nodes, archive->allNodes());
+  TESSERA_ASSIGN_OR_RETURN(context->textures, archive->textures(0, archive->summary().textures));
+  const FileRange coarse = archive->coarseRange();
+  context->coarse_block.resize(coarse.length_bytes);
+  context->coarse_offset_bytes = coarse.offset_bytes;
+  TESSERA_TRY(archive->source().read(coarse.offset_bytes, context->coarse_block));
+
+  auto impl = std::make_unique<Impl>(levelBytes(context->textures));
+  impl->options = options;
+  impl->archive = archive;
+  const size_t node_count = nodes.size(), texture_count = context->textures.size();
+  impl->parent.assign(node_count, 0);
+  for (uint32_t i = 0; i < node_count; ++i) {
+    const uint32_t end = i + nodes[i].subtree_nodes;
+    for (uint32_t c = i + 1; c < end; c += nodes[c].subtree_nodes) impl->parent[c] = i;
+  }
+  impl->nodes = std::move(nodes);
+  impl->node_state.assign(node_count, NodeState::kUnknown);
+  impl->leaf_objects.resize(node_count);
+  impl->leaf_coarse_ratio.assign(node_count, INFINITY);
+  impl->node_textures.resize(node_count);
+  impl->holder_entry.assign(texture_count, nullptr);
+  impl->objects.resize(archive->summary().objects);
+  impl->object_known.assign(archive->summary().objects, false);
+  impl->meshes.resize(archive->summary().meshes);
+  impl->coarsest.resize(texture_count);
+  impl->coarsest_known.assign(texture_count, false);
+  impl->levels.resize(texture_count);
+  impl->level_busy.assign(texture_count, false);
+  impl->plan.resize(node_count);
+  for (uint32_t i = 0; i < node_count; ++i) {
+    impl->plan[i].subtree_nodes = impl->nodes[i].subtree_nodes;
+    impl->plan[i].own = impl->nodes[i].own;
+    impl->plan[i].subtree = impl->nodes[i].subtree;
+  }
+  impl->context = context;
+  impl->pool = std::make_unique<detail::SceneLoaderPool>(context, options.worker_threads);
+  return std::unique_ptr<SceneStreamer>(new SceneStreamer(std::move(impl)));
+}
+
+void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
+  for (const detail::LevelJob& level : result.job.levels) level_busy[level.texture] = false;
+  if (!result.error.empty()) {
+    // A node that failed to read or parse is not asked for again: retrying a corrupt block
+    // every frame would only repeat the error.
+    ++totals.read_errors;
+    for (const SceneNode& node : result.job.parse) node_state[node.index] = NodeState::kFailed;
+    return;
+  }
+  for (detail::ParsedNode& parsed : result.nodes) {
+    for (const SceneObject& object : parsed.contents.objects) {
+      if (object.index >= objects.size()) continue;
+      objects[object.index] = object;
+      object_known[object.index] = true;
+      leaf_objects[parsed.node].push_back(object.index);
+      const double side = detail::longestSide(object.bounds);
+      for (uint32_t t : object.textures) {
+        if (t == kNoTexture || t >= context->textures.size() || !(side > 0)) continue;
+        const ImageInfo& info = context->textures[t].info;
+        const double ratio = double(std::max(info.width_px, info.height_px)) /
+                             std::ldexp(side, int(std::max(1u, info.level_count) - 1));
+        leaf_coarse_ratio[parsed.node] = std::min(leaf_coarse_ratio[parsed.node], ratio);
+      }
+    }
+    node_textures[parsed.node] = std::move(parsed.contents.textures);
+    for (const NodeTexture& texture : node_textures[parsed.node]) {
+      if (texture.texture < holder_entry.size()) holder_entry[texture.texture] = &texture;
+    }
+    node_state[parsed.node] = NodeState::kKnown;
+  }
+  for (detail::DecodedMesh& mesh : result.meshes) {
+    if (mesh.mesh < meshes.size())
+      meshes[mesh.mesh] = std::make_unique<MeshData>(std::move(mesh.data));
+  }
+  for (detail::DecodedCoarsest& tile : result.coarsest) {
+    if (coarsest_known[tile.texture]) continue;
+    coarsest[tile.texture] = std::move(tile.tile);
+    coarsest_known[tile.texture] = true;
+  }
+  for (detail::DecodedLevel& level : result.levels) {
+    // A level that no longer extends the chain (evicted meanwhile) is dropped.
+    if (!residency.loaded({level.texture, level.level})) continue;
+    auto& texture_levels = levels[level.texture];
+    if (texture_levels.size() <= level.level)
+      texture_levels.resize(residency.coarsest(level.texture) + 1);
+    texture_levels[level.level] = std::move(level.tiles);
+  }
+}
+
+void SceneStreamer::Impl::applyResults(SceneFrameStats& stats) {
+  std::vector<detail::ReadResult> results = pool->drain();
+  for (detail::ReadResult& result : results) applyResult(result);
+  stats.results_applied = uint32_t(results.size());
+}
+
+void SceneStreamer::Impl::queryVisible(const detail::Frustum& frustum) {
+  visible_leaves.clear();
+  leaf_inside.clear();
+  // Depth-first: a node's children start at index + 1 and follow each other's subtrees. A
+  // subtree wholly inside the frustum is taken without testing below it (inside_end).
+  uint32_t i = 0, inside_end = 0;
+  const uint32_t count = uint32_t(nodes.size());
+  while (i < count) {
+    const SceneNode& node = nodes[i];
+    if (i >= inside_end) {
+      if (!detail::boxMayBeVisible(frustum, node.bounds)) {
+        i += node.subtree_nodes;
+        continue;
+      }
+      if (detail::boxInside(frustum, node.bounds)) inside_end = i + node.subtree_nodes;
+    }
+    if (node.isLeaf()) {
+      visible_leaves.push_back(i);
+      leaf_inside.push_back(i < inside_end);
+    }
+    ++i;
+  }
+}
+
+void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
+                                         const detail::Frustum& frustum, SceneFrameStats& stats) {
+  demands.clear();
+  drawable.clear();
+  const detail::LodFrame lod_frame = detail::lodFrame(camera, options.lod_bias);
+  for (size_t v = 0; v < visible_leaves.size(); ++v) {
+    const uint32_t leaf = visible_leaves[v];
+    if (node_state[leaf] != NodeState::kKnown) {
+      ++stats.waiting_leaves;
+      continue;
+    }
+    // Far enough that every texture of every object wants its coarsest: no demand to make.
+    const bool far = detail::distanceToBox(camera, nodes[leaf].bounds) * lod_frame.pixel_angle *
+                         lod_frame.bias_scale * leaf_coarse_ratio[leaf] >=
+                     1;
+    for (uint32_t o : leaf_objects[leaf]) {
+      const SceneObject& object = objects[o];
+      if (!leaf_inside[v] && !detail::boxMayBeVisible(frustum, object.bounds)) continue;
+      ++stats.visible_objects;
+      bool textured = true;
+      const detail::ObjectScale scale =
+          far ? detail::ObjectScale{} : detail::objectScale(lod_frame, object.bounds);
+      for (uint32_t t : object.textures) {
+        if (t == kNoTexture || t >= coarsest_known.size()) continue;
+        if (far) {
+          textured = textured && coarsest_known[t];
+          continue;
+        }
+        const uint32_t level = detail::levelFor(lod_frame, scale, context->textures[t].info);
+        demands.push_back({t, level, scale.pixels});
+        textured = textured && coarsest_known[t];
+        if (residency.resident(t) > level) stats.missing_pixels += scale.pixels;
+      }
+      // Drawn only with its geometry and at least the coarsest level of every texture.
+      if (textured && object.mesh < meshes.size() && meshes[object.mesh]) drawable.push_back(o);
+    }
+  }
+  residency.setDemand(demands);
+}
+
+void SceneStreamer::Impl::evict(uint64_t budget, SceneFrameStats& stats) {
+  for (const LevelRef& level : residency.evictTo(budget)) {
+    levels[level.texture][level.level] = {};
+    levels[level.texture][level.level].shrink_to_fit();
+    ++stats.levels_evicted;
+  }
+}
+
+std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budget, bool moving,
+                                                                  uint32_t slots) {
+  std::vector<detail::LevelJob> jobs;
+  const LinkCost cost = link();
+  const double limit_s =
+      moving ? options.moving_level_time_limit_s : options.still_level_time_limit_s;
+  for (const LevelRef& ref : residency.nextLoads(budget, level_busy)) {
+    if (jobs.size() >= slots) break;
+    const NodeTexture* entry = holder_entry[ref.texture];
+    if (!entry || ref.level >= entry->levels.size()) continue;  // its node is not known yet
+    const uint32_t holder = context->textures[ref.texture].node;
+    const FileRange hull = levelHull(entry->levels[ref.level], nodes[holder].own.offset_bytes);
+    // Seed 003 part III: a level that would take longer than the limit waits for a stiller
+    // camera (or a faster link).
+    if (detail::readCost(cost, hull.length_bytes) > limit_s) continue;
+    want(holder);
+    plan[holder].pieces.push_back(hull);
+    jobs.push_back({ref.texture, ref.level, hull, entry->info, entry->levels[ref.level]});
+    level_busy[ref.texture] = true;
+  }
+  return jobs;
+}
+
+void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
+                                     std::vector<detail::LevelJob>& refinements,
+                                     SceneFrameStats& stats) {
+  std::vector<PlannedRead> reads = detail::planReads(plan, link());
+  for (const PlannedRead& read : reads) {
+    detail::ReadJob job;
+    job.read = read;
+    job.camera = camera;
+    job.lod_bias = options.lod_bias;
+    const uint64_t begin = read.range.offset_bytes, end = begin + read.range.length_bytes;
+    const uint32_t last = read.granularity == ReadGranularity::kSubtree
+                              ? read.node + nodes[read.node].subtree_nodes
+                              : read.node + 1;
+    // Every unknown node the read holds is parsed: its bytes are here already.
+    for (uint32_t n = read.node; n < last; ++n) {
+      if (node_state[n] == NodeState::kUnknown) {
+        node_state[n] = NodeState::kInFlight;
+        job.parse.push_back(nodes[n]);
+      }
+    }
+    for (detail::LevelJob& level : refinements) {
+      const FileRange& hull = level.hull;
+      if (level.tiles.empty() || hull.offset_bytes < begin ||
+          hull.offset_bytes + hull.length_bytes > end) {
+        continue;
+      }
+      job.levels.push_back(std::move(level));
+      level.tiles.clear();  // taken: a level goes to the first read that holds it
+    }
+    ++totals.reads;
+    ++totals.reads_by_granularity[int(read.granularity)];
+    totals.bytes_read += read.range.length_bytes;
+    ++stats.reads_started;
+    pool->submit(std::move(job));
+  }
+  // Every refinement's hull lies in its holder's block, which some read covers; one that
+  // found no read (none expected) is released to be asked for again.
+  for (const detail::LevelJob& level : refinements) {
+    if (!level.tiles.empty()) level_busy[level.texture] = false;
+  }
+}
+
+void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
+                                        SceneFrameStats& stats) {
+  const uint32_t pending = pool->pending();
+  if (pending >= options.max_reads_in_flight) return;
+  uint32_t slots = options.max_reads_in_flight - pending;
+  uint32_t leaves = 0;
+  for (uint32_t leaf : visible_leaves) {
+    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots) continue;
+    ++leaves;
+    // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
+    for (uint32_t n = leaf;; n = parent[n]) {
+      if (node_state[n] == NodeState::kUnknown) want(n);
+      if (n == 0) break;
+    }
+  }
+  std::vector<detail::LevelJob> refinements =
+      addRefinements(budget, moving, slots - std::min(slots, leaves));
+  if (!plan_touched.empty()) submitPlan(camera, refinements, stats);
+  for (uint32_t n : plan_touched) {
+    plan[n].wanted = false;
+    plan[n].pieces.clear();
+  }
+  plan_touched.clear();
+}
+
+SceneFrameStats SceneStreamer::update(const PerspectiveView& camera) {
+  Impl& s = *impl_;
+  SceneFrameStats stats;
+  s.applyResults(stats);
+  const bool changed = s.first_frame || !sameCamera(camera, s.last_camera);
+  s.first_frame = false;
+  s.last_camera = camera;
+  s.still_frames = changed ? 0 : s.still_frames + 1;
+  stats.moving = s.still_frames < s.options.still_after_frames;
+  const uint64_t budget =
+      stats.moving ? s.options.moving_texel_budget_bytes : s.options.still_texel_budget_bytes;
+  const detail::Frustum frustum = detail::frustumOf(camera);
+  s.queryVisible(frustum);
+  stats.visible_leaves = uint32_t(s.visible_leaves.size());
+  s.collectDemands(camera, frustum, stats);
+  s.evict(budget, stats);
+  s.planAndSubmit(camera, budget, stats.moving, stats);
+  for (uint32_t o : s.drawable) {
+    for (uint32_t t : s.objects[o].textures) {
+      if (t != kNoTexture && t < s.coarsest_known.size() && !s.coarsest_known[t]) {
+        ++stats.untextured_objects;
+        break;
+      }
+    }
+  }
+  stats.texel_bytes = s.residency.budgetedBytes();
+  stats.texel_budget_bytes = budget;
+  stats.pinned_texel_bytes = s.residency.pinnedBytes();
+  return stats;
+}
+
+const std::vector<uint32_t>& SceneStreamer::drawableObjects() const {
+  return impl_->drawable;
+}
+
+const SceneObject* SceneStreamer::object(uint32_t index) const {
+  return index < impl_->objects.size() && impl_->object_known[index] ? &impl_->objects[index]
+                                                                     : nullptr;
+}
+
+const MeshData* SceneStreamer::mesh(uint32_t index) const {
+  return index < impl_->meshes.size() ? impl_->meshes[index].get() : nullptr;
+}
+
+uint32_t SceneStreamer::residentLevel(uint32_t texture) const {
+  return impl_->residency.resident(texture);
+}
+
+uint32_t SceneStreamer::wantedLevel(uint32_t texture) const {
+  return impl_->residency.wanted(texture);
+}
+
+const std::vector<Image>* SceneStreamer::levelTiles(uint32_t texture, uint32_t level) const {
+  const Impl& s = *impl_;
+  if (texture >= s.levels.size() || level < s.residency.resident(texture) ||
+      level > s.residency.coarsest(texture)) {
+    return nullptr;
+  }
+  if (level == s.residency.coarsest(texture)) return nullptr;  // one tile: coarsestTile
+  return &s.levels[texture][level];
+}
+
+const Image* SceneStreamer::coarsestTile(uint32_t texture) const {
+  const Impl& s = *impl_;
+  return texture < s.coarsest_known.size() && s.coarsest_known[texture] ? &s.coarsest[texture]
+                                                                        : nullptr;
+}
+
+const SceneStreamTotals& SceneStreamer::totals() const {
+  return impl_->totals;
+}
+
+void SceneStreamer::waitForReads() {
+  impl_->pool->waitIdle();
+}
+
+}  // namespace tessera

@@ -1,0 +1,213 @@
+// The scene streamer end to end on a synthetic scene: the coarsest-level guarantee, reads one
+// per planned range on a counting source, the texel budget, and levels refining as the camera
+// comes closer.
+#include <tessera/scene_stream.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+#include <tessera/scene_build.h>
+
+#include "scene/scene_test_support.h"
+
+namespace tessera {
+namespace {
+
+using test::CountingSource;
+using test::ScratchDir;
+
+std::string buildCity(const ScratchDir& dir, const std::string& spec) {
+  SceneBuildOptions options;
+  options.input = "synthetic-scene:" + spec;
+  options.output = dir.file("city.tess");
+  options.tile_size_px = 64;
+  options.threads = 2;
+  options.leaf_capacity = 8;
+  options.max_children = 4;
+  Result<SceneBuildReport> report = buildScene(options);
+  EXPECT_TRUE(report.has_value()) << report.error().message;
+  return options.output;
+}
+
+// The synthetic city is y-up: yaw 0 and pitch 0 look straight down -y.
+PerspectiveView above(const SceneSummary& summary, double height) {
+  PerspectiveView camera;
+  camera.eye_x = (summary.bounds.min[0] + summary.bounds.max[0]) / 2;
+  camera.eye_y = summary.bounds.max[1] + height;
+  camera.eye_z = (summary.bounds.min[2] + summary.bounds.max[2]) / 2;
+  camera.yaw_rad = 0;
+  camera.pitch_rad = 0;
+  camera.fov_y_rad = 1.0;
+  camera.viewport_w = 640;
+  camera.viewport_h = 480;
+  return camera;
+}
+
+struct Opened {
+  std::shared_ptr<CountingSource> counter;
+  std::shared_ptr<SceneArchive> archive;
+};
+
+Opened openCounted(const std::string& path) {
+  auto file = openFileSource(path);
+  EXPECT_TRUE(file.has_value());
+  Opened out;
+  out.counter = std::make_shared<CountingSource>(*file);
+  auto archive = SceneArchive::open(out.counter);
+  EXPECT_TRUE(archive.has_value()) << archive.error().message;
+  if (archive.has_value()) out.archive = *archive;
+  return out;
+}
+
+// Steps frames at one camera until a frame starts no read and picks up nothing.
+SceneFrameStats settle(SceneStreamer& streamer, const PerspectiveView& camera) {
+  SceneFrameStats stats;
+  for (int frame = 0; frame < 200; ++frame) {
+    stats = streamer.update(camera);
+    if (stats.reads_started == 0 && stats.results_applied == 0 && frame > 0) break;
+    streamer.waitForReads();
+  }
+  return stats;
+}
+
+TEST(SceneStreamer, EveryDrawnObjectHasGeometryAndEveryTextureResident) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "400:40:7"));
+  ASSERT_TRUE(scene.archive);
+  auto streamer = SceneStreamer::open(scene.archive);
+  ASSERT_TRUE(streamer.has_value()) << streamer.error().message;
+  const PerspectiveView camera = above(scene.archive->summary(), 200);
+  SceneFrameStats first = (*streamer)->update(camera);
+  EXPECT_TRUE((*streamer)->drawableObjects().empty()) << "nothing has arrived on frame one";
+  EXPECT_GT(first.waiting_leaves, 0u);
+  const SceneFrameStats stats = settle(**streamer, camera);
+  EXPECT_EQ(stats.waiting_leaves, 0u);
+  EXPECT_GT(stats.visible_objects, 0u);
+  EXPECT_EQ((*streamer)->drawableObjects().size(), stats.visible_objects);
+  EXPECT_EQ(stats.untextured_objects, 0u);
+  for (uint32_t o : (*streamer)->drawableObjects()) {
+    const SceneObject* object = (*streamer)->object(o);
+    ASSERT_NE(object, nullptr);
+    EXPECT_NE((*streamer)->mesh(object->mesh), nullptr) << "object " << o;
+    for (uint32_t t : object->textures) {
+      if (t == kNoTexture) continue;
+      ASSERT_NE((*streamer)->coarsestTile(t), nullptr) << "object " << o << " texture " << t;
+      const uint32_t resident = (*streamer)->residentLevel(t);
+      EXPECT_LE(resident, (*streamer)->wantedLevel(t)) << "settled: wanted levels are in";
+      for (uint32_t level = resident; level + 1 < scene.archive->summary().textures &&
+                                      (*streamer)->levelTiles(t, level) != nullptr;
+           ++level) {
+        EXPECT_FALSE((*streamer)->levelTiles(t, level)->empty());
+      }
+    }
+  }
+}
+
+TEST(SceneStreamer, WantedLevelIsTheFinestAnyVisibleObjectNeeds) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "400:40:7"));
+  ASSERT_TRUE(scene.archive);
+  auto streamer = SceneStreamer::open(scene.archive);
+  ASSERT_TRUE(streamer.has_value());
+  auto textures = scene.archive->textures(0, scene.archive->summary().textures);
+  ASSERT_TRUE(textures.has_value());
+  // Near (every level matters) and far (leaves take the all-coarsest shortcut).
+  for (double height : {15.0, 200.0, 3000.0}) {
+    const PerspectiveView camera = above(scene.archive->summary(), height);
+    settle(**streamer, camera);
+    std::vector<uint32_t> expected(textures->size());
+    for (const SceneTexture& t : *textures) expected[t.index] = t.info.level_count - 1;
+    for (uint32_t o : (*streamer)->drawableObjects()) {
+      const SceneObject* object = (*streamer)->object(o);
+      for (uint32_t t : object->textures) {
+        if (t == kNoTexture) continue;
+        // floor(log2(rho)), rho = max(w, h) * d * pixelAngle / longest side (docs/scenes.md).
+        const Box3& b = object->bounds;
+        double side = 0, d2 = 0;
+        const double eye[3] = {camera.eye_x, camera.eye_y, camera.eye_z};
+        for (int a = 0; a < 3; ++a) {
+          side = std::max(side, double(b.max[a]) - b.min[a]);
+          const double out = std::max({0.0, b.min[a] - eye[a], eye[a] - b.max[a]});
+          d2 += out * out;
+        }
+        const ImageInfo& info = (*textures)[t].info;
+        const double rho =
+            std::max(info.width_px, info.height_px) * std::sqrt(d2) * pixelAngle(camera) / side;
+        const double level =
+            std::clamp(std::floor(std::log2(rho)), 0.0, double(info.level_count - 1));
+        expected[t] = std::min(expected[t], uint32_t(level));
+      }
+    }
+    for (uint32_t t = 0; t < expected.size(); ++t) {
+      EXPECT_EQ((*streamer)->wantedLevel(t), expected[t])
+          << "height " << height << " texture " << t;
+    }
+  }
+}
+
+TEST(SceneStreamer, ReadsOncePerPlannedRangeAtEveryGranularity) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "600:60:8"));
+  ASSERT_TRUE(scene.archive);
+  // A slow link makes subtree reads pay; a fast one node and object reads.
+  for (const LinkCost link : {LinkCost{0.04, 2.5e6}, LinkCost{0.0, 1e10}}) {
+    SceneStreamOptions options;
+    options.link = link;
+    const uint64_t before_open = scene.counter->reads;
+    auto streamer = SceneStreamer::open(scene.archive, options);
+    ASSERT_TRUE(streamer.has_value()) << streamer.error().message;
+    EXPECT_LE(scene.counter->reads - before_open, 3u) << "node table, texture table, coarse block";
+    const uint64_t after_open = scene.counter->reads;
+    PerspectiveView camera = above(scene.archive->summary(), 400);
+    settle(**streamer, camera);
+    camera.eye_y -= 330;  // closer: finer levels by object reads
+    settle(**streamer, camera);
+    const SceneStreamTotals& totals = (*streamer)->totals();
+    EXPECT_GT(totals.reads, 0u);
+    EXPECT_EQ(scene.counter->reads - after_open, totals.reads)
+        << "one source read per planned read";
+    EXPECT_EQ(totals.reads_by_granularity[0] + totals.reads_by_granularity[1] +
+                  totals.reads_by_granularity[2],
+              totals.reads);
+    EXPECT_EQ(totals.read_errors, 0u);
+    if (link.latency_s > 0) {
+      EXPECT_GT(totals.reads_by_granularity[2], 0u) << "40 ms round trips: subtree reads";
+    } else {
+      EXPECT_EQ(totals.reads_by_granularity[2], 0u) << "no latency: no byte read for nothing";
+      EXPECT_GT(totals.reads_by_granularity[0], 0u) << "refinements read single levels";
+    }
+  }
+}
+
+TEST(SceneStreamer, StaysWithinTheTexelBudgetMovingAndStill) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "400:40:9"));
+  ASSERT_TRUE(scene.archive);
+  SceneStreamOptions options;
+  options.moving_texel_budget_bytes = 48 << 10;
+  options.still_texel_budget_bytes = 160 << 10;
+  options.still_after_frames = 3;
+  auto streamer = SceneStreamer::open(scene.archive, options);
+  ASSERT_TRUE(streamer.has_value());
+  PerspectiveView camera = above(scene.archive->summary(), 60);
+  uint64_t most_moving = 0, most_still = 0;
+  for (int frame = 0; frame < 60; ++frame) {
+    if (frame < 30) camera.eye_x += 2;  // moving, then still
+    const SceneFrameStats stats = (*streamer)->update(camera);
+    // Still from the third unchanged frame (frames 30, 31 and 32 repeat frame 29's camera).
+    EXPECT_EQ(stats.moving, frame < 32) << "frame " << frame;
+    EXPECT_LE(stats.texel_bytes, stats.texel_budget_bytes) << "frame " << frame;
+    EXPECT_EQ(stats.texel_budget_bytes,
+              stats.moving ? options.moving_texel_budget_bytes : options.still_texel_budget_bytes);
+    (stats.moving ? most_moving : most_still) =
+        std::max(stats.moving ? most_moving : most_still, stats.texel_bytes);
+    EXPECT_EQ(stats.untextured_objects, 0u);
+    (*streamer)->waitForReads();
+  }
+  EXPECT_GT(most_still, options.moving_texel_budget_bytes) << "still: the larger budget is used";
+}
+
+}  // namespace
+}  // namespace tessera
