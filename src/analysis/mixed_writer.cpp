@@ -12,44 +12,12 @@
 #include "format/header.h"
 #include "format/sections.h"
 #include "format/tile_order.h"
+#include "builder/directory_pages.h"
+#include "output/file_appender.h"
 
 namespace tessera::detail {
 
 namespace {
-
-constexpr size_t kWriteBufferBytes = 8u << 20;
-
-// Appends at the end of the output through a large buffer.
-class Appender {
- public:
-  Appender(const TempFile& out, uint64_t start) : out_(out), end_(start), flushed_(start) {}
-  Result<uint64_t> append(std::span<const uint8_t> bytes) {
-    const uint64_t offset = end_;
-    if (buffer_.size() + bytes.size() > kWriteBufferBytes) TESSERA_TRY(flush());
-    if (bytes.size() > kWriteBufferBytes) {
-      TESSERA_TRY(out_.pwrite(flushed_, bytes));
-      flushed_ += bytes.size();
-    } else {
-      buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
-    }
-    end_ += bytes.size();
-    return offset;
-  }
-  Result<void> flush() {
-    if (buffer_.empty()) return {};
-    TESSERA_TRY(out_.pwrite(flushed_, buffer_));
-    flushed_ += buffer_.size();
-    buffer_.clear();
-    return {};
-  }
-  uint64_t end() const { return end_; }
-
- private:
-  const TempFile& out_;
-  uint64_t end_;
-  uint64_t flushed_;
-  std::vector<uint8_t> buffer_;
-};
 
 /// Identical pages (a tile under one base instance, and its neighbours) are stored once; two
 /// independent 64-bit hashes and the length make a false match negligible.
@@ -80,7 +48,7 @@ Result<std::vector<uint8_t>> storedPage(const TempFile& spool, const MixedTile& 
 // Payloads and pages in the clustering order; fills the final entries.
 Result<void> placeTiles(const TempFile& spool, const ImageInfo& info,
                         const std::vector<std::vector<MixedTile>>& tiles,
-                        const MixedBrushes& brushes, TileOrder order, Appender& appender,
+                        const MixedBrushes& brushes, TileOrder order, FileAppender& appender,
                         std::vector<std::vector<TileEntry>>& entries, MixedWritten& written) {
   std::map<PageKey, std::pair<uint64_t, uint32_t>> pages;
   std::vector<uint8_t> payload;
@@ -122,7 +90,7 @@ Result<void> placeTiles(const TempFile& spool, const ImageInfo& info,
   return {};
 }
 
-Result<ProceduralImageRecord> placePicture(const MixedPicture& picture, Appender& appender) {
+Result<ProceduralImageRecord> placePicture(const MixedPicture& picture, FileAppender& appender) {
   ProceduralImageRecord record;
   TESSERA_ASSIGN_OR_RETURN(record.block.offset_bytes, appender.append(picture.payload));
   record.block.length_bytes = picture.payload.size();
@@ -136,40 +104,16 @@ Result<ProceduralImageRecord> placePicture(const MixedPicture& picture, Appender
 
 // Directory pages (coarse levels first) and each level's page index bytes.
 Result<std::vector<std::vector<uint8_t>>> placeDirectory(
-    const ImageInfo& info, const std::vector<std::vector<TileEntry>>& entries, Appender& appender,
-    ImageRecord& record) {
+    const ImageInfo& info, const std::vector<std::vector<TileEntry>>& entries,
+    FileAppender& appender, ImageRecord& record) {
   std::vector<std::vector<uint8_t>> indexes(info.level_count);
   record.info = info;
   record.levels.resize(info.level_count);
   for (uint32_t l = info.level_count; l-- > 0;) {
-    const uint32_t pages_x = pagesX(info, l), pages_y = pagesY(info, l);
-    std::vector<PageRef> refs(size_t(pages_x) * pages_y);
-    bool any_page = false;
-    for (uint32_t py = 0; py < pages_y; ++py) {
-      for (uint32_t px = 0; px < pages_x; ++px) {
-        const PageGeometry geometry = pageGeometry(info, l, px, py);
-        std::vector<TileEntry> page_entries;
-        bool all_empty = true;
-        for (uint32_t ty = 0; ty < geometry.rows; ++ty) {
-          for (uint32_t tx = 0; tx < geometry.columns; ++tx) {
-            page_entries.push_back(entries[l][size_t(geometry.first_tile_y + ty) * info.tilesX(l) +
-                                              geometry.first_tile_x + tx]);
-            all_empty &= page_entries.back().kind == TileKind::kEmpty;
-          }
-        }
-        if (all_empty) continue;
-        std::vector<uint8_t> bytes = encodeTileEntries(page_entries);
-        PageRef& ref = refs[size_t(py) * pages_x + px];
-        TESSERA_ASSIGN_OR_RETURN(ref.offset_bytes, appender.append(bytes));
-        ref.length_bytes = bytes.size();
-        ref.checksum = checksum64(bytes);
-        any_page = true;
-      }
-    }
+    TESSERA_ASSIGN_OR_RETURN(indexes[l], writeLevelPages(info, l, entries[l], appender));
     uint64_t payload_total = 0;
     for (const TileEntry& entry : entries[l]) payload_total += entry.length_bytes;
     record.levels[l].payload_bytes = payload_total;
-    if (any_page) indexes[l] = encodePageIndex(refs);
   }
   return indexes;
 }
@@ -181,7 +125,7 @@ Result<MixedWritten> writeMixedArchive(const TempFile& spool, const ImageInfo& i
                                        const MixedBrushes& brushes, TileOrder order,
                                        const nlohmann::json& metadata, const TempFile& out) {
   MixedWritten written;
-  Appender appender(out, kHeaderRegionBytes);
+  FileAppender appender(out, kHeaderRegionBytes);
   std::vector<std::vector<TileEntry>> entries;
   TESSERA_TRY(placeTiles(spool, info, tiles, brushes, order, appender, entries, written));
 

@@ -10,6 +10,7 @@
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/tile_order.h"
+#include "builder/directory_pages.h"
 #include "output/file_appender.h"
 
 namespace tessera::detail {
@@ -111,41 +112,14 @@ Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
   return copied;
 }
 
-/// Writes the non-empty directory pages of one level and returns its page index (no bytes
-/// when every page is empty).
-Result<PlacedBlock> writeLevelPages(const ImageInfo& info, uint32_t level,
+/// One level's directory pages and its page index as a block to place (no bytes when every
+/// page is empty).
+Result<PlacedBlock> placeLevelPages(const ImageInfo& info, uint32_t level,
                                     const std::vector<TileEntry>& entries, FileAppender& appender) {
-  uint32_t pages_x = pagesX(info, level), pages_y = pagesY(info, level);
-  std::vector<PageRef> refs(size_t(pages_x) * pages_y);
-  bool any_page = false;
-  for (uint32_t py = 0; py < pages_y; ++py) {
-    for (uint32_t px = 0; px < pages_x; ++px) {
-      PageGeometry geometry = pageGeometry(info, level, px, py);
-      std::vector<TileEntry> page_entries;
-      page_entries.reserve(size_t(geometry.columns) * geometry.rows);
-      bool all_empty = true;
-      for (uint32_t ty = 0; ty < geometry.rows; ++ty) {
-        for (uint32_t tx = 0; tx < geometry.columns; ++tx) {
-          size_t slot =
-              size_t(geometry.first_tile_y + ty) * info.tilesX(level) + geometry.first_tile_x + tx;
-          page_entries.push_back(entries[slot]);
-          all_empty &= page_entries.back().kind == TileKind::kEmpty;
-        }
-      }
-      if (all_empty) continue;
-      std::vector<uint8_t> bytes = encodeTileEntries(page_entries);
-      PageRef& ref = refs[size_t(py) * pages_x + px];
-      TESSERA_ASSIGN_OR_RETURN(ref.offset_bytes, appender.append(bytes));
-      ref.length_bytes = bytes.size();
-      ref.checksum = checksum64(bytes);
-      any_page = true;
-    }
-  }
   PlacedBlock block;
-  if (!any_page) return block;
-  block.bytes = encodePageIndex(refs);
+  TESSERA_ASSIGN_OR_RETURN(block.bytes, writeLevelPages(info, level, entries, appender));
   block.ref.length_bytes = block.bytes.size();
-  block.ref.checksum = checksum64(block.bytes);
+  if (!block.bytes.empty()) block.ref.checksum = checksum64(block.bytes);
   return block;
 }
 
@@ -165,7 +139,7 @@ Result<WrittenDirectory> writeDirectoryPages(std::span<const SpooledImage> image
       for (const TileEntry& entry : entries[i][l]) level_payload += entry.length_bytes;
       record.levels[l].payload_bytes = level_payload;
       TESSERA_ASSIGN_OR_RETURN(PlacedBlock index,
-                               writeLevelPages(info, l, entries[i][l], appender));
+                               placeLevelPages(info, l, entries[i][l], appender));
       directory.page_indexes.push_back(std::move(index));
     }
   }
@@ -245,6 +219,39 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
       written.file_bytes,
       writeHeaderRegion(out, region, directory.records, metadata_block.ref, appender.end()));
   return written;
+}
+
+Result<std::vector<uint8_t>> writeLevelPages(const ImageInfo& info, uint32_t level,
+                                             const std::vector<TileEntry>& entries,
+                                             FileAppender& appender) {
+  uint32_t pages_x = pagesX(info, level), pages_y = pagesY(info, level);
+  std::vector<PageRef> refs(size_t(pages_x) * pages_y);
+  bool any_page = false;
+  for (uint32_t py = 0; py < pages_y; ++py) {
+    for (uint32_t px = 0; px < pages_x; ++px) {
+      PageGeometry geometry = pageGeometry(info, level, px, py);
+      std::vector<TileEntry> page_entries;
+      page_entries.reserve(size_t(geometry.columns) * geometry.rows);
+      bool all_empty = true;
+      for (uint32_t ty = 0; ty < geometry.rows; ++ty) {
+        for (uint32_t tx = 0; tx < geometry.columns; ++tx) {
+          size_t slot =
+              size_t(geometry.first_tile_y + ty) * info.tilesX(level) + geometry.first_tile_x + tx;
+          page_entries.push_back(entries[slot]);
+          all_empty &= page_entries.back().kind == TileKind::kEmpty;
+        }
+      }
+      if (all_empty) continue;
+      std::vector<uint8_t> bytes = encodeTileEntries(page_entries);
+      PageRef& ref = refs[size_t(py) * pages_x + px];
+      TESSERA_ASSIGN_OR_RETURN(ref.offset_bytes, appender.append(bytes));
+      ref.length_bytes = bytes.size();
+      ref.checksum = checksum64(bytes);
+      any_page = true;
+    }
+  }
+  if (!any_page) return std::vector<uint8_t>{};
+  return encodePageIndex(refs);
 }
 
 }  // namespace tessera::detail
