@@ -19,6 +19,7 @@ packages=(
   libtinygltf-dev
   libassimp-dev
   libmeshoptimizer-dev
+  libminizip-dev
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and

@@ -11,7 +11,7 @@
 // stored. Refused with kUnsupported: other bit depths, signed or floating-point samples,
 // palette, CMYK and other photometrics.
 
-#include "tiff_reader.h"
+#include "builder/geotiff_tags.h"
 
 #include <algorithm>
 #include <cstdarg>
@@ -32,15 +32,6 @@
 namespace tessera::detail {
 namespace {
 
-// Tags from the GeoTIFF 1.1 spec (OGC 19-008r4, section 7.1) and GDAL's private tags.
-constexpr ttag_t kTagModelPixelScale = 33550;
-constexpr ttag_t kTagModelTiepoint = 33922;
-constexpr ttag_t kTagModelTransformation = 34264;
-constexpr ttag_t kTagGeoKeyDirectory = 34735;
-constexpr ttag_t kTagGeoDoubleParams = 34736;
-constexpr ttag_t kTagGeoAsciiParams = 34737;
-constexpr ttag_t kTagGdalMetadata = 42112;
-constexpr ttag_t kTagGdalNodata = 42113;
 // GeoKeys holding an EPSG code (GeoTIFF 1.1, sections 7.3.2 and 7.3.3).
 constexpr uint16_t kGeoKeyGeographicType = 2048;
 constexpr uint16_t kGeoKeyProjectedCsType = 3072;

@@ -6,6 +6,8 @@
 #include <string>
 #include <vector>
 
+#include <tiffio.h>
+
 #include "export/export.h"
 #include "serve/pictures.h"
 
@@ -26,6 +28,16 @@ std::vector<XyzTile> xyzTilesOf(const ImageInfo& info);
 [[nodiscard]] Result<void> writeThroughPartialFile(
     const std::string& out_path, const std::function<Result<void>(const std::string&)>& write);
 
+/// Sets the GeoTIFF and GDAL tags held by `georeference_json` (an image's `georeference`
+/// metadata, docs/format.md) on the TIFF directory being written. An entry that does not hold
+/// what its tag does is left out and named in `report.warnings`; `report.georeferenced` says
+/// whether any tag was set.
+void setGeoreferenceTags(TIFF* tiff, const std::string& georeference_json, ExportReport& report);
+
+/// A Deep Zoom folder (`out_path` NAME.dzi) or zip file (NAME.zip).
+[[nodiscard]] Result<ExportReport> exportDeepZoom(const Archive& archive,
+                                                  const std::string& out_path,
+                                                  const ExportOptions& options);
 [[nodiscard]] Result<ExportReport> exportPmtiles(const Archive& archive,
                                                  const std::string& out_path,
                                                  const ExportOptions& options);

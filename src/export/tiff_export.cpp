@@ -3,7 +3,8 @@
 // tiles the archive's tile size. Tessera's levels are padded to whole tiles exactly as TIFF's
 // are, so a JPEG archive without border has its payloads written as they are, edge tiles
 // included (TIFF readers ignore the padding); other archives are decoded and stored with
-// Deflate and the horizontal predictor, losslessly.
+// Deflate and the horizontal predictor, losslessly. A GeoTIFF source's georeference, kept in the
+// archive's metadata, goes back on level 0's directory.
 #include <tiffio.h>
 
 #include <algorithm>
@@ -11,9 +12,12 @@
 #include <memory>
 
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
+#include "builder/geotiff_tags.h"
 #include "codecs/encode.h"
 #include "export_writers.h"
+#include "serve/image_metadata.h"
 
 namespace tessera::detail {
 
@@ -102,6 +106,93 @@ void setLevelTags(TIFF* tiff, const ImageInfo& info, uint32_t level, const Level
   }
 }
 
+// GeoTIFF arrays hold a handful of values and GDAL metadata a few KiB (the reader's bound).
+constexpr size_t kMaxGeoValues = size_t(1) << 16;
+
+// Writes one array tag when `values` holds what the tag does; says why not otherwise.
+template <typename T>
+bool setGeoArray(TIFF* tiff, uint32_t tag, const nlohmann::json& values, std::string* why) {
+  if (!values.is_array() || values.empty() || values.size() > kMaxGeoValues) {
+    *why = fmt::format("not an array of 1 to {} values", kMaxGeoValues);
+    return false;
+  }
+  std::vector<T> data;
+  data.reserve(values.size());
+  for (const nlohmann::json& value : values) {
+    if constexpr (std::is_same_v<T, uint16_t>) {
+      if (!value.is_number_unsigned() || value.get<uint64_t>() > 0xFFFF) {
+        *why = "holds a value that is not a 16-bit unsigned integer";
+        return false;
+      }
+      data.push_back(uint16_t(value.get<uint64_t>()));
+    } else {
+      if (!value.is_number()) {
+        *why = "holds a value that is not a number";
+        return false;
+      }
+      data.push_back(value.get<double>());
+    }
+  }
+  if (TIFFSetField(tiff, tag, uint32_t(data.size()), data.data()) == 1) return true;
+  *why = "refused by libtiff";
+  return false;
+}
+
+}  // namespace
+
+// Goes on level 0's directory only, where GDAL and QGIS look. A bad entry (an edited or
+// hostile archive) is left out with a warning rather than failing the export of good pixels.
+void setGeoreferenceTags(TIFF* tiff, const std::string& georeference_json, ExportReport& report) {
+  const nlohmann::json geo = nlohmann::json::parse(georeference_json, nullptr, false);
+  if (!geo.is_object()) {
+    report.warnings.push_back("georeference is not a JSON object; not written");
+    return;
+  }
+  const auto skip = [&](const char* key, const std::string& why) {
+    report.warnings.push_back(fmt::format("georeference.{} {}; not written", key, why));
+  };
+  struct ArrayTag {
+    uint32_t tag;
+    const char* key;
+    bool shorts;
+  };
+  for (const ArrayTag& entry : {ArrayTag{kTagModelPixelScale, "model_pixel_scale", false},
+                                ArrayTag{kTagModelTiepoint, "model_tiepoint", false},
+                                ArrayTag{kTagModelTransformation, "model_transformation", false},
+                                ArrayTag{kTagGeoKeyDirectory, "geo_key_directory", true},
+                                ArrayTag{kTagGeoDoubleParams, "geo_double_params", false}}) {
+    if (!geo.contains(entry.key)) continue;
+    std::string why;
+    const bool set = entry.shorts ? setGeoArray<uint16_t>(tiff, entry.tag, geo[entry.key], &why)
+                                  : setGeoArray<double>(tiff, entry.tag, geo[entry.key], &why);
+    if (set)
+      report.georeferenced = true;
+    else
+      skip(entry.key, why);
+  }
+  struct TextTag {
+    uint32_t tag;
+    const char* key;
+  };
+  for (const TextTag& entry :
+       {TextTag{kTagGeoAsciiParams, "geo_ascii_params"}, TextTag{kTagGdalNodata, "gdal_nodata"},
+        TextTag{kTagGdalMetadata, "gdal_metadata"}}) {
+    if (!geo.contains(entry.key)) continue;
+    const nlohmann::json& value = geo[entry.key];
+    if (!value.is_string() || value.get_ref<const std::string&>().size() > kMaxGeoValues ||
+        value.get_ref<const std::string&>().find('\0') != std::string::npos) {
+      skip(entry.key, "is not a text without NUL of at most 65536 bytes");
+      continue;
+    }
+    if (TIFFSetField(tiff, entry.tag, value.get_ref<const std::string&>().c_str()) == 1)
+      report.georeferenced = true;
+    else
+      skip(entry.key, "refused by libtiff");
+  }
+}
+
+namespace {
+
 // The tile's texels without the archive's border, tile_size square.
 Image withoutBorder(const Image& stored, const ImageInfo& info) {
   if (info.border_px == 0) return stored;
@@ -142,6 +233,10 @@ Result<void> writeLevel(TIFF* tiff, const std::string& path, const Archive& arch
   const ImageInfo& info = archive.images()[options.image];
   TESSERA_ASSIGN_OR_RETURN(LevelPlan plan, planLevel(archive, info, options.image, level));
   setLevelTags(tiff, info, level, plan);
+  if (level == 0) {
+    if (const std::string geo = imageGeoreferenceJson(archive, options.image); !geo.empty())
+      setGeoreferenceTags(tiff, geo, report);
+  }
   for (uint32_t y = 0; y < info.tilesY(level); ++y) {
     for (uint32_t x = 0; x < info.tilesX(level); ++x) {
       const TileId tile{options.image, level, x, y};
@@ -180,6 +275,7 @@ Result<ExportReport> exportTiff(const Archive& archive, const std::string& out_p
                                (info.channels == 1 || info.channels == 3)
                            ? "jpeg"
                            : "deflate";
+  registerGeoTiffTags();
   const auto write = [&](const std::string& partial) -> Result<void> {
     TiffFile tiff(TIFFOpen(partial.c_str(), "w8"));
     if (!tiff) return fail(ErrorCode::kIo, fmt::format("{}: cannot create", partial));

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include "byte_ranges.h"
+#include "serve/image_metadata.h"
 #include "serve/pictures.h"
 #include "viewer_assets.h"
 
@@ -239,21 +240,24 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics)
                           {"height", info.levelHeightPx(l)},
                           {"tiles_x", info.tilesX(l)},
                           {"tiles_y", info.tilesY(l)}});
-      images.push_back({{"index", i},
-                        {"name", info.name},
-                        {"width", info.width_px},
-                        {"height", info.height_px},
-                        {"channels", info.channels},
-                        {"tile_size", info.tile_size_px},
-                        {"border", info.border_px},
-                        {"codec", codecName(info.default_codec)},
-                        {"tile_content_type", codecContentType(info.default_codec)},
-                        {"level_count", info.level_count},
-                        {"levels", levels},
-                        {"dzi", fmt::format("/{}/{}.dzi", name, i)},
-                        {"dzi_max_level", dziMaxLevel(info)},
-                        {"xyz", fmt::format("/{}/{}/xyz/{{z}}/{{x}}/{{y}}.png", name, i)},
-                        {"xyz_max_zoom", xyzMaxZoom(info)}});
+      nlohmann::json image = {{"index", i},
+                              {"name", info.name},
+                              {"width", info.width_px},
+                              {"height", info.height_px},
+                              {"channels", info.channels},
+                              {"tile_size", info.tile_size_px},
+                              {"border", info.border_px},
+                              {"codec", codecName(info.default_codec)},
+                              {"tile_content_type", codecContentType(info.default_codec)},
+                              {"level_count", info.level_count},
+                              {"levels", levels},
+                              {"dzi", fmt::format("/{}/{}.dzi", name, i)},
+                              {"dzi_max_level", dziMaxLevel(info)},
+                              {"xyz", fmt::format("/{}/{}/xyz/{{z}}/{{x}}/{{y}}.png", name, i)},
+                              {"xyz_max_zoom", xyzMaxZoom(info)}};
+      if (const std::string geo = imageGeoreferenceJson(*served->archive, i); !geo.empty())
+        image["georeference"] = nlohmann::json::parse(geo);
+      images.push_back(std::move(image));
     }
     nlohmann::json info = {{"name", name},
                            {"file_bytes", served->file_bytes},

@@ -61,6 +61,11 @@ int runExport(const ExportArgs& args) {
         args.output.c_str(), static_cast<unsigned long long>(report->tiles),
         report->tile_format.c_str(), static_cast<unsigned long long>(report->tiles_copied),
         formatBytes(report->bytes).c_str(), seconds);
+  if (!args.quiet && report->georeferenced)
+    std::printf("%s: the source's GeoTIFF georeference written back\n", args.output.c_str());
+  // Not errors (the pixels are all there) but a difference the user must hear of.
+  for (const std::string& warning : report->warnings)
+    std::fprintf(stderr, "tessera export: warning: %s: %s\n", args.output.c_str(), warning.c_str());
   return kExitOk;
 }
 
@@ -74,7 +79,8 @@ void registerExportCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
   cmd->add_option("--to", args->format, "Target: dzi, pmtiles, mbtiles or tiff")->required();
   cmd->add_option("output", args->output,
-                  "Output file (Deep Zoom: NAME.dzi, its tiles in NAME_files beside it)")
+                  "Output file (Deep Zoom: NAME.dzi with its tiles in NAME_files beside it, or "
+                  "NAME.zip holding both, as vips dzsave --container zip writes)")
       ->required();
   cmd->add_option("--image", args->image, "Which image of the archive")->capture_default_str();
   cmd->add_option("--quality", args->quality,

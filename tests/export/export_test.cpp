@@ -321,6 +321,10 @@ TEST_F(ExportTest, ACorruptTileFailsTheExportAndLeavesNothing) {
     EXPECT_FALSE(fs::exists(dir_ + "c_files"));
     EXPECT_TRUE(partials().empty());
   }
+  Result<ExportReport> zip = exportArchive(**opened, dir_ + "c.zip", ExportOptions{});
+  ASSERT_FALSE(zip);
+  EXPECT_FALSE(fs::exists(dir_ + "c.zip"));
+  EXPECT_TRUE(partials().empty());
 }
 
 }  // namespace

@@ -15,6 +15,7 @@
 
 #include "codecs/decode.h"
 #include "serve/serve_fixture.h"
+#include "support/test_images.h"
 
 namespace tessera::test {
 namespace {
@@ -95,7 +96,35 @@ TEST_F(TileServerTest, InfoDocumentDescribesImagesAndLevels) {
   EXPECT_EQ(image["levels"][1]["tiles_x"], info.tilesX(1));
   EXPECT_EQ(image["dzi"], "/pngb1/0.dzi");
   EXPECT_EQ(image["xyz"], "/pngb1/0/xyz/{z}/{x}/{y}.png");
+  EXPECT_FALSE(image.contains("georeference"));  // a synthetic source has none
   EXPECT_EQ(httpRequest(port_, "/nope/info.json").status, 404u);
+}
+
+// A GeoTIFF source's georeference (tags and EPSG code) is in the image's info.json entry.
+TEST(TileServerGeo, InfoDocumentCarriesTheGeoreference) {
+  const std::string dir = testTempDir() + "/serve-geo/";
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  TiffSpec spec{.width_px = 300, .height_px = 200, .samples = 3};
+  spec.geo.model_pixel_scale = {0.5, 0.5, 0.0};
+  spec.geo.model_tiepoint = {0, 0, 0, 440720.0, 3751320.0, 0};
+  spec.geo.geo_key_directory = {1, 1, 0, 1, 3072, 0, 1, 26711};
+  ASSERT_EQ(writeTiff(dir + "utm.tif", spec, makeTestPixels(300, 200, 3, 2)), "");
+  BuildOptions build;
+  build.inputs = {dir + "utm.tif"};
+  build.output = dir + "utm.tess";
+  Result<BuildReport> built = buildArchive(build);
+  ASSERT_TRUE(built) << built.error().message;
+  std::unique_ptr<TileServer> server = startServer({build.output});
+  ASSERT_NE(server, nullptr);
+  HttpReply reply = httpRequest(server->port(), "/utm/info.json");
+  ASSERT_EQ(reply.status, 200u);
+  const nlohmann::json geo = nlohmann::json::parse(reply.body)["images"][0]["georeference"];
+  EXPECT_EQ(geo["epsg"], 26711);
+  EXPECT_EQ(geo["model_tiepoint"], nlohmann::json(spec.geo.model_tiepoint));
+  EXPECT_EQ(geo["model_pixel_scale"], nlohmann::json(spec.geo.model_pixel_scale));
+  server.reset();
+  std::filesystem::remove_all(dir);
 }
 
 TEST_F(TileServerTest, TileEndpointSendsTheStoredPayload) {

@@ -10,6 +10,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include <tessera/archive.h>
 #include <tessera/result.h>
@@ -37,6 +38,11 @@ struct ExportReport {
   uint64_t tiles_copied = 0;  ///< of those, stored payloads copied without decoding
   uint64_t bytes = 0;         ///< bytes of the output (folder: every file)
   std::string tile_format;    ///< "jpg" or "png"
+  /// TIFF: the source's GeoTIFF tags were written back (docs/export.md).
+  bool georeferenced = false;
+  /// What was exported differently from what the archive holds, one line each (for example a
+  /// georeference entry that is not what its tag holds, left out).
+  std::vector<std::string> warnings;
 };
 
 /// Writes the export to `out_path`. Nothing is visible at the output until it is complete:
