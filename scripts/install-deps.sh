@@ -20,6 +20,7 @@ packages=(
   libassimp-dev
   libmeshoptimizer-dev
   libminizip-dev
+  gdal-bin libvips-tools
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and
