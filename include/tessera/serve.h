@@ -35,8 +35,13 @@ struct ServeOptions {
   int jpeg_quality = 85;                         ///< for transcoded JPEG tiles
   /// Access-Control-Allow-Origin value ("*" or an origin); empty sends no CORS headers.
   std::string cors_origin;
-  /// Access log: a path, "-" for stdout, empty for none. One line per request.
+  /// Access log: a path, "-" for stdout, empty for none. One line per request; the `sig`
+  /// of a signed URL is logged as "REDACTED".
   std::string access_log;
+  /// Access file (JSON, docs/serve.md "Access control"): public archives, bearer tokens and
+  /// URL-signing keys per archive or pattern, per-archive CORS origins, a per-client rate
+  /// limit. Empty: every archive is readable by every client that reaches the port.
+  std::string access_file;
   /// Called once by `start`, on the calling thread, after the socket is bound and before any
   /// connection is accepted, with the bound address and port: the CLI prints its "listening
   /// on" line here, so that line precedes every access log line on stdout. May be empty.

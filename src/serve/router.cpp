@@ -220,11 +220,15 @@ std::shared_ptr<const std::string> shared(std::string text) {
 
 }  // namespace
 
-Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics)
+Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
+               std::shared_ptr<const AccessRules> access)
     : catalog_(std::move(catalog)),
       options_(options),
       metrics_(metrics),
-      cache_(options.transcode_cache_bytes) {
+      cache_(options.transcode_cache_bytes),
+      access_(std::move(access)) {
+  if (access_ && access_->requestsPerSecond() > 0)
+    limiter_ = std::make_unique<RateLimiter>(access_->requestsPerSecond(), access_->burst());
   nlohmann::json list = nlohmann::json::array();
   for (const auto& [name, served] : catalog_) {
     list.push_back(
@@ -269,15 +273,26 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics)
   archives_json_ = shared(nlohmann::json{{"archives", list}}.dump());
 }
 
+void setCorsHeaders(Response& response, const std::string& origin) {
+  if (origin.empty()) {
+    response.erase(http::field::access_control_allow_origin);
+    response.erase(http::field::access_control_expose_headers);
+    response.erase(http::field::vary);
+    return;
+  }
+  response.set(http::field::access_control_allow_origin, origin);
+  response.set(http::field::access_control_expose_headers,
+               "ETag, Content-Range, Content-Length, Accept-Ranges, X-Tessera-Codec, "
+               "X-Tessera-Tile-Kind, WWW-Authenticate, Retry-After");
+  if (origin != "*")
+    response.set(http::field::vary, "Origin");
+  else
+    response.erase(http::field::vary);
+}
+
 void Router::addCommonHeaders(Response& response) const {
   response.set(http::field::server, "tessera");
-  if (!options_.cors_origin.empty()) {
-    response.set(http::field::access_control_allow_origin, options_.cors_origin);
-    response.set(http::field::access_control_expose_headers,
-                 "ETag, Content-Range, Content-Length, Accept-Ranges, X-Tessera-Codec, "
-                 "X-Tessera-Tile-Kind");
-    if (options_.cors_origin != "*") response.set(http::field::vary, "Origin");
-  }
+  if (!options_.cors_origin.empty()) setCorsHeaders(response, options_.cors_origin);
 }
 
 Response Router::errorResponse(unsigned version, http::status status,
@@ -314,16 +329,20 @@ Response Router::bytesResponse(const Request& request, BodyPart body, std::strin
   return response;
 }
 
-RoutedResponse Router::handle(const Request& request) {
+RoutedResponse Router::handle(const Request& request, std::string_view client) {
   const http::verb method = request.method();
+  Target target = parseTarget(request.target());
+  const std::string_view archive = archiveOfSegments(target.segments);
   if (method == http::verb::options) {
     Response response{http::status::no_content, request.version()};
     addCommonHeaders(response);
+    applyCors(response, archive);
     response.set(http::field::allow, "GET, HEAD, OPTIONS");
-    if (!options_.cors_origin.empty()) {
+    if (response.count(http::field::access_control_allow_origin)) {
       response.set(http::field::access_control_allow_methods, "GET, HEAD, OPTIONS");
       response.set(http::field::access_control_allow_headers,
-                   "Range, If-None-Match, If-Range, If-Modified-Since");
+                   access_ ? "Range, If-None-Match, If-Range, If-Modified-Since, Authorization"
+                           : "Range, If-None-Match, If-Range, If-Modified-Since");
       response.set(http::field::access_control_max_age, "86400");
     }
     return {Endpoint::kOther, std::move(response)};
@@ -334,14 +353,16 @@ RoutedResponse Router::handle(const Request& request) {
     response.set(http::field::allow, "GET, HEAD, OPTIONS");
     return {Endpoint::kOther, std::move(response)};
   }
-  Target target = parseTarget(request.target());
   RoutedResponse routed;
   if (!target.problem.empty()) {
     routed = {Endpoint::kOther,
               errorResponse(request.version(), http::status::bad_request, target.problem)};
+  } else if (std::optional<Response> refused = refuse(request, target.segments, client)) {
+    routed = {Endpoint::kOther, std::move(*refused)};
   } else {
     routed = route(request, target);
   }
+  applyCors(routed.response, archive);
   if (method == http::verb::head) {
     // Same header as GET, Content-Length included, and no body.
     const uint64_t length = PartsBody::size(routed.response.body());
@@ -375,6 +396,8 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
     return {Endpoint::kMetrics,
             bytesResponse(request, shared(metrics_.render(cache_.stats())),
                           "text/plain; version=0.0.4; charset=utf-8", "", "no-store")};
+  if (seg.size() == 2 && seg[0] == "api" && seg[1] == "archives" && access_)
+    return {Endpoint::kArchives, archivesForRequest(request)};
   if (seg.size() == 2 && seg[0] == "api" && seg[1] == "archives")
     return {Endpoint::kArchives,
             bytesResponse(request, archives_json_, "application/json",

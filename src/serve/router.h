@@ -6,6 +6,9 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
+#include <string_view>
+#include <vector>
 #include <string>
 
 #include <boost/beast/http/message.hpp>
@@ -13,6 +16,7 @@
 
 #include <tessera/serve.h>
 
+#include "access.h"
 #include "catalog.h"
 #include "metrics.h"
 #include "parts_body.h"
@@ -28,14 +32,25 @@ struct RoutedResponse {
   Response response;
 };
 
+/// The archive a request path names (its first segment, or "NAME" of "/NAME.tess"); empty for
+/// the routes that belong to no archive (viewer, health, metrics, the archive list).
+std::string_view archiveOfSegments(const std::vector<std::string>& segments);
+
+/// Sets (or with an empty `origin`, removes) the CORS response headers.
+void setCorsHeaders(Response& response, const std::string& origin);
+
 /// Thread-safe: the catalog and JSON documents are immutable, the cache and metrics
 /// synchronise themselves.
 class Router {
  public:
-  Router(Catalog catalog, const ServeOptions& options, Metrics& metrics);
+  /// `access` null: every archive is open to every client (the server binds loopback by
+  /// default); otherwise its rules guard every archive route (docs/serve.md, "Access control").
+  Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
+         std::shared_ptr<const AccessRules> access = nullptr);
 
-  /// Answers `request`. Never throws; archive failures become 500 with the error's message.
-  RoutedResponse handle(const Request& request);
+  /// Answers `request` from `client` (its address, for rate limits; may be empty). Never
+  /// throws; archive failures become 500 with the error's message.
+  RoutedResponse handle(const Request& request, std::string_view client = {});
 
   /// A plain-text error response (also used by the connection for malformed requests).
   Response errorResponse(unsigned version, boost::beast::http::status status,
@@ -63,11 +78,21 @@ class Router {
   Response bytesResponse(const Request& request, BodyPart body, std::string_view content_type,
                          std::string_view etag, std::string_view cache_control);
   void addCommonHeaders(Response& response) const;
+  // Access control (router_access.cpp).
+  /// The refusal (429, 401 or 403) of a request that may not go on, or nullopt.
+  std::optional<Response> refuse(const Request& request, const std::vector<std::string>& segments,
+                                 std::string_view client);
+  /// /api/archives listing only what the request's credentials may read.
+  Response archivesForRequest(const Request& request);
+  /// Sets the CORS headers of `archive`'s routes (the access file's origin for it).
+  void applyCors(Response& response, std::string_view archive) const;
 
   const Catalog catalog_;
   const ServeOptions options_;
   Metrics& metrics_;
   TranscodeCache cache_;
+  const std::shared_ptr<const AccessRules> access_;
+  std::unique_ptr<RateLimiter> limiter_;
   std::shared_ptr<const std::string> archives_json_;
   std::map<std::string, std::shared_ptr<const std::string>> info_json_;  // by archive name
 };

@@ -39,6 +39,20 @@ using Clock = std::chrono::steady_clock;
 
 namespace {
 
+// `target` with the value of its query's `sig` parameter replaced by REDACTED.
+std::string withoutSignature(std::string_view target) {
+  std::string out(target);
+  const size_t query = out.find('?');
+  if (query == std::string::npos) return out;
+  for (size_t at = out.find("sig=", query); at != std::string::npos;
+       at = out.find("sig=", at + 1)) {
+    if (out[at - 1] != '?' && out[at - 1] != '&') continue;
+    const size_t end = std::min(out.find('&', at), out.size());
+    out.replace(at + 4, end - at - 4, "REDACTED");
+  }
+  return out;
+}
+
 class AccessLog {
  public:
   Result<void> open(const std::string& path) {
@@ -68,8 +82,9 @@ class AccessLog {
     ::gmtime_r(&seconds, &parts);
     char stamp[32];
     std::strftime(stamp, sizeof stamp, "%Y-%m-%dT%H:%M:%S", &parts);
-    // Targets are logged as received, minus anything that could break the line format.
-    std::string safe_target(target.substr(0, 2048));
+    // Targets are logged as received, minus anything that could break the line format and
+    // the signature of a signed URL (a credential until it expires).
+    std::string safe_target = withoutSignature(target.substr(0, 2048));
     for (char& c : safe_target)
       if (uint8_t(c) < 0x21 || uint8_t(c) >= 0x7f) c = '?';
     std::string line = fmt::format("{}.{:03d}Z {} {} {} {} {} {}\n", stamp, millis, peer,
@@ -222,7 +237,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
   void handle() {
     const Request& request = parser_->get();
-    detail::RoutedResponse routed = server_.router->handle(request);
+    detail::RoutedResponse routed = server_.router->handle(request, peer_);
     endpoint_ = routed.endpoint;
     method_ = std::string(request.method_string());
     target_ = std::string(request.target());
@@ -391,7 +406,12 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   TESSERA_ASSIGN_OR_RETURN(detail::Catalog catalog, detail::loadCatalog(options.paths));
   auto impl = std::make_unique<Impl>();
   impl->options = options;
-  impl->router = std::make_unique<detail::Router>(std::move(catalog), options, impl->metrics);
+  std::shared_ptr<const detail::AccessRules> access;
+  if (!options.access_file.empty()) {
+    TESSERA_ASSIGN_OR_RETURN(access, detail::AccessRules::load(options.access_file));
+  }
+  impl->router = std::make_unique<detail::Router>(std::move(catalog), options, impl->metrics,
+                                                  std::move(access));
   TESSERA_TRY(impl->access_log.open(options.access_log));
 
   beast::error_code ec;
