@@ -19,7 +19,7 @@ packages=(
   libtinygltf-dev
   libassimp-dev
   libmeshoptimizer-dev
-  libminizip-dev
+  libminizip-dev libssl-dev
   gdal-bin libvips-tools
 )
 

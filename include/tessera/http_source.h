@@ -6,6 +6,7 @@
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -49,6 +50,15 @@ struct HttpOptions {
   bool verify_tls = true;
   /// Sent as User-Agent.
   std::string user_agent = "tessera/0.1";
+  /// Sent as `Authorization: Bearer <token>` on every request when not empty: a token of
+  /// `tessera serve --access` (docs/serve.md, "Access control"). Never in an error message.
+  std::string bearer_token;
+  /// Called when the server refuses a request with 401 or 403, with the URL it refused, to get
+  /// a fresh one (typically a signed URL whose time ran out, signed again by the application);
+  /// the request is retried with it at once and every later request uses it. An empty string,
+  /// or no callback, fails the request. Runs on the source's I/O thread between transfers:
+  /// it must be thread-safe, must not read from this source, and should be quick.
+  std::function<std::string(const std::string& refused_url)> renew_url;
 };
 
 /// Opens `url` (http:// or https://) with one request: a GET of the first 16 KiB, which

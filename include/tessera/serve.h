@@ -48,6 +48,18 @@ struct ServeOptions {
   std::function<void(const std::string& address, uint16_t port)> on_listening;
 };
 
+/// The query string ("key=ID&expires=T[&archive=NAME][&range=A-B]&sig=HEX") of a signed URL
+/// that `tessera serve --access ACCESS_FILE` accepts until `expires_unix_s`: for one request
+/// path (`scope` "/earth.tess", "/earth/info.json", ...) or for every route of an archive
+/// (`scope` "archive:earth"), and when `range` ("A-B") is set, for requests whose byte ranges
+/// all lie inside it. The secret is key `key_id`'s in the access file; the algorithm
+/// (HMAC-SHA256) is in docs/serve.md so other languages can sign too. Errors name the file or
+/// the key, never the secret.
+[[nodiscard]] Result<std::string> signServeQuery(const std::string& access_file,
+                                                 const std::string& key_id,
+                                                 const std::string& scope, int64_t expires_unix_s,
+                                                 const std::string& range = {});
+
 /// Counters since start, for tests and the CLI. All values are monotonic except the gauges
 /// marked so.
 struct ServeStats {

@@ -14,6 +14,8 @@
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
+#include <tessera/serve.h>
+
 namespace tessera::detail {
 
 namespace {
@@ -342,6 +344,12 @@ const std::string& AccessRules::corsOrigin(std::string_view archive,
   return fallback;
 }
 
+const std::string* AccessRules::secretOf(std::string_view key_id) const {
+  for (const SigningKey& key : keys_)
+    if (key.id == key_id) return &key.secret;
+  return nullptr;
+}
+
 RateLimiter::RateLimiter(double rate, double burst, size_t max_clients)
     : rate_(rate), burst_(std::max(burst, 1.0)), max_clients_(max_clients) {}
 
@@ -374,3 +382,25 @@ bool RateLimiter::admit(std::string_view client, std::chrono::steady_clock::time
 }
 
 }  // namespace tessera::detail
+
+namespace tessera {
+
+Result<std::string> signServeQuery(const std::string& access_file, const std::string& key_id,
+                                   const std::string& scope, int64_t expires_unix_s,
+                                   const std::string& range) {
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<const detail::AccessRules> rules,
+                           detail::AccessRules::load(access_file));
+  const std::string* secret = rules->secretOf(key_id);
+  if (!secret)
+    return fail(ErrorCode::kNotFound,
+                fmt::format("{}: no signing key \"{}\"", access_file, key_id));
+  if (scope.empty() || (scope.front() != '/' && !scope.starts_with("archive:")))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("scope \"{}\": a request path (/...) or archive:NAME", scope));
+  if (!range.empty() && !detail::parseSpan(range))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("range \"{}\": expected FIRST-LAST byte offsets", range));
+  return detail::signedQuery(key_id, *secret, scope, expires_unix_s, range);
+}
+
+}  // namespace tessera

@@ -59,6 +59,9 @@ class AccessRules {
   /// The CORS origin for `archive`'s routes: the first matching rule's, else `fallback`.
   const std::string& corsOrigin(std::string_view archive, const std::string& fallback) const;
 
+  /// The secret of signing key `key_id`, or null.
+  const std::string* secretOf(std::string_view key_id) const;
+
   double requestsPerSecond() const { return requests_per_second_; }
   double burst() const { return burst_; }
 

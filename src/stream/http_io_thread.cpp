@@ -187,7 +187,7 @@ void HttpSource::startAttempt(Transfer& transfer) {
   transfer.curl_error[0] = 0;
   transfer.source = this;
   CURL* easy = transfer.easy = takeEasy();
-  curl_easy_setopt(easy, CURLOPT_URL, url_.c_str());
+  curl_easy_setopt(easy, CURLOPT_URL, request_url_.c_str());
   curl_easy_setopt(easy, CURLOPT_PRIVATE, &transfer);
   curl_easy_setopt(easy, CURLOPT_ERRORBUFFER, transfer.curl_error);
   curl_easy_setopt(easy, CURLOPT_NOSIGNAL, 1L);
@@ -219,6 +219,9 @@ void HttpSource::startAttempt(Transfer& transfer) {
   curl_easy_setopt(easy, CURLOPT_XFERINFODATA, &transfer);
   curl_slist_free_all(transfer.headers);
   transfer.headers = nullptr;
+  if (!options_.bearer_token.empty())
+    transfer.headers = curl_slist_append(
+        transfer.headers, ("Authorization: Bearer " + options_.bearer_token).c_str());
   if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
     curl_easy_setopt(easy, CURLOPT_NOBODY, 1L);
   } else {
@@ -372,6 +375,7 @@ bool HttpSource::finishResponse(Transfer& transfer, const std::string& what, dou
     return true;
   }
   if (status == 416) return finishUnsatisfiable(transfer, what, status_line);
+  if (status == 401 || status == 403) return finishRefused(transfer, what, status_line);
   if (status == 404 || status == 410) {
     complete(transfer, fail(ErrorCode::kNotFound, fmt::format("{}: {}", what, status_line)), true);
     return false;
@@ -382,6 +386,26 @@ bool HttpSource::finishResponse(Transfer& transfer, const std::string& what, dou
         status == 429 || status == 503 ? retryAfter(transfer) : std::chrono::milliseconds(0),
         random);
   complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, status_line)), true);
+  return false;
+}
+
+bool HttpSource::finishRefused(Transfer& transfer, const std::string& what,
+                               const std::string& status_line) {
+  if (options_.renew_url && !transfer.renewed) {
+    const std::string renewed = options_.renew_url(request_url_);
+    if (!renewed.empty() && renewed != request_url_) {
+      request_url_ = renewed;
+      transfer.renewed = true;
+      transfer.not_before = Clock::now();
+      return true;
+    }
+  }
+  const char* hint = transfer.status == 401
+                         ? "the server wants a bearer token (HttpOptions::bearer_token, "
+                           "TESSERA_TOKEN for the tools) or a signed URL"
+                         : "the token or signed URL does not grant this request, or expired";
+  complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}: {}", what, status_line, hint)),
+           true);
   return false;
 }
 

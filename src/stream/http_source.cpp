@@ -32,7 +32,7 @@ bool strongEtag(const std::string& etag) {
 }  // namespace
 
 HttpSource::HttpSource(std::string url, HttpOptions options)
-    : url_(std::move(url)), options_(std::move(options)) {
+    : url_(std::move(url)), request_url_(url_), options_(std::move(options)) {
   initCurlOnce();
   multi_ = curl_multi_init();
   curl_multi_setopt(multi_, CURLMOPT_PIPELINING, long(CURLPIPE_MULTIPLEX));

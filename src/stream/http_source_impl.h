@@ -92,6 +92,8 @@ struct Transfer {
   uint64_t probe_total = 0;  ///< the probe: the file size
   Error change_error;        ///< kHeadAfterChange: the message, completed with the HEAD's version
 
+  bool renewed = false;  ///< the URL was renewed for this request already (HttpOptions::renew_url)
+
   bool done = false;
   Result<void> result;
 };
@@ -203,6 +205,8 @@ class HttpSource final : public ByteSource {
                       double first_byte_seconds, std::mt19937_64& random);
 
   /// A 416: an empty file when probing, a file that shrank when reading, else a failure.
+  /// 401/403: renews the URL once through HttpOptions::renew_url (true: retry), else fails.
+  bool finishRefused(Transfer& transfer, const std::string& what, const std::string& status_line);
   bool finishUnsatisfiable(Transfer& transfer, const std::string& what,
                            const std::string& status_line);
 
@@ -231,6 +235,8 @@ class HttpSource final : public ByteSource {
   static int onProgress(void* user, curl_off_t, curl_off_t, curl_off_t, curl_off_t);
 
   const std::string url_;
+  /// The URL requests go to: url_ until HttpOptions::renew_url replaces it. The I/O thread's.
+  std::string request_url_;
   const HttpOptions options_;
   // Set by probe() before the source is shared, constant after.
   uint64_t size_bytes_ = 0;

@@ -1,5 +1,7 @@
 #include <tessera/open.h>
 
+#include <cstdlib>
+
 #include <tessera/http_source.h>
 
 namespace tessera {
@@ -11,7 +13,14 @@ bool isRemoteUri(const std::string& path_or_url) {
 }
 
 Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url) {
-  if (isRemoteUri(path_or_url)) return openHttpSource(path_or_url);
+  if (isRemoteUri(path_or_url)) {
+    HttpOptions options;
+    // The tools' way to pass a token: the environment, never the command line, which every
+    // user of the machine can read in the process list.
+    if (const char* token = std::getenv("TESSERA_TOKEN"); token && *token)
+      options.bearer_token = token;
+    return openHttpSource(path_or_url, options);
+  }
   return openFileSource(path_or_url);
 }
 

@@ -77,6 +77,7 @@ void registerViewCommand(CLI::App& app, int& exit_code);
 void registerDemoCommand(CLI::App& app, int& exit_code);
 void registerRenderCommand(CLI::App& app, int& exit_code);
 void registerServeCommand(CLI::App& app, int& exit_code);
+void registerSignCommand(CLI::App& app, int& exit_code);
 void registerExportCommand(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

@@ -179,6 +179,7 @@ int main(int argc, char** argv) {
   registerViewCommand(app, exit_code);
   registerRenderCommand(app, exit_code);
   registerServeCommand(app, exit_code);
+  registerSignCommand(app, exit_code);
   registerBrushesCommand(app, exit_code);
   registerExportCommand(app, exit_code);
   if (reportUnknownSubcommand(app, argc, argv)) return kExitUsage;

@@ -3,6 +3,7 @@
 #include <sys/stat.h>
 
 #include <cerrno>
+#include <chrono>
 #include <cstdio>
 #include <cstring>
 #include <memory>
@@ -133,7 +134,56 @@ void registerServeCommand(CLI::App& app, int& exit_code) {
                   "Send Access-Control-Allow-Origin with this origin (or *)");
   cmd->add_option("--access-log", options->access_log,
                   "One line per request to FILE, or - for stdout (after the listening line)");
+  cmd->add_option("--access", options->access_file,
+                  "Access file (JSON): public archives, bearer tokens, URL-signing keys, CORS "
+                  "origins and rate limits (docs/serve.md, \"Access control\")")
+      ->check(CLI::ExistingFile);
   cmd->callback([=, &exit_code] { exit_code = runServe(*options, *cache_mib, *port); });
+}
+
+namespace {
+
+struct SignArgs {
+  std::string access_file, key, path, archive, range, base;
+  int64_t expires_in_s = 3600;
+};
+
+int runSign(const SignArgs& args) {
+  if (args.path.empty() == args.archive.empty()) {
+    std::fprintf(stderr, "tessera sign: give exactly one of --path and --archive\n");
+    return kExitUsage;
+  }
+  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  const std::string scope = args.path.empty() ? "archive:" + args.archive : args.path;
+  Result<std::string> query =
+      signServeQuery(args.access_file, args.key, scope, now + args.expires_in_s, args.range);
+  if (!query) return reportError(query.error());
+  // An archive-wide signature works on any of its routes; its archive file is the example.
+  const std::string path = args.path.empty() ? "/" + args.archive + ".tess" : args.path;
+  std::printf("%s%s?%s\n", args.base.c_str(), path.c_str(), query->c_str());
+  return kExitOk;
+}
+
+}  // namespace
+
+void registerSignCommand(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<SignArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "sign", "Print a time-limited signed URL that `tessera serve --access FILE` accepts");
+  cmd->add_option("access", args->access_file, "The server's access file")
+      ->required()
+      ->check(CLI::ExistingFile);
+  cmd->add_option("--key", args->key, "Signing key id (signing_keys[].id)")->required();
+  cmd->add_option("--path", args->path, "One request path, e.g. /earth.tess");
+  cmd->add_option("--archive", args->archive, "Every route of this archive instead");
+  cmd->add_option("--range", args->range, "Only byte ranges inside FIRST-LAST");
+  cmd->add_option("--expires-in", args->expires_in_s, "Seconds from now")
+      ->capture_default_str()
+      ->check(CLI::Range(int64_t(1), int64_t(10) * 365 * 24 * 3600));
+  cmd->add_option("--base", args->base, "Prefix of the printed URL, e.g. https://tiles.example");
+  cmd->callback([=, &exit_code] { exit_code = runSign(*args); });
 }
 
 }  // namespace tessera::cli

@@ -4,6 +4,8 @@
 // a request without the right credential on any route.
 #include "access.h"
 
+#include <unistd.h>
+
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -182,10 +184,17 @@ class AccessServerTest : public ::testing::Test {
     paths_ = {test::servedArchive("pngb1", 1000, 700, 3, Codec::kPng, 128, 1),
               test::servedArchive("zstd4", 600, 400, 4, Codec::kZstd, 64, 0),
               test::servedArchive("jpeg3", 700, 500, 3, Codec::kJpeg, 256, 0)};
-    dir_ = std::filesystem::path(::testing::TempDir()) / "tessera-access-server";
+    // One folder per test and process: ctest runs these tests in parallel processes.
+    dir_ = std::filesystem::path(::testing::TempDir()) /
+           ("tessera-access-" + std::to_string(::getpid()) + "-" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
     std::filesystem::create_directories(dir_);
     access_file_ = (dir_ / "access.json").string();
     std::ofstream(access_file_) << rulesJson();
+  }
+  void TearDown() override {
+    std::error_code ignored;
+    std::filesystem::remove_all(dir_, ignored);
   }
   std::unique_ptr<TileServer> start(ServeOptions options = {}) {
     options.access_file = access_file_;

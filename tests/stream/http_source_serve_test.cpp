@@ -3,6 +3,8 @@
 #include <tessera/http_source.h>
 #include <tessera/open.h>
 
+#include <chrono>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -114,6 +116,73 @@ TEST_F(ServeTest, UnknownArchiveIsNotFound) {
   EXPECT_EQ(source.error().code, ErrorCode::kNotFound);
   EXPECT_NE(source.error().message.find(url + ": bytes=0-16383: HTTP 404"), std::string::npos)
       << source.error().message;
+}
+
+// `tessera serve --access`: a protected archive opens with its bearer token (also from
+// TESSERA_TOKEN through openArchive), not without; a signed URL that expired is renewed
+// through HttpOptions::renew_url once and the source goes on with the new URL.
+TEST_F(ServeTest, TokensAndRenewedSignedUrlsOpenAProtectedArchive) {
+  const std::string token = "a-bearer-token-for-earth-0123";
+  const std::string access = (dir_ / "access.json").string();
+  std::ofstream(access) << R"({"tokens": [{"token": ")" << token
+                        << R"(", "archives": ["earth"]}], "signing_keys": [{"id": "web",
+                        "secret": "0123456789abcdef0123456789abcdef-web", "archives": ["*"]}]})";
+  server_.reset();
+  ServeOptions options;
+  options.paths = {path_};
+  options.port = 0;
+  options.access_file = access;
+  auto server = TileServer::start(options);
+  ASSERT_TRUE(server) << server.error().message;
+  server_ = std::move(*server);
+  const std::string base = "http://127.0.0.1:" + std::to_string(server_->port());
+  const std::string url = base + "/earth.tess";
+
+  auto refused = openHttpSource(url);
+  ASSERT_FALSE(refused);
+  EXPECT_NE(refused.error().message.find("401"), std::string::npos) << refused.error().message;
+  EXPECT_NE(refused.error().message.find("bearer token"), std::string::npos);
+
+  HttpOptions with_token;
+  with_token.bearer_token = token;
+  auto source = openHttpSource(url, with_token);
+  ASSERT_TRUE(source) << source.error().message;
+  std::vector<uint8_t> tail(1000);
+  ASSERT_TRUE((*source)->read(bytes_.size() - tail.size(), tail));
+  EXPECT_TRUE(std::equal(tail.begin(), tail.end(), bytes_.end() - ptrdiff_t(tail.size())));
+  EXPECT_EQ(refused.error().message.find(token), std::string::npos);
+
+  ::setenv("TESSERA_TOKEN", token.c_str(), 1);
+  auto archive = openArchive(url);
+  ::unsetenv("TESSERA_TOKEN");
+  ASSERT_TRUE(archive) << archive.error().message;
+
+  const int64_t now = std::chrono::duration_cast<std::chrono::seconds>(
+                          std::chrono::system_clock::now().time_since_epoch())
+                          .count();
+  auto expired = signServeQuery(access, "web", "/earth.tess", now - 10);
+  ASSERT_TRUE(expired) << expired.error().message;
+  std::vector<std::string> renewals;
+  HttpOptions renewing;
+  renewing.renew_url = [&](const std::string& refused_url) {
+    renewals.push_back(refused_url);
+    Result<std::string> fresh = signServeQuery(access, "web", "/earth.tess", now + 600);
+    return fresh ? url + "?" + *fresh : std::string();
+  };
+  auto signed_source = openHttpSource(url + "?" + *expired, renewing);
+  ASSERT_TRUE(signed_source) << signed_source.error().message;
+  ASSERT_EQ(renewals.size(), 1u);
+  EXPECT_EQ(renewals[0], url + "?" + *expired);
+  ASSERT_TRUE((*signed_source)->read(bytes_.size() - tail.size(), tail));
+  EXPECT_TRUE(std::equal(tail.begin(), tail.end(), bytes_.end() - ptrdiff_t(tail.size())));
+  EXPECT_EQ(renewals.size(), 1u) << "later requests use the renewed URL";
+
+  // A renewal that gives nothing fails the open with the 403.
+  HttpOptions giving_up;
+  giving_up.renew_url = [](const std::string&) { return std::string(); };
+  auto gave_up = openHttpSource(url + "?" + *expired, giving_up);
+  ASSERT_FALSE(gave_up);
+  EXPECT_NE(gave_up.error().message.find("403"), std::string::npos) << gave_up.error().message;
 }
 
 }  // namespace
