@@ -5,7 +5,9 @@
 /// base-colour texture. A texture's GL storage holds its whole mip chain from the start and
 /// levels are uploaded as the streamer makes them resident; sampling is clamped to the
 /// uploaded levels (GL_TEXTURE_BASE_LEVEL and GL_TEXTURE_MIN_LOD), so a texture refines in
-/// place and never shows a level that has not arrived.
+/// place and never shows a level that has not arrived. The world is right-handed (glTF's):
+/// screen x runs along -cameraBasis().right, screen y along up (the basis is mirrored, up =
+/// forward x right), so a y-up scene shows upright with the roll `tessera fly` gives it.
 
 #include <cstdint>
 #include <memory>

@@ -332,7 +332,7 @@ void SceneRenderer::Impl::drawObjects(const SceneStreamer& streamer, const Persp
     // Normals to eye space: the view's rows times the object's 3x3 (no non-uniform scale
     // assumed; the shader normalises).
     const auto& t = object->transform;
-    const double rows[3][3] = {{b.right.x, b.right.y, b.right.z},
+    const double rows[3][3] = {{-b.right.x, -b.right.y, -b.right.z},
                                {b.up.x, b.up.y, b.up.z},
                                {-b.forward.x, -b.forward.y, -b.forward.z}};
     float normal[9];

@@ -27,6 +27,7 @@
 #include "camera_path.h"
 #include "fly_command.h"
 #include "fly_render.h"
+#include "scene_fly_command.h"
 #include "cli.h"
 
 namespace tessera::cli {
@@ -705,6 +706,7 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
 }  // namespace
 
 int runFly(const FlyArgs& args) {
+  if (isSceneArchive(args.archive)) return runSceneFly(args);
   Result<FlightSetup> setup = setUpFlight(args);
   if (!setup) return reportError(setup.error());
   Result<nlohmann::json> flown = runFlight(args, *setup);
