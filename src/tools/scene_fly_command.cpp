@@ -256,7 +256,11 @@ nlohmann::json sceneFlightSummary(const FlyArgs& args, const SceneFlightSetup& s
   return {
       {"archive", args.archive},
       {"path", setup.path.name},
-      {"scene", {{"objects", scene.objects}, {"textures", scene.textures}, {"nodes", scene.nodes}}},
+      {"scene",
+       {{"objects", scene.objects},
+        {"textures", scene.textures},
+        {"nodes", scene.nodes},
+        {"bounds", {{"min", scene.bounds.min}, {"max", scene.bounds.max}}}}},
       {"viewport", args.viewport},
       {"fps", args.fps},
       {"renderer", "scene"},
