@@ -74,7 +74,9 @@ std::vector<SceneStop> ScenePath::stops() const {
   for (size_t i = 0; i + 1 < keys.size(); ++i) {
     if (keys[i + 1].pose != keys[i].pose || keys[i + 1].jump || !(keys[i + 1].t_s > keys[i].t_s))
       continue;
-    if (!out.empty() && out.back().until_s == keys[i].t_s)
+    const bool continues = i > 0 && !out.empty() && out.back().until_s == keys[i].t_s &&
+                           !keys[i].jump && keys[i - 1].pose == keys[i].pose;
+    if (continues)
       out.back().until_s = keys[i + 1].t_s;  // one stop over several keyframes
     else
       out.push_back({keys[i].t_s, keys[i + 1].t_s});
