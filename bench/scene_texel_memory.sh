@@ -10,9 +10,9 @@
 # The scene is the one tests/scene/real_scene_test.cpp builds from Debian's
 # flightgear-data-models (fetched into build/scene-data, or TESSERA_FGDATA): the script runs
 # that test with TESSERA_KEEP_SCENE to keep its archive. Then `tessera fly` flies the built-in
-# orbit, a low pass along the placements and four jumps (path files written here from the
-# scene's bounds), each ending at rest, where the picture is compared with every texture
-# resident. One line per flight; each flight's summary.json and frames.csv stay in
+# orbit, a low pass along a row of placements and four jumps to placements (path files
+# written here from the test's placement grid), each ending at rest, where the picture is
+# compared with every texture resident. One line per flight; each flight's summary.json and frames.csv stay in
 # $WORK/<path>/.
 set -euo pipefail
 
@@ -61,26 +61,28 @@ EOF
 }
 
 fly orbit orbit --duration 20
-# Paths from the scene's bounds (summary.json of the orbit): x east, y up, z south.
-python3 - "$WORK/orbit/summary.json" "$WORK" <<'EOF'
-import json, sys
-b = json.load(open(sys.argv[1]))["scene"]["bounds"]
-(x0, y0, z0), (x1, y1, z1) = b["min"], b["max"]
-cz = (z0 + z1) / 2
-with open(sys.argv[2] + "/low-pass.path", "w") as f:
-    # East along the middle row 40 m up, looking 25 degrees down; stops halfway and at the end.
+# The real-data test places its models on a grid, column c at longitude -122.40 + 0.004 c and
+# row r at latitude 37.62 + 0.004 r, 5 to 11 m up, on a tangent plane at the first one (x east,
+# y up, z south): about 352 m between columns along +x and 445 m between rows along -z.
+python3 - "$WORK" <<'EOF'
+import sys
+work = sys.argv[1]
+dx, dz = 352.0, -445.0
+with open(work + "/low-pass.path", "w") as f:
+    # East along row 2, 40 m up and 40 m south of it, looking 20 degrees down; stops halfway
+    # and at the end, with placements still ahead.
+    z = 2 * dz + 40
     f.write("# t x y z yaw_deg pitch_deg\n")
-    mid = (x0 + x1) / 2
-    f.write(f"0 {x0} {y0 + 40} {cz} 90 -25\n12 {mid} {y0 + 40} {cz} 90 -25\n")
-    f.write(f"17 {mid} {y0 + 40} {cz} 90 -25\n29 {x1} {y0 + 40} {cz} 90 -25\n")
-    f.write(f"34 {x1} {y0 + 40} {cz} 90 -25\n")
-with open(sys.argv[2] + "/jumps.path", "w") as f:
-    # Four teleports 80 m up looking at a point 150 m ahead on the ground, 5 s each.
+    f.write(f"0 -100 40 {z} 90 -20\n12 {13 * dx} 40 {z} 90 -20\n")
+    f.write(f"17 {13 * dx} 40 {z} 90 -20\n29 {26 * dx} 40 {z} 90 -20\n")
+    f.write(f"34 {26 * dx} 40 {z} 90 -20\n")
+with open(work + "/jumps.path", "w") as f:
+    # Four teleports to 60 m south of a placement and 50 m up, looking at it; 5 s each.
     f.write("# t x y z look tx ty tz [jump]\n")
     t = 0
-    for fx, fz in ((0.25, 0.3), (0.7, 0.6), (0.4, 0.8), (0.85, 0.25)):
-        x, z = x0 + fx * (x1 - x0), z0 + fz * (z1 - z0)
-        line = f"{x} {y0 + 80} {z} look {x} {y0} {z - 150}"
+    for c, r in ((5, 3), (20, 7), (12, 12), (27, 1)):
+        x, z = c * dx, r * dz
+        line = f"{x} 50 {z + 60} look {x} 5 {z}"
         f.write(f"{t} {line}{' jump' if t else ''}\n{t + 5} {line}\n")
         t += 5
 EOF

@@ -143,13 +143,8 @@ struct SceneFlightLog {
 /// A picture to a PNG in the output folder, kept for the report.
 Result<void> savePicture(const FlyArgs& args, SceneFlightLog& log, const Picture& picture,
                          const std::string& name, const std::string& caption) {
-  const std::string file = args.out_dir + "/" + name;
-  TESSERA_TRY(writePng(picture, file));
-  if (args.report) {
-    std::ifstream in(file, std::ios::binary);
-    log.pictures.push_back({caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
-  }
-  return {};
+  return writeReportPicture(picture, args.out_dir + "/" + name, caption,
+                            args.report ? &log.pictures : nullptr);
 }
 
 /// Flies the path in real time: frame k is shown at k / fps after the start, or as soon as

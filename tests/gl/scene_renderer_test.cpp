@@ -6,7 +6,6 @@
 #include <gtest/gtest.h>
 
 #include <tessera/gl.h>
-#include <tessera/scene_build.h>
 
 #include "scene/scene_test_support.h"
 
@@ -26,16 +25,7 @@ GlContext& context() {
 }
 
 std::shared_ptr<SceneArchive> buildCity(const ScratchDir& dir) {
-  SceneBuildOptions options;
-  options.input = "synthetic-scene:80:16:5";
-  options.output = dir.file("city.tess");
-  options.tile_size_px = 64;
-  options.threads = 2;
-  options.leaf_capacity = 8;
-  options.max_children = 4;
-  Result<SceneBuildReport> report = buildScene(options);
-  EXPECT_TRUE(report.has_value()) << report.error().message;
-  auto archive = SceneArchive::openFile(options.output);
+  auto archive = SceneArchive::openFile(test::buildSyntheticCity(dir, "80:16:5"));
   EXPECT_TRUE(archive.has_value()) << archive.error().message;
   return archive ? *archive : nullptr;
 }
