@@ -31,8 +31,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-/// The vertical field of view of scene flights (as `tessera view`'s perspective camera).
-constexpr double kFovYRad = 1.0;
 /// Frames the settling at the end may take before the rest picture is taken anyway.
 constexpr int kMaxSettleFrames = 2000;
 
@@ -160,7 +158,7 @@ Result<void> flySceneFrames(const FlyArgs& args, const SceneFlightSetup& setup,
         start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
     const ScenePose pose = setup.path.at(t_s);
     const PerspectiveView camera =
-        perspectiveOf(pose, kFovYRad, setup.viewport_w, setup.viewport_h);
+        perspectiveOf(pose, kSceneFovYRad, setup.viewport_w, setup.viewport_h);
     const auto before = Clock::now();
     const SceneFrameStats frame = streamer.update(camera);
     const double update_ms = msBetween(before, Clock::now());
@@ -190,7 +188,7 @@ Result<RestFigures> restFigures(const FlyArgs& args, const SceneFlightSetup& set
                                 SceneStreamer& streamer, SceneRenderer& renderer,
                                 SceneFlightLog& log) {
   RestFigures rest;
-  const PerspectiveView camera = perspectiveOf(setup.path.at(setup.path.durationS()), kFovYRad,
+  const PerspectiveView camera = perspectiveOf(setup.path.at(setup.path.durationS()), kSceneFovYRad,
                                                setup.viewport_w, setup.viewport_h);
   // Frame-stepping: waitForReads is for tools that step frames, as this settling does.
   for (; rest.settle_frames < kMaxSettleFrames; ++rest.settle_frames) {

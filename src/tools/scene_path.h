@@ -12,6 +12,9 @@
 
 namespace tessera::cli {
 
+/// The vertical field of view of scene flights and `tessera view` on a scene.
+inline constexpr double kSceneFovYRad = 1.0;
+
 /// A camera in a scene's world (x east, y up, z south as the importers write it).
 struct ScenePose {
   double x = 0, y = 0, z = 0;

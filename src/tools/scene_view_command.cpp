@@ -29,7 +29,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-constexpr double kFovYRad = 1.0;
 constexpr double kTurnRadPerPx = 0.004;
 /// R-tree nodes drawn by the node overlay: the upper levels (a deep tree has thousands).
 constexpr uint32_t kNodeOverlayDepth = 3;
@@ -143,7 +142,7 @@ int runSceneViewLoop(SceneViewLoop& loop) {
       glfwWaitEventsTimeout(0.1);
       continue;
     }
-    const PerspectiveView camera = perspectiveOf(v.pose, kFovYRad, uint32_t(fw), uint32_t(fh));
+    const PerspectiveView camera = perspectiveOf(v.pose, kSceneFovYRad, uint32_t(fw), uint32_t(fh));
     const SceneFrameStats stats = loop.streamer.update(camera);
     // Overlays: the node boxes; the view cell of coverage hints is one more box here.
     v.overlays.boxes = v.show_nodes ? loop.node_boxes : std::vector<OverlayBox>{};
