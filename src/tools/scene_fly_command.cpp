@@ -359,8 +359,11 @@ Result<nlohmann::json> runSceneFlight(const FlyArgs& args, const SceneFlightSetu
 }  // namespace
 
 bool isSceneArchive(const std::string& path_or_url) {
-  Result<std::shared_ptr<ByteSource>> source = openByteSource(path_or_url);
-  return source && SceneArchive::open(*source).has_value();
+  // A URL is not probed: the probe would cost the server a request of its own before the
+  // image flight's open (a URL flies as images; docs/scenes.md, "Not done").
+  if (isRemoteUri(path_or_url)) return false;
+  Result<std::shared_ptr<SceneArchive>> scene = SceneArchive::openFile(path_or_url);
+  return scene.has_value();
 }
 
 int runSceneFly(const FlyArgs& args) {

@@ -8,9 +8,9 @@
 
 namespace tessera::cli {
 
-/// True when `path_or_url` opens as a scene archive (a 1.1 archive with a scene section): the
-/// fly and view commands then take the scene path. False for anything else, errors included
-/// (the image path reports them).
+/// True when the local file `path_or_url` opens as a scene archive (a 1.1 archive with a scene
+/// section): the fly and view commands then take the scene path. False for anything else,
+/// URLs and errors included (the image path reports them).
 bool isSceneArchive(const std::string& path_or_url);
 
 /// Flies a scene: `args.path` is "orbit" (also what the image default "pan" means here) or a
