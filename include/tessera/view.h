@@ -37,6 +37,10 @@ struct PerspectiveView {
   double fov_y_rad = 1.0;   ///< vertical field of view
   uint32_t viewport_w = 1280;
   uint32_t viewport_h = 720;
+  /// Turns the screen about the view axis, positive from right towards up. The terrain views
+  /// keep 0; a scene whose world is y-up needs it to keep its up on the screen's up. Last, so
+  /// that brace initialisers of the fields above keep their meaning.
+  double roll_rad = 0;
 };
 
 /// A view of one image of an archive: `ortho` or `perspective`, as `kind` says (the other
@@ -70,7 +74,7 @@ struct Vec3 {
 struct CameraBasis {
   /// (sin(yaw) cos(pitch), -cos(yaw) cos(pitch), sin(pitch)): yaw 0 looks up the image.
   Vec3 forward;
-  Vec3 right;  ///< (cos(yaw), sin(yaw), 0): screen x
+  Vec3 right;  ///< (cos(yaw), sin(yaw), 0) at roll 0: screen x; roll turns it towards up
   /// forward x right: screen y towards the top row, so a camera that looks down has the
   /// horizon at the top of the screen (docs/rendering.md explains the handedness).
   Vec3 up;

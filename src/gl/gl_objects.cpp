@@ -93,23 +93,31 @@ GLenum tilePixelFormat(uint32_t channels) {
   }
 }
 
-Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers) {
+GLenum tileInternalFormat(uint32_t channels) {
   static const GLenum kInternal[] = {GL_R8, GL_RG8, GL_RGB8, GL_RGBA8};
+  return kInternal[std::clamp<uint32_t>(channels, 1, 4) - 1];
+}
+
+void setChannelSwizzle(const Texture& texture, uint32_t channels) {
   static const GLint kSwizzles[4][4] = {{GL_RED, GL_RED, GL_RED, GL_ONE},
                                         {GL_RED, GL_RED, GL_RED, GL_GREEN},
                                         {GL_RED, GL_GREEN, GL_BLUE, GL_ONE},
                                         {GL_RED, GL_GREEN, GL_BLUE, GL_ALPHA}};
-  const uint32_t c = std::clamp<uint32_t>(channels, 1, 4) - 1;
+  glTextureParameteriv(texture.get(), GL_TEXTURE_SWIZZLE_RGBA,
+                       kSwizzles[std::clamp<uint32_t>(channels, 1, 4) - 1]);
+}
+
+Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers) {
   Texture texture = createTexture(GL_TEXTURE_2D_ARRAY);
   while (glGetError() != GL_NO_ERROR) {
   }
-  glTextureStorage3D(texture.get(), 1, kInternal[c], side, side, layers);
+  glTextureStorage3D(texture.get(), 1, tileInternalFormat(channels), side, side, layers);
   if (glGetError() != GL_NO_ERROR) return Texture();
   glTextureParameteri(texture.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
   glTextureParameteri(texture.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
   glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
   glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-  glTextureParameteriv(texture.get(), GL_TEXTURE_SWIZZLE_RGBA, kSwizzles[c]);
+  setChannelSwizzle(texture, channels);
   return texture;
 }
 
@@ -136,12 +144,21 @@ void UploadStaging::unbind() {
   glBindBuffer(GL_PIXEL_UNPACK_BUFFER, 0);
 }
 
-void ColourTarget::bind(uint32_t width, uint32_t height) {
-  if (width != width_ || height != height_ || !framebuffer_) {
+void ColourTarget::bind(uint32_t width, uint32_t height, bool with_depth) {
+  if (width != width_ || height != height_ || !framebuffer_ || with_depth != bool(depth_)) {
     colour_ = createTexture(GL_TEXTURE_2D);
     glTextureStorage2D(colour_.get(), 1, GL_RGBA8, GLsizei(width), GLsizei(height));
     framebuffer_ = createFramebuffer();
     glNamedFramebufferTexture(framebuffer_.get(), GL_COLOR_ATTACHMENT0, colour_.get(), 0);
+    depth_.reset();
+    if (with_depth) {
+      GLuint name = 0;
+      glCreateRenderbuffers(1, &name);
+      depth_ = Renderbuffer(name);
+      glNamedRenderbufferStorage(name, GL_DEPTH_COMPONENT24, GLsizei(width), GLsizei(height));
+      glNamedFramebufferRenderbuffer(framebuffer_.get(), GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER,
+                                     name);
+    }
     width_ = width;
     height_ = height;
   }

@@ -65,6 +65,9 @@ std::string formatBytes(uint64_t bytes);
 /// a third of the word's length (at least 2 edits): the suggestion for a misspelt name.
 std::string nearestName(std::string_view word, const std::vector<std::string>& candidates);
 
+/// Parses a strict "WxH" viewport: digits only on both sides, each side 1..16384.
+bool parseViewport(const std::string& text, uint32_t& w, uint32_t& h);
+
 /// "a, b or c": the accepted values of an option, for its "unknown value" message.
 std::string listChoices(const std::vector<std::string>& choices);
 

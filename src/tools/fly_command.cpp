@@ -27,6 +27,7 @@
 #include "camera_path.h"
 #include "fly_command.h"
 #include "fly_render.h"
+#include "scene_fly_command.h"
 #include "cli.h"
 
 namespace tessera::cli {
@@ -328,14 +329,8 @@ struct FlightLog {
 /// A picture of the GPU's last frame to a PNG in the output folder, kept for the report.
 Result<void> saveFlightPicture(const FlyArgs& args, FlightLog& log, const Picture& picture,
                                const std::string& name, const std::string& caption) {
-  const std::string file = args.out_dir + "/" + name;
-  TESSERA_TRY(writePng(picture, file));
-  if (args.report) {
-    std::ifstream in(file, std::ios::binary);
-    log.report_pictures.push_back(
-        {caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
-  }
-  return {};
+  return writeReportPicture(picture, args.out_dir + "/" + name, caption,
+                            args.report ? &log.report_pictures : nullptr);
 }
 
 /// With --render, after frame `k` at `t_s`: the screenshots asked for, and at rest (the last
@@ -705,6 +700,7 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
 }  // namespace
 
 int runFly(const FlyArgs& args) {
+  if (isSceneArchive(args.archive)) return runSceneFly(args);
   Result<FlightSetup> setup = setUpFlight(args);
   if (!setup) return reportError(setup.error());
   Result<nlohmann::json> flown = runFlight(args, *setup);

@@ -5,8 +5,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <fstream>
+#include <iterator>
 
 #include <fmt/format.h>
+
+#include <tessera/picture_file.h>
 
 #include "output/output_file.h"
 #include "view_overlay.h"
@@ -147,6 +151,16 @@ std::string formatMs(double ms) {
 
 }  // namespace
 
+Result<void> writeReportPicture(const Picture& picture, const std::string& file,
+                                const std::string& caption, std::vector<ReportPicture>* pictures) {
+  TESSERA_TRY(writePng(picture, file));
+  if (pictures) {
+    std::ifstream in(file, std::ios::binary);
+    pictures->push_back({caption, std::vector<uint8_t>(std::istreambuf_iterator<char>(in), {})});
+  }
+  return {};
+}
+
 std::vector<HeadlineFigure> headlineFigures(const nlohmann::json& summary) {
   const bool rendered = summary.contains("renderer");
   const bool software = softwareRenderer(summary);
@@ -183,6 +197,16 @@ std::vector<HeadlineFigure> headlineFigures(const nlohmann::json& summary) {
   const double failures = numberAt(summary, "/load_failures");
   add("/load_failures", "failed loads", "failed loads", fmt::format("{:.0f}", failures), "0",
       failures == 0, false);
+  // Scene flights (docs/fly.md, "Scenes"; issue 28's targets).
+  const double untextured = numberAt(summary, "/untextured_frames");
+  add("/untextured_frames", "frames with a visible object untextured", "untextured frames",
+      fmt::format("{:.0f}", untextured), "0", untextured == 0, false);
+  const double scene_psnr = numberAt(summary, "/scene_rest_psnr_db");
+  add("/scene_rest_psnr_db", "picture at rest against every texture resident", "at rest",
+      formatPsnr(scene_psnr), "≥ 40 dB", scene_psnr >= 40, false);
+  const double texels = numberAt(summary, "/rest_texel_memory_pct");
+  add("/rest_texel_memory_pct", "texel memory at rest, of every texture at full resolution",
+      "texel memory", fmt::format("{:.1f} %", texels), "≤ 25 %", texels <= 25, false);
   const double median = numberAt(summary, "/full_detail_ms_median");
   add("/full_detail_ms_median", "time to full detail after a jump (median)", "to full detail",
       formatMs(median), "≤ 100 ms", median <= 100, rendered);

@@ -79,6 +79,12 @@ struct ReportPicture {
   bool levels = false;  ///< tinted by level (levelOverlay): shown beside the one before it
 };
 
+/// Writes `picture` to `file` as a PNG and, when `pictures` is not null, keeps its bytes
+/// there under `caption` for the report. Fails naming the file.
+[[nodiscard]] Result<void> writeReportPicture(const Picture& picture, const std::string& file,
+                                              const std::string& caption,
+                                              std::vector<ReportPicture>* pictures);
+
 /// PSNR of identical pictures (infinite) as summary.json, the report and the demo state it.
 inline constexpr double kIdenticalPsnrDb = 99;
 /// The share of frames at full detail a flight should reach (issue 31's target).

@@ -30,17 +30,6 @@ struct RenderArgs {
   double rotation_deg = 0;
 };
 
-// Strict "WxH": digits only on both sides, each side 1..16384. sscanf's %u would take "-3".
-bool parseViewport(const std::string& text, uint32_t& w, uint32_t& h) {
-  size_t x = text.find('x');
-  if (x == std::string::npos || x == 0 || x + 1 >= text.size()) return false;
-  auto parse = [](const std::string& digits, uint32_t& out) {
-    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), out);
-    return error == std::errc() && end == digits.data() + digits.size() && out >= 1 && out <= 16384;
-  };
-  return parse(text.substr(0, x), w) && parse(text.substr(x + 1), h);
-}
-
 int runRender(const RenderArgs& args) {
   uint32_t viewport_w = 0, viewport_h = 0;
   if (!parseViewport(args.viewport, viewport_w, viewport_h))
@@ -85,6 +74,17 @@ int runRender(const RenderArgs& args) {
 }
 
 }  // namespace
+
+// Strict "WxH": digits only on both sides, each side 1..16384. sscanf's %u would take "-3".
+bool parseViewport(const std::string& text, uint32_t& w, uint32_t& h) {
+  size_t x = text.find('x');
+  if (x == std::string::npos || x == 0 || x + 1 >= text.size()) return false;
+  auto parse = [](const std::string& digits, uint32_t& out) {
+    const auto [end, error] = std::from_chars(digits.data(), digits.data() + digits.size(), out);
+    return error == std::errc() && end == digits.data() + digits.size() && out >= 1 && out <= 16384;
+  };
+  return parse(text.substr(0, x), w) && parse(text.substr(x + 1), h);
+}
 
 void registerRenderCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<RenderArgs>();

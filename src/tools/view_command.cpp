@@ -29,6 +29,8 @@
 #include "cli.h"
 #include "gl/window.h"
 #include "view_camera.h"
+#include "scene_fly_command.h"
+#include "scene_view_command.h"
 #include "view_command.h"
 #include "view_overlay.h"
 #include "view_panel.h"
@@ -607,6 +609,7 @@ int runViewerLoop(ViewerLoop& loop) {
 }  // namespace
 
 int runView(const ViewArgs& args) {
+  if (isSceneArchive(args.archive)) return runSceneView(args);
   uint32_t window_w = 0, window_h = 0;
   if (std::sscanf(args.size.c_str(), "%ux%u", &window_w, &window_h) != 2 || window_w == 0 ||
       window_h == 0 || window_w > 16384 || window_h > 16384)
@@ -668,9 +671,10 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
       ->capture_default_str();
   cmd->add_flag("--perspective", args->perspective, "Start in the perspective fly-over");
   cmd->add_option("--overlays", args->overlays,
-                  "Overlays on from the start: levels, clip, grid (comma-separated)")
+                  "Overlays on from the start: levels, clip, grid (comma-separated); for a "
+                  "scene levels, nodes")
       ->delimiter(',')
-      ->check(CLI::IsMember({"levels", "clip", "grid"}));
+      ->check(CLI::IsMember({"levels", "clip", "grid", "nodes"}));
   cmd->add_option("--screenshot-dir", args->screenshot_dir, "Folder for tessera-screenshot-<n>.png")
       ->capture_default_str();
   // For tests and scripted runs: an empty group hides it from --help.

@@ -19,6 +19,12 @@ CameraBasis cameraBasis(const PerspectiveView& view) {
   const Vec3& f = b.forward;
   const Vec3& r = b.right;
   b.up = {f.y * r.z - f.z * r.y, f.z * r.x - f.x * r.z, f.x * r.y - f.y * r.x};
+  if (view.roll_rad != 0) {
+    const double c = std::cos(view.roll_rad), s = std::sin(view.roll_rad);
+    const Vec3 right = b.right, up = b.up;
+    b.right = {right.x * c + up.x * s, right.y * c + up.y * s, right.z * c + up.z * s};
+    b.up = {up.x * c - right.x * s, up.y * c - right.y * s, up.z * c - right.z * s};
+  }
   return b;
 }
 

@@ -4,7 +4,8 @@
 // The test places every model whose textures are PNG or JPEG (the SGI .rgb ones are not read)
 // twice in a .stg placement list around San Francisco and builds it: hundreds of textured
 // objects and about two hundred textures shared between models and placements.
-// Set TESSERA_FGDATA to an unpacked Models folder to skip the download.
+// Set TESSERA_FGDATA to an unpacked Models folder to skip the download, and TESSERA_KEEP_SCENE
+// to a path to keep a copy of the archive built (bench/scene_texel_memory.sh flies it).
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -104,6 +105,9 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
       (unsigned long long)report->promotion.copies_avoided,
       (unsigned long long)report->geometry_stored_bytes,
       (unsigned long long)report->geometry_raw_bytes);
+  // bench/scene_texel_memory.sh flies this scene: it asks for a copy of the archive.
+  if (const char* keep = std::getenv("TESSERA_KEEP_SCENE"))
+    fs::copy_file(options.output, keep, fs::copy_options::overwrite_existing);
   EXPECT_GE(report->summary.objects, 300u);
   EXPECT_GE(report->summary.textures, 100u);
   EXPECT_GT(report->promotion.copies_avoided, 0u) << "placements share textures";

@@ -19,16 +19,7 @@ using test::CountingSource;
 using test::ScratchDir;
 
 std::string buildCity(const ScratchDir& dir, const std::string& spec) {
-  SceneBuildOptions options;
-  options.input = "synthetic-scene:" + spec;
-  options.output = dir.file("city.tess");
-  options.tile_size_px = 64;
-  options.threads = 2;
-  options.leaf_capacity = 8;
-  options.max_children = 4;
-  Result<SceneBuildReport> report = buildScene(options);
-  EXPECT_TRUE(report.has_value()) << report.error().message;
-  return options.output;
+  return test::buildSyntheticCity(dir, spec);
 }
 
 // The synthetic city is y-up: yaw 0 and pitch 0 look straight down -y.

@@ -5,10 +5,26 @@
 #include <cstring>
 #include <fstream>
 
+#include <gtest/gtest.h>
+
 #include <tessera/check.h>
 #include <tessera/picture_file.h>
+#include <tessera/scene_build.h>
 
 namespace tessera::test {
+
+std::string buildSyntheticCity(const ScratchDir& dir, const std::string& spec) {
+  SceneBuildOptions options;
+  options.input = "synthetic-scene:" + spec;
+  options.output = dir.file("city.tess");
+  options.tile_size_px = 64;
+  options.threads = 2;
+  options.leaf_capacity = 8;
+  options.max_children = 4;
+  Result<SceneBuildReport> report = buildScene(options);
+  EXPECT_TRUE(report.has_value()) << report.error().message;
+  return options.output;
+}
 
 ScratchDir::ScratchDir() {
   std::string pattern =

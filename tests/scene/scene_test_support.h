@@ -30,6 +30,11 @@ class ScratchDir {
   std::filesystem::path path_;
 };
 
+/// Builds `synthetic-scene:SPEC` into `dir`/city.tess with small tiles (64 px), leaves (8)
+/// and fan-out (4), so that a few hundred objects make a tree of several levels; returns the
+/// path (a failed build fails the test).
+std::string buildSyntheticCity(const ScratchDir& dir, const std::string& spec);
+
 /// Writes a w x h RGB PNG with a pattern that depends on `seed`.
 void writeTestPng(const std::string& path, uint32_t width, uint32_t height, uint32_t seed);
 /// Reads a file whole.

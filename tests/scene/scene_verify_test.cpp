@@ -15,16 +15,7 @@ namespace {
 using test::ScratchDir;
 
 std::string buildCity(const ScratchDir& dir) {
-  SceneBuildOptions options;
-  options.input = "synthetic-scene:200:20:3";
-  options.output = dir.file("city.tess");
-  options.tile_size_px = 64;
-  options.threads = 2;
-  options.leaf_capacity = 8;
-  options.max_children = 4;
-  Result<SceneBuildReport> report = buildScene(options);
-  EXPECT_TRUE(report.has_value()) << report.error().message;
-  return options.output;
+  return test::buildSyntheticCity(dir, "200:20:3");
 }
 
 SceneVerifyReport verifyBytes(const std::vector<uint8_t>& bytes) {

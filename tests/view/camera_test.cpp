@@ -48,6 +48,19 @@ TEST(Camera, YawZeroLooksUpTheImageWithScreenXAlongX) {
   EXPECT_NEAR(b.up.z, 1, 1e-12);
 }
 
+TEST(Camera, RollTurnsRightTowardsUpAboutForward) {
+  PerspectiveView p = camera(0.7, -0.6);
+  const CameraBasis flat = cameraBasis(p);
+  p.roll_rad = 0.5;
+  const CameraBasis rolled = cameraBasis(p);
+  EXPECT_NEAR(dot(rolled.forward, flat.forward), 1, 1e-12);
+  EXPECT_NEAR(dot(rolled.right, flat.right), std::cos(0.5), 1e-12);
+  EXPECT_NEAR(dot(rolled.right, flat.up), std::sin(0.5), 1e-12);
+  EXPECT_NEAR(dot(rolled.up, flat.up), std::cos(0.5), 1e-12);
+  EXPECT_NEAR(dot(rolled.right, rolled.up), 0, 1e-12);
+  EXPECT_NEAR(dot(rolled.forward, rolled.right), 0, 1e-12);
+}
+
 TEST(Camera, RayThroughTheScreenCentreIsForwardAndCornersSpanTheFieldOfView) {
   const PerspectiveView p = camera(0.7, -0.6);
   const CameraBasis b = cameraBasis(p);

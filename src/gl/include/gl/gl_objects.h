@@ -57,6 +57,9 @@ inline void deleteFramebuffer(GLuint n) {
 inline void deleteProgram(GLuint n) {
   glDeleteProgram(n);
 }
+inline void deleteRenderbuffer(GLuint n) {
+  glDeleteRenderbuffers(1, &n);
+}
 }  // namespace detail
 
 using Texture = Object<detail::deleteTexture>;
@@ -64,6 +67,7 @@ using Buffer = Object<detail::deleteBuffer>;
 using VertexArray = Object<detail::deleteVertexArray>;
 using Framebuffer = Object<detail::deleteFramebuffer>;
 using Program = Object<detail::deleteProgram>;
+using Renderbuffer = Object<detail::deleteRenderbuffer>;
 
 /// Creates a texture of `target` (direct state access).
 Texture createTexture(GLenum target);
@@ -77,6 +81,12 @@ Framebuffer createFramebuffer();
 
 /// Pixel transfer format of a tile with `channels` channels: GL_RED, GL_RG, GL_RGB, GL_RGBA.
 GLenum tilePixelFormat(uint32_t channels);
+
+/// Internal format that stores texels of `channels` channels as they come: GL_R8 ... GL_RGBA8.
+GLenum tileInternalFormat(uint32_t channels);
+/// Sets the swizzle that shows grey as (g, g, g, 1), grey+alpha as (g, g, g, a) and RGB as
+/// opaque, as tessera/render.h's Picture does.
+void setChannelSwizzle(const Texture& texture, uint32_t channels);
 
 /// A 2D array texture that stores tiles of `channels` channels as they are stored
 /// (GL_R8 ... GL_RGBA8), with a swizzle that shows grey as (g, g, g, 1), grey+alpha as
@@ -101,8 +111,9 @@ class UploadStaging {
 /// An RGBA8 colour target of a given size, drawn into and read back.
 class ColourTarget {
  public:
-  /// (Re)allocates when the size changes; binds it for drawing with the viewport set.
-  void bind(uint32_t width, uint32_t height);
+  /// (Re)allocates when the size (or `with_depth`) changes; binds it for drawing with the
+  /// viewport set. `with_depth` adds a 24-bit depth buffer (the scene renderer's).
+  void bind(uint32_t width, uint32_t height, bool with_depth = false);
   /// Reads the picture back, rows top to bottom.
   void read(std::vector<uint8_t>& rgba) const;
   /// Blits to the default framebuffer, scaled to the window.
@@ -113,6 +124,7 @@ class ColourTarget {
  private:
   Texture colour_;
   Framebuffer framebuffer_;
+  Renderbuffer depth_;
   uint32_t width_ = 0, height_ = 0;
 };
 
