@@ -7,6 +7,7 @@
 
 #include <tessera/check.h>
 
+#include "format/directory.h"
 #include "io_plan.h"
 #include "scene_loader.h"
 #include "scene_lod.h"
@@ -82,6 +83,23 @@ FileRange levelHull(const std::vector<TileEntry>& tiles, uint64_t fallback_offse
   return begin == UINT64_MAX ? FileRange{fallback_offset, 0} : FileRange{begin, end - begin};
 }
 
+// Per node: its head and the directory pages of the textures it stores, the prefix of its
+// block a reader needs before it can read single meshes and levels (the writer puts the pages
+// right after the head; parseNode checks that they are inside).
+std::vector<uint64_t> headAndPagesBytes(const std::vector<SceneNode>& nodes,
+                                        const std::vector<SceneTexture>& textures) {
+  std::vector<uint64_t> out(nodes.size(), 0);
+  for (const SceneNode& node : nodes) out[node.index] = node.head_bytes;
+  for (const SceneTexture& texture : textures) {
+    if (texture.node >= out.size()) continue;
+    for (uint32_t level = 0; level < texture.info.level_count; ++level) {
+      out[texture.node] += uint64_t(texture.info.tilesX(level)) * texture.info.tilesY(level) *
+                           detail::kTileEntryBytes;
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 struct SceneStreamer::Impl {
@@ -101,6 +119,14 @@ struct SceneStreamer::Impl {
   std::vector<SceneObject> objects;
   std::vector<bool> object_known;
   std::vector<std::unique_ptr<MeshData>> meshes;
+  std::vector<SceneMesh> mesh_records;  ///< per mesh, once its node is known
+  std::vector<bool> mesh_record_known;
+  std::vector<bool> mesh_busy;  ///< an object read of its blob is queued or running
+  /// Meshes of visible objects whose node is known but whose blob is not loaded (the node was
+  /// read as a prefix), gathered each frame.
+  std::vector<uint32_t> missing_meshes;
+  std::vector<uint64_t> prefix_bytes;  ///< per node: headAndPagesBytes
+  std::vector<uint32_t> mesh_holder;   ///< per mesh: the node storing it
   std::vector<Image> coarsest;
   std::vector<bool> coarsest_known;
   std::vector<std::vector<std::vector<Image>>> levels;  ///< [texture][level] tiles
@@ -135,13 +161,22 @@ struct SceneStreamer::Impl {
   void evict(uint64_t budget, SceneFrameStats& stats);
   void planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
                      SceneFrameStats& stats);
+  /// A large inner node is first read as its head and pages only (a prefix of its block):
+  /// shared meshes and textures gather at the top of the tree (seed 004's promotion), and a
+  /// view needs a few of them, read next as object reads, rather than the whole block.
+  bool readPrefixFirst(uint32_t node, const LinkCost& cost) const {
+    const uint64_t own = nodes[node].own.length_bytes, prefix = prefix_bytes[node];
+    return !nodes[node].isLeaf() &&
+           prefix<own&& double(own - prefix) / cost.bandwidth_bytes_per_s> 2 * cost.latency_s;
+  }
+  void wantMeshes(std::vector<SceneMesh>& jobs);
   void want(uint32_t node) {
     if (!plan[node].wanted) plan_touched.push_back(node);
     plan[node].wanted = true;
   }
   std::vector<detail::LevelJob> addRefinements(uint64_t budget, bool moving, uint32_t slots);
   void submitPlan(const PerspectiveView& camera, std::vector<detail::LevelJob>& refinements,
-                  SceneFrameStats& stats);
+                  std::vector<SceneMesh>& mesh_jobs, SceneFrameStats& stats);
 };
 
 SceneStreamer::SceneStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -177,6 +212,16 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   impl->objects.resize(archive->summary().objects);
   impl->object_known.assign(archive->summary().objects, false);
   impl->meshes.resize(archive->summary().meshes);
+  impl->mesh_records.resize(archive->summary().meshes);
+  impl->mesh_record_known.assign(archive->summary().meshes, false);
+  impl->mesh_busy.assign(archive->summary().meshes, false);
+  impl->prefix_bytes = headAndPagesBytes(impl->nodes, context->textures);
+  impl->mesh_holder.assign(archive->summary().meshes, 0);
+  for (const SceneNode& node : impl->nodes) {
+    for (uint32_t m = node.first_mesh; m < node.first_mesh + node.mesh_count; ++m) {
+      if (m < impl->mesh_holder.size()) impl->mesh_holder[m] = node.index;
+    }
+  }
   impl->coarsest.resize(texture_count);
   impl->coarsest_known.assign(texture_count, false);
   impl->levels.resize(texture_count);
@@ -194,6 +239,7 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
 
 void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
   for (const detail::LevelJob& level : result.job.levels) level_busy[level.texture] = false;
+  for (const SceneMesh& mesh : result.job.meshes) mesh_busy[mesh.index] = false;
   if (!result.error.empty()) {
     // A node that failed to read or parse is not asked for again: retrying a corrupt block
     // every frame would only repeat the error.
@@ -215,6 +261,11 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
                              std::ldexp(side, int(std::max(1u, info.level_count) - 1));
         leaf_coarse_ratio[parsed.node] = std::min(leaf_coarse_ratio[parsed.node], ratio);
       }
+    }
+    for (const SceneMesh& mesh : parsed.contents.meshes) {
+      if (mesh.index >= mesh_records.size()) continue;
+      mesh_records[mesh.index] = mesh;
+      mesh_record_known[mesh.index] = true;
     }
     node_textures[parsed.node] = std::move(parsed.contents.textures);
     for (const NodeTexture& texture : node_textures[parsed.node]) {
@@ -275,6 +326,7 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
                                          const detail::Frustum& frustum, SceneFrameStats& stats) {
   demands.clear();
   drawable.clear();
+  missing_meshes.clear();
   const detail::LodFrame lod_frame = detail::lodFrame(camera, options.lod_bias);
   for (size_t v = 0; v < visible_leaves.size(); ++v) {
     const uint32_t leaf = visible_leaves[v];
@@ -290,6 +342,10 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
       const SceneObject& object = objects[o];
       if (!leaf_inside[v] && !detail::boxMayBeVisible(frustum, object.bounds)) continue;
       ++stats.visible_objects;
+      if (object.mesh < meshes.size() && !meshes[object.mesh] && mesh_record_known[object.mesh] &&
+          !mesh_busy[object.mesh]) {
+        missing_meshes.push_back(object.mesh);
+      }
       bool textured = true;
       const detail::ObjectScale scale =
           far ? detail::ObjectScale{} : detail::objectScale(lod_frame, object.bounds);
@@ -342,9 +398,21 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
   return jobs;
 }
 
+void SceneStreamer::Impl::wantMeshes(std::vector<SceneMesh>& jobs) {
+  for (uint32_t m : missing_meshes) {
+    if (mesh_busy[m]) continue;  // two visible objects share it
+    const SceneMesh& mesh = mesh_records[m];
+    const uint32_t holder = mesh_holder[m];
+    want(holder);
+    plan[holder].pieces.push_back(mesh.blob);
+    jobs.push_back(mesh);
+    mesh_busy[m] = true;
+  }
+}
+
 void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
                                      std::vector<detail::LevelJob>& refinements,
-                                     SceneFrameStats& stats) {
+                                     std::vector<SceneMesh>& mesh_jobs, SceneFrameStats& stats) {
   std::vector<PlannedRead> reads = detail::planReads(plan, link());
   for (const PlannedRead& read : reads) {
     detail::ReadJob job;
@@ -371,6 +439,14 @@ void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
       job.levels.push_back(std::move(level));
       level.tiles.clear();  // taken: a level goes to the first read that holds it
     }
+    for (SceneMesh& mesh : mesh_jobs) {
+      if (mesh.blob.length_bytes == 0 || mesh.blob.offset_bytes < begin ||
+          mesh.blob.offset_bytes + mesh.blob.length_bytes > end) {
+        continue;
+      }
+      job.meshes.push_back(mesh);
+      mesh.blob.length_bytes = 0;  // taken
+    }
     ++totals.reads;
     ++totals.reads_by_granularity[int(read.granularity)];
     totals.bytes_read += read.range.length_bytes;
@@ -382,6 +458,9 @@ void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
   for (const detail::LevelJob& level : refinements) {
     if (!level.tiles.empty()) level_busy[level.texture] = false;
   }
+  for (const SceneMesh& mesh : mesh_jobs) {
+    if (mesh.blob.length_bytes != 0) mesh_busy[mesh.index] = false;
+  }
 }
 
 void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
@@ -389,19 +468,27 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   const uint32_t pending = pool->pending();
   if (pending >= options.max_reads_in_flight) return;
   uint32_t slots = options.max_reads_in_flight - pending;
+  const LinkCost cost = link();
   uint32_t leaves = 0;
   for (uint32_t leaf : visible_leaves) {
     if (node_state[leaf] != NodeState::kUnknown || leaves >= slots) continue;
     ++leaves;
     // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
     for (uint32_t n = leaf;; n = parent[n]) {
-      if (node_state[n] == NodeState::kUnknown) want(n);
+      if (node_state[n] == NodeState::kUnknown && !plan[n].wanted) {
+        want(n);
+        if (readPrefixFirst(n, cost)) {
+          plan[n].pieces.push_back({nodes[n].own.offset_bytes, prefix_bytes[n]});
+        }
+      }
       if (n == 0) break;
     }
   }
+  std::vector<SceneMesh> mesh_jobs;
+  wantMeshes(mesh_jobs);
   std::vector<detail::LevelJob> refinements =
       addRefinements(budget, moving, slots - std::min(slots, leaves));
-  if (!plan_touched.empty()) submitPlan(camera, refinements, stats);
+  if (!plan_touched.empty()) submitPlan(camera, refinements, mesh_jobs, stats);
   for (uint32_t n : plan_touched) {
     plan[n].wanted = false;
     plan[n].pieces.clear();
