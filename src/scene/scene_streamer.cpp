@@ -166,8 +166,8 @@ struct SceneStreamer::Impl {
   /// view needs a few of them, read next as object reads, rather than the whole block.
   bool readPrefixFirst(uint32_t node, const LinkCost& cost) const {
     const uint64_t own = nodes[node].own.length_bytes, prefix = prefix_bytes[node];
-    return !nodes[node].isLeaf() &&
-           prefix<own&& double(own - prefix) / cost.bandwidth_bytes_per_s> 2 * cost.latency_s;
+    if (nodes[node].isLeaf() || prefix >= own) return false;
+    return double(own - prefix) / cost.bandwidth_bytes_per_s > 2 * cost.latency_s;
   }
   void wantMeshes(std::vector<SceneMesh>& jobs);
   void want(uint32_t node) {

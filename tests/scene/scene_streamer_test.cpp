@@ -181,6 +181,39 @@ TEST(SceneStreamer, ReadsOncePerPlannedRangeAtEveryGranularity) {
   }
 }
 
+TEST(SceneStreamer, ReadsALargeSharedNodeAsHeadAndPagesThenOnlyWhatTheViewNeeds) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "600:60:8"));
+  ASSERT_TRUE(scene.archive);
+  auto root = scene.archive->node(0);
+  ASSERT_TRUE(root.has_value());
+  // Shared meshes and textures live at the root (promotion); on a link where 2 KB cost more
+  // than two round trips, its block is too large to read for a corner of the city.
+  ASSERT_GT(root->own.length_bytes, 8000u) << "the generator promotes shared items to the root";
+  SceneStreamOptions options;
+  options.link = LinkCost{1e-6, 1e9};
+  auto streamer = SceneStreamer::open(scene.archive, options);
+  ASSERT_TRUE(streamer.has_value()) << streamer.error().message;
+  scene.counter->largest_read_bytes = 0;
+  PerspectiveView camera = above(scene.archive->summary(), 30);
+  camera.eye_x = scene.archive->summary().bounds.min[0] + 20;
+  const SceneFrameStats stats = settle(**streamer, camera);
+  EXPECT_LT(scene.counter->largest_read_bytes, root->own.length_bytes) << "no read of the root";
+  EXPECT_GT((*streamer)->totals().reads_by_granularity[0], 0u) << "meshes and levels by object";
+  EXPECT_EQ((*streamer)->totals().read_errors, 0u);
+  EXPECT_EQ(stats.waiting_leaves, 0u);
+  ASSERT_GT(stats.visible_objects, 0u);
+  EXPECT_EQ((*streamer)->drawableObjects().size(), stats.visible_objects);
+  for (uint32_t o : (*streamer)->drawableObjects()) {
+    const SceneObject* object = (*streamer)->object(o);
+    EXPECT_NE((*streamer)->mesh(object->mesh), nullptr) << "object " << o;
+    for (uint32_t t : object->textures) {
+      if (t == kNoTexture) continue;
+      EXPECT_LE((*streamer)->residentLevel(t), (*streamer)->wantedLevel(t));
+    }
+  }
+}
+
 TEST(SceneStreamer, StaysWithinTheTexelBudgetMovingAndStill) {
   ScratchDir dir;
   Opened scene = openCounted(buildCity(dir, "400:40:9"));
