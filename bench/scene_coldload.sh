@@ -19,7 +19,7 @@
 # prepare), built with 128-px JPEG tiles.
 #
 #   bench/scene_coldload.sh                       # 2 repeats, local and 20mbit:40ms
-#   bench/scene_coldload.sh --repeat 1 --views street --no-http
+#   bench/scene_coldload.sh --repeat 1 --views street --no-http --sides tessera
 # Environment: TESSERA_BENCH_DIR (default /tmp/tessera-bench), TESSERA_BUILD_DIR (default
 # build/), TESSERA_FGDATA (an unpacked Models folder).
 set -euo pipefail
@@ -32,6 +32,7 @@ VIEWS="street oblique overview"
 LINKS="20mbit:40ms"
 LOCAL=1
 HTTP=1
+SIDES="tessera perfile all"
 while [[ $# -gt 0 ]]; do
   case $1 in
     --repeat) REPEAT=$2; shift 2 ;;
@@ -39,6 +40,7 @@ while [[ $# -gt 0 ]]; do
     --links) LINKS=$2; shift 2 ;;
     --no-http) HTTP=0; shift ;;
     --no-local) LOCAL=0; shift ;;
+    --sides) SIDES=$2; shift 2 ;;
     -h|--help) sed -n '2,25p' "${BASH_SOURCE[0]}" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "scene_coldload: unknown option $1" >&2; exit 2 ;;
   esac
@@ -88,6 +90,8 @@ trap cleanup EXIT
   echo "scene: $(stat -c %s "$SCENE/sf.tess") bytes of archive, $(wc -l < "$SCENE/files.txt") separate files"
 } | tee "$RUN/machine.txt"
 
+has() { [[ " $SIDES " == *" $1 "* ]]; }
+
 record() {  # record LINK SERVER N [PROXY_BYTES REQUESTS] < JSON line
   python3 -c '
 import json, sys
@@ -114,10 +118,10 @@ perfile_run() {  # perfile_run STG_URI [--all]
 if ((LOCAL)); then
   for ((n = 1; n <= REPEAT; ++n)); do
     for view in $VIEWS; do
-      tessera_run "$SCENE/sf.tess" | record local disk "$n"
-      perfile_run "$SCENE/sf.stg" | record local disk "$n"
+      if has tessera; then tessera_run "$SCENE/sf.tess" | record local disk "$n"; fi
+      if has perfile; then perfile_run "$SCENE/sf.stg" | record local disk "$n"; fi
     done
-    perfile_run "$SCENE/sf.stg" --all | record local disk "$n"
+    if has all; then perfile_run "$SCENE/sf.stg" --all | record local disk "$n"; fi
   done
 fi
 
@@ -190,11 +194,12 @@ EOF
   for link in $LINKS; do
     for ((n = 1; n <= REPEAT; ++n)); do
       for view in $VIEWS; do
-        http_run "$link" serve "$n" tessera
-        http_run "$link" nginx "$n" perfile
-        http_run "$link" nginx "$n" tessera
+        if has tessera; then http_run "$link" serve "$n" tessera; fi
+        if has perfile; then http_run "$link" nginx "$n" perfile; fi
+        if has tessera; then http_run "$link" nginx "$n" tessera; fi
       done
-      if ((n == 1)); then view=all; http_run "$link" nginx "$n" perfile --all; fi
+      # Every file of the scene is the same whatever the view: once per link.
+      if ((n == 1)) && has all; then view=all; http_run "$link" nginx "$n" perfile --all; fi
     done
   done
 fi

@@ -100,6 +100,9 @@ std::vector<uint64_t> headAndPagesBytes(const std::vector<SceneNode>& nodes,
   return out;
 }
 
+// Textures refined per free read slot: their levels' pieces join into few reads.
+constexpr size_t kTexturesPerRead = 8;
+
 }  // namespace
 
 struct SceneStreamer::Impl {
@@ -131,7 +134,10 @@ struct SceneStreamer::Impl {
   std::vector<bool> coarsest_known;
   std::vector<std::vector<std::vector<Image>>> levels;  ///< [texture][level] tiles
   detail::SceneResidency residency;
-  std::vector<bool> level_busy;  ///< a refinement of the texture is queued or running
+  std::vector<bool> level_busy;            ///< a refinement of the texture is queued or running
+  std::vector<uint32_t> levels_in_flight;  ///< per texture: its levels queued or running
+  /// Decoded levels finer than their texture's next one, waiting for it (another read).
+  std::vector<detail::DecodedLevel> early_levels;
   std::unique_ptr<detail::SceneLoaderPool> pool;  // last: its workers stop before the rest goes
 
   PerspectiveView last_camera;
@@ -155,6 +161,12 @@ struct SceneStreamer::Impl {
   }
   void applyResults(SceneFrameStats& stats);
   void applyResult(detail::ReadResult& result);
+  void applyLevel(detail::DecodedLevel& level);
+  void applyEarlyLevels();
+  void levelSettled(uint32_t texture) {
+    if (levels_in_flight[texture] > 0 && --levels_in_flight[texture] == 0)
+      level_busy[texture] = false;
+  }
   void queryVisible(const detail::Frustum& frustum);
   void collectDemands(const PerspectiveView& camera, const detail::Frustum& frustum,
                       SceneFrameStats& stats);
@@ -226,6 +238,7 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   impl->coarsest_known.assign(texture_count, false);
   impl->levels.resize(texture_count);
   impl->level_busy.assign(texture_count, false);
+  impl->levels_in_flight.assign(texture_count, 0);
   impl->plan.resize(node_count);
   for (uint32_t i = 0; i < node_count; ++i) {
     impl->plan[i].subtree_nodes = impl->nodes[i].subtree_nodes;
@@ -238,7 +251,7 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
 }
 
 void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
-  for (const detail::LevelJob& level : result.job.levels) level_busy[level.texture] = false;
+  for (const detail::LevelJob& level : result.job.levels) levelSettled(level.texture);
   for (const SceneMesh& mesh : result.job.meshes) mesh_busy[mesh.index] = false;
   if (!result.error.empty()) {
     // A node that failed to read or parse is not asked for again: retrying a corrupt block
@@ -283,18 +296,48 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
     coarsest_known[tile.texture] = true;
   }
   for (detail::DecodedLevel& level : result.levels) {
-    // A level that no longer extends the chain (evicted meanwhile) is dropped.
-    if (!residency.loaded({level.texture, level.level})) continue;
-    auto& texture_levels = levels[level.texture];
-    if (texture_levels.size() <= level.level)
-      texture_levels.resize(residency.coarsest(level.texture) + 1);
-    texture_levels[level.level] = std::move(level.tiles);
+    // A level of a chain read in several reads can arrive before its coarser neighbour.
+    if (level.level + 1 < residency.resident(level.texture)) {
+      early_levels.push_back(std::move(level));
+      continue;
+    }
+    applyLevel(level);
+  }
+}
+
+void SceneStreamer::Impl::applyLevel(detail::DecodedLevel& level) {
+  // A level that no longer extends the chain (evicted meanwhile) is dropped.
+  if (!residency.loaded({level.texture, level.level})) return;
+  auto& texture_levels = levels[level.texture];
+  if (texture_levels.size() <= level.level)
+    texture_levels.resize(residency.coarsest(level.texture) + 1);
+  texture_levels[level.level] = std::move(level.tiles);
+}
+
+void SceneStreamer::Impl::applyEarlyLevels() {
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (size_t i = 0; i < early_levels.size();) {
+      detail::DecodedLevel& level = early_levels[i];
+      const uint32_t resident = residency.resident(level.texture);
+      if (level.level + 1 < resident && levels_in_flight[level.texture] > 0) {
+        ++i;  // its coarser neighbour is still on its way
+        continue;
+      }
+      if (level.level + 1 == resident) {
+        applyLevel(level);
+        progress = true;
+      }
+      early_levels[i] = std::move(early_levels.back());  // applied, or stale
+      early_levels.pop_back();
+    }
   }
 }
 
 void SceneStreamer::Impl::applyResults(SceneFrameStats& stats) {
   std::vector<detail::ReadResult> results = pool->drain();
   for (detail::ReadResult& result : results) applyResult(result);
+  applyEarlyLevels();
   stats.results_applied = uint32_t(results.size());
 }
 
@@ -381,19 +424,32 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
   const LinkCost cost = link();
   const double limit_s =
       moving ? options.moving_level_time_limit_s : options.still_level_time_limit_s;
+  // The levels of many textures join into few reads (mergePieces), so a slot serves several.
+  const size_t max_textures = size_t(slots) * kTexturesPerRead;
+  uint64_t planned_bytes = residency.budgetedBytes();
+  size_t textures = 0;
   for (const LevelRef& ref : residency.nextLoads(budget, level_busy)) {
-    if (jobs.size() >= slots) break;
+    if (textures >= max_textures) break;
     const NodeTexture* entry = holder_entry[ref.texture];
     if (!entry || ref.level >= entry->levels.size()) continue;  // its node is not known yet
     const uint32_t holder = context->textures[ref.texture].node;
-    const FileRange hull = levelHull(entry->levels[ref.level], nodes[holder].own.offset_bytes);
-    // Seed 003 part III: a level that would take longer than the limit waits for a stiller
-    // camera (or a faster link).
-    if (detail::readCost(cost, hull.length_bytes) > limit_s) continue;
-    want(holder);
-    plan[holder].pieces.push_back(hull);
-    jobs.push_back({ref.texture, ref.level, hull, entry->info, entry->levels[ref.level]});
-    level_busy[ref.texture] = true;
+    // The whole chain down to the wanted level at once (coarse to fine), not one level per
+    // round trip, while it fits the budget; the next level alone is nextLoads' to admit.
+    for (uint32_t level = ref.level + 1; level-- > residency.wanted(ref.texture);) {
+      const uint64_t bytes = residency.levelBytes(ref.texture, level);
+      if (level != ref.level && planned_bytes + bytes > budget) break;
+      const FileRange hull = levelHull(entry->levels[level], nodes[holder].own.offset_bytes);
+      // Seed 003 part III: a level that would take longer than the limit waits for a stiller
+      // camera (or a faster link).
+      if (detail::readCost(cost, hull.length_bytes) > limit_s) break;
+      want(holder);
+      plan[holder].pieces.push_back(hull);
+      jobs.push_back({ref.texture, level, hull, entry->info, entry->levels[level]});
+      planned_bytes += bytes;
+      ++levels_in_flight[ref.texture];
+      level_busy[ref.texture] = true;
+    }
+    ++textures;
   }
   return jobs;
 }
@@ -456,7 +512,7 @@ void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
   // Every refinement's hull lies in its holder's block, which some read covers; one that
   // found no read (none expected) is released to be asked for again.
   for (const detail::LevelJob& level : refinements) {
-    if (!level.tiles.empty()) level_busy[level.texture] = false;
+    if (!level.tiles.empty()) levelSettled(level.texture);
   }
   for (const SceneMesh& mesh : mesh_jobs) {
     if (mesh.blob.length_bytes != 0) mesh_busy[mesh.index] = false;
