@@ -107,6 +107,31 @@ std::vector<PlannedRead> planReads(const std::vector<PlanNode>& nodes, const Lin
   return reads;
 }
 
+std::vector<JoinedRead> joinReads(const std::vector<PlannedRead>& reads, const LinkCost& link) {
+  std::vector<PlannedRead> sorted = reads;
+  std::sort(sorted.begin(), sorted.end(), [](const PlannedRead& a, const PlannedRead& b) {
+    return a.range.offset_bytes < b.range.offset_bytes;
+  });
+  const double gap_limit_bytes = link.latency_s * link.bandwidth_bytes_per_s;
+  std::vector<JoinedRead> out;
+  for (const PlannedRead& read : sorted) {
+    const uint64_t end = read.range.offset_bytes + read.range.length_bytes;
+    if (!out.empty()) {
+      PlannedRead& last = out.back().read;
+      const uint64_t last_end = last.range.offset_bytes + last.range.length_bytes;
+      if (read.range.offset_bytes <= last_end ||
+          double(read.range.offset_bytes - last_end) < gap_limit_bytes) {
+        last.range.length_bytes = std::max(last_end, end) - last.range.offset_bytes;
+        last.granularity = std::max(last.granularity, read.granularity);
+        out.back().parts.push_back(read);
+        continue;
+      }
+    }
+    out.push_back({read, {read}});
+  }
+  return out;
+}
+
 double planCost(const std::vector<PlannedRead>& reads, const LinkCost& link) {
   double cost = 0;
   for (const PlannedRead& read : reads) cost += readCost(link, read.range.length_bytes);

@@ -43,6 +43,18 @@ double readCost(const LinkCost& link, uint64_t bytes);
 /// subtrees in pre-order.
 std::vector<PlannedRead> planReads(const std::vector<PlanNode>& nodes, const LinkCost& link);
 
+/// Reads of a plan joined where they are neighbours in the file: one source read of `range`
+/// (the hull of its parts), counted at the coarsest granularity among them.
+struct JoinedRead {
+  PlannedRead read;
+  std::vector<PlannedRead> parts;  ///< in file order; what each part was planned for
+};
+
+/// Joins file-ordered `reads` of different nodes as mergePieces joins one node's pieces: two
+/// neighbours become one read exactly when the gap between them costs less than a round trip
+/// (a subtree read and the next sibling's, a node's pieces and the next node's block).
+std::vector<JoinedRead> joinReads(const std::vector<PlannedRead>& reads, const LinkCost& link);
+
 /// Total cost of `reads` under `link`.
 double planCost(const std::vector<PlannedRead>& reads, const LinkCost& link);
 

@@ -100,8 +100,9 @@ std::vector<uint64_t> headAndPagesBytes(const std::vector<SceneNode>& nodes,
   return out;
 }
 
-// Textures refined per free read slot: their levels' pieces join into few reads.
-constexpr size_t kTexturesPerRead = 8;
+// Leaves asked for, and textures refined, per free read slot: neighbours' reads join
+// (mergePieces, joinReads), so a slot serves several.
+constexpr uint32_t kWantsPerSlot = 8;
 
 }  // namespace
 
@@ -424,8 +425,7 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
   const LinkCost cost = link();
   const double limit_s =
       moving ? options.moving_level_time_limit_s : options.still_level_time_limit_s;
-  // The levels of many textures join into few reads (mergePieces), so a slot serves several.
-  const size_t max_textures = size_t(slots) * kTexturesPerRead;
+  const size_t max_textures = size_t(slots) * kWantsPerSlot;
   uint64_t planned_bytes = residency.budgetedBytes();
   size_t textures = 0;
   for (const LevelRef& ref : residency.nextLoads(budget, level_busy)) {
@@ -469,21 +469,24 @@ void SceneStreamer::Impl::wantMeshes(std::vector<SceneMesh>& jobs) {
 void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
                                      std::vector<detail::LevelJob>& refinements,
                                      std::vector<SceneMesh>& mesh_jobs, SceneFrameStats& stats) {
-  std::vector<PlannedRead> reads = detail::planReads(plan, link());
-  for (const PlannedRead& read : reads) {
+  const LinkCost cost = link();
+  for (const detail::JoinedRead& joined : detail::joinReads(detail::planReads(plan, cost), cost)) {
+    const PlannedRead& read = joined.read;
     detail::ReadJob job;
     job.read = read;
     job.camera = camera;
     job.lod_bias = options.lod_bias;
     const uint64_t begin = read.range.offset_bytes, end = begin + read.range.length_bytes;
-    const uint32_t last = read.granularity == ReadGranularity::kSubtree
-                              ? read.node + nodes[read.node].subtree_nodes
-                              : read.node + 1;
-    // Every unknown node the read holds is parsed: its bytes are here already.
-    for (uint32_t n = read.node; n < last; ++n) {
-      if (node_state[n] == NodeState::kUnknown) {
-        node_state[n] = NodeState::kInFlight;
-        job.parse.push_back(nodes[n]);
+    // Every unknown node a part holds is parsed: its bytes are here already.
+    for (const PlannedRead& part : joined.parts) {
+      const uint32_t last = part.granularity == ReadGranularity::kSubtree
+                                ? part.node + nodes[part.node].subtree_nodes
+                                : part.node + 1;
+      for (uint32_t n = part.node; n < last; ++n) {
+        if (node_state[n] == NodeState::kUnknown) {
+          node_state[n] = NodeState::kInFlight;
+          job.parse.push_back(nodes[n]);
+        }
       }
     }
     for (detail::LevelJob& level : refinements) {
@@ -527,7 +530,7 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   const LinkCost cost = link();
   uint32_t leaves = 0;
   for (uint32_t leaf : visible_leaves) {
-    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots) continue;
+    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots * kWantsPerSlot) continue;
     ++leaves;
     // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
     for (uint32_t n = leaf;; n = parent[n]) {
@@ -542,8 +545,8 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   }
   std::vector<SceneMesh> mesh_jobs;
   wantMeshes(mesh_jobs);
-  std::vector<detail::LevelJob> refinements =
-      addRefinements(budget, moving, slots - std::min(slots, leaves));
+  std::vector<detail::LevelJob> refinements = addRefinements(
+      budget, moving, slots - std::min(slots, (leaves + kWantsPerSlot - 1) / kWantsPerSlot));
   if (!plan_touched.empty()) submitPlan(camera, refinements, mesh_jobs, stats);
   for (uint32_t n : plan_touched) {
     plan[n].wanted = false;

@@ -168,6 +168,46 @@ TEST(IoPlan, JoinsExactlyTheGapsCheaperThanARoundTrip) {
   EXPECT_EQ(mergePieces({{0, 10}, {1011, 10}}, link).size(), 2u);
 }
 
+TEST(IoPlan, JoinsNeighbouringReadsOfDifferentNodes) {
+  const LinkCost link{0.001, 1e6};  // gaps under 1000 bytes join
+  std::mt19937 rng(5);
+  for (int round = 0; round < 200; ++round) {
+    std::vector<PlannedRead> reads;
+    uint64_t offset = 0;
+    for (uint32_t i = 0; i < 1 + rng() % 10; ++i) {
+      offset += rng() % 2500;
+      const uint64_t length = 1 + rng() % 3000;
+      reads.push_back({ReadGranularity(rng() % 3), i, {offset, length}});
+      offset += length;
+    }
+    std::shuffle(reads.begin(), reads.end(), rng);
+    const std::vector<JoinedRead> joined = joinReads(reads, link);
+    size_t parts = 0;
+    for (size_t j = 0; j < joined.size(); ++j) {
+      const FileRange& range = joined[j].read.range;
+      parts += joined[j].parts.size();
+      ReadGranularity coarsest = ReadGranularity::kObject;
+      for (size_t p = 0; p < joined[j].parts.size(); ++p) {
+        const FileRange& part = joined[j].parts[p].range;
+        EXPECT_GE(part.offset_bytes, range.offset_bytes);
+        EXPECT_LE(part.offset_bytes + part.length_bytes, range.offset_bytes + range.length_bytes);
+        if (p > 0) {
+          const FileRange& prev = joined[j].parts[p - 1].range;
+          EXPECT_LT(part.offset_bytes - (prev.offset_bytes + prev.length_bytes), 1000u);
+        }
+        coarsest = std::max(coarsest, joined[j].parts[p].granularity);
+      }
+      EXPECT_EQ(joined[j].read.granularity, coarsest);
+      if (j > 0) {
+        const FileRange& prev = joined[j - 1].read.range;
+        EXPECT_GE(range.offset_bytes - (prev.offset_bytes + prev.length_bytes), 1000u)
+            << "a gap cheaper than a round trip would have joined";
+      }
+    }
+    EXPECT_EQ(parts, reads.size());
+  }
+}
+
 TEST(IoPlan, MatchesTheBruteForceMinimumOnRandomTrees) {
   std::mt19937 rng(28);
   // Latencies from a RAM disk to a slow link, so every granularity wins somewhere.
