@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <thread>
 
@@ -151,16 +152,32 @@ struct StreamRun {
 // The frame loop: update every `frame_s` (a renderer's frame), never waiting on reads, until
 // full quality or `timeout_s`; `step` instead waits for the reads between frames (untimed use).
 Result<StreamRun> streamToFullQuality(tessera::SceneStreamer& streamer,
+                                      const tessera::ByteSource* link_source,
                                       const tessera::PerspectiveView& camera, double frame_s,
                                       bool step, std::chrono::steady_clock::time_point start) {
   using Clock = std::chrono::steady_clock;
   StreamRun run;
   auto next = Clock::now();
+  // TESSERA_COLDLOAD_TRACE=1: one line per frame that started or finished reads (stderr).
+  static const bool trace = std::getenv("TESSERA_COLDLOAD_TRACE") != nullptr;
   const double timeout_s = 600;
   for (;;) {
     run.last = streamer.update(camera);
     ++run.frames;
     const double now = std::chrono::duration<double>(Clock::now() - start).count();
+    if (trace && run.last.reads_started > 0) {
+      const tessera::LinkCost cost = tessera::measureLinkCost(*link_source);
+      std::fprintf(stderr, "link: %.1f ms, %.2f MB/s\n", cost.latency_s * 1e3,
+                   cost.bandwidth_bytes_per_s / 1e6);
+    }
+    if (trace && (run.last.reads_started > 0 || run.last.results_applied > 0)) {
+      std::fprintf(stderr,
+                   "%.3f s frame %u: %u reads started, %u results, %u waiting leaves, %llu reads "
+                   "(%llu bytes) so far\n",
+                   now, run.frames, run.last.reads_started, run.last.results_applied,
+                   run.last.waiting_leaves, (unsigned long long)streamer.totals().reads,
+                   (unsigned long long)streamer.totals().bytes_read);
+    }
     if (run.complete_s < 0 && run.last.waiting_leaves == 0 &&
         streamer.drawableObjects().size() == run.last.visible_objects) {
       run.complete_s = now;
@@ -207,7 +224,8 @@ int runTessera(const std::string& uri, const std::string& view, double frame_s, 
   if (!streamer) return std::fprintf(stderr, "%s\n", streamer.error().message.c_str()), 1;
   const double open_s =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  Result<StreamRun> run = streamToFullQuality(**streamer, *camera, frame_s, false, start);
+  Result<StreamRun> run =
+      streamToFullQuality(**streamer, source.get(), *camera, frame_s, false, start);
   if (!run) return std::fprintf(stderr, "%s: %s\n", uri.c_str(), run.error().message.c_str()), 1;
   const tessera::SceneStreamTotals& totals = (*streamer)->totals();
   const std::optional<tessera::LinkStats> link = source->linkStats();
@@ -245,7 +263,8 @@ Result<std::set<uint32_t>> visiblePlacements(const std::string& archive_path,
   TESSERA_ASSIGN_OR_RETURN(auto archive, tessera::SceneArchive::openFile(archive_path));
   TESSERA_ASSIGN_OR_RETURN(tessera::PerspectiveView camera, viewByName(view, archive->summary()));
   TESSERA_ASSIGN_OR_RETURN(auto streamer, tessera::SceneStreamer::open(archive));
-  TESSERA_TRY(streamToFullQuality(*streamer, camera, 0, true, std::chrono::steady_clock::now()));
+  TESSERA_TRY(streamToFullQuality(*streamer, &archive->source(), camera, 0, true,
+                                  std::chrono::steady_clock::now()));
   std::set<uint32_t> lines;
   for (uint32_t o : streamer->drawableObjects()) {
     const uint32_t source_index = streamer->object(o)->source_index;

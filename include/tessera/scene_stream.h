@@ -25,8 +25,9 @@ struct LinkCost {
 };
 
 /// The link cost of `source`: measured from its latest request samples (ByteSource::linkStats:
-/// median first-byte time as latency; bytes over transfer time as bandwidth) when it has at
-/// least 4, else `fallback` (a local file has no samples). Thread-safe.
+/// median first-byte time as latency; bytes over transfer time as bandwidth, or the fallback's
+/// when the transfers were too short to time) when it has any, else `fallback` (a local file
+/// has none). Thread-safe.
 LinkCost measureLinkCost(const ByteSource& source, const LinkCost& fallback = {});
 
 /// How much one read fetches (seed 004, section 4).

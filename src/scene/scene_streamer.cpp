@@ -29,7 +29,9 @@ const char* readGranularityName(ReadGranularity granularity) {
 
 LinkCost measureLinkCost(const ByteSource& source, const LinkCost& fallback) {
   const std::optional<LinkStats> stats = source.linkStats();
-  if (!stats || stats->recent.size() < 4) return fallback;
+  // A network source is measured from its first request on (the open's): planning the first
+  // frame's reads with a local disk's costs would ask a 40 ms link for many small reads.
+  if (!stats || stats->recent.empty()) return fallback;
   std::vector<double> first_byte;
   double bytes = 0, transfer_s = 0;
   for (const LinkSample& sample : stats->recent) {

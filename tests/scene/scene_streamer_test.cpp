@@ -72,6 +72,41 @@ SceneFrameStats settle(SceneStreamer& streamer, const PerspectiveView& camera) {
   return stats;
 }
 
+// A network source with given request samples.
+class SampledSource final : public ByteSource {
+ public:
+  explicit SampledSource(std::vector<LinkSample> samples) : samples_(std::move(samples)) {}
+  uint64_t sizeBytes() const override { return 0; }
+  const std::string& name() const override { return name_; }
+  Result<void> read(uint64_t, std::span<uint8_t>) const override { return {}; }
+  std::optional<LinkStats> linkStats() const override {
+    LinkStats stats;
+    stats.recent = samples_;
+    return stats;
+  }
+
+ private:
+  std::vector<LinkSample> samples_;
+  std::string name_ = "sampled";
+};
+
+TEST(SceneStreamer, MeasuresTheLinkFromItsFirstRequest) {
+  const LinkCost fallback{0.0002, 500e6};
+  // A local file: no samples, the fallback.
+  EXPECT_EQ(measureLinkCost(SampledSource({}), fallback).latency_s, fallback.latency_s);
+  // The open's one request (1 MB: 40 ms to the first byte, then 0.4 s) is enough to plan the
+  // first frame for a 40 ms link, not for a disk.
+  const LinkCost one = measureLinkCost(SampledSource({{{}, 1000000, 0.44, 0.04}}), fallback);
+  EXPECT_DOUBLE_EQ(one.latency_s, 0.04);
+  EXPECT_NEAR(one.bandwidth_bytes_per_s, 2.5e6, 1);
+  // Latency is the median first-byte time; bandwidth all bytes over all transfer time.
+  const LinkCost three = measureLinkCost(
+      SampledSource({{{}, 100, 0.03, 0.03}, {{}, 1000000, 0.55, 0.05}, {{}, 500000, 0.45, 0.2}}),
+      fallback);
+  EXPECT_DOUBLE_EQ(three.latency_s, 0.05);
+  EXPECT_NEAR(three.bandwidth_bytes_per_s, 1500100 / 0.75, 1);
+}
+
 TEST(SceneStreamer, EveryDrawnObjectHasGeometryAndEveryTextureResident) {
   ScratchDir dir;
   Opened scene = openCounted(buildCity(dir, "400:40:7"));
