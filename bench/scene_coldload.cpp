@@ -243,14 +243,15 @@ int runTessera(const std::string& uri, const std::string& view, double frame_s, 
       "\"open_seconds\": %.4f, \"complete_seconds\": %.4f, \"frames\": %u, \"reads\": %llu, "
       "\"bytes\": %llu, \"requests\": %llu, \"streamer_reads\": [%llu, %llu, %llu], "
       "\"visible_objects\": %u, \"visible_textures\": %zu, \"textures_at_level0\": %u, "
-      "\"resident_pages_after_drop\": %llu}\n",
+      "\"resident_pages_after_drop\": %llu, \"prefetch_hit_bytes\": %llu}\n",
       uri.c_str(), view.c_str(), run->full_s, open_s, run->complete_s, run->frames,
       (unsigned long long)source->reads.load(), (unsigned long long)source->bytes.load(),
       (unsigned long long)(link ? link->requests : source->reads.load()),
       (unsigned long long)totals.reads_by_granularity[0],
       (unsigned long long)totals.reads_by_granularity[1],
       (unsigned long long)totals.reads_by_granularity[2], run->last.visible_objects,
-      textures.size(), level0, (unsigned long long)*resident);
+      textures.size(), level0, (unsigned long long)*resident,
+      (unsigned long long)(link ? link->prefetch_hit_bytes : 0));
   return 0;
 }
 

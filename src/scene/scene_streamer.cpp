@@ -104,7 +104,7 @@ std::vector<uint64_t> headAndPagesBytes(const std::vector<SceneNode>& nodes,
 
 // Leaves asked for, and textures refined, per free read slot: neighbours' reads join
 // (mergePieces, joinReads), so a slot serves several.
-constexpr uint32_t kWantsPerSlot = 8;
+constexpr uint32_t kWantsPerSlot = 16;
 
 }  // namespace
 
@@ -202,9 +202,17 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   TESSERA_CHECK(archive != nullptr) << "SceneStreamer::open: null archive";
   auto context = std::make_shared<detail::LoaderContext>();
   context->archive = archive;
+  // Over a network, ask for the three at once: the coarse block, and the node table with the
+  // texture table the builder appends right after it (two requests, one round trip).
+  const FileRange node_table = archive->nodeTableRange(), coarse = archive->coarseRange();
+  const uint64_t tables_end =
+      std::min(archive->fileBytes(), node_table.offset_bytes + node_table.length_bytes +
+                                         uint64_t(archive->summary().textures) * 64);
+  const ByteRange hints[2] = {{node_table.offset_bytes, tables_end - node_table.offset_bytes},
+                              {coarse.offset_bytes, coarse.length_bytes}};
+  archive->source().prefetch(hints);
   TESSERA_ASSIGN_OR_RETURN(std::vector<SceneNode> nodes, archive->allNodes());
   TESSERA_ASSIGN_OR_RETURN(context->textures, archive->textures(0, archive->summary().textures));
-  const FileRange coarse = archive->coarseRange();
   context->coarse_block.resize(coarse.length_bytes);
   context->coarse_offset_bytes = coarse.offset_bytes;
   TESSERA_TRY(archive->source().read(coarse.offset_bytes, context->coarse_block));
