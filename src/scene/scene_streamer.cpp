@@ -146,6 +146,8 @@ struct SceneStreamer::Impl {
   PerspectiveView last_camera;
   bool first_frame = true;
   uint32_t still_frames = 0;
+  bool camera_changed = true;         ///< this frame's camera differs from the last one's
+  uint32_t node_reads_in_flight = 0;  ///< queued or running reads that parse nodes
   std::vector<uint32_t> drawable;
   std::vector<uint32_t> visible_leaves;
   std::vector<bool> leaf_inside;  ///< per visible leaf: wholly inside the frustum
@@ -264,6 +266,7 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
 void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
   for (const detail::LevelJob& level : result.job.levels) levelSettled(level.texture);
   for (const SceneMesh& mesh : result.job.meshes) mesh_busy[mesh.index] = false;
+  if (!result.job.parse.empty()) --node_reads_in_flight;
   if (!result.error.empty()) {
     // A node that failed to read or parse is not asked for again: retrying a corrupt block
     // every frame would only repeat the error.
@@ -520,6 +523,7 @@ void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
     ++totals.reads_by_granularity[int(read.granularity)];
     totals.bytes_read += read.range.length_bytes;
     ++stats.reads_started;
+    if (!job.parse.empty()) ++node_reads_in_flight;
     pool->submit(std::move(job));
   }
   // Every refinement's hull lies in its holder's block, which some read covers; one that
@@ -553,10 +557,16 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
       if (n == 0) break;
     }
   }
+  // At rest, the meshes and levels of the view wait for the node reads on their way: asked for
+  // together once those land, they join into few reads instead of one wave per arrival. A
+  // moving camera asks at once (what it sees now may be gone when the nodes land).
   std::vector<SceneMesh> mesh_jobs;
-  wantMeshes(mesh_jobs);
-  std::vector<detail::LevelJob> refinements = addRefinements(
-      budget, moving, slots - std::min(slots, (leaves + kWantsPerSlot - 1) / kWantsPerSlot));
+  std::vector<detail::LevelJob> refinements;
+  if (camera_changed || node_reads_in_flight == 0) {
+    wantMeshes(mesh_jobs);
+    refinements = addRefinements(
+        budget, moving, slots - std::min(slots, (leaves + kWantsPerSlot - 1) / kWantsPerSlot));
+  }
   if (!plan_touched.empty()) submitPlan(camera, refinements, mesh_jobs, stats);
   for (uint32_t n : plan_touched) {
     plan[n].wanted = false;
@@ -573,6 +583,7 @@ SceneFrameStats SceneStreamer::update(const PerspectiveView& camera) {
   s.first_frame = false;
   s.last_camera = camera;
   s.still_frames = changed ? 0 : s.still_frames + 1;
+  s.camera_changed = changed;
   stats.moving = s.still_frames < s.options.still_after_frames;
   const uint64_t budget =
       stats.moving ? s.options.moving_texel_budget_bytes : s.options.still_texel_budget_bytes;
