@@ -128,6 +128,7 @@ fi
 # ---- HTTP through the link proxy
 source "$REPO/bench/link/servers.sh"
 if ((HTTP)); then
+  command -v nginx > /dev/null || "$REPO/bench/install_peers.sh"
   "$TESSERA" serve "$SCENE/sf.tess" --port 0 --access-log "$RUN/serve-access.log" \
     > "$RUN/serve.out" 2> "$RUN/serve.err" &
   pids+=($!)
