@@ -271,7 +271,15 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
     // A node that failed to read or parse is not asked for again: retrying a corrupt block
     // every frame would only repeat the error.
     ++totals.read_errors;
-    for (const SceneNode& node : result.job.parse) node_state[node.index] = NodeState::kFailed;
+    const uint64_t read_end =
+        result.job.read.range.offset_bytes + result.job.read.range.length_bytes;
+    for (const SceneNode& node : result.job.parse) {
+      // A prefix that did not hold the pages (an archive written in another order): read the
+      // whole block next time.
+      const bool prefix = read_end < node.own.offset_bytes + node.own.length_bytes;
+      node_state[node.index] = prefix ? NodeState::kUnknown : NodeState::kFailed;
+      if (prefix) prefix_bytes[node.index] = node.own.length_bytes;
+    }
     return;
   }
   for (detail::ParsedNode& parsed : result.nodes) {
