@@ -350,7 +350,8 @@ void SceneStreamer::Impl::applyEarlyLevels() {
         applyLevel(level);
         progress = true;
       }
-      early_levels[i] = std::move(early_levels.back());  // applied, or stale
+      // Applied, already resident, or orphaned (its coarser neighbour failed or was dropped).
+      early_levels[i] = std::move(early_levels.back());
       early_levels.pop_back();
     }
   }
