@@ -283,7 +283,8 @@ Result<std::set<uint32_t>> visiblePlacements(const std::string& archive_path,
 }
 
 int runPerFile(const std::string& stg, const std::string& archive, const std::string& placements,
-               const std::string& view, uint32_t threads, const std::string& drop_list) {
+               const std::string& view, uint32_t threads, bool parse_models,
+               const std::string& drop_list) {
   std::set<uint32_t> lines;
   if (!view.empty()) {
     Result<std::set<uint32_t>> visible = visiblePlacements(archive, placements, view);
@@ -299,16 +300,17 @@ int runPerFile(const std::string& stg, const std::string& archive, const std::st
   }
   Result<uint64_t> resident = dropAll(drops);
   if (!resident) return std::fprintf(stderr, "%s\n", resident.error().message.c_str()), 1;
-  Result<PerFileReport> report = loadPerFile(stg, lines, threads);
+  Result<PerFileReport> report = loadPerFile(stg, lines, threads, parse_models);
   if (!report) return std::fprintf(stderr, "%s\n", report.error().message.c_str()), 1;
   std::printf(
-      "{\"side\": \"perfile\", \"uri\": \"%s\", \"view\": \"%s\", \"seconds\": %.4f, "
+      "{\"side\": \"%s\", \"uri\": \"%s\", \"view\": \"%s\", \"seconds\": %.4f, "
       "\"reads\": %llu, \"bytes\": %llu, \"requests\": %llu, \"placements\": %zu, "
       "\"models\": %u, \"textures\": %u, \"texels\": %llu, \"resident_pages_after_drop\": %llu}\n",
-      stg.c_str(), view.empty() ? "all" : view.c_str(), report->seconds,
-      (unsigned long long)report->files, (unsigned long long)report->bytes,
-      (unsigned long long)report->files, lines.size(), report->models, report->textures,
-      (unsigned long long)report->texels, (unsigned long long)*resident);
+      parse_models ? "perfile" : "perfile-noparse", stg.c_str(),
+      view.empty() ? "all" : view.c_str(), report->seconds, (unsigned long long)report->files,
+      (unsigned long long)report->bytes, (unsigned long long)report->files, lines.size(),
+      report->models, report->textures, (unsigned long long)report->texels,
+      (unsigned long long)*resident);
   return 0;
 }
 
@@ -322,7 +324,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> drops;
   double fps = 60;
   uint32_t threads = 2;
-  bool all = false;
+  bool all = false, no_model_parse = false;
   CLI::App* prepare = app.add_subcommand("prepare", "select the models, write the .stg, build");
   prepare->add_option("--models", models, "FlightGear Models folder")->required();
   prepare->add_option("--work", work, "work folder")->required();
@@ -338,6 +340,8 @@ int main(int argc, char** argv) {
   perfile->add_option("--placements", placements, "placements.tsv of prepare");
   perfile->add_option("--view", view, "street, oblique or overview");
   perfile->add_flag("--all", all, "every file of the scene, whatever the view");
+  perfile->add_flag("--no-model-parse", no_model_parse,
+                    "read models without parsing their geometry (a lower bound)");
   perfile->add_option("--threads", threads, "files loaded at once");
   perfile->add_option("--drop-list", drop_list, "file listing files to drop from the cache");
   CLI11_PARSE(app, argc, argv);
@@ -351,5 +355,5 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "perfile: give --view with --archive and --placements, or --all\n");
     return 2;
   }
-  return coldload::runPerFile(stg, archive, placements, view, threads, drop_list);
+  return coldload::runPerFile(stg, archive, placements, view, threads, !no_model_parse, drop_list);
 }

@@ -42,7 +42,9 @@ std::vector<std::string> viewNames();
 /// Per-file loading as a viewer does (scene_coldload_perfile.cpp): reads the .stg at
 /// `stg_uri` (a path or http:// URL), then every model of the placements in `lines` (all
 /// when empty) and every texture those models use, each file read whole and decoded
-/// (Assimp, libpng or libjpeg-turbo) at full resolution, `threads` at a time.
+/// (Assimp, libpng or libjpeg-turbo) at full resolution, `threads` at a time. Without
+/// `parse_models` a model's geometry is read but not parsed (only its texture names are
+/// found): the lower bound of a viewer whose models cost nothing to parse.
 struct PerFileReport {
   double seconds = 0;
   uint64_t files = 0;  ///< reads (local) or GET requests (HTTP): one per file
@@ -53,6 +55,6 @@ struct PerFileReport {
 };
 [[nodiscard]] tessera::Result<PerFileReport> loadPerFile(const std::string& stg_uri,
                                                          const std::set<uint32_t>& lines,
-                                                         uint32_t threads);
+                                                         uint32_t threads, bool parse_models);
 
 }  // namespace coldload

@@ -7,6 +7,8 @@
 #   perfile   tessera-scene-coldload perfile: the view's models (.ac) and textures (.png, .jpg)
 #             from their own files, each read and decoded separately as a viewer does
 #   all       the same for every model and texture of the scene (a viewer that loads it all)
+#   noparse   (local, with --sides) perfile reading the models without parsing their geometry:
+#             the lower bound of a viewer whose models cost nothing to parse (glTF buffers)
 #
 # Cold: before each run the files it reads leave the page cache (posix_fadvise DONTNEED, checked
 # with mincore; no root needed). Locally both sides read the files; over HTTP each client
@@ -105,12 +107,12 @@ print(json.dumps(r))' "$@" | tee -a "$RESULTS"
 tessera_run() {  # tessera_run URI
   "$COLDLOAD" tessera --archive "$1" --view "$view" --drop "$SCENE/sf.tess"
 }
-perfile_run() {  # perfile_run STG_URI [--all]
+perfile_run() {  # perfile_run STG_URI [--all | --no-model-parse]
   if [[ ${2:-} == --all ]]; then
     "$COLDLOAD" perfile --stg "$1" --all --drop-list "$SCENE/files.txt"
   else
     "$COLDLOAD" perfile --stg "$1" --archive "$SCENE/sf.tess" --placements "$SCENE/placements.tsv" \
-      --view "$view" --drop-list "$SCENE/files.txt"
+      --view "$view" --drop-list "$SCENE/files.txt" ${2:+"$2"}
   fi
 }
 
@@ -120,6 +122,7 @@ if ((LOCAL)); then
     for view in $VIEWS; do
       if has tessera; then tessera_run "$SCENE/sf.tess" | record local disk "$n"; fi
       if has perfile; then perfile_run "$SCENE/sf.stg" | record local disk "$n"; fi
+      if has noparse; then perfile_run "$SCENE/sf.stg" --no-model-parse | record local disk "$n"; fi
     done
     if has all; then perfile_run "$SCENE/sf.stg" --all | record local disk "$n"; fi
   done

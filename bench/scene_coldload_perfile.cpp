@@ -14,6 +14,7 @@
 #include <map>
 #include <mutex>
 #include <sstream>
+#include <string_view>
 #include <thread>
 
 #include <assimp/Importer.hpp>
@@ -150,11 +151,28 @@ Result<std::vector<std::string>> parseModel(const Uri& uri, const std::vector<ui
   return textures;
 }
 
+// Only the texture names of an AC3D model (its `texture "file"` lines), its geometry left
+// unparsed: a lower bound for a viewer whose models need no parsing (glTF's binary buffers go
+// to the GPU as they are).
+std::vector<std::string> acTextureNames(const std::vector<uint8_t>& bytes) {
+  std::vector<std::string> out;
+  const std::string_view text(reinterpret_cast<const char*>(bytes.data()), bytes.size());
+  const std::string_view prefix = "\ntexture \"";
+  for (size_t at = text.find(prefix); at != std::string_view::npos;
+       at = text.find(prefix, at + 1)) {
+    const size_t begin = at + prefix.size(), end = text.find('"', begin);
+    if (end == std::string_view::npos) break;
+    out.emplace_back(text.substr(begin, end - begin));
+  }
+  return out;
+}
+
 // The viewer's loader: a fixed pool working through model and texture files; a model's
 // textures are queued once it is parsed. Thread-safe.
 class PerFileLoader {
  public:
-  explicit PerFileLoader(uint32_t threads) : threads_(threads) {}
+  PerFileLoader(uint32_t threads, bool parse_models)
+      : threads_(threads), parse_models_(parse_models) {}
 
   Result<PerFileReport> run(const std::vector<Uri>& models) {
     for (const Uri& model : models) queueOnce({model, true});
@@ -206,7 +224,12 @@ class PerFileLoader {
       report_.bytes += bytes.size();
     }
     if (task.model) {
-      TESSERA_ASSIGN_OR_RETURN(std::vector<std::string> textures, parseModel(task.uri, bytes));
+      std::vector<std::string> textures;
+      if (parse_models_) {
+        TESSERA_ASSIGN_OR_RETURN(textures, parseModel(task.uri, bytes));
+      } else {
+        textures = acTextureNames(bytes);
+      }
       {
         std::lock_guard lock(mutex_);
         ++report_.models;
@@ -222,6 +245,7 @@ class PerFileLoader {
   }
 
   const uint32_t threads_;
+  const bool parse_models_;
   std::mutex mutex_;  // guards everything below
   std::condition_variable wake_;
   std::deque<Task> queue_;
@@ -234,7 +258,7 @@ class PerFileLoader {
 }  // namespace
 
 Result<PerFileReport> loadPerFile(const std::string& stg_uri, const std::set<uint32_t>& lines,
-                                  uint32_t threads) {
+                                  uint32_t threads, bool parse_models) {
   const auto start = std::chrono::steady_clock::now();
   const Uri stg = parseUri(stg_uri);
   Fetcher fetcher;
@@ -248,7 +272,7 @@ Result<PerFileReport> loadPerFile(const std::string& stg_uri, const std::set<uin
     if (!(fields >> keyword >> model) || keyword != "OBJECT_STATIC") continue;
     if (lines.empty() || lines.count(line)) models.push_back(stg.sibling(model));
   }
-  PerFileLoader loader(std::max(1u, threads));
+  PerFileLoader loader(std::max(1u, threads), parse_models);
   TESSERA_ASSIGN_OR_RETURN(PerFileReport report, loader.run(models));
   ++report.files;
   report.bytes += bytes.size();
