@@ -87,49 +87,12 @@ if [[ ! -f $WWW/.done ]]; then
 fi
 
 # ---- servers on loopback
-port_of() {  # port_of FILE: waits for "listening on ...:PORT" as the file's first line
-  local line="" i
-  for ((i = 0; i < 200; ++i)); do
-    line=$(head -1 "$1" 2>/dev/null || true)
-    [[ $line == listening\ on* ]] && { echo "${line##*:}"; return 0; }
-    sleep 0.05
-  done
-  echo "link_bench: no 'listening on' line in $1" >&2; return 1
-}
-
+source "$REPO/bench/link/servers.sh"
 "$TESSERA" serve "$WWW/image.tess" --port 0 --access-log "$RUN/serve-access.log" \
   > "$RUN/serve.out" 2> "$RUN/serve.err" &
 pids+=($!)
 SERVE_PORT=$(port_of "$RUN/serve.out")
-
-NGINX_PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
-mkdir -p "$RUN/nginx"
-cat > "$RUN/nginx/nginx.conf" <<EOF
-daemon off;
-worker_processes 2;
-pid $RUN/nginx/nginx.pid;
-error_log $RUN/nginx/error.log;
-events { worker_connections 1024; }
-http {
-  include /etc/nginx/mime.types;
-  access_log $RUN/nginx-access.log;
-  client_body_temp_path $RUN/nginx; proxy_temp_path $RUN/nginx; fastcgi_temp_path $RUN/nginx;
-  uwsgi_temp_path $RUN/nginx; scgi_temp_path $RUN/nginx;
-  sendfile on; tcp_nopush on; keepalive_requests 10000;
-  types { application/octet-stream tess; application/xml dzi; }
-  server {
-    listen 127.0.0.1:$NGINX_PORT;
-    root $WWW;
-    add_header Access-Control-Allow-Origin * always;
-  }
-}
-EOF
-nginx -c "$RUN/nginx/nginx.conf" -p "$RUN/nginx" &
-pids+=($!)
-for ((i = 0; i < 200; ++i)); do
-  curl -sf -o /dev/null "http://127.0.0.1:$NGINX_PORT/image.dzi" && break
-  sleep 0.05
-done
+start_nginx "$RUN" "$WWW" image.dzi 'add_header Access-Control-Allow-Origin * always;'
 
 # ---- the view: image centre, full detail, held long enough for the slowest link
 CX=$((SIZE / 2)); CY=$((SIZE / 2))
@@ -176,7 +139,7 @@ PY
   esac
   kill -TERM "$proxy_pid"; wait "$proxy_pid" || true
   local carried requests
-  carried=$(sed -n 's/^carried \([0-9]*\) B to the server and \([0-9]*\) B to clients.*/\2/p' "$out/proxy.out")
+  carried=$(proxy_carried "$out/proxy.out")
   requests=$(( $(wc -l < "$log") - requests_before ))
   python3 - "$out/result.json" "$link" "$client" "$n" "$carried" "$requests" >> "$RUN/results.jsonl" <<'PY'
 import json, sys

@@ -189,8 +189,10 @@ class SceneArchive {
   /// Reads the node's own block (one read) and parses it with parseNode.
   [[nodiscard]] Result<NodeContents> readNode(const SceneNode& node) const;
   /// Parses a node's own block from bytes the caller read, e.g. within a subtree read:
-  /// `block` must be exactly node.own (at least its first head_bytes when
-  /// `with_textures` is false). Verifies the head and page checksums.
+  /// `block` is node.own or a prefix of it holding at least the head (head_bytes) and, when
+  /// `with_textures`, every texture's directory pages (kInvalidArgument naming the texture
+  /// otherwise); mesh blobs and payloads past the prefix are the caller's to read. Verifies
+  /// the head and page checksums.
   [[nodiscard]] Result<NodeContents> parseNode(const SceneNode& node,
                                                std::span<const uint8_t> block,
                                                bool with_textures = true) const;

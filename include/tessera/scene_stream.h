@@ -25,13 +25,16 @@ struct LinkCost {
 };
 
 /// The link cost of `source`: measured from its latest request samples (ByteSource::linkStats:
-/// median first-byte time as latency; bytes over transfer time as bandwidth) when it has at
-/// least 4, else `fallback` (a local file has no samples). Thread-safe.
+/// median first-byte time as latency; bytes over transfer time as bandwidth, or the fallback's
+/// when the transfers were too short to time) when it has any, else `fallback` (a local file
+/// has none). Thread-safe.
 LinkCost measureLinkCost(const ByteSource& source, const LinkCost& fallback = {});
 
 /// How much one read fetches (seed 004, section 4).
 enum class ReadGranularity : uint8_t {
-  kObject = 0,   ///< one piece of a node whose head is known: a mesh blob or a texture level
+  /// Pieces of one node: mesh blobs and texture levels once its head is known, or the head and
+  /// directory pages of a large node not yet read (neighbouring pieces join into one read).
+  kObject = 0,
   kNode = 1,     ///< one node's block: head, geometry and texture levels together
   kSubtree = 2,  ///< a node's subtree: every block under it, one contiguous range
 };

@@ -47,16 +47,12 @@ class Planner {
   void addOwn(uint32_t i, SubtreePlan& out) const {
     const PlanNode& node = nodes_[i];
     const double block = readCost(link_, node.own.length_bytes);
-    double pieces = std::numeric_limits<double>::infinity();
-    if (!node.pieces.empty()) {
-      pieces = 0;
-      for (const FileRange& piece : node.pieces) pieces += readCost(link_, piece.length_bytes);
-    }
+    const std::vector<FileRange> runs = mergePieces(node.pieces, link_);
+    double pieces = runs.empty() ? std::numeric_limits<double>::infinity() : 0;
+    for (const FileRange& run : runs) pieces += readCost(link_, run.length_bytes);
     if (pieces < block) {
       out.cost += pieces;
-      for (const FileRange& piece : node.pieces) {
-        out.reads.push_back({ReadGranularity::kObject, i, piece});
-      }
+      for (const FileRange& run : runs) out.reads.push_back({ReadGranularity::kObject, i, run});
     } else {
       out.cost += block;
       out.reads.push_back({ReadGranularity::kNode, i, node.own});
@@ -68,6 +64,29 @@ class Planner {
 };
 
 }  // namespace
+
+std::vector<FileRange> mergePieces(std::vector<FileRange> pieces, const LinkCost& link) {
+  std::sort(pieces.begin(), pieces.end(),
+            [](const FileRange& a, const FileRange& b) { return a.offset_bytes < b.offset_bytes; });
+  // Reading a gap costs gap / bandwidth, a read of its own the latency: each gap is decided
+  // alone, so joining exactly the gaps cheaper than a round trip is the least total cost.
+  const double gap_limit_bytes = link.latency_s * link.bandwidth_bytes_per_s;
+  std::vector<FileRange> runs;
+  for (const FileRange& piece : pieces) {
+    const uint64_t end = piece.offset_bytes + piece.length_bytes;
+    if (!runs.empty()) {
+      FileRange& last = runs.back();
+      const uint64_t last_end = last.offset_bytes + last.length_bytes;
+      if (piece.offset_bytes <= last_end ||
+          double(piece.offset_bytes - last_end) < gap_limit_bytes) {
+        last.length_bytes = std::max(last_end, end) - last.offset_bytes;
+        continue;
+      }
+    }
+    runs.push_back(piece);
+  }
+  return runs;
+}
 
 double readCost(const LinkCost& link, uint64_t bytes) {
   return link.latency_s + double(bytes) / link.bandwidth_bytes_per_s;
@@ -86,6 +105,31 @@ std::vector<PlannedRead> planReads(const std::vector<PlanNode>& nodes, const Lin
     return a.range.offset_bytes < b.range.offset_bytes;
   });
   return reads;
+}
+
+std::vector<JoinedRead> joinReads(const std::vector<PlannedRead>& reads, const LinkCost& link) {
+  std::vector<PlannedRead> sorted = reads;
+  std::sort(sorted.begin(), sorted.end(), [](const PlannedRead& a, const PlannedRead& b) {
+    return a.range.offset_bytes < b.range.offset_bytes;
+  });
+  const double gap_limit_bytes = link.latency_s * link.bandwidth_bytes_per_s;
+  std::vector<JoinedRead> out;
+  for (const PlannedRead& read : sorted) {
+    const uint64_t end = read.range.offset_bytes + read.range.length_bytes;
+    if (!out.empty()) {
+      PlannedRead& last = out.back().read;
+      const uint64_t last_end = last.range.offset_bytes + last.range.length_bytes;
+      if (read.range.offset_bytes <= last_end ||
+          double(read.range.offset_bytes - last_end) < gap_limit_bytes) {
+        last.range.length_bytes = std::max(last_end, end) - last.range.offset_bytes;
+        last.granularity = std::max(last.granularity, read.granularity);
+        out.back().parts.push_back(read);
+        continue;
+      }
+    }
+    out.push_back({read, {read}});
+  }
+  return out;
 }
 
 double planCost(const std::vector<PlannedRead>& reads, const LinkCost& link) {

@@ -325,7 +325,7 @@ Result<NodeContents> SceneArchive::parseNode(const SceneNode& node, std::span<co
                                              bool with_textures) const {
   TESSERA_ASSIGN_OR_RETURN(NodeRecord record, impl_->record(node.index));
   const std::string what = fmt::format("{}: node {}", impl_->name, node.index);
-  if (block.size() < record.head_bytes || (with_textures && block.size() != record.own_bytes))
+  if (block.size() < record.head_bytes || block.size() > record.own_bytes)
     return fail(ErrorCode::kInvalidArgument, fmt::format("{}: {} bytes given, the block has {}",
                                                          what, block.size(), record.own_bytes));
   std::span<const uint8_t> head_bytes = block.first(record.head_bytes);
@@ -350,6 +350,12 @@ Result<NodeContents> SceneArchive::parseNode(const SceneNode& node, std::span<co
   if (!with_textures) return out;
   for (const NodeTextureRecord& t : head.textures) {
     const std::string texture_what = fmt::format("{} texture {}", what, t.texture);
+    // A prefix of the block (a reader that skipped the payloads) must still hold the pages.
+    if (t.pages.offset_bytes - record.offset_bytes + t.pages.length_bytes > block.size())
+      return fail(
+          ErrorCode::kInvalidArgument,
+          fmt::format("{}: directory pages [{}, +{}) lie outside the {} bytes given", texture_what,
+                      t.pages.offset_bytes, t.pages.length_bytes, block.size()));
     std::span<const uint8_t> pages =
         block.subspan(t.pages.offset_bytes - record.offset_bytes, t.pages.length_bytes);
     if (checksum64(pages) != t.pages.checksum)

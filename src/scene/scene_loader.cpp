@@ -45,6 +45,18 @@ Result<std::vector<Image>> decodeLevel(const SceneArchive& archive, uint32_t tex
   return out;
 }
 
+// Whether every encoded tile of a level lies in the read [base, base + size).
+bool levelInside(const std::vector<TileEntry>& tiles, uint64_t base, uint64_t size) {
+  for (const TileEntry& tile : tiles) {
+    if (tile.kind == TileKind::kEncoded &&
+        (tile.offset_bytes < base || tile.offset_bytes - base > size ||
+         tile.length_bytes > size - (tile.offset_bytes - base))) {
+      return false;
+    }
+  }
+  return true;
+}
+
 // The finest level any object of `parsed` in view needs of each texture (coarsest when none).
 std::vector<uint32_t> wantedLevels(const LoaderContext& context, const ReadJob& job,
                                    const std::vector<ParsedNode>& parsed) {
@@ -73,18 +85,20 @@ Result<void> parseNodes(const LoaderContext& context, const ReadJob& job,
   const uint64_t base = job.read.range.offset_bytes;
   std::set<uint32_t> used;
   for (const SceneNode& node : job.parse) {
+    // The node's block, or the prefix of it the read holds (a large node's head and pages).
     std::span<const uint8_t> block;
-    if (!sliceOf(buffer, base, node.own.offset_bytes, node.own.length_bytes, &block)) {
+    const uint64_t end = base + buffer.size();
+    if (node.own.offset_bytes < base || node.own.offset_bytes >= end ||
+        !sliceOf(buffer, base, node.own.offset_bytes,
+                 std::min(node.own.length_bytes, end - node.own.offset_bytes), &block)) {
       return fail(ErrorCode::kCorrupt, fmt::format("{}: node {} lies outside read of node {}",
                                                    archive.name(), node.index, job.read.node));
     }
     TESSERA_ASSIGN_OR_RETURN(NodeContents contents, archive.parseNode(node, block));
     for (const SceneMesh& mesh : contents.meshes) {
+      // Blobs past a prefix are read later, as object reads of the meshes in view.
       std::span<const uint8_t> blob;
-      if (!sliceOf(buffer, base, mesh.blob.offset_bytes, mesh.blob.length_bytes, &blob)) {
-        return fail(ErrorCode::kCorrupt, fmt::format("{}: mesh {} lies outside node {}",
-                                                     archive.name(), mesh.index, node.index));
-      }
+      if (!sliceOf(buffer, base, mesh.blob.offset_bytes, mesh.blob.length_bytes, &blob)) continue;
       TESSERA_ASSIGN_OR_RETURN(MeshData data, archive.decodeMesh(mesh, blob));
       out.meshes.push_back({mesh.index, std::move(data)});
     }
@@ -114,6 +128,10 @@ Result<void> parseNodes(const LoaderContext& context, const ReadJob& job,
       if (texture.texture >= wanted.size() || wanted[texture.texture] == UINT32_MAX) continue;
       // Coarse to fine, so the streamer's chain of resident levels grows one level at a time.
       for (uint32_t level = texture.info.level_count - 1; level-- > wanted[texture.texture];) {
+        if (level < texture.levels.size() &&
+            !levelInside(texture.levels[level], base, buffer.size())) {
+          break;  // past a prefix: the streamer refines the chain from here
+        }
         if (level >= texture.levels.size()) {
           return fail(
               ErrorCode::kCorrupt,
@@ -144,6 +162,22 @@ ReadResult runReadJob(const LoaderContext& context, ReadJob job, CodecScratch* s
   }
   out.bytes_read = buffer.size();
   Result<void> parsed = parseNodes(context, j, buffer, scratch, out);
+  for (size_t i = 0; parsed.has_value() && i < j.meshes.size(); ++i) {
+    std::span<const uint8_t> blob;
+    const SceneMesh& mesh = j.meshes[i];
+    if (!sliceOf(buffer, j.read.range.offset_bytes, mesh.blob.offset_bytes, mesh.blob.length_bytes,
+                 &blob)) {
+      parsed = fail(ErrorCode::kCorrupt, fmt::format("{}: mesh {} lies outside the read",
+                                                     context.archive->name(), mesh.index));
+      break;
+    }
+    Result<MeshData> data = context.archive->decodeMesh(mesh, blob);
+    if (!data.has_value()) {
+      parsed = fail(data.error().code, data.error().message);
+      break;
+    }
+    out.meshes.push_back({mesh.index, std::move(*data)});
+  }
   for (size_t i = 0; parsed.has_value() && i < j.levels.size(); ++i) {
     const LevelJob& level = j.levels[i];
     Result<std::vector<Image>> tiles =

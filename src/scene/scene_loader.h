@@ -45,7 +45,8 @@ struct ReadJob {
   PlannedRead read;
   std::vector<SceneNode> parse;  ///< nodes whose blocks lie in read.range and are unknown
   std::vector<LevelJob> levels;
-  PerspectiveView camera;  ///< the frame that asked: picks the levels of newly read textures
+  std::vector<SceneMesh> meshes;  ///< blobs inside read.range to decode (object reads)
+  PerspectiveView camera;         ///< the frame that asked: picks the levels of newly read textures
   double lod_bias = 0;
 };
 

@@ -7,6 +7,7 @@
 
 #include <tessera/check.h>
 
+#include "format/directory.h"
 #include "io_plan.h"
 #include "scene_loader.h"
 #include "scene_lod.h"
@@ -28,7 +29,9 @@ const char* readGranularityName(ReadGranularity granularity) {
 
 LinkCost measureLinkCost(const ByteSource& source, const LinkCost& fallback) {
   const std::optional<LinkStats> stats = source.linkStats();
-  if (!stats || stats->recent.size() < 4) return fallback;
+  // A network source is measured from its first request on (the open's): planning the first
+  // frame's reads with a local disk's costs would ask a 40 ms link for many small reads.
+  if (!stats || stats->recent.empty()) return fallback;
   std::vector<double> first_byte;
   double bytes = 0, transfer_s = 0;
   for (const LinkSample& sample : stats->recent) {
@@ -82,6 +85,27 @@ FileRange levelHull(const std::vector<TileEntry>& tiles, uint64_t fallback_offse
   return begin == UINT64_MAX ? FileRange{fallback_offset, 0} : FileRange{begin, end - begin};
 }
 
+// Per node: its head and the directory pages of the textures it stores, the prefix of its
+// block a reader needs before it can read single meshes and levels (the writer puts the pages
+// right after the head; parseNode checks that they are inside).
+std::vector<uint64_t> headAndPagesBytes(const std::vector<SceneNode>& nodes,
+                                        const std::vector<SceneTexture>& textures) {
+  std::vector<uint64_t> out(nodes.size(), 0);
+  for (const SceneNode& node : nodes) out[node.index] = node.head_bytes;
+  for (const SceneTexture& texture : textures) {
+    if (texture.node >= out.size()) continue;
+    for (uint32_t level = 0; level < texture.info.level_count; ++level) {
+      out[texture.node] += uint64_t(texture.info.tilesX(level)) * texture.info.tilesY(level) *
+                           detail::kTileEntryBytes;
+    }
+  }
+  return out;
+}
+
+// Leaves asked for, and textures refined, per free read slot: neighbours' reads join
+// (mergePieces, joinReads), so a slot serves several.
+constexpr uint32_t kWantsPerSlot = 16;
+
 }  // namespace
 
 struct SceneStreamer::Impl {
@@ -101,16 +125,29 @@ struct SceneStreamer::Impl {
   std::vector<SceneObject> objects;
   std::vector<bool> object_known;
   std::vector<std::unique_ptr<MeshData>> meshes;
+  std::vector<SceneMesh> mesh_records;  ///< per mesh, once its node is known
+  std::vector<bool> mesh_record_known;
+  std::vector<bool> mesh_busy;  ///< an object read of its blob is queued or running
+  /// Meshes of visible objects whose node is known but whose blob is not loaded (the node was
+  /// read as a prefix), gathered each frame.
+  std::vector<uint32_t> missing_meshes;
+  std::vector<uint64_t> prefix_bytes;  ///< per node: headAndPagesBytes
+  std::vector<uint32_t> mesh_holder;   ///< per mesh: the node storing it
   std::vector<Image> coarsest;
   std::vector<bool> coarsest_known;
   std::vector<std::vector<std::vector<Image>>> levels;  ///< [texture][level] tiles
   detail::SceneResidency residency;
-  std::vector<bool> level_busy;  ///< a refinement of the texture is queued or running
+  std::vector<bool> level_busy;            ///< a refinement of the texture is queued or running
+  std::vector<uint32_t> levels_in_flight;  ///< per texture: its levels queued or running
+  /// Decoded levels finer than their texture's next one, waiting for it (another read).
+  std::vector<detail::DecodedLevel> early_levels;
   std::unique_ptr<detail::SceneLoaderPool> pool;  // last: its workers stop before the rest goes
 
   PerspectiveView last_camera;
   bool first_frame = true;
   uint32_t still_frames = 0;
+  bool camera_changed = true;         ///< this frame's camera differs from the last one's
+  uint32_t node_reads_in_flight = 0;  ///< queued or running reads that parse nodes
   std::vector<uint32_t> drawable;
   std::vector<uint32_t> visible_leaves;
   std::vector<bool> leaf_inside;  ///< per visible leaf: wholly inside the frustum
@@ -129,19 +166,34 @@ struct SceneStreamer::Impl {
   }
   void applyResults(SceneFrameStats& stats);
   void applyResult(detail::ReadResult& result);
+  void applyLevel(detail::DecodedLevel& level);
+  void applyEarlyLevels();
+  void levelSettled(uint32_t texture) {
+    if (levels_in_flight[texture] > 0 && --levels_in_flight[texture] == 0)
+      level_busy[texture] = false;
+  }
   void queryVisible(const detail::Frustum& frustum);
   void collectDemands(const PerspectiveView& camera, const detail::Frustum& frustum,
                       SceneFrameStats& stats);
   void evict(uint64_t budget, SceneFrameStats& stats);
   void planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
                      SceneFrameStats& stats);
+  /// A large inner node is first read as its head and pages only (a prefix of its block):
+  /// shared meshes and textures gather at the top of the tree (seed 004's promotion), and a
+  /// view needs a few of them, read next as object reads, rather than the whole block.
+  bool readPrefixFirst(uint32_t node, const LinkCost& cost) const {
+    const uint64_t own = nodes[node].own.length_bytes, prefix = prefix_bytes[node];
+    if (nodes[node].isLeaf() || prefix >= own) return false;
+    return double(own - prefix) / cost.bandwidth_bytes_per_s > 2 * cost.latency_s;
+  }
+  void wantMeshes(std::vector<SceneMesh>& jobs);
   void want(uint32_t node) {
     if (!plan[node].wanted) plan_touched.push_back(node);
     plan[node].wanted = true;
   }
   std::vector<detail::LevelJob> addRefinements(uint64_t budget, bool moving, uint32_t slots);
   void submitPlan(const PerspectiveView& camera, std::vector<detail::LevelJob>& refinements,
-                  SceneFrameStats& stats);
+                  std::vector<SceneMesh>& mesh_jobs, SceneFrameStats& stats);
 };
 
 SceneStreamer::SceneStreamer(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
@@ -152,9 +204,17 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   TESSERA_CHECK(archive != nullptr) << "SceneStreamer::open: null archive";
   auto context = std::make_shared<detail::LoaderContext>();
   context->archive = archive;
+  // Over a network, ask for the three at once: the coarse block, and the node table with the
+  // texture table the builder appends right after it (two requests, one round trip).
+  const FileRange node_table = archive->nodeTableRange(), coarse = archive->coarseRange();
+  const uint64_t tables_end =
+      std::min(archive->fileBytes(), node_table.offset_bytes + node_table.length_bytes +
+                                         uint64_t(archive->summary().textures) * 64);
+  const ByteRange hints[2] = {{node_table.offset_bytes, tables_end - node_table.offset_bytes},
+                              {coarse.offset_bytes, coarse.length_bytes}};
+  archive->source().prefetch(hints);
   TESSERA_ASSIGN_OR_RETURN(std::vector<SceneNode> nodes, archive->allNodes());
   TESSERA_ASSIGN_OR_RETURN(context->textures, archive->textures(0, archive->summary().textures));
-  const FileRange coarse = archive->coarseRange();
   context->coarse_block.resize(coarse.length_bytes);
   context->coarse_offset_bytes = coarse.offset_bytes;
   TESSERA_TRY(archive->source().read(coarse.offset_bytes, context->coarse_block));
@@ -177,10 +237,21 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   impl->objects.resize(archive->summary().objects);
   impl->object_known.assign(archive->summary().objects, false);
   impl->meshes.resize(archive->summary().meshes);
+  impl->mesh_records.resize(archive->summary().meshes);
+  impl->mesh_record_known.assign(archive->summary().meshes, false);
+  impl->mesh_busy.assign(archive->summary().meshes, false);
+  impl->prefix_bytes = headAndPagesBytes(impl->nodes, context->textures);
+  impl->mesh_holder.assign(archive->summary().meshes, 0);
+  for (const SceneNode& node : impl->nodes) {
+    for (uint32_t m = node.first_mesh; m < node.first_mesh + node.mesh_count; ++m) {
+      if (m < impl->mesh_holder.size()) impl->mesh_holder[m] = node.index;
+    }
+  }
   impl->coarsest.resize(texture_count);
   impl->coarsest_known.assign(texture_count, false);
   impl->levels.resize(texture_count);
   impl->level_busy.assign(texture_count, false);
+  impl->levels_in_flight.assign(texture_count, 0);
   impl->plan.resize(node_count);
   for (uint32_t i = 0; i < node_count; ++i) {
     impl->plan[i].subtree_nodes = impl->nodes[i].subtree_nodes;
@@ -193,12 +264,22 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
 }
 
 void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
-  for (const detail::LevelJob& level : result.job.levels) level_busy[level.texture] = false;
+  for (const detail::LevelJob& level : result.job.levels) levelSettled(level.texture);
+  for (const SceneMesh& mesh : result.job.meshes) mesh_busy[mesh.index] = false;
+  if (!result.job.parse.empty()) --node_reads_in_flight;
   if (!result.error.empty()) {
     // A node that failed to read or parse is not asked for again: retrying a corrupt block
     // every frame would only repeat the error.
     ++totals.read_errors;
-    for (const SceneNode& node : result.job.parse) node_state[node.index] = NodeState::kFailed;
+    const uint64_t read_end =
+        result.job.read.range.offset_bytes + result.job.read.range.length_bytes;
+    for (const SceneNode& node : result.job.parse) {
+      // A prefix that did not hold the pages (an archive written in another order): read the
+      // whole block next time.
+      const bool prefix = read_end < node.own.offset_bytes + node.own.length_bytes;
+      node_state[node.index] = prefix ? NodeState::kUnknown : NodeState::kFailed;
+      if (prefix) prefix_bytes[node.index] = node.own.length_bytes;
+    }
     return;
   }
   for (detail::ParsedNode& parsed : result.nodes) {
@@ -216,6 +297,11 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
         leaf_coarse_ratio[parsed.node] = std::min(leaf_coarse_ratio[parsed.node], ratio);
       }
     }
+    for (const SceneMesh& mesh : parsed.contents.meshes) {
+      if (mesh.index >= mesh_records.size()) continue;
+      mesh_records[mesh.index] = mesh;
+      mesh_record_known[mesh.index] = true;
+    }
     node_textures[parsed.node] = std::move(parsed.contents.textures);
     for (const NodeTexture& texture : node_textures[parsed.node]) {
       if (texture.texture < holder_entry.size()) holder_entry[texture.texture] = &texture;
@@ -232,18 +318,49 @@ void SceneStreamer::Impl::applyResult(detail::ReadResult& result) {
     coarsest_known[tile.texture] = true;
   }
   for (detail::DecodedLevel& level : result.levels) {
-    // A level that no longer extends the chain (evicted meanwhile) is dropped.
-    if (!residency.loaded({level.texture, level.level})) continue;
-    auto& texture_levels = levels[level.texture];
-    if (texture_levels.size() <= level.level)
-      texture_levels.resize(residency.coarsest(level.texture) + 1);
-    texture_levels[level.level] = std::move(level.tiles);
+    // A level of a chain read in several reads can arrive before its coarser neighbour.
+    if (level.level + 1 < residency.resident(level.texture)) {
+      early_levels.push_back(std::move(level));
+      continue;
+    }
+    applyLevel(level);
+  }
+}
+
+void SceneStreamer::Impl::applyLevel(detail::DecodedLevel& level) {
+  // A level that no longer extends the chain (evicted meanwhile) is dropped.
+  if (!residency.loaded({level.texture, level.level})) return;
+  auto& texture_levels = levels[level.texture];
+  if (texture_levels.size() <= level.level)
+    texture_levels.resize(residency.coarsest(level.texture) + 1);
+  texture_levels[level.level] = std::move(level.tiles);
+}
+
+void SceneStreamer::Impl::applyEarlyLevels() {
+  for (bool progress = true; progress;) {
+    progress = false;
+    for (size_t i = 0; i < early_levels.size();) {
+      detail::DecodedLevel& level = early_levels[i];
+      const uint32_t resident = residency.resident(level.texture);
+      if (level.level + 1 < resident && levels_in_flight[level.texture] > 0) {
+        ++i;  // its coarser neighbour is still on its way
+        continue;
+      }
+      if (level.level + 1 == resident) {
+        applyLevel(level);
+        progress = true;
+      }
+      // Applied, already resident, or orphaned (its coarser neighbour failed or was dropped).
+      early_levels[i] = std::move(early_levels.back());
+      early_levels.pop_back();
+    }
   }
 }
 
 void SceneStreamer::Impl::applyResults(SceneFrameStats& stats) {
   std::vector<detail::ReadResult> results = pool->drain();
   for (detail::ReadResult& result : results) applyResult(result);
+  applyEarlyLevels();
   stats.results_applied = uint32_t(results.size());
 }
 
@@ -275,6 +392,7 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
                                          const detail::Frustum& frustum, SceneFrameStats& stats) {
   demands.clear();
   drawable.clear();
+  missing_meshes.clear();
   const detail::LodFrame lod_frame = detail::lodFrame(camera, options.lod_bias);
   for (size_t v = 0; v < visible_leaves.size(); ++v) {
     const uint32_t leaf = visible_leaves[v];
@@ -290,6 +408,10 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
       const SceneObject& object = objects[o];
       if (!leaf_inside[v] && !detail::boxMayBeVisible(frustum, object.bounds)) continue;
       ++stats.visible_objects;
+      if (object.mesh < meshes.size() && !meshes[object.mesh] && mesh_record_known[object.mesh] &&
+          !mesh_busy[object.mesh]) {
+        missing_meshes.push_back(object.mesh);
+      }
       bool textured = true;
       const detail::ObjectScale scale =
           far ? detail::ObjectScale{} : detail::objectScale(lod_frame, object.bounds);
@@ -325,41 +447,68 @@ std::vector<detail::LevelJob> SceneStreamer::Impl::addRefinements(uint64_t budge
   const LinkCost cost = link();
   const double limit_s =
       moving ? options.moving_level_time_limit_s : options.still_level_time_limit_s;
+  const size_t max_textures = size_t(slots) * kWantsPerSlot;
+  uint64_t planned_bytes = residency.budgetedBytes();
+  size_t textures = 0;
   for (const LevelRef& ref : residency.nextLoads(budget, level_busy)) {
-    if (jobs.size() >= slots) break;
+    if (textures >= max_textures) break;
     const NodeTexture* entry = holder_entry[ref.texture];
     if (!entry || ref.level >= entry->levels.size()) continue;  // its node is not known yet
     const uint32_t holder = context->textures[ref.texture].node;
-    const FileRange hull = levelHull(entry->levels[ref.level], nodes[holder].own.offset_bytes);
-    // Seed 003 part III: a level that would take longer than the limit waits for a stiller
-    // camera (or a faster link).
-    if (detail::readCost(cost, hull.length_bytes) > limit_s) continue;
-    want(holder);
-    plan[holder].pieces.push_back(hull);
-    jobs.push_back({ref.texture, ref.level, hull, entry->info, entry->levels[ref.level]});
-    level_busy[ref.texture] = true;
+    // The whole chain down to the wanted level at once (coarse to fine), not one level per
+    // round trip, while it fits the budget; the next level alone is nextLoads' to admit.
+    for (uint32_t level = ref.level + 1; level-- > residency.wanted(ref.texture);) {
+      const uint64_t bytes = residency.levelBytes(ref.texture, level);
+      if (level != ref.level && planned_bytes + bytes > budget) break;
+      const FileRange hull = levelHull(entry->levels[level], nodes[holder].own.offset_bytes);
+      // Seed 003 part III: a level that would take longer than the limit waits for a stiller
+      // camera (or a faster link).
+      if (detail::readCost(cost, hull.length_bytes) > limit_s) break;
+      want(holder);
+      plan[holder].pieces.push_back(hull);
+      jobs.push_back({ref.texture, level, hull, entry->info, entry->levels[level]});
+      planned_bytes += bytes;
+      ++levels_in_flight[ref.texture];
+      level_busy[ref.texture] = true;
+    }
+    ++textures;
   }
   return jobs;
 }
 
+void SceneStreamer::Impl::wantMeshes(std::vector<SceneMesh>& jobs) {
+  for (uint32_t m : missing_meshes) {
+    if (mesh_busy[m]) continue;  // two visible objects share it
+    const SceneMesh& mesh = mesh_records[m];
+    const uint32_t holder = mesh_holder[m];
+    want(holder);
+    plan[holder].pieces.push_back(mesh.blob);
+    jobs.push_back(mesh);
+    mesh_busy[m] = true;
+  }
+}
+
 void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
                                      std::vector<detail::LevelJob>& refinements,
-                                     SceneFrameStats& stats) {
-  std::vector<PlannedRead> reads = detail::planReads(plan, link());
-  for (const PlannedRead& read : reads) {
+                                     std::vector<SceneMesh>& mesh_jobs, SceneFrameStats& stats) {
+  const LinkCost cost = link();
+  for (const detail::JoinedRead& joined : detail::joinReads(detail::planReads(plan, cost), cost)) {
+    const PlannedRead& read = joined.read;
     detail::ReadJob job;
     job.read = read;
     job.camera = camera;
     job.lod_bias = options.lod_bias;
     const uint64_t begin = read.range.offset_bytes, end = begin + read.range.length_bytes;
-    const uint32_t last = read.granularity == ReadGranularity::kSubtree
-                              ? read.node + nodes[read.node].subtree_nodes
-                              : read.node + 1;
-    // Every unknown node the read holds is parsed: its bytes are here already.
-    for (uint32_t n = read.node; n < last; ++n) {
-      if (node_state[n] == NodeState::kUnknown) {
-        node_state[n] = NodeState::kInFlight;
-        job.parse.push_back(nodes[n]);
+    // Every unknown node a part holds is parsed: its bytes are here already.
+    for (const PlannedRead& part : joined.parts) {
+      const uint32_t last = part.granularity == ReadGranularity::kSubtree
+                                ? part.node + nodes[part.node].subtree_nodes
+                                : part.node + 1;
+      for (uint32_t n = part.node; n < last; ++n) {
+        if (node_state[n] == NodeState::kUnknown) {
+          node_state[n] = NodeState::kInFlight;
+          job.parse.push_back(nodes[n]);
+        }
       }
     }
     for (detail::LevelJob& level : refinements) {
@@ -371,16 +520,28 @@ void SceneStreamer::Impl::submitPlan(const PerspectiveView& camera,
       job.levels.push_back(std::move(level));
       level.tiles.clear();  // taken: a level goes to the first read that holds it
     }
+    for (SceneMesh& mesh : mesh_jobs) {
+      if (mesh.blob.length_bytes == 0 || mesh.blob.offset_bytes < begin ||
+          mesh.blob.offset_bytes + mesh.blob.length_bytes > end) {
+        continue;
+      }
+      job.meshes.push_back(mesh);
+      mesh.blob.length_bytes = 0;  // taken
+    }
     ++totals.reads;
     ++totals.reads_by_granularity[int(read.granularity)];
     totals.bytes_read += read.range.length_bytes;
     ++stats.reads_started;
+    if (!job.parse.empty()) ++node_reads_in_flight;
     pool->submit(std::move(job));
   }
   // Every refinement's hull lies in its holder's block, which some read covers; one that
   // found no read (none expected) is released to be asked for again.
   for (const detail::LevelJob& level : refinements) {
-    if (!level.tiles.empty()) level_busy[level.texture] = false;
+    if (!level.tiles.empty()) levelSettled(level.texture);
+  }
+  for (const SceneMesh& mesh : mesh_jobs) {
+    if (mesh.blob.length_bytes != 0) mesh_busy[mesh.index] = false;
   }
 }
 
@@ -389,19 +550,33 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   const uint32_t pending = pool->pending();
   if (pending >= options.max_reads_in_flight) return;
   uint32_t slots = options.max_reads_in_flight - pending;
+  const LinkCost cost = link();
   uint32_t leaves = 0;
   for (uint32_t leaf : visible_leaves) {
-    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots) continue;
+    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots * kWantsPerSlot) continue;
     ++leaves;
     // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
     for (uint32_t n = leaf;; n = parent[n]) {
-      if (node_state[n] == NodeState::kUnknown) want(n);
+      if (node_state[n] == NodeState::kUnknown && !plan[n].wanted) {
+        want(n);
+        if (readPrefixFirst(n, cost)) {
+          plan[n].pieces.push_back({nodes[n].own.offset_bytes, prefix_bytes[n]});
+        }
+      }
       if (n == 0) break;
     }
   }
-  std::vector<detail::LevelJob> refinements =
-      addRefinements(budget, moving, slots - std::min(slots, leaves));
-  if (!plan_touched.empty()) submitPlan(camera, refinements, stats);
+  // At rest, the meshes and levels of the view wait for the node reads on their way: asked for
+  // together once those land, they join into few reads instead of one wave per arrival. A
+  // moving camera asks at once (what it sees now may be gone when the nodes land).
+  std::vector<SceneMesh> mesh_jobs;
+  std::vector<detail::LevelJob> refinements;
+  if (camera_changed || node_reads_in_flight == 0) {
+    wantMeshes(mesh_jobs);
+    refinements = addRefinements(
+        budget, moving, slots - std::min(slots, (leaves + kWantsPerSlot - 1) / kWantsPerSlot));
+  }
+  if (!plan_touched.empty()) submitPlan(camera, refinements, mesh_jobs, stats);
   for (uint32_t n : plan_touched) {
     plan[n].wanted = false;
     plan[n].pieces.clear();
@@ -417,6 +592,7 @@ SceneFrameStats SceneStreamer::update(const PerspectiveView& camera) {
   s.first_frame = false;
   s.last_camera = camera;
   s.still_frames = changed ? 0 : s.still_frames + 1;
+  s.camera_changed = changed;
   stats.moving = s.still_frames < s.options.still_after_frames;
   const uint64_t budget =
       stats.moving ? s.options.moving_texel_budget_bytes : s.options.still_texel_budget_bytes;

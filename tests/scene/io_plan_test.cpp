@@ -2,6 +2,7 @@
 // choice of object, node and subtree reads on small random trees.
 #include "io_plan.h"
 
+#include <algorithm>
 #include <cmath>
 #include <functional>
 #include <random>
@@ -64,7 +65,8 @@ double bruteForceMinimum(const std::vector<PlanNode>& nodes, const LinkCost& lin
       double cost = 0;
       for (uint32_t k = 0; k < n; ++k) {
         if (choice[k] == 1) {
-          for (const FileRange& piece : nodes[k].pieces) cost += readCost(link, piece.length_bytes);
+          for (const FileRange& run : mergePieces(nodes[k].pieces, link))
+            cost += readCost(link, run.length_bytes);
         }
         if (choice[k] == 2) cost += readCost(link, nodes[k].own.length_bytes);
         if (choice[k] == 3) cost += readCost(link, nodes[k].subtree.length_bytes);
@@ -90,24 +92,120 @@ double bruteForceMinimum(const std::vector<PlanNode>& nodes, const LinkCost& lin
   return best == INFINITY ? 0 : best;
 }
 
-// Whether `reads` cover every wanted node (a node read, all its pieces, or a subtree).
+// Whether `reads` cover every wanted node (a node read, every piece inside its object reads,
+// or a subtree).
 bool coversEveryWantedNode(const std::vector<PlanNode>& nodes,
                            const std::vector<PlannedRead>& reads) {
   for (uint32_t k = 0; k < nodes.size(); ++k) {
     if (!nodes[k].wanted) continue;
-    size_t pieces = 0;
     bool covered = false;
     for (const PlannedRead& read : reads) {
-      if (read.granularity == ReadGranularity::kObject && read.node == k) ++pieces;
       if (read.granularity == ReadGranularity::kNode && read.node == k) covered = true;
       if (read.granularity == ReadGranularity::kSubtree && read.node <= k &&
           k < read.node + nodes[read.node].subtree_nodes) {
         covered = true;
       }
     }
-    if (!covered && (nodes[k].pieces.empty() || pieces != nodes[k].pieces.size())) return false;
+    bool pieces = !nodes[k].pieces.empty();
+    for (const FileRange& piece : nodes[k].pieces) {
+      bool inside = false;
+      for (const PlannedRead& read : reads) {
+        inside = inside || (read.granularity == ReadGranularity::kObject && read.node == k &&
+                            read.range.offset_bytes <= piece.offset_bytes &&
+                            piece.offset_bytes + piece.length_bytes <=
+                                read.range.offset_bytes + read.range.length_bytes);
+      }
+      pieces = pieces && inside;
+    }
+    if (!covered && !pieces) return false;
   }
   return true;
+}
+
+// Every split of sorted pieces into runs of neighbours, each run read as its hull.
+double bestSplit(std::vector<FileRange> pieces, const LinkCost& link) {
+  std::sort(pieces.begin(), pieces.end(),
+            [](const FileRange& a, const FileRange& b) { return a.offset_bytes < b.offset_bytes; });
+  double best = INFINITY;
+  const uint32_t gaps = uint32_t(pieces.size()) - 1;
+  for (uint32_t cut = 0; cut < (1u << gaps); ++cut) {
+    double cost = 0;
+    uint64_t begin = pieces[0].offset_bytes, end = begin + pieces[0].length_bytes;
+    for (uint32_t p = 1; p <= pieces.size(); ++p) {
+      if (p == pieces.size() || (cut >> (p - 1) & 1)) {
+        cost += readCost(link, end - begin);
+        if (p == pieces.size()) break;
+        begin = pieces[p].offset_bytes;
+        end = begin + pieces[p].length_bytes;
+      } else {
+        end = std::max(end, pieces[p].offset_bytes + pieces[p].length_bytes);
+      }
+    }
+    best = std::min(best, cost);
+  }
+  return best;
+}
+
+TEST(IoPlan, JoinsExactlyTheGapsCheaperThanARoundTrip) {
+  std::mt19937 rng(11);
+  const LinkCost link{0.001, 1e6};  // a gap under 1000 bytes is cheaper than a read
+  for (int round = 0; round < 300; ++round) {
+    std::vector<FileRange> pieces(1 + rng() % 8);
+    for (FileRange& piece : pieces) piece = {rng() % 20000, 1 + rng() % 1500};
+    const std::vector<FileRange> runs = mergePieces(pieces, link);
+    double cost = 0;
+    for (const FileRange& run : runs) cost += readCost(link, run.length_bytes);
+    EXPECT_NEAR(cost, bestSplit(pieces, link), 1e-9) << "round " << round;
+    for (const FileRange& piece : pieces) {
+      EXPECT_TRUE(std::any_of(runs.begin(), runs.end(), [&](const FileRange& run) {
+        return run.offset_bytes <= piece.offset_bytes &&
+               piece.offset_bytes + piece.length_bytes <= run.offset_bytes + run.length_bytes;
+      }));
+    }
+  }
+  // Two pieces 999 bytes apart join; 1001 bytes apart they stay two reads.
+  EXPECT_EQ(mergePieces({{0, 10}, {1009, 10}}, link).size(), 1u);
+  EXPECT_EQ(mergePieces({{0, 10}, {1011, 10}}, link).size(), 2u);
+}
+
+TEST(IoPlan, JoinsNeighbouringReadsOfDifferentNodes) {
+  const LinkCost link{0.001, 1e6};  // gaps under 1000 bytes join
+  std::mt19937 rng(5);
+  for (int round = 0; round < 200; ++round) {
+    std::vector<PlannedRead> reads;
+    uint64_t offset = 0;
+    for (uint32_t i = 0; i < 1 + rng() % 10; ++i) {
+      offset += rng() % 2500;
+      const uint64_t length = 1 + rng() % 3000;
+      reads.push_back({ReadGranularity(rng() % 3), i, {offset, length}});
+      offset += length;
+    }
+    std::shuffle(reads.begin(), reads.end(), rng);
+    const std::vector<JoinedRead> joined = joinReads(reads, link);
+    size_t parts = 0;
+    for (size_t j = 0; j < joined.size(); ++j) {
+      const FileRange& range = joined[j].read.range;
+      parts += joined[j].parts.size();
+      ReadGranularity coarsest = ReadGranularity::kObject;
+      for (size_t p = 0; p < joined[j].parts.size(); ++p) {
+        const FileRange& part = joined[j].parts[p].range;
+        EXPECT_GE(part.offset_bytes, range.offset_bytes);
+        EXPECT_LE(part.offset_bytes + part.length_bytes, range.offset_bytes + range.length_bytes);
+        if (p > 0) {
+          const FileRange& prev = joined[j].parts[p - 1].range;
+          EXPECT_LT(part.offset_bytes - (prev.offset_bytes + prev.length_bytes), 1000u);
+        }
+        coarsest = std::max(coarsest, joined[j].parts[p].granularity);
+      }
+      EXPECT_EQ(joined[j].read.granularity, coarsest);
+      if (j > 0) {
+        const FileRange& prev = joined[j - 1].read.range;
+        EXPECT_GE(range.offset_bytes - (prev.offset_bytes + prev.length_bytes), 1000u)
+            << "a gap cheaper than a round trip would have joined";
+      }
+    }
+    EXPECT_EQ(parts, reads.size());
+  }
 }
 
 TEST(IoPlan, MatchesTheBruteForceMinimumOnRandomTrees) {

@@ -4,7 +4,11 @@
 #include <tessera/scene_stream.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <mutex>
+#include <thread>
 
 #include <gtest/gtest.h>
 
@@ -61,6 +65,41 @@ SceneFrameStats settle(SceneStreamer& streamer, const PerspectiveView& camera) {
     streamer.waitForReads();
   }
   return stats;
+}
+
+// A network source with given request samples.
+class SampledSource final : public ByteSource {
+ public:
+  explicit SampledSource(std::vector<LinkSample> samples) : samples_(std::move(samples)) {}
+  uint64_t sizeBytes() const override { return 0; }
+  const std::string& name() const override { return name_; }
+  Result<void> read(uint64_t, std::span<uint8_t>) const override { return {}; }
+  std::optional<LinkStats> linkStats() const override {
+    LinkStats stats;
+    stats.recent = samples_;
+    return stats;
+  }
+
+ private:
+  std::vector<LinkSample> samples_;
+  std::string name_ = "sampled";
+};
+
+TEST(SceneStreamer, MeasuresTheLinkFromItsFirstRequest) {
+  const LinkCost fallback{0.0002, 500e6};
+  // A local file: no samples, the fallback.
+  EXPECT_EQ(measureLinkCost(SampledSource({}), fallback).latency_s, fallback.latency_s);
+  // The open's one request (1 MB: 40 ms to the first byte, then 0.4 s) is enough to plan the
+  // first frame for a 40 ms link, not for a disk.
+  const LinkCost one = measureLinkCost(SampledSource({{{}, 1000000, 0.44, 0.04}}), fallback);
+  EXPECT_DOUBLE_EQ(one.latency_s, 0.04);
+  EXPECT_NEAR(one.bandwidth_bytes_per_s, 2.5e6, 1);
+  // Latency is the median first-byte time; bandwidth all bytes over all transfer time.
+  const LinkCost three = measureLinkCost(
+      SampledSource({{{}, 100, 0.03, 0.03}, {{}, 1000000, 0.55, 0.05}, {{}, 500000, 0.45, 0.2}}),
+      fallback);
+  EXPECT_DOUBLE_EQ(three.latency_s, 0.05);
+  EXPECT_NEAR(three.bandwidth_bytes_per_s, 1500100 / 0.75, 1);
 }
 
 TEST(SceneStreamer, EveryDrawnObjectHasGeometryAndEveryTextureResident) {
@@ -170,6 +209,131 @@ TEST(SceneStreamer, ReadsOncePerPlannedRangeAtEveryGranularity) {
       EXPECT_GT(totals.reads_by_granularity[0], 0u) << "refinements read single levels";
     }
   }
+}
+
+TEST(SceneStreamer, ReadsALargeSharedNodeAsHeadAndPagesThenOnlyWhatTheViewNeeds) {
+  ScratchDir dir;
+  Opened scene = openCounted(buildCity(dir, "600:60:8"));
+  ASSERT_TRUE(scene.archive);
+  auto root = scene.archive->node(0);
+  ASSERT_TRUE(root.has_value());
+  // Shared meshes and textures live at the root (promotion); on a link where 2 KB cost more
+  // than two round trips, its block is too large to read for a corner of the city.
+  ASSERT_GT(root->own.length_bytes, 8000u) << "the generator promotes shared items to the root";
+  SceneStreamOptions options;
+  options.link = LinkCost{1e-6, 1e9};
+  auto streamer = SceneStreamer::open(scene.archive, options);
+  ASSERT_TRUE(streamer.has_value()) << streamer.error().message;
+  scene.counter->largest_read_bytes = 0;
+  PerspectiveView camera = above(scene.archive->summary(), 30);
+  camera.eye_x = scene.archive->summary().bounds.min[0] + 20;
+  const SceneFrameStats stats = settle(**streamer, camera);
+  EXPECT_LT(scene.counter->largest_read_bytes, root->own.length_bytes) << "no read of the root";
+  EXPECT_GT((*streamer)->totals().reads_by_granularity[0], 0u) << "meshes and levels by object";
+  EXPECT_EQ((*streamer)->totals().read_errors, 0u);
+  EXPECT_EQ(stats.waiting_leaves, 0u);
+  ASSERT_GT(stats.visible_objects, 0u);
+  EXPECT_EQ((*streamer)->drawableObjects().size(), stats.visible_objects);
+  for (uint32_t o : (*streamer)->drawableObjects()) {
+    const SceneObject* object = (*streamer)->object(o);
+    EXPECT_NE((*streamer)->mesh(object->mesh), nullptr) << "object " << o;
+    for (uint32_t t : object->textures) {
+      if (t == kNoTexture) continue;
+      EXPECT_LE((*streamer)->residentLevel(t), (*streamer)->wantedLevel(t));
+    }
+  }
+}
+
+// Holds every read back until the test grants it: the order of arrivals is the test's.
+class GatedSource final : public ByteSource {
+ public:
+  explicit GatedSource(std::shared_ptr<ByteSource> inner) : inner_(std::move(inner)) {}
+  uint64_t sizeBytes() const override { return inner_->sizeBytes(); }
+  const std::string& name() const override { return inner_->name(); }
+  Result<void> read(uint64_t offset, std::span<uint8_t> out) const override {
+    {
+      std::unique_lock lock(mutex_);
+      changed_.wait(lock, [&] { return open_ || granted_ > 0; });
+      if (!open_) --granted_;
+    }
+    return inner_->read(offset, out);
+  }
+  void grant(uint32_t reads) {
+    std::lock_guard lock(mutex_);
+    granted_ += reads;
+    changed_.notify_all();
+  }
+  void open() {
+    std::lock_guard lock(mutex_);
+    open_ = true;
+    changed_.notify_all();
+  }
+  void close() {
+    std::lock_guard lock(mutex_);
+    open_ = false;
+  }
+
+ private:
+  std::shared_ptr<ByteSource> inner_;
+  mutable std::mutex mutex_;  // guards granted_ and open_
+  mutable std::condition_variable changed_;
+  mutable uint32_t granted_ = 0;
+  bool open_ = true;  // while the archive and the streamer open; closed by the test
+};
+
+// Closes the gate for a scope and opens it on the way out, so that a failing test never leaves
+// workers blocked in a read when the streamer joins them.
+class GateClosed {
+ public:
+  explicit GateClosed(GatedSource& gate) : gate_(gate) { gate_.close(); }
+  ~GateClosed() { gate_.open(); }
+
+ private:
+  GatedSource& gate_;
+};
+
+TEST(SceneStreamer, AtRestAsksForTheViewsPiecesOnceItsNodeReadsHaveLanded) {
+  ScratchDir dir;
+  const std::string path = buildCity(dir, "600:60:8");
+  auto file = openFileSource(path);
+  ASSERT_TRUE(file.has_value());
+  auto gate = std::make_shared<GatedSource>(*file);
+  auto archive = SceneArchive::open(gate);
+  ASSERT_TRUE(archive.has_value()) << archive.error().message;
+  SceneStreamOptions options;
+  options.link = LinkCost{1e-6, 1e9};  // the root is read as head and pages: meshes come later
+  options.worker_threads = 1;          // reads run in the order they were queued
+  auto streamer = SceneStreamer::open(*archive, options);
+  ASSERT_TRUE(streamer.has_value()) << streamer.error().message;
+  PerspectiveView camera = above((*archive)->summary(), 120);
+  camera.eye_x = (*archive)->summary().bounds.min[0] + 60;
+  {
+    GateClosed closed(*gate);
+    const SceneFrameStats first = (**streamer).update(camera);
+    ASSERT_GE(first.reads_started, 3u) << "the root's head and pages, and leaves in 2 reads";
+    // Reads land one by one until some visible leaves are in and others wait. At rest, the
+    // meshes and levels of the leaves that landed are not asked for meanwhile.
+    SceneFrameStats now;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    for (uint32_t granted = 1; granted < first.reads_started; ++granted) {
+      gate->grant(1);
+      for (uint32_t applied = 0; applied < 1 && std::chrono::steady_clock::now() < deadline;) {
+        now = (**streamer).update(camera);
+        applied += now.results_applied;
+        EXPECT_EQ(now.reads_started, 0u) << "node reads are on their way";
+        std::this_thread::yield();
+      }
+      if (now.visible_objects > 0) break;
+    }
+    EXPECT_GT(now.visible_objects, 0u) << "some leaves landed, wanting meshes of the root";
+    EXPECT_GT(now.waiting_leaves, 0u) << "others are on their way";
+  }
+  (**streamer).waitForReads();
+  const SceneFrameStats after = (**streamer).update(camera);
+  EXPECT_GT(after.reads_started, 0u) << "the landed nodes' pieces, all in one wave";
+  const SceneFrameStats settled = settle(**streamer, camera);
+  EXPECT_EQ(settled.waiting_leaves, 0u);
+  EXPECT_EQ((**streamer).drawableObjects().size(), settled.visible_objects);
 }
 
 TEST(SceneStreamer, StaysWithinTheTexelBudgetMovingAndStill) {

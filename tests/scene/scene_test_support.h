@@ -75,9 +75,13 @@ class CountingSource : public ByteSource {
   const std::string& name() const override { return inner_->name(); }
   Result<void> read(uint64_t offset, std::span<uint8_t> out) const override {
     ++reads;
+    uint64_t largest = largest_read_bytes.load();
+    while (out.size() > largest && !largest_read_bytes.compare_exchange_weak(largest, out.size())) {
+    }
     return inner_->read(offset, out);
   }
   mutable std::atomic<uint64_t> reads{0};
+  mutable std::atomic<uint64_t> largest_read_bytes{0};  ///< the longest read; tests may reset it
 
  private:
   std::shared_ptr<ByteSource> inner_;
