@@ -21,15 +21,16 @@ inline constexpr uint32_t kMaxBuildThreads = 1024;
 
 /// An image the caller supplies row by row instead of as a file: the Python package builds from
 /// NumPy arrays (memory-mapped ones included) and iterators of row bands this way. The builder
-/// pulls rows top to bottom as it needs them, `band_rows` (or a few tiles' worth) at a time, so
-/// the source never has to hold the whole image.
+/// pulls rows top to bottom as it needs them, one band at a time: a tile row (tile_size_px
+/// rows), or `band_rows` up to four tile rows when that is more; the source never has to hold
+/// the whole image.
 struct RowSource {
   /// Names the source in messages and in the archive metadata ("source"), e.g. "array".
   std::string name;
   uint32_t width_px = 0;   ///< 1..kMaxImageSidePx
   uint32_t height_px = 0;  ///< 1..kMaxImageSidePx
   uint32_t channels = 0;   ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA; 8 bits each
-  uint32_t band_rows = 0;  ///< rows the source delivers most cheaply at once; 0 = 64
+  uint32_t band_rows = 0;  ///< rows the source delivers most cheaply at once; 0 = any
   /// Fills `out` with rows [first_row, first_row + rows), tightly packed (width_px * channels
   /// bytes per row). Called on the building thread, top to bottom, each row exactly once. An
   /// error fails the build with its message (prefixed with `name` if it does not start with it).

@@ -13,9 +13,9 @@
 namespace tessera::detail {
 namespace {
 
-/// Rows asked of a source that states no band height: a few 256-px tile rows' worth would
-/// cost memory on wide images, and 64 rows keeps the callback overhead negligible.
-constexpr uint32_t kDefaultBandRows = 64;
+/// The band height of a source that states none: the builder then reads one tile row a time
+/// (bandRowsFor), the least it can.
+constexpr uint32_t kDefaultBandRows = 1;
 
 class RowSourceReader final : public BandReader {
  public:
