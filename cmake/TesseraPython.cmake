@@ -1,12 +1,16 @@
 # Decides whether to build the Python extension (src/python) and finds what it needs:
 # TESSERA_BUILD_PYTHON AUTO builds it when pybind11 (Debian: pybind11-dev) and the Python
-# headers are found and no sanitizer is set; ON requires them; OFF skips it. Sets
+# headers are found, no sanitizer is set and Tessera is the top-level project (not an
+# add_subdirectory dependency); ON requires them; OFF skips it. Sets
 # TESSERA_PYTHON_ENABLED and, when on, Python_EXECUTABLE (the interpreter the tests run).
 #
 # Debian's /usr/bin/python3 is preferred over whatever `python3` is first on PATH (a pyenv shim,
 # say): it is the interpreter whose numpy and pytest the Debian packages install.
 set(TESSERA_PYTHON_ENABLED OFF)
-if(TESSERA_BUILD_PYTHON STREQUAL "OFF" OR (TESSERA_SANITIZE AND NOT TESSERA_BUILD_PYTHON STREQUAL "ON"))
+if(TESSERA_BUILD_PYTHON STREQUAL "OFF")
+  return()
+endif()
+if(NOT TESSERA_BUILD_PYTHON STREQUAL "ON" AND (TESSERA_SANITIZE OR NOT PROJECT_IS_TOP_LEVEL))
   return()
 endif()
 if(NOT DEFINED Python_EXECUTABLE AND EXISTS /usr/bin/python3)

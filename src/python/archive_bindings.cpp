@@ -24,10 +24,9 @@ namespace {
 /// An (height, width, channels) uint8 array over `image`'s texels, which it takes over: the
 /// buffer moves into a capsule the array keeps alive, so no byte is copied.
 py::array_t<uint8_t> toArray(Image image) {
-  auto* owned = new std::vector<uint8_t>(std::move(image.texels));
-  py::capsule owner(owned, [](void* p) { delete static_cast<std::vector<uint8_t>*>(p); });
-  const py::ssize_t h = image.height_px, w = image.width_px, c = image.channels;
-  return py::array_t<uint8_t>({h, w, c}, {w * c, c, py::ssize_t(1)}, owned->data(), owner);
+  auto* owned = new Image(std::move(image));
+  py::capsule owner(owned, [](void* p) { delete static_cast<Image*>(p); });
+  return arrayOver(*owned, std::move(owner));
 }
 
 const ImageInfo& imageAt(const Archive& archive, uint32_t image) {
