@@ -21,6 +21,7 @@ packages=(
   libmeshoptimizer-dev
   libminizip-dev libssl-dev
   gdal-bin libvips-tools
+  pybind11-dev python3-dev python3-numpy python3-pytest python3-venv
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and

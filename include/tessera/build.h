@@ -7,6 +7,7 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -18,11 +19,31 @@ namespace tessera {
 /// Most encoder threads a build accepts (BuildOptions::threads).
 inline constexpr uint32_t kMaxBuildThreads = 1024;
 
+/// An image the caller supplies row by row instead of as a file: the Python package builds from
+/// NumPy arrays (memory-mapped ones included) and iterators of row bands this way. The builder
+/// pulls rows top to bottom as it needs them, one band at a time: a tile row (tile_size_px
+/// rows), or `band_rows` up to four tile rows when that is more; the source never has to hold
+/// the whole image.
+struct RowSource {
+  /// Names the source in messages and in the archive metadata ("source"), e.g. "array".
+  std::string name;
+  uint32_t width_px = 0;   ///< 1..kMaxImageSidePx
+  uint32_t height_px = 0;  ///< 1..kMaxImageSidePx
+  uint32_t channels = 0;   ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA; 8 bits each
+  uint32_t band_rows = 0;  ///< rows the source delivers most cheaply at once; 0 = any
+  /// Fills `out` with rows [first_row, first_row + rows), tightly packed (width_px * channels
+  /// bytes per row). Called on the building thread, top to bottom, each row exactly once. An
+  /// error fails the build with its message (prefixed with `name` if it does not start with it).
+  std::function<Result<void>(uint32_t first_row, uint32_t rows, std::span<uint8_t> out)> read_rows;
+};
+
 /// Everything `tessera build` can set. Defaults are the CLI's defaults.
 struct BuildOptions {
   /// One or more sources, one image each (a scene's texture set): paths, or
   /// "synthetic:WxH[:seed[:channels]]".
   std::vector<std::string> inputs;
+  /// Images supplied by the caller (RowSource), after those of `inputs`.
+  std::vector<RowSource> row_sources;
   std::string output;           ///< the archive path; written atomically
   uint32_t tile_size_px = 256;  ///< power of two, 64..2048
   uint32_t border_px = 0;       ///< 0..16
@@ -35,7 +56,8 @@ struct BuildOptions {
   TileOrder order = TileOrder::kHilbert;
   uint32_t threads = 0;          ///< encoder threads, 0..kMaxBuildThreads; 0 = all cores
   uint32_t page_tiles_log2 = 5;  ///< directory page side in tiles, as a power of two (3..8)
-  /// Optional image names stored in metadata, one per input; default: the input's file name.
+  /// Optional image names stored in metadata, one per input (inputs, then row_sources);
+  /// default: the input's file name, or the row source's name.
   std::vector<std::string> image_names;
   /// Most memory the build may need, in bytes; 0 = defaultBuildMemoryLimitBytes(). The need is
   /// estimated from the sizes the inputs claim, after their headers are read and before any
@@ -77,7 +99,8 @@ struct BuildReport {
 /// -100..22, png and webp 0..9, ptm 0..4, none for raw, lz4 and jpeg: 0 only), tile size,
 /// border, directory page size, threads up to kMaxBuildThreads, the codec's availability, and
 /// that an output is named. kInvalidArgument (kUnsupported for a codec missing from this build)
-/// naming the value and what is accepted. buildArchive calls it first.
+/// naming the value and what is accepted; row sources without a callback or with a channel count
+/// outside 1..4. buildArchive calls it first.
 [[nodiscard]] Result<void> validateBuildOptions(const BuildOptions& options);
 
 /// Builds an archive. On any failure, and when `cancel` becomes true, nothing is left at

@@ -12,6 +12,10 @@
 
 #include <tessera/result.h>
 
+namespace tessera {
+struct RowSource;
+}  // namespace tessera
+
 namespace tessera::detail {
 
 /// What a reader knows about its image after open.
@@ -61,5 +65,8 @@ class BandReader {
 /// "16384x16384:1:3". Any size up to kMaxImageSidePx per side; 4 channels by default
 /// (no-data regions transparent), 3 for RGB (no-data filled with a flat colour).
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openSyntheticReader(const std::string& spec);
+/// A reader over the caller's callback (tessera/build.h). `source` must outlive the reader.
+/// Fails for zero or absurd dimensions, naming the source.
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openRowSourceReader(const RowSource& source);
 
 }  // namespace tessera::detail

@@ -59,7 +59,8 @@ Result<void> validateGeometry(const BuildOptions& options) {
 }  // namespace
 
 Result<void> validateBuildOptions(const BuildOptions& options) {
-  if (options.inputs.empty()) return fail(ErrorCode::kInvalidArgument, "no input given");
+  if (options.inputs.empty() && options.row_sources.empty())
+    return fail(ErrorCode::kInvalidArgument, "no input given");
   if (options.output.empty()) return fail(ErrorCode::kInvalidArgument, "no output path given");
   if (options.quality < 1 || options.quality > 100)
     return fail(ErrorCode::kInvalidArgument,
@@ -77,8 +78,15 @@ Result<void> validateBuildOptions(const BuildOptions& options) {
     return fail(ErrorCode::kInvalidArgument,
                 "codec ptm stores the integer floor-average pyramid of Marvie & Bouatouch; it "
                 "cannot average in linear light (--srgb)");
-  if (options.image_names.size() > options.inputs.size())
+  if (options.image_names.size() > options.inputs.size() + options.row_sources.size())
     return fail(ErrorCode::kInvalidArgument, "more image names than inputs");
+  for (const RowSource& source : options.row_sources) {
+    if (!source.read_rows)
+      return fail(ErrorCode::kInvalidArgument, source.name + ": row source without a callback");
+    if (source.channels < 1 || source.channels > 4)
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: {} channels out of 1..4", source.name, source.channels));
+  }
   for (const std::string& input : options.inputs) {
     if (std::filesystem::path(input).lexically_normal() ==
         std::filesystem::path(options.output).lexically_normal())

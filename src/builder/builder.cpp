@@ -344,16 +344,24 @@ std::string displayName(const std::string& input) {
 /// The build's sources, opened, with the images they become.
 struct OpenedSources {
   std::vector<std::unique_ptr<BandReader>> readers;
-  std::vector<ImageInfo> infos;  ///< one per reader, level_count set
-  uint64_t pixels_total = 0;     ///< level-0 pixels of every image
+  std::vector<ImageInfo> infos;    ///< one per reader, level_count set
+  std::vector<std::string> names;  ///< one per reader: the input path or the row source's name
+  uint64_t pixels_total = 0;       ///< level-0 pixels of every image
 };
 
-/// Opens every source first: bad inputs fail before any output exists, and progress knows the
-/// total.
+/// Opens every source first (files, then the caller's row sources): bad inputs fail before any
+/// output exists, and progress knows the total.
 Result<OpenedSources> openSources(const BuildOptions& options) {
   OpenedSources sources;
-  for (size_t i = 0; i < options.inputs.size(); ++i) {
-    TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(options.inputs[i]));
+  const size_t count = options.inputs.size() + options.row_sources.size();
+  for (size_t i = 0; i < count; ++i) {
+    const bool is_file = i < options.inputs.size();
+    const std::string& name =
+        is_file ? options.inputs[i] : options.row_sources[i - options.inputs.size()].name;
+    TESSERA_ASSIGN_OR_RETURN(
+        std::unique_ptr<BandReader> reader,
+        is_file ? openBandReader(name)
+                : openRowSourceReader(options.row_sources[i - options.inputs.size()]));
     const SourceInfo& source = reader->info();
     ImageInfo info;
     info.width_px = source.width_px;
@@ -364,13 +372,15 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
     info.page_tiles_log2 = options.page_tiles_log2;
     info.default_codec = options.codec;
     info.srgb_downsample = options.srgb_downsample;
-    info.name =
-        i < options.image_names.size() ? options.image_names[i] : displayName(options.inputs[i]);
-    TESSERA_TRY(validateImageInfo(info, options.inputs[i]));
+    info.name = i < options.image_names.size() ? options.image_names[i]
+                : is_file                      ? displayName(name)
+                                               : name;
+    TESSERA_TRY(validateImageInfo(info, name));
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
     sources.pixels_total += uint64_t(info.width_px) * info.height_px;
     sources.readers.push_back(std::move(reader));
     sources.infos.push_back(info);
+    sources.names.push_back(name);
   }
   return sources;
 }
@@ -424,13 +434,14 @@ struct PoolDrain {
 
 /// Streams image `index` band by band through the pyramid into the encoders and returns its
 /// metadata; every tile is encoded into `spooled` when it returns.
-Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, const ImageInfo& info,
-                                   BandReader& reader, SpooledImage& spooled, EncodeStage& stage) {
+Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::string& source_name,
+                                   const ImageInfo& info, BandReader& reader, SpooledImage& spooled,
+                                   EncodeStage& stage) {
   spooled.info = info;
   spooled.entries.resize(info.level_count);
   for (uint32_t l = 0; l < info.level_count; ++l)
     spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
-  EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, options.inputs[index]);
+  EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
   const uint32_t band_rows = bandRowsFor(info, reader.info());
   const size_t row_bytes = size_t(info.width_px) * info.channels;
@@ -450,7 +461,7 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, size_t index, co
     TESSERA_CHECK(spooled.entries[l].size() == size_t(info.tilesX(l)) * info.tilesY(l))
         << "level " << l << " has tile rows the pyramid never announced";
   stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
-  return imageMetadata(info, options.inputs[index], reader.info(), sink.statistics);
+  return imageMetadata(info, source_name, reader.info(), sink.statistics);
 }
 
 /// The archive's metadata: the format, the build's options and each image's entry.
@@ -490,9 +501,9 @@ Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& 
   TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
   EncodeStage stage{context, pool, buffers, progress, cancel};
   for (uint32_t i = 0; i < sources.infos.size(); ++i) {
-    TESSERA_ASSIGN_OR_RETURN(
-        nlohmann::json meta,
-        encodeImage(options, i, sources.infos[i], *sources.readers[i], spooled[i], stage));
+    TESSERA_ASSIGN_OR_RETURN(nlohmann::json meta,
+                             encodeImage(options, sources.names[i], sources.infos[i],
+                                         *sources.readers[i], spooled[i], stage));
     image_metadata.push_back(std::move(meta));
   }
   pool.waitIdle();
@@ -525,7 +536,7 @@ Result<BuildBudget> checkBudget(const BuildOptions& options, const OpenedSources
                                  : fmt::format("the default: half of the {} this machine has",
                                                formatByteCount(usableMemoryBytes()));
   TESSERA_TRY(checkMemoryBudget(budget.memory, budget.memory_limit_bytes, origin, sources.infos,
-                                options.inputs));
+                                sources.names));
   budget.spool_dir = options.spool_dir.empty() ? directoryOf(options.output) : options.spool_dir;
   return budget;
 }

@@ -1,0 +1,143 @@
+"""tessera.build: archives from files, NumPy arrays (memory-mapped ones included, or anything
+sliceable by rows with a `shape`, such as zarr and dask arrays) and iterators of row bands.
+
+The builder pulls rows top to bottom as it needs them, a band of `band_rows` rows at a time,
+through a filler's fill(first_row, out): an array-like is sliced by rows, so only one band of it
+is in memory at once; an iterator is consumed band by band."""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable, Iterable, Optional, Sequence
+
+import numpy as np
+
+from . import _tessera
+
+
+def _channels_of(shape: Sequence[int], name: str) -> int:
+    if len(shape) == 2:
+        return 1
+    if len(shape) == 3 and 1 <= shape[2] <= 4:
+        return int(shape[2])
+    raise ValueError(f"{name}: shape {tuple(shape)} is not (height, width) or "
+                     "(height, width, channels) with 1..4 channels")
+
+
+class _ArrayFiller:
+    """Rows of an array-like (ndarray, np.memmap, zarr, dask: `shape` and row slicing)."""
+
+    def __init__(self, array: Any, name: str, band_rows: int):
+        dtype = getattr(array, "dtype", None)
+        if dtype is not None and np.dtype(dtype) != np.uint8:
+            raise TypeError(f"{name}: dtype {dtype} is not uint8 (Tessera stores 8-bit texels)")
+        self.array = array
+        self.name = name
+        self.height, self.width = int(array.shape[0]), int(array.shape[1])
+        self.channels = _channels_of(array.shape, name)
+        self.band_rows = band_rows
+
+    def fill(self, first_row: int, out: np.ndarray) -> None:
+        rows = np.asarray(self.array[first_row:first_row + out.shape[0]], dtype=np.uint8)
+        out[...] = rows.reshape(out.shape)
+
+
+class _BandFiller:
+    """Rows of an iterator of row bands: arrays of shape (rows, width[, channels]), any number
+    of rows each. The image's shape must be given up front (the pyramid's levels depend on it)."""
+
+    def __init__(self, bands: Iterable, shape: Sequence[int], name: str, band_rows: int):
+        self.bands = iter(bands)
+        self.name = name
+        self.height, self.width = int(shape[0]), int(shape[1])
+        self.channels = _channels_of(shape, name)
+        self.band_rows = band_rows
+        self._pending: Optional[np.ndarray] = None  # rows of the last band not yet handed on
+
+    def _next_band(self, row: int) -> np.ndarray:
+        try:
+            band = np.asarray(next(self.bands))
+        except StopIteration:
+            raise ValueError(f"{self.name}: the bands ended at row {row} of {self.height}") from None
+        if band.dtype != np.uint8:
+            raise TypeError(f"{self.name}: band at row {row} has dtype {band.dtype}, not uint8")
+        expected = (self.width,) if self.channels == 1 and band.ndim == 2 else (
+            self.width, self.channels)
+        if band.ndim not in (2, 3) or band.shape[1:] != expected:
+            raise ValueError(f"{self.name}: band at row {row} has shape {band.shape}, rows of "
+                             f"{self.width} px x {self.channels} channel(s) expected")
+        return band.reshape(band.shape[0], self.width, self.channels)
+
+    def fill(self, first_row: int, out: np.ndarray) -> None:
+        done = 0
+        while done < out.shape[0]:
+            if self._pending is None or len(self._pending) == 0:
+                self._pending = self._next_band(first_row + done)
+            take = min(out.shape[0] - done, len(self._pending))
+            out[done:done + take] = self._pending[:take]
+            self._pending = self._pending[take:]
+            done += take
+        if first_row + done == self.height:
+            self._check_exhausted()
+
+    def _check_exhausted(self) -> None:
+        extra = len(self._pending) if self._pending is not None else 0
+        if extra == 0:
+            following = next(self.bands, None)
+            extra = 0 if following is None else len(np.asarray(following))
+        if extra:
+            raise ValueError(f"{self.name}: the bands hold more than the {self.height} rows "
+                             "of the shape given")
+
+
+def _is_array_like(source: Any) -> bool:
+    return hasattr(source, "shape") and hasattr(source, "__getitem__")
+
+
+def _filler(source: Any, index: int, shape, name: Optional[str], band_rows: int):
+    label = name or ("array" if index == 0 else f"array{index}")
+    if _is_array_like(source):
+        return _ArrayFiller(source, label, band_rows)
+    if shape is None:
+        raise ValueError("building from an iterator of row bands needs shape=(height, width"
+                         "[, channels])")
+    return _BandFiller(source, shape, name or "bands", band_rows)
+
+
+_CODEC_DEFAULT = "jpeg"
+
+
+def build(source: Any, out: "str | os.PathLike", *, tile_size: int = 256, border: int = 0,
+          codec: str = _CODEC_DEFAULT, quality: int = 85, effort: int = 0,
+          chroma_subsampling: bool = True, srgb_downsample: bool = False,
+          order: str = "hilbert", threads: int = 0, page_tiles_log2: int = 5,
+          image_names: Optional[Sequence[str]] = None, memory_limit: int = 0,
+          spool_dir: "str | os.PathLike" = "", shape: Optional[Sequence[int]] = None,
+          band_rows: int = 0, name: Optional[str] = None,
+          progress: Optional[Callable[[dict], None]] = None) -> _tessera.BuildReport:
+    """Builds the archive `out` from `source`, with the options of ``tessera build``
+    (docs/cli.md): a path (or "synthetic:WxH[:seed[:channels]]"), a uint8 array-like of shape
+    (height, width) or (height, width, channels), an iterator of row bands (with `shape`), or a
+    list of those, one image each. Writes atomically: on any error nothing is left at `out`.
+    progress(dict(pixels_done, pixels_total, tiles_written, elapsed_s)) is called about every
+    100 ms and at the end; an exception it raises (or Ctrl-C) cancels the build and is raised.
+    The default codec is the CLI's (jpeg, lossy); use png, zstd, lz4, webp or raw for exact
+    texels. Returns the BuildReport."""
+    sources = list(source) if isinstance(source, (list, tuple)) else [source]
+    inputs, fillers = [], []
+    for index, item in enumerate(sources):
+        if isinstance(item, (str, os.PathLike)):
+            if fillers:
+                raise ValueError("list files before arrays and iterators (images keep that order)")
+            inputs.append(os.fspath(item))
+        else:
+            fillers.append(_filler(item, len(fillers), shape, name, band_rows))
+    options = {
+        "output": os.fspath(out), "inputs": inputs, "tile_size": tile_size, "border": border,
+        "codec": codec, "quality": quality, "effort": effort,
+        "chroma_subsampling": chroma_subsampling, "srgb_downsample": srgb_downsample,
+        "order": order, "threads": threads, "page_tiles_log2": page_tiles_log2,
+        "image_names": list(image_names or []), "memory_limit": memory_limit,
+        "spool_dir": os.fspath(spool_dir),
+    }
+    return _tessera.build(options, fillers, progress)
