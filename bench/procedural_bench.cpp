@@ -2,9 +2,12 @@
 //   setup DB --images DIR --size WxH --count N [--seed S]   brushes cut from real pictures
 //                                                           (bench/procedural_data.sh fetches
 //                                                           them) and a generated instance set
-//   composite --images DIR [--seconds S]                    tiles/s per core at 10, 100 and
+//   composite --images DIR [--seconds S] [--gpu]            tiles/s per core at 10, 100 and
 //                                                           1000 instances per tile, beside
-//                                                           JPEG decode of the same tiles
+//                                                           JPEG decode of the same tiles;
+//                                                           --gpu adds the GPU compositor on
+//                                                           a headless context (llvmpipe
+//                                                           here: a CPU, all of its cores)
 //   query DB [--tiles N] [--level L]                        spatial query time per tile
 // DB is an SQLite file or a PostGIS connection string.
 #include <algorithm>
@@ -19,6 +22,7 @@
 #include <fmt/format.h>
 
 #include <tessera/brushes.h>
+#include <tessera/gl.h>
 #include <tessera/procedural.h>
 #include <tessera/procedural_build.h>
 
@@ -151,10 +155,61 @@ std::vector<BrushInstance> tileInstances(uint32_t n, uint32_t brush_count, std::
   return instances;
 }
 
+bool hasFlag(int argc, char** argv, const char* name) {
+  for (int i = 2; i < argc; ++i)
+    if (std::strcmp(argv[i], name) == 0) return true;
+  return false;
+}
+
+/// Tiles per second of `composite` over `seconds`, cycling through `count` tiles.
+template <typename Composite>
+double rate(double seconds, size_t count, Composite composite) {
+  uint64_t done = 0;
+  const auto start = Clock::now();
+  while (std::chrono::duration<double>(Clock::now() - start).count() < seconds) {
+    composite(done % count);
+    ++done;
+  }
+  return done / std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// The GPU compositor on the same tiles, raw and as paged, and the largest difference from
+/// the CPU compositor over them.
+void runGpuComposite(GpuCompositor& gpu, uint32_t n, double seconds,
+                     const std::vector<std::vector<BrushInstance>>& tiles,
+                     const std::vector<detail::TileAnalysis>& analysed, double decode_rate) {
+  const TileGeometry geometry{0, 0, 0, 256, 0, 256, 256};
+  Image out, cpu;
+  uint32_t max_difference = 0;
+  for (const auto& instances : tiles) {
+    check(gpu.compositeTile(geometry, instances, out));
+    check(compositeTile(gpu.brushSet(), geometry, instances, cpu));
+    for (size_t i = 0; i < out.texels.size(); ++i)
+      max_difference =
+          std::max<uint32_t>(max_difference, uint32_t(std::abs(out.texels[i] - cpu.texels[i])));
+  }
+  const double raw = rate(seconds, tiles.size(),
+                          [&](size_t t) { check(gpu.compositeTile(geometry, tiles[t], out)); });
+  const double paged = rate(seconds, analysed.size(), [&](size_t t) {
+    check(gpu.compositeTile(geometry, analysed[t].kept, out, analysed[t].clips));
+  });
+  std::printf(
+      "%-10u GPU: %8.1f tiles/s raw (%5.1f%% of JPEG decode), %8.1f as paged (%5.1f%%), "
+      "max |gpu - cpu| %u\n",
+      n, raw, 100 * raw / decode_rate, paged, 100 * paged / decode_rate, max_difference);
+}
+
 int runComposite(int argc, char** argv) {
   const double seconds = std::stod(argument(argc, argv, "--seconds", "2"));
   auto set = check(
       BrushSet::prepare(realBrushes(argument(argc, argv, "--images", nullptr)), {}, 256, 256));
+  std::unique_ptr<GlContext> context;
+  std::unique_ptr<GpuCompositor> gpu;
+  if (hasFlag(argc, argv, "--gpu")) {
+    context = check(GlContext::createHeadless());
+    gpu = check(GpuCompositor::create(set));
+    std::printf("GPU compositor on %s\n", context->description().c_str());
+  }
   std::mt19937_64 rng(1);
   std::printf("%-10s %12s %12s %12s %8s %14s %8s %8s\n", "instances", "tiles/s", "JPEG dec/s",
               "ratio", "us/tile", "analysed t/s", "ratio", "kept");
@@ -209,6 +264,7 @@ int runComposite(int argc, char** argv) {
     std::printf("%-10u %12.0f %12.0f %11.0f%% %8.0f %14.0f %7.0f%% %8.1f\n", n, composite_rate,
                 decode_rate, 100 * composite_rate / decode_rate, 1e6 / composite_rate, paged_rate,
                 100 * paged_rate / decode_rate, double(kept) / tiles.size());
+    if (gpu) runGpuComposite(*gpu, n, seconds, tiles, analysed, decode_rate);
   }
   return 0;
 }
@@ -259,7 +315,7 @@ int main(int argc, char** argv) {
   if (command == "query" && argc > 2) return tessera::runQuery(argc, argv);
   std::fprintf(stderr,
                "usage: tessera-procedural-bench setup DB --images DIR --size WxH --count N "
-               "[--seed S] | composite --images DIR [--seconds S] | query DB [--tiles N] "
+               "[--seed S] | composite --images DIR [--seconds S] [--gpu] | query DB [--tiles N] "
                "[--level L]\n");
   return 2;
 }
