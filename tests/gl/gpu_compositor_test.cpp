@@ -13,20 +13,10 @@
 #include <tessera/procedural.h>
 
 #include "../procedural/procedural_fixtures.h"
+#include "gl_test_context.h"
 
 namespace tessera {
 namespace {
-
-GlContext& sharedContext() {
-  static std::unique_ptr<GlContext> context = [] {
-    auto created = GlContext::createHeadless();
-    EXPECT_TRUE(created) << created.error().message;
-    return created ? std::move(*created) : nullptr;
-  }();
-  if (!context) throw std::runtime_error("no headless OpenGL context");
-  context->makeCurrent();
-  return *context;
-}
 
 /// Differences per channel between the GPU and CPU tiles: histogram[d] counts channel values
 /// that differ by d (the last bin by 3 or more).
@@ -51,10 +41,16 @@ struct Difference {
   }
 };
 
-std::shared_ptr<const BrushSet> testSet(uint32_t w, uint32_t h) {
+/// The fixtures' brushes (every blend mode, masked ones over a height layer) for a w x h
+/// texture, and a GPU compositor of them on the shared context; null (test failed) on error.
+std::unique_ptr<GpuCompositor> testCompositor(uint32_t w, uint32_t h) {
+  test::sharedGlContext();
   auto set = BrushSet::prepare(testing::testBrushes(), {testing::heightLayer(w / 4, h / 4)}, w, h);
   EXPECT_TRUE(set) << set.error().message;
-  return set ? *set : nullptr;
+  if (!set) return nullptr;
+  auto gpu = GpuCompositor::create(*set);
+  EXPECT_TRUE(gpu) << gpu.error().message;
+  return gpu ? std::move(*gpu) : nullptr;
 }
 
 /// Composites every tile of every level of a w x h texture (64-px tiles, `border`) on both
@@ -80,12 +76,10 @@ void compareEveryTile(GpuCompositor& gpu, const std::vector<BrushInstance>& inst
 }
 
 TEST(GpuCompositor, EveryLevelWithinOneOfTheCpu) {
-  sharedContext();
   const uint32_t w = 300, h = 200;
-  auto set = testSet(w, h);
-  ASSERT_TRUE(set);
-  auto gpu = GpuCompositor::create(set);
-  ASSERT_TRUE(gpu) << gpu.error().message;
+  std::unique_ptr<GpuCompositor> gpu = testCompositor(w, h);
+  ASSERT_TRUE(gpu);
+  const BrushSet* set = &gpu->brushSet();
   Difference difference;
   size_t tiles = 0;
   {
@@ -94,7 +88,7 @@ TEST(GpuCompositor, EveryLevelWithinOneOfTheCpu) {
         testing::randomInstances(200, w, h, uint32_t(set->brushes().size()), seed);
     std::sort(instances.begin(), instances.end(), drawsBefore);
     for (uint32_t border : {0u, 3u})
-      compareEveryTile(**gpu, instances, w, h, border, difference, &tiles);
+      compareEveryTile(*gpu, instances, w, h, border, difference, &tiles);
   }
   std::printf("GPU compositor, %zu tiles: %s\n", tiles, difference.text().c_str());
   ::testing::Test::RecordProperty("histogram", difference.text());
@@ -105,12 +99,10 @@ TEST(GpuCompositor, EveryLevelWithinOneOfTheCpu) {
 }
 
 TEST(GpuCompositor, EachBlendModeAloneWithinOneOfTheCpu) {
-  sharedContext();
   const uint32_t w = 160, h = 130;
-  auto set = testSet(w, h);
-  ASSERT_TRUE(set);
-  auto gpu = GpuCompositor::create(set);
-  ASSERT_TRUE(gpu) << gpu.error().message;
+  std::unique_ptr<GpuCompositor> gpu = testCompositor(w, h);
+  ASSERT_TRUE(gpu);
+  const BrushSet* set = &gpu->brushSet();
   std::vector<BrushInstance> all =
       testing::randomInstances(200, w, h, uint32_t(set->brushes().size()), 5);
   // Each brush (normal, multiply, add, overlay, slope- and height-masked) over the opaque base.
@@ -124,7 +116,7 @@ TEST(GpuCompositor, EachBlendModeAloneWithinOneOfTheCpu) {
     std::sort(instances.begin(), instances.end(), drawsBefore);
     Difference difference;
     size_t tiles = 0;
-    compareEveryTile(**gpu, instances, w, h, 1, difference, &tiles);
+    compareEveryTile(*gpu, instances, w, h, 1, difference, &tiles);
     std::printf("brush %s (%s): %s\n", set->brushes()[brush].name.c_str(),
                 blendModeName(set->brushes()[brush].blend), difference.text().c_str());
     EXPECT_LE(difference.max, 1u) << set->brushes()[brush].name << ": " << difference.text();
@@ -132,12 +124,10 @@ TEST(GpuCompositor, EachBlendModeAloneWithinOneOfTheCpu) {
 }
 
 TEST(GpuCompositor, ClipsAsTheCpuDoes) {
-  sharedContext();
   const uint32_t w = 128, h = 128;
-  auto set = testSet(w, h);
-  ASSERT_TRUE(set);
-  auto gpu = GpuCompositor::create(set);
-  ASSERT_TRUE(gpu) << gpu.error().message;
+  std::unique_ptr<GpuCompositor> gpu = testCompositor(w, h);
+  ASSERT_TRUE(gpu);
+  const BrushSet* set = &gpu->brushSet();
   std::vector<BrushInstance> instances =
       testing::randomInstances(120, w, h, uint32_t(set->brushes().size()), 9);
   std::sort(instances.begin(), instances.end(), drawsBefore);
@@ -150,22 +140,20 @@ TEST(GpuCompositor, ClipsAsTheCpuDoes) {
   const TileGeometry tile{0, 0, 0, 64, 2, w, h};
   Image on_gpu, on_cpu;
   ASSERT_TRUE(compositeTile(*set, tile, instances, on_cpu, clips));
-  ASSERT_TRUE((*gpu)->compositeTile(tile, instances, on_gpu, clips));
+  ASSERT_TRUE(gpu->compositeTile(tile, instances, on_gpu, clips));
   Difference difference;
   difference.add(on_gpu, on_cpu);
   EXPECT_LE(difference.max, 1u) << difference.text();
   // The clips mattered: without them the tile differs.
   Image unclipped;
-  ASSERT_TRUE((*gpu)->compositeTile(tile, instances, unclipped));
+  ASSERT_TRUE(gpu->compositeTile(tile, instances, unclipped));
   EXPECT_NE(unclipped.texels, on_gpu.texels);
 }
 
 TEST(GpuCompositor, MissingBrushIsAnErrorNotAPicture) {
-  sharedContext();
-  auto set = testSet(64, 64);
-  ASSERT_TRUE(set);
-  auto gpu = GpuCompositor::create(set);
-  ASSERT_TRUE(gpu) << gpu.error().message;
+  std::unique_ptr<GpuCompositor> gpu = testCompositor(64, 64);
+  ASSERT_TRUE(gpu);
+  const BrushSet* set = &gpu->brushSet();
   BrushInstance instance;
   instance.id = 1;
   instance.brush = uint32_t(set->brushes().size());
@@ -174,7 +162,7 @@ TEST(GpuCompositor, MissingBrushIsAnErrorNotAPicture) {
   instance.radius_px = 10;
   Image out;
   Result<void> composited =
-      (*gpu)->compositeTile({0, 0, 0, 64, 0, 64, 64}, std::span(&instance, 1), out);
+      gpu->compositeTile({0, 0, 0, 64, 0, 64, 64}, std::span(&instance, 1), out);
   ASSERT_FALSE(composited);
   EXPECT_EQ(composited.error().code, ErrorCode::kCorrupt);
 }
