@@ -83,4 +83,10 @@ class GpuCompositor {
   std::unique_ptr<Impl> impl_;
 };
 
+/// A TileCompositor (tessera/procedural.h) that composites on the GPU, for
+/// Archive::setTileCompositor: a thread of its own holding a headless context and one
+/// GpuCompositor per brush set; the threads that decode tiles (the loader pool) wait for their
+/// tile, the render thread never calls it. Fails (kUnsupported) naming what is missing.
+[[nodiscard]] Result<std::shared_ptr<TileCompositor>> createGpuTileCompositor();
+
 }  // namespace tessera

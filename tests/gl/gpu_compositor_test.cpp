@@ -4,16 +4,23 @@
 // printed and recorded.
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
+#include <thread>
 
 #include <gtest/gtest.h>
 
+#include <tessera/archive.h>
+#include <tessera/brushes.h>
+#include <tessera/procedural_build.h>
 #include <tessera/gl.h>
 #include <tessera/procedural.h>
 
 #include "../procedural/procedural_fixtures.h"
 #include "gl_test_context.h"
+#include "support/test_images.h"
 
 namespace tessera {
 namespace {
@@ -165,6 +172,73 @@ TEST(GpuCompositor, MissingBrushIsAnErrorNotAPicture) {
       gpu->compositeTile({0, 0, 0, 64, 0, 64, 64}, std::span(&instance, 1), out);
   ASSERT_FALSE(composited);
   EXPECT_EQ(composited.error().code, ErrorCode::kCorrupt);
+}
+
+// A mixed archive read through the GPU tile compositor (Archive::setTileCompositor): every
+// procedural tile, read from two threads at once, within 1 of the CPU's.
+TEST(GpuTileCompositor, ArchiveCompositesProceduralTilesOnTheGpu) {
+  const std::string dir = test::testTempDir();
+  const uint32_t w = 300, h = 200;
+  {
+    auto db = openSqliteBrushDatabase(dir + "world.sqlite", true);
+    ASSERT_TRUE(db) << db.error().message;
+    ASSERT_TRUE((*db)->setTextureExtent({w, h}));
+    std::vector<Brush> brushes = testing::testBrushes();
+    brushes.resize(5);  // no masks: no base layer
+    for (const Brush& brush : brushes) ASSERT_TRUE((*db)->addBrush(brush));
+    ASSERT_TRUE((*db)->addInstances(testing::randomInstances(150, w, h, 5, 11)));
+  }
+  ProceduralBuildOptions options;
+  options.database = dir + "world.sqlite";
+  options.output = dir + "mixed.tess";
+  options.tile_size_px = 64;
+  options.border_px = 1;
+  options.codec = Codec::kZstd;
+  options.threads = 2;
+  ASSERT_TRUE(buildProceduralArchive(options));
+  auto archive = Archive::openFile(options.output);
+  ASSERT_TRUE(archive) << archive.error().message;
+  auto compositor = createGpuTileCompositor();
+  ASSERT_TRUE(compositor) << compositor.error().message;
+  std::vector<TileId> procedural;
+  const ImageInfo& info = (*archive)->images()[0];
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    for (uint32_t y = 0; y < info.tilesY(level); ++y)
+      for (uint32_t x = 0; x < info.tilesX(level); ++x)
+        if ((*(*archive)->tileEntry({0, level, x, y})).kind == TileKind::kProcedural)
+          procedural.push_back({0, level, x, y});
+  ASSERT_FALSE(procedural.empty());
+  std::vector<Image> on_cpu;
+  for (const TileId& id : procedural) on_cpu.push_back(*(*archive)->readTile(id));
+  // Counts the tiles handed to the GPU: the archive must composite through it.
+  struct Counting final : TileCompositor {
+    std::shared_ptr<TileCompositor> gpu;
+    std::atomic<size_t> calls{0};
+    Result<void> composite(const std::shared_ptr<const BrushSet>& brushes, const TileGeometry& tile,
+                           std::span<const BrushInstance> instances,
+                           std::span<const TileClip> clips, Image& out) override {
+      ++calls;
+      return gpu->composite(brushes, tile, instances, clips, out);
+    }
+  };
+  auto counting = std::make_shared<Counting>();
+  counting->gpu = *compositor;
+  (*archive)->setTileCompositor(counting);
+  std::vector<Image> on_gpu(procedural.size());
+  auto read = [&](size_t first) {
+    for (size_t i = first; i < procedural.size(); i += 2) {
+      auto tile = (*archive)->readTile(procedural[i]);
+      if (tile) on_gpu[i] = std::move(*tile);
+    }
+  };
+  std::thread other(read, 1);
+  read(0);
+  other.join();
+  Difference difference;
+  for (size_t i = 0; i < procedural.size(); ++i) difference.add(on_gpu[i], on_cpu[i]);
+  EXPECT_EQ(counting->calls.load(), procedural.size());
+  EXPECT_LE(difference.max, 1u) << difference.text();
+  std::filesystem::remove_all(dir);
 }
 
 }  // namespace
