@@ -2,10 +2,18 @@
 //   setup DB --images DIR --size WxH --count N [--seed S]   brushes cut from real pictures
 //                                                           (bench/procedural_data.sh fetches
 //                                                           them) and a generated instance set
-//   composite --images DIR [--seconds S]                    tiles/s per core at 10, 100 and
+//   composite --images DIR [--seconds S] [--gpu]            tiles/s per core at 10, 100 and
 //                                                           1000 instances per tile, beside
-//                                                           JPEG decode of the same tiles
+//                                                           JPEG decode of the same tiles;
+//                                                           --gpu adds the GPU compositor on
+//                                                           a headless context (llvmpipe
+//                                                           here: a CPU, all of its cores)
 //   query DB [--tiles N] [--level L]                        spatial query time per tile
+//   storage DB --out DIR [--qualities Q,Q...] [--threads N] [--frame-budget-ms MS]
+//                                                           the mixed archive's size against
+//                                                           baked-only JPEG archives of the same
+//                                                           pixels, at the PSNR of its baked
+//                                                           tiles (docs/procedural.md)
 // DB is an SQLite file or a PostGIS connection string.
 #include <algorithm>
 #include <chrono>
@@ -13,12 +21,15 @@
 #include <cstdio>
 #include <cstring>
 #include <random>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include <fmt/format.h>
 
+#include <tessera/archive.h>
 #include <tessera/brushes.h>
+#include <tessera/gl.h>
 #include <tessera/procedural.h>
 #include <tessera/procedural_build.h>
 
@@ -151,10 +162,61 @@ std::vector<BrushInstance> tileInstances(uint32_t n, uint32_t brush_count, std::
   return instances;
 }
 
+bool hasFlag(int argc, char** argv, const char* name) {
+  for (int i = 2; i < argc; ++i)
+    if (std::strcmp(argv[i], name) == 0) return true;
+  return false;
+}
+
+/// Tiles per second of `composite` over `seconds`, cycling through `count` tiles.
+template <typename Composite>
+double rate(double seconds, size_t count, Composite composite) {
+  uint64_t done = 0;
+  const auto start = Clock::now();
+  while (std::chrono::duration<double>(Clock::now() - start).count() < seconds) {
+    composite(done % count);
+    ++done;
+  }
+  return done / std::chrono::duration<double>(Clock::now() - start).count();
+}
+
+/// The GPU compositor on the same tiles, raw and as paged, and the largest difference from
+/// the CPU compositor over them.
+void runGpuComposite(GpuCompositor& gpu, uint32_t n, double seconds,
+                     const std::vector<std::vector<BrushInstance>>& tiles,
+                     const std::vector<detail::TileAnalysis>& analysed, double decode_rate) {
+  const TileGeometry geometry{0, 0, 0, 256, 0, 256, 256};
+  Image out, cpu;
+  uint32_t max_difference = 0;
+  for (const auto& instances : tiles) {
+    check(gpu.compositeTile(geometry, instances, out));
+    check(compositeTile(gpu.brushSet(), geometry, instances, cpu));
+    for (size_t i = 0; i < out.texels.size(); ++i)
+      max_difference =
+          std::max<uint32_t>(max_difference, uint32_t(std::abs(out.texels[i] - cpu.texels[i])));
+  }
+  const double raw = rate(seconds, tiles.size(),
+                          [&](size_t t) { check(gpu.compositeTile(geometry, tiles[t], out)); });
+  const double paged = rate(seconds, analysed.size(), [&](size_t t) {
+    check(gpu.compositeTile(geometry, analysed[t].kept, out, analysed[t].clips));
+  });
+  std::printf(
+      "%-10u GPU: %8.1f tiles/s raw (%5.1f%% of JPEG decode), %8.1f as paged (%5.1f%%), "
+      "max |gpu - cpu| %u\n",
+      n, raw, 100 * raw / decode_rate, paged, 100 * paged / decode_rate, max_difference);
+}
+
 int runComposite(int argc, char** argv) {
   const double seconds = std::stod(argument(argc, argv, "--seconds", "2"));
   auto set = check(
       BrushSet::prepare(realBrushes(argument(argc, argv, "--images", nullptr)), {}, 256, 256));
+  std::unique_ptr<GlContext> context;
+  std::unique_ptr<GpuCompositor> gpu;
+  if (hasFlag(argc, argv, "--gpu")) {
+    context = check(GlContext::createHeadless());
+    gpu = check(GpuCompositor::create(set));
+    std::printf("GPU compositor on %s\n", context->description().c_str());
+  }
   std::mt19937_64 rng(1);
   std::printf("%-10s %12s %12s %12s %8s %14s %8s %8s\n", "instances", "tiles/s", "JPEG dec/s",
               "ratio", "us/tile", "analysed t/s", "ratio", "kept");
@@ -209,6 +271,7 @@ int runComposite(int argc, char** argv) {
     std::printf("%-10u %12.0f %12.0f %11.0f%% %8.0f %14.0f %7.0f%% %8.1f\n", n, composite_rate,
                 decode_rate, 100 * composite_rate / decode_rate, 1e6 / composite_rate, paged_rate,
                 100 * paged_rate / decode_rate, double(kept) / tiles.size());
+    if (gpu) runGpuComposite(*gpu, n, seconds, tiles, analysed, decode_rate);
   }
   return 0;
 }
@@ -249,6 +312,115 @@ int runQuery(int argc, char** argv) {
   return 0;
 }
 
+/// Squared error and channel values compared, for a PSNR.
+struct ErrorSum {
+  double squared = 0;
+  uint64_t values = 0;
+  double psnr() const {
+    if (values == 0) return 0;
+    const double mse = squared / double(values);
+    return mse == 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / mse);
+  }
+};
+
+/// Every tile of `archive` against the same tile of `reference` (the composited pixels, baked
+/// losslessly): the error over all tiles, and over the tiles `archive` stores encoded.
+void compareArchives(const Archive& archive, const Archive& reference, ErrorSum* all,
+                     ErrorSum* encoded) {
+  const ImageInfo& info = reference.images()[0];
+  CodecScratch scratch;
+  for (uint32_t level = 0; level < info.level_count; ++level) {
+    for (uint32_t y = 0; y < info.tilesY(level); ++y) {
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+        const TileId id{0, level, x, y};
+        const Image a = check(archive.readTile(id, &scratch));
+        const Image r = check(reference.readTile(id, &scratch));
+        if (a.texels.size() != r.texels.size()) die("tiles of different shapes");
+        ErrorSum tile;
+        for (size_t i = 0; i < a.texels.size(); ++i) {
+          const double d = double(a.texels[i]) - double(r.texels[i]);
+          tile.squared += d * d;
+        }
+        tile.values = a.texels.size();
+        all->squared += tile.squared;
+        all->values += tile.values;
+        if (encoded && check(archive.tileEntry(id)).kind == TileKind::kEncoded) {
+          encoded->squared += tile.squared;
+          encoded->values += tile.values;
+        }
+      }
+    }
+  }
+}
+
+ProceduralBuildReport build(ProceduralBuildOptions options, const std::string& name) {
+  const auto start = Clock::now();
+  ProceduralBuildReport report = check(buildProceduralArchive(options));
+  std::fprintf(stderr, "%s: %llu bytes, %llu procedural tiles of %llu, %.0f s\n", name.c_str(),
+               (unsigned long long)report.output_bytes, (unsigned long long)report.tiles_procedural,
+               (unsigned long long)report.tiles_total,
+               std::chrono::duration<double>(Clock::now() - start).count());
+  return report;
+}
+
+// The storage target: the reference is every tile baked losslessly (the composited
+// pixels), the mixed archive stores JPEG (quality 85) where baked, and each baked-only archive
+// is JPEG of the composited pixels at one quality. The mixed archive is compared with the
+// baked-only size interpolated at the PSNR its baked tiles achieve.
+int runStorage(int argc, char** argv) {
+  const std::string out = argument(argc, argv, "--out", nullptr);
+  ProceduralBuildOptions base;
+  base.database = argv[2];
+  base.threads = uint32_t(std::stoul(argument(argc, argv, "--threads", "2")));
+  base.frame_budget_ms = std::stod(argument(argc, argv, "--frame-budget-ms", "4"));
+  ProceduralBuildOptions reference_options = base;
+  reference_options.output = out + "/reference.tess";
+  reference_options.codec = Codec::kZstd;
+  reference_options.bake_all = true;
+  build(reference_options, "reference (zstd, every tile baked)");
+  ProceduralBuildOptions mixed_options = base;
+  mixed_options.output = out + "/mixed.tess";
+  const ProceduralBuildReport mixed = build(mixed_options, "mixed (JPEG 85 where baked)");
+  auto reference = check(Archive::openFile(reference_options.output));
+  auto mixed_archive = check(Archive::openFile(mixed_options.output));
+  ErrorSum mixed_all, mixed_baked;
+  compareArchives(*mixed_archive, *reference, &mixed_all, &mixed_baked);
+  std::printf(
+      "mixed: %llu bytes, %llu of %llu tiles procedural, %llu baked; PSNR of its baked "
+      "tiles %.2f dB, of all tiles %.2f dB\n",
+      (unsigned long long)mixed.output_bytes, (unsigned long long)mixed.tiles_procedural,
+      (unsigned long long)mixed.tiles_total, (unsigned long long)mixed.tiles_baked,
+      mixed_baked.psnr(), mixed_all.psnr());
+  std::vector<std::pair<double, double>> curve;  // (PSNR, bytes) of the baked-only archives
+  std::stringstream qualities(argument(argc, argv, "--qualities", "50,70,80,85,90,95"));
+  for (std::string q; std::getline(qualities, q, ',');) {
+    ProceduralBuildOptions baked_options = base;
+    baked_options.output = out + "/baked-q" + q + ".tess";
+    baked_options.quality = std::stoi(q);
+    baked_options.bake_all = true;
+    const ProceduralBuildReport baked = build(baked_options, "baked-only JPEG " + q);
+    ErrorSum all;
+    compareArchives(*check(Archive::openFile(baked_options.output)), *reference, &all, nullptr);
+    std::printf("baked-only JPEG quality %3s: %llu bytes, PSNR %.2f dB, mixed / this %.1f%%\n",
+                q.c_str(), (unsigned long long)baked.output_bytes, all.psnr(),
+                100.0 * mixed.output_bytes / baked.output_bytes);
+    curve.emplace_back(all.psnr(), double(baked.output_bytes));
+  }
+  std::sort(curve.begin(), curve.end());
+  const double target = mixed_baked.psnr();
+  for (size_t i = 1; i < curve.size(); ++i) {
+    if (curve[i - 1].first <= target && target <= curve[i].first) {
+      const double t = (target - curve[i - 1].first) / (curve[i].first - curve[i - 1].first);
+      const double bytes = curve[i - 1].second + t * (curve[i].second - curve[i - 1].second);
+      std::printf("baked-only at %.2f dB (interpolated): %.0f bytes; mixed / baked-only = %.2f%%\n",
+                  target, bytes, 100.0 * mixed.output_bytes / bytes);
+      return 0;
+    }
+  }
+  std::printf("the mixed archive's %.2f dB lies outside the qualities measured\n", target);
+  return 0;
+}
+
 }  // namespace
 }  // namespace tessera
 
@@ -257,9 +429,11 @@ int main(int argc, char** argv) {
   if (command == "setup" && argc > 2) return tessera::runSetup(argc, argv);
   if (command == "composite") return tessera::runComposite(argc, argv);
   if (command == "query" && argc > 2) return tessera::runQuery(argc, argv);
+  if (command == "storage" && argc > 2) return tessera::runStorage(argc, argv);
   std::fprintf(stderr,
                "usage: tessera-procedural-bench setup DB --images DIR --size WxH --count N "
-               "[--seed S] | composite --images DIR [--seconds S] | query DB [--tiles N] "
-               "[--level L]\n");
+               "[--seed S] | composite --images DIR [--seconds S] [--gpu] | query DB [--tiles N] "
+               "[--level L] | storage DB --out DIR [--qualities Q,Q...] [--threads N] "
+               "[--frame-budget-ms MS]\n");
   return 2;
 }

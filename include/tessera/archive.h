@@ -19,6 +19,7 @@
 namespace tessera {
 
 class ProceduralTiles;
+class TileCompositor;
 
 /// What `Archive::verify` found.
 struct VerifyReport {
@@ -128,6 +129,11 @@ class Archive {
   /// procedural directory; a damaged brush block is kCorrupt naming it, and is retried by the
   /// next call. decodeTile composites procedural tiles through it.
   [[nodiscard]] Result<std::shared_ptr<const ProceduralTiles>> procedural() const;
+  /// Composites procedural tiles with `compositor` (for example on the GPU) instead of the CPU
+  /// compositor; null returns to the CPU. Thread-safe: a tile decoded while it changes uses
+  /// the old or the new one.
+  void setTileCompositor(std::shared_ptr<TileCompositor> compositor);
+  std::shared_ptr<TileCompositor> tileCompositor() const;
   /// Reads `rect` of `level` of `image` into RGBA (gray replicated, alpha 255 when absent).
   /// Texels outside the level read as transparent black. The rectangle may be at most
   /// 16384 x 16384 px (kTooLarge beyond).

@@ -184,6 +184,20 @@ struct TileClip {
                                                   std::span<const BrushInstance> instances,
                                                   Image& out);
 
+/// Composites procedural tiles in place of compositeTile, with the same contract (the same
+/// stored tile from the same inputs; kCorrupt for a missing brush): what Archive uses when one
+/// is set (Archive::setTileCompositor), for example the GPU compositor (tessera/gl.h,
+/// createGpuTileCompositor). Called from any thread that decodes tiles, concurrently:
+/// implementations are thread-safe.
+class TileCompositor {
+ public:
+  virtual ~TileCompositor() = default;
+  [[nodiscard]] virtual Result<void> composite(const std::shared_ptr<const BrushSet>& brushes,
+                                               const TileGeometry& tile,
+                                               std::span<const BrushInstance> instances,
+                                               std::span<const TileClip> clips, Image& out) = 0;
+};
+
 /// The procedural side of an archive of format 1.1 (docs/format.md, "Procedural tiles"): its
 /// brush set, loaded once, and the compositing of procedural tiles from their instance pages.
 /// Immutable after `open`: thread-safe, any thread may composite. Archive::procedural() holds

@@ -7,18 +7,7 @@
 #include "procedural/kernel.h"
 #include "procedural/row_kernel.h"
 
-namespace tessera {
-
-using namespace detail;
-
-namespace {
-
-/// The stored tile's texels whose level texel lies inside the level: [i0, i1) x [j0, j1). The
-/// others (padding, borders past the image edge) repeat the nearest of these.
-struct ValidRect {
-  int64_t x0 = 0, y0 = 0;  ///< level texel of stored texel (0, 0), unclamped
-  uint32_t i0 = 0, i1 = 0, j0 = 0, j1 = 0;
-};
+namespace tessera::detail {
 
 ValidRect validRect(const TileGeometry& tile) {
   const int64_t level_w = std::max<int64_t>(
@@ -35,6 +24,25 @@ ValidRect validRect(const TileGeometry& tile) {
   rect.j1 = uint32_t(std::clamp<int64_t>(level_h - rect.y0, rect.j0, side));
   return rect;
 }
+
+InstanceRect instanceRect(const InstanceSetup& setup, const ValidRect& rect, const TileClip& clip) {
+  // Only the texels within `reach` of the centre can be drawn (sampleInstance returns 0
+  // beyond), so the loops visit those alone.
+  InstanceRect r;
+  r.i_lo = std::max<int64_t>({rect.i0, setup.x_c - setup.reach - rect.x0, clip.x0});
+  r.i_hi = std::min<int64_t>({rect.i1, setup.x_c + setup.reach + 1 - rect.x0, clip.x1});
+  r.j_lo = std::max<int64_t>({rect.j0, setup.y_c - setup.reach - rect.y0, clip.y0});
+  r.j_hi = std::min<int64_t>({rect.j1, setup.y_c + setup.reach + 1 - rect.y0, clip.y1});
+  return r;
+}
+
+}  // namespace tessera::detail
+
+namespace tessera {
+
+using namespace detail;
+
+namespace {
 
 // Copies the valid rectangle's edge texels outwards over the padding and outer borders.
 void replicateEdges(const ValidRect& rect, uint32_t side, Image& out) {
@@ -117,14 +125,7 @@ Result<void> compositeTile(const BrushSet& brushes, const TileGeometry& tile,
     const BrushInstance& instance = instances[n];
     const TileClip clip = clips.empty() ? TileClip{} : clips[n];
     TESSERA_ASSIGN_OR_RETURN(InstanceSetup setup, setupInstance(set, instance, tile.level));
-    // Only the texels within `reach` of the centre can be drawn (sampleInstance returns 0
-    // beyond), so the loops visit those alone.
-    const int64_t i_lo = std::max<int64_t>({rect.i0, setup.x_c - setup.reach - rect.x0, clip.x0});
-    const int64_t i_hi =
-        std::min<int64_t>({rect.i1, setup.x_c + setup.reach + 1 - rect.x0, clip.x1});
-    const int64_t j_lo = std::max<int64_t>({rect.j0, setup.y_c - setup.reach - rect.y0, clip.y0});
-    const int64_t j_hi =
-        std::min<int64_t>({rect.j1, setup.y_c + setup.reach + 1 - rect.y0, clip.y1});
+    const auto [i_lo, i_hi, j_lo, j_hi] = instanceRect(setup, rect, clip);
     if (i_lo >= i_hi || j_lo >= j_hi) continue;
     const uint8_t* mask_values =
         setup.brush->mask == MaskSource::kNone ? nullptr : layers.values(setup.brush->mask);

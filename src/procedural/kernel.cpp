@@ -104,26 +104,38 @@ uint32_t sampleInstance(const InstanceSetup& setup, int64_t x, int64_t y, uint8_
   return alpha;
 }
 
-uint8_t sampleLayer(const LayerPyramid& layer, uint32_t texture_width_px,
+LayerTaps layerTaps(const LayerPyramid& layer, uint32_t texture_width_px,
                     uint32_t texture_height_px, uint32_t level, int64_t x, int64_t y) {
   const MipLevel& base = layer.mips[0];
   const double level_px = std::ldexp(1.0, int(level));
   const double per_target = std::max(double(base.width_px) / texture_width_px,
                                      double(base.height_px) / texture_height_px) *
                             level_px;
-  const MipLevel& mip = layer.mips[chooseMip(per_target, layer.mips.size())];
+  LayerTaps taps;
+  taps.mip = chooseMip(per_target, layer.mips.size());
+  const MipLevel& mip = layer.mips[taps.mip];
   const int64_t u = toFixed((double(x) + 0.5) * level_px * mip.width_px / texture_width_px - 0.5);
   const int64_t v = toFixed((double(y) + 0.5) * level_px * mip.height_px / texture_height_px - 0.5);
   const int64_t w = mip.width_px, h = mip.height_px;
-  const int64_t x0 = std::clamp<int64_t>(u >> 16, 0, w - 1),
-                x1 = std::clamp<int64_t>((u >> 16) + 1, 0, w - 1);
-  const int64_t y0 = std::clamp<int64_t>(v >> 16, 0, h - 1),
-                y1 = std::clamp<int64_t>((v >> 16) + 1, 0, h - 1);
-  const uint32_t fx = uint32_t(u >> 8) & 0xFF, fy = uint32_t(v >> 8) & 0xFF;
+  taps.x0 = std::clamp<int64_t>(u >> 16, 0, w - 1);
+  taps.x1 = std::clamp<int64_t>((u >> 16) + 1, 0, w - 1);
+  taps.y0 = std::clamp<int64_t>(v >> 16, 0, h - 1);
+  taps.y1 = std::clamp<int64_t>((v >> 16) + 1, 0, h - 1);
+  taps.fx = uint32_t(u >> 8) & 0xFF;
+  taps.fy = uint32_t(v >> 8) & 0xFF;
+  return taps;
+}
+
+uint8_t sampleLayer(const LayerPyramid& layer, uint32_t texture_width_px,
+                    uint32_t texture_height_px, uint32_t level, int64_t x, int64_t y) {
+  const LayerTaps taps = layerTaps(layer, texture_width_px, texture_height_px, level, x, y);
+  const MipLevel& mip = layer.mips[taps.mip];
+  const int64_t w = mip.width_px;
   const uint8_t* t = mip.texels.data();
-  const uint32_t gx = 256 - fx, gy = 256 - fy;
-  return uint8_t(((t[y0 * w + x0] * gx + t[y0 * w + x1] * fx) * gy +
-                  (t[y1 * w + x0] * gx + t[y1 * w + x1] * fx) * fy + 32768) >>
+  const uint32_t gx = 256 - taps.fx, gy = 256 - taps.fy;
+  return uint8_t(((t[taps.y0 * w + taps.x0] * gx + t[taps.y0 * w + taps.x1] * taps.fx) * gy +
+                  (t[taps.y1 * w + taps.x0] * gx + t[taps.y1 * w + taps.x1] * taps.fx) * taps.fy +
+                  32768) >>
                  16);
 }
 

@@ -369,6 +369,16 @@ Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entr
   return {};
 }
 
+void Archive::setTileCompositor(std::shared_ptr<TileCompositor> compositor) {
+  std::lock_guard lock(impl_->compositor_mutex);
+  impl_->tile_compositor = std::move(compositor);
+}
+
+std::shared_ptr<TileCompositor> Archive::tileCompositor() const {
+  std::lock_guard lock(impl_->compositor_mutex);
+  return impl_->tile_compositor;
+}
+
 Result<std::shared_ptr<const ProceduralTiles>> Archive::procedural() const {
   std::lock_guard lock(impl_->procedural_mutex);
   if (impl_->procedural_tiles) return impl_->procedural_tiles;

@@ -65,7 +65,9 @@ struct Archive::Impl {
   /// first procedural tile so that opening an archive reads no brush image, and a damaged brush
   /// block fails only the procedural tiles (each, naming the block), never open() or the baked
   /// tiles. Locked after cache_mutex is released, never inside it.
-  std::mutex procedural_mutex;  // guards procedural_tiles; held while it loads (one load)
+  std::mutex procedural_mutex;          // guards procedural_tiles; held while it loads (one load)
+  mutable std::mutex compositor_mutex;  // guards tile_compositor
+  std::shared_ptr<TileCompositor> tile_compositor;
   std::shared_ptr<const ProceduralTiles> procedural_tiles;
 
   /// Decoded parents of parent-coded (ptm) tiles for decodeTile without a parent (regions,

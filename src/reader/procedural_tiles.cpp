@@ -174,8 +174,10 @@ Result<void> ProceduralTiles::compositePage(const Archive& archive, const TileId
   const ImageInfo& info = impl_->records[tile.image].info;
   TileGeometry geometry{tile.level,     tile.x,        tile.y,        info.tile_size_px,
                         info.border_px, info.width_px, info.height_px};
+  const std::shared_ptr<TileCompositor> compositor = archive.tileCompositor();
   Result<void> composited =
-      tessera::compositeTile(*impl_->brushes, geometry, instances, out, clips);
+      compositor ? compositor->composite(impl_->brushes, geometry, instances, clips, out)
+                 : tessera::compositeTile(*impl_->brushes, geometry, instances, out, clips);
   if (!composited) return fail(ErrorCode::kCorrupt, what + ": " + composited.error().message);
   return {};
 }

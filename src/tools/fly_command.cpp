@@ -19,6 +19,7 @@
 #include <tessera/open.h>
 #include <tessera/picture_file.h>
 #include <tessera/byte_source.h>
+#include <tessera/gl.h>
 #include <tessera/link.h>
 #include <tessera/renderer.h>
 #include <tessera/stream.h>
@@ -487,6 +488,7 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
   const size_t frames = log.frames;
   nlohmann::json summary = {
       {"archive", args.archive},
+      {"composite", args.composite},
       {"path", setup.path.name},
       {"codec", codecName(setup.info.default_codec)},
       {"levels", setup.info.level_count},
@@ -648,6 +650,11 @@ Result<void> startFramesCsv(const FlyArgs& args) {
 /// runFly after the archive is open: fly, then write what the flight recorded. Returns the
 /// summary (summary.json).
 Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) {
+  if (args.composite == "gpu") {
+    Result<std::shared_ptr<TileCompositor>> compositor = createGpuTileCompositor();
+    if (!compositor) return forwardError(compositor);
+    setup.archive->setTileCompositor(std::move(*compositor));
+  }
   const StreamerOptions options = flightStreamerOptions(args, setup);
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
   if (!streamer) return forwardError(streamer);
@@ -774,6 +781,11 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--render", args->render,
                   "Draw every frame headless: tile-quads or clipmap (none: no GPU work)")
       ->check(CLI::IsMember({"none", "tile-quads", "clipmap"}))
+      ->capture_default_str();
+  cmd->add_option("--composite", args->composite,
+                  "Where procedural tiles are composited: cpu (the loader threads) or gpu (a "
+                  "headless OpenGL context of its own)")
+      ->check(CLI::IsMember({"cpu", "gpu"}))
       ->capture_default_str();
   cmd->add_option("--screenshots", args->screenshot_frames,
                   "Frames to save as frame-N.png (with --render)")

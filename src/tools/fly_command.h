@@ -36,6 +36,9 @@ struct FlyArgs {
   bool cold = false;
   bool decode_bound = false;
   std::string render = "none";
+  /// Where procedural tiles are composited: "cpu" (the loader threads) or "gpu" (a thread
+  /// with a headless context, docs/procedural.md "GPU compositing").
+  std::string composite = "cpu";
   std::vector<uint64_t> screenshot_frames;
   bool report = false;
   /// A simulated link between the archive and the loader, "RATE:RTT" (e.g. "20mbit:40ms");

@@ -13,7 +13,8 @@ namespace tessera::cli {
 namespace {
 
 struct LevelCounts {
-  uint64_t encoded = 0, uniform = 0, empty = 0, payload_bytes = 0;
+  uint64_t encoded = 0, uniform = 0, procedural = 0, empty = 0, payload_bytes = 0;
+  uint64_t page_bytes = 0;  ///< instance pages of the procedural tiles, shared pages each time
 };
 
 Result<LevelCounts> countLevel(const Archive& archive, uint32_t image, uint32_t level) {
@@ -28,6 +29,10 @@ Result<LevelCounts> countLevel(const Archive& archive, uint32_t image, uint32_t 
           counts.payload_bytes += entry.length_bytes;
           break;
         case TileKind::kUniform: ++counts.uniform; break;
+        case TileKind::kProcedural:
+          ++counts.procedural;
+          counts.page_bytes += entry.length_bytes;
+          break;
         default: ++counts.empty; break;
       }
     }
@@ -74,7 +79,8 @@ int runInfo(const std::string& path, bool json, bool levels) {
     if (levels) {
       nlohmann::json level_list = nlohmann::json::array();
       if (!json)
-        std::printf("  level        size      tiles  encoded  uniform    empty    payload\n");
+        std::printf(
+            "  level        size      tiles  encoded  uniform procedural    empty    payload\n");
       for (uint32_t l = 0; l < info.level_count; ++l) {
         Result<LevelCounts> counts = countLevel(archive, i, l);
         if (!counts) return reportError(counts.error());
@@ -85,14 +91,16 @@ int runInfo(const std::string& path, bool json, bool levels) {
                               {"tiles_y", info.tilesY(l)},
                               {"encoded", counts->encoded},
                               {"uniform", counts->uniform},
+                              {"procedural", counts->procedural},
                               {"empty", counts->empty},
-                              {"payload_bytes", counts->payload_bytes}});
+                              {"payload_bytes", counts->payload_bytes},
+                              {"page_bytes", counts->page_bytes}});
         if (!json)
-          std::printf("  %5u %11s %10s %8llu %8llu %8llu %10s\n", l,
+          std::printf("  %5u %11s %10s %8llu %8llu %10llu %8llu %10s\n", l,
                       fmt::format("{}x{}", info.levelWidthPx(l), info.levelHeightPx(l)).c_str(),
                       fmt::format("{}x{}", info.tilesX(l), info.tilesY(l)).c_str(),
                       (unsigned long long)counts->encoded, (unsigned long long)counts->uniform,
-                      (unsigned long long)counts->empty,
+                      (unsigned long long)counts->procedural, (unsigned long long)counts->empty,
                       formatBytes(counts->payload_bytes).c_str());
       }
       image["level_table"] = level_list;

@@ -14,6 +14,7 @@
 #include <tessera/stream.h>
 
 #include "gl/renderers.h"
+#include "gl_test_context.h"
 #include "support/fault_source.h"
 #include "support/synthetic_archive.h"
 #include "support/test_images.h"
@@ -21,16 +22,8 @@
 namespace tessera {
 namespace {
 
-/// One headless context for the whole test program: the EGL display is per process anyway.
 GlContext& sharedContext() {
-  static std::unique_ptr<GlContext> context = [] {
-    auto created = GlContext::createHeadless();
-    EXPECT_TRUE(created) << created.error().message;
-    return created ? std::move(*created) : nullptr;
-  }();
-  if (!context) throw std::runtime_error("no headless OpenGL context");
-  context->makeCurrent();
-  return *context;
+  return test::sharedGlContext();
 }
 
 View orthoAt(double x, double y, double texels_per_pixel, uint32_t w, uint32_t h) {

@@ -83,6 +83,18 @@ Result<InstanceSetup> setupInstance(const BrushSet::Impl& set, const BrushInstan
 /// any mask: writes rgba and returns its alpha (0: nothing drawn, rgba unspecified).
 uint32_t sampleInstance(const InstanceSetup& setup, int64_t x, int64_t y, uint8_t rgba[4]);
 
+/// Where the layer is read for level texel (X, Y) of `level`: the mip whose texel is nearest
+/// the level's texel in size, the bilinear taps (edges clamped) and 8-bit weights. The column
+/// taps depend on X alone and the row taps on Y alone (the GPU compositor uploads them per
+/// column and row of a tile).
+struct LayerTaps {
+  uint32_t mip = 0;
+  int64_t x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+  uint32_t fx = 0, fy = 0;
+};
+LayerTaps layerTaps(const LayerPyramid& layer, uint32_t texture_width_px,
+                    uint32_t texture_height_px, uint32_t level, int64_t x, int64_t y);
+
 /// The layer's value at level texel (X, Y) of `level`: bilinear in the mip whose texel is
 /// nearest the level's texel in size, edges clamped.
 uint8_t sampleLayer(const LayerPyramid& layer, uint32_t texture_width_px,
@@ -90,6 +102,21 @@ uint8_t sampleLayer(const LayerPyramid& layer, uint32_t texture_width_px,
 
 /// Blends source (s, alpha sa > 0) over the canvas texel `dst` (straight alpha, in place).
 void blendTexel(BlendMode mode, const uint8_t s[4], uint32_t sa, uint8_t dst[4]);
+
+/// The stored tile's texels whose level texel lies inside the level: [i0, i1) x [j0, j1). The
+/// others (padding, borders past the image edge) repeat the nearest of these.
+struct ValidRect {
+  int64_t x0 = 0, y0 = 0;  ///< level texel of stored texel (0, 0), unclamped
+  uint32_t i0 = 0, i1 = 0, j0 = 0, j1 = 0;
+};
+ValidRect validRect(const TileGeometry& tile);
+
+/// The stored-tile texels [i_lo, i_hi) x [j_lo, j_hi) an instance may draw in a tile: the
+/// valid rectangle, the instance's reach and its clip intersected. Empty when lo >= hi.
+struct InstanceRect {
+  int64_t i_lo = 0, i_hi = 0, j_lo = 0, j_hi = 0;
+};
+InstanceRect instanceRect(const InstanceSetup& setup, const ValidRect& rect, const TileClip& clip);
 
 /// The level texel of a stored tile texel index, before clamping (docs/format.md, "Tiles").
 inline int64_t levelTexel(uint32_t tile_index, uint32_t tile_size_px, uint32_t border_px,
