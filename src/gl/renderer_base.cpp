@@ -63,6 +63,7 @@ void RendererBase::beginApply() {
   result_.accepted.clear();
   result_.declined.clear();
   result_.dropped.clear();
+  result_.upload_ms = 0;
   stats_.uploads = 0;
   stats_.upload_bytes = 0;
   stats_.declined = 0;
@@ -87,6 +88,7 @@ void RendererBase::uploadStaged(
     std::span<const PendingUpload> pending,
     const std::function<void(const DecodedTile&, uint32_t, size_t)>& write) {
   if (pending.empty()) return;
+  const auto started = Clock::now();
   sources_.clear();
   for (const PendingUpload& p : pending)
     if (p.tile) sources_.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
@@ -101,6 +103,9 @@ void RendererBase::uploadStaged(
     stats_.upload_bytes += p.tile->texels.texels.size();
   }
   staging_.unbind();
+  // What the adaptive upload budget is fed (TileStreamer::acknowledge): the render thread's
+  // time for this frame's copies and texture updates.
+  result_.upload_ms = msSince(started);
 }
 
 const ApplyResult& RendererBase::endApply(Clock::time_point started, size_t resident_tiles) {
