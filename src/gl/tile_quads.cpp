@@ -168,8 +168,10 @@ class TileQuadsRenderer final : public RendererBase {
     for (const TileId& id : update.releases) release(id);
     // Layers first, so a tile with no room is declined before any byte is copied.
     pending_.clear();
+    size_t room = stagingRoom();
     for (const auto& tile : update.uploads) {
-      if (!holds(*tile)) {
+      // Not this image's, or no room left in the staging ring this frame (offered again).
+      if (!holds(*tile) || tile->texels.texels.size() > room) {
         decline(tile->id);
         continue;
       }
@@ -181,6 +183,7 @@ class TileQuadsRenderer final : public RendererBase {
       }
       layers_[tile->id] = layer;
       pending_.push_back({tile.get(), uint32_t(layer)});
+      room -= tile->texels.texels.size();
     }
     const GLsizei side = GLsizei(info_.storedTileSidePx());
     uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
