@@ -199,6 +199,11 @@ struct FrameUpdate {
   /// n of Backes et al., eq. 3, for this frame's viewport: the side of an unclipped clip
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
+  /// The most tiles of this image the streamer keeps resident at this viewport: per level,
+  /// the clip region with its keep margin (or the whole level when smaller). Lookahead and
+  /// far perspective ground can exceed it for a while; a renderer sizes its texture storage
+  /// from it up front and grows only past it.
+  uint64_t resident_tiles_bound = 0;
   FrameReport report;
   /// Loads that failed since the last update, in the order they failed
   /// (FrameReport::load_failures_total counts them all).

@@ -167,6 +167,15 @@ class TileQuadsRenderer final : public RendererBase {
     beginApply();
     for (const TileId& id : update.releases) release(id);
     // Layers first, so a tile with no room is declined before any byte is copied.
+    // Storage for every tile the streamer may keep resident, allocated once at the first
+    // frame (nothing to copy yet): growing by doubling later copies every layer in use, a
+    // 50-150 ms stall of the render thread on llvmpipe each time.
+    if (!sized_from_bound_) {
+      sized_from_bound_ = true;
+      const uint64_t wanted =
+          std::min<uint64_t>(update.resident_tiles_bound, uint64_t(std::max(max_layers_, 1)));
+      if (wanted > layer_capacity_ && layers_.empty()) (void)growLayers(uint32_t(wanted));
+    }
     pending_.clear();
     size_t room = stagingRoom();
     for (const auto& tile : update.uploads) {
@@ -359,6 +368,7 @@ class TileQuadsRenderer final : public RendererBase {
   }
 
   Texture tiles_;
+  bool sized_from_bound_ = false;  ///< the first apply sized the array from the streamer
   GLint max_layers_ = 0;
   uint32_t layer_capacity_ = 0;
   std::vector<GLint> free_layers_;

@@ -300,6 +300,11 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   out.regions = plan.clip_regions;
   out.clip_region_tiles =
       clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info.tile_size_px);
+  const uint64_t side = out.clip_region_tiles + 2 * uint64_t(s.options.residency.keep_margin_tiles);
+  out.resident_tiles_bound = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    out.resident_tiles_bound +=
+        std::min(side * side, uint64_t(info.tilesX(level)) * info.tilesY(level));
 
   const uint64_t upload_bytes = s.chooseUploads(plan, info);
   FrameReport& report = out.report;
