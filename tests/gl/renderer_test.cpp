@@ -479,6 +479,25 @@ TEST_P(Renderers, AFullStagingRingDeclinesUploadsAndTheyGoUpLater) {
   EXPECT_EQ(difference->max_abs, 0u);
 }
 
+TEST(TileQuads, TheTileArrayIsSizedFromTheResidencyBoundAtTheFirstFrameAndNeverGrowsInAPan) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  const View first = orthoAt(100, info.height_px / 2.0, 1, 128, 96);
+  const uint64_t bound = rig.frame(first).resident_tiles_bound;
+  ASSERT_GT(bound, RendererOptions{}.initial_layers) << "the test needs a bound above the default";
+  const uint64_t sized = rig.renderer->stats().gpu_bytes;
+  EXPECT_EQ(sized, bound * info.storedTileBytes());
+  for (int i = 0; i < 40; ++i) {
+    rig.streamer->waitIdleForTesting();
+    rig.frame(orthoAt(100 + (info.width_px - 200.0) * i / 39.0, info.height_px / 2.0, 1, 128, 96));
+    EXPECT_LE(rig.renderer->stats().resident_tiles, bound);
+    EXPECT_EQ(rig.renderer->stats().gpu_bytes, sized) << "frame " << i;
+  }
+}
+
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {
   test::SyntheticArchiveSpec spec;
   spec.border_px = 1;
