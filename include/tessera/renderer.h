@@ -65,6 +65,12 @@ struct RendererOptions {
   /// Clipmap: tiles along a level layer's side at first (n of Backes et al., eq. 3); a frame
   /// whose clip regions are larger reallocates the layers. 0: the first frame's size.
   uint32_t initial_clip_tiles = 0;
+  /// Bytes of the persistently mapped staging ring uploads go through (OpenGL 4.4 buffer
+  /// storage; docs/rendering.md, "Uploads"): two frames at the largest adaptive upload
+  /// budget. A frame that finds no room in it uploads less and declines the rest, offered
+  /// again later, instead of waiting for the GPU. 0, or a driver without buffer storage: a
+  /// staging buffer orphaned each frame, with no limit.
+  size_t staging_ring_bytes = size_t(64) << 20;
 };
 
 /// Draws views of one image. Render thread only: the thread on which its backend's context

@@ -62,6 +62,31 @@ struct TileRequest {
   uint32_t urgency = 0;
 };
 
+/// The upload budget that follows the measured cost of uploads (docs/runtime.md, "Upload
+/// budget"): the renderer reports the render-thread time its uploads took
+/// (`ApplyResult::upload_ms`), the streamer smooths bytes per millisecond over the frames that
+/// uploaded, and each frame may hand over what takes `upload_share` of `frame_ms` at that
+/// rate, clamped to [min_bytes, max_bytes]. A software renderer gets a few MiB a frame, a GPU
+/// the maximum.
+struct AdaptiveUploadOptions {
+  /// Off: `ResidencyOptions::upload_budget_bytes` is the fixed budget.
+  bool enabled = true;
+  /// The frame-time target, ms (60 fps unless the application says otherwise).
+  double frame_ms = 1000.0 / 60;
+  /// Share of the frame the renderer's uploads may take, in [0, 1].
+  double upload_share = 0.25;
+  /// Bounds of the budget, bytes. The floor keeps a slow measurement from starving uploads
+  /// (and one tile always goes up whatever the budget); the ceiling bounds what a frame can
+  /// ask of the renderer's staging memory.
+  uint64_t min_bytes = 1u << 20;
+  uint64_t max_bytes = 32u << 20;
+  /// The rate assumed before the first measurement, bytes per ms: low (256 MB/s), so the
+  /// first frames never stall a slow renderer; the first measured frame replaces it.
+  double initial_bytes_per_ms = 256 << 10;
+  /// Weight of a new frame in the smoothed bytes and milliseconds, in (0, 1].
+  double smoothing = 0.25;
+};
+
 /// Per-frame tuning. Defaults suit a 1920x1080 view with 256-px tiles.
 struct ResidencyOptions {
   /// Texel bytes handed to the renderer per frame (0 = no byte limit): the upload bandwidth
@@ -71,6 +96,9 @@ struct ResidencyOptions {
   /// renderer that cannot take as much sets it lower, and full detail then waits a few frames
   /// longer while the view moves fast (docs/runtime.md, "Residency", step 5).
   uint64_t upload_budget_bytes = 16u << 20;
+  /// Whether the byte budget follows the measured cost of uploads instead (the default);
+  /// `upload_budget_bytes` is then unused.
+  AdaptiveUploadOptions adaptive_upload;
   /// Tiles handed to the renderer per frame: a cap on per-tile work for small tiles.
   uint32_t upload_budget_tiles = 128;
   bool prefetch = true;  ///< direction-based prefetch (Luo & Duan, section 3.3)
@@ -99,6 +127,10 @@ struct FrameReport {
   std::chrono::steady_clock::time_point loader_idle_since{};
   size_t uploads = 0;  ///< tiles handed to the renderer this frame
   uint64_t upload_bytes = 0;
+  /// The byte budget this frame's uploads were chosen within (0: no byte limit), and the
+  /// smoothed upload rate it came from (bytes per render-thread ms; 0 with a fixed budget).
+  uint64_t upload_budget_bytes = 0;
+  double upload_bytes_per_ms = 0;
   uint64_t bytes_read_total = 0;     ///< by the loader since start, merged-read gaps included
   uint64_t payload_bytes_total = 0;  ///< payload bytes of the tiles those reads delivered
   uint64_t reads_total = 0;          ///< read calls on the byte source
@@ -167,6 +199,11 @@ struct FrameUpdate {
   /// n of Backes et al., eq. 3, for this frame's viewport: the side of an unclipped clip
   /// region in tiles (a clipmap sizes its level layers by it).
   uint32_t clip_region_tiles = 0;
+  /// The most tiles of this image the streamer keeps resident at this viewport: per level,
+  /// the clip region with its keep margin (or the whole level when smaller). Lookahead and
+  /// far perspective ground can exceed it for a while; a renderer sizes its texture storage
+  /// from it up front and grows only past it.
+  uint64_t resident_tiles_bound = 0;
   FrameReport report;
   /// Loads that failed since the last update, in the order they failed
   /// (FrameReport::load_failures_total counts them all).
@@ -183,6 +220,9 @@ struct ApplyResult {
   /// taken by a tile of the clip region, its layers reallocated): offered again from the
   /// cache while they are wanted.
   std::vector<TileId> dropped;
+  /// Render-thread milliseconds the accepted uploads took (staging copy and texture updates),
+  /// for the adaptive upload budget; negative when not measured (no sample is taken).
+  double upload_ms = -1;
 };
 
 /// Budgets for one mode of adaptive scheduling.

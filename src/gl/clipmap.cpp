@@ -206,9 +206,11 @@ class ClipmapRenderer final : public RendererBase {
   void placeUploads(const FrameUpdate& update) {
     pending_.clear();
     pending_index_.clear();
+    size_t room = stagingRoom();
     for (const auto& tile : update.uploads) {
       const TileId& id = tile->id;
-      if (!holds(*tile)) {
+      // Not this image's, or no room left in the staging ring this frame (offered again).
+      if (!holds(*tile) || tile->texels.texels.size() > room) {
         decline(id);
         continue;
       }
@@ -239,6 +241,7 @@ class ClipmapRenderer final : public RendererBase {
       slot_of_[id] = slot;
       pending_index_[id] = pending_.size();
       pending_.push_back({tile.get(), slot});
+      room -= tile->texels.texels.size();
     }
   }
 

@@ -63,6 +63,7 @@ void RendererBase::beginApply() {
   result_.accepted.clear();
   result_.declined.clear();
   result_.dropped.clear();
+  result_.upload_ms = 0;
   stats_.uploads = 0;
   stats_.upload_bytes = 0;
   stats_.declined = 0;
@@ -87,11 +88,12 @@ void RendererBase::uploadStaged(
     std::span<const PendingUpload> pending,
     const std::function<void(const DecodedTile&, uint32_t, size_t)>& write) {
   if (pending.empty()) return;
+  const auto started = Clock::now();
   sources_.clear();
   for (const PendingUpload& p : pending)
     if (p.tile) sources_.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
-  staging_.stage(sources_);
-  size_t offset = 0;  // staged one after the other, in this order
+  if (!staging_) staging_.emplace(options_.staging_ring_bytes);
+  size_t offset = staging_->stage(sources_);  // staged one after the other, in this order
   for (const PendingUpload& p : pending) {
     if (!p.tile) continue;
     write(*p.tile, p.place, offset);
@@ -100,7 +102,15 @@ void RendererBase::uploadStaged(
     ++stats_.uploads;
     stats_.upload_bytes += p.tile->texels.texels.size();
   }
-  staging_.unbind();
+  staging_->finish();
+  // What the adaptive upload budget is fed (TileStreamer::acknowledge): the render thread's
+  // time for this frame's copies and texture updates.
+  result_.upload_ms = msSince(started);
+}
+
+size_t RendererBase::stagingRoom() {
+  if (!staging_) staging_.emplace(options_.staging_ring_bytes);
+  return staging_->room();
 }
 
 const ApplyResult& RendererBase::endApply(Clock::time_point started, size_t resident_tiles) {

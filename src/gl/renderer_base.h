@@ -7,11 +7,13 @@
 
 #include <chrono>
 #include <functional>
+#include <optional>
 #include <span>
 
 #include <tessera/renderer.h>
 
 #include "gl/gl_objects.h"
+#include "upload_ring.h"
 
 namespace tessera::gl {
 
@@ -53,9 +55,13 @@ class RendererBase : public Renderer {
   void decline(const TileId& id);
   /// Records a tile held since an earlier frame as dropped.
   void drop(const TileId& id);
-  /// Copies the texels of every pending tile into one staging buffer (orphaned each frame),
-  /// then calls `write(tile, place, offset)` for each, which updates its texture from
-  /// `offset` bytes into the bound pixel-unpack buffer. Each written tile is accepted.
+  /// Texel bytes this frame can stage (UploadRing::room: the free run of the persistently
+  /// mapped ring, never waited for). A renderer declines the uploads beyond it.
+  size_t stagingRoom();
+  /// Copies the texels of every pending tile into the staging ring (at most stagingRoom()
+  /// bytes in all), then calls `write(tile, place, offset)` for each, which updates its
+  /// texture from `offset` bytes into the bound pixel-unpack buffer, and fences the span.
+  /// Each written tile is accepted.
   void uploadStaged(std::span<const PendingUpload> pending,
                     const std::function<void(const DecodedTile&, uint32_t, size_t)>& write);
   /// Ends an apply begun at `started`, the renderer holding `resident_tiles` tiles now.
@@ -76,7 +82,7 @@ class RendererBase : public Renderer {
 
  private:
   ColourTarget target_;
-  UploadStaging staging_;
+  std::optional<UploadRing> staging_;  ///< made at first use, with the context current
   GLint view_projection_uniform_ = -1;
   ApplyResult result_;
   std::vector<std::pair<const uint8_t*, size_t>> sources_;  ///< scratch of uploadStaged

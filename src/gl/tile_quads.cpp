@@ -6,6 +6,7 @@
 // is missing, the coarser one beneath shows through, magnified.
 #include <algorithm>
 #include <cmath>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -54,9 +55,6 @@ uniform sampler2DArray u_tiles;
 uniform float u_tile_size;
 uniform float u_border;
 uniform float u_stored_side;
-// Without borders: per instance, the layers of the 3 x 3 tiles around the tile, then around
-// its parent (-1 where not resident).
-layout(std430, binding = 0) readonly buffer Neighbours { int neighbours[]; };
 out vec4 o_colour;
 // Bilinear at `level` inside one stored tile; its border holds the neighbours' texels, so the
 // four texels around any point of the tile are in it.
@@ -64,6 +62,10 @@ vec4 sampleTile(vec2 world, vec2 origin, int level, int layer) {
   vec2 texel = (world - origin) * exp2(-float(level)) + u_border;
   return texture(u_tiles, vec3(texel / u_stored_side, float(layer)));
 }
+#if BORDERLESS
+// Without borders: per instance, the layers of the 3 x 3 tiles around the tile, then around
+// its parent (-1 where not resident).
+layout(std430, binding = 0) readonly buffer Neighbours { int neighbours[]; };
 // Tiles stored without borders: the four texels come from whichever of the 3 x 3 tiles
 // around `tile` holds them, indices clamped to the level's image as the reference clamps
 // them. A neighbour that is not resident lends nothing: its texel is taken from the nearest
@@ -88,17 +90,23 @@ vec4 sampleBorderless(vec2 world, vec2 origin, int level, ivec2 tile, int table)
   }
   return mix(mix(texels[0], texels[1], f.x), mix(texels[2], texels[3], f.x), f.y);
 }
+#endif
 void main() {
   float lambda = levelOfDetail(v_world);
   int level = v_info.x;
   bool coarsest = v_info.w != 0;
   if (!coarsest && lambda >= float(level + 1)) discard;  // a coarser tile beneath draws here
-  bool borderless = u_border == 0.0;
-  vec4 colour = borderless ? sampleBorderless(v_world, v_origins.xy, level, v_tile, 0)
-                           : sampleTile(v_world, v_origins.xy, level, v_info.y);
+#if BORDERLESS
+  vec4 colour = sampleBorderless(v_world, v_origins.xy, level, v_tile, 0);
+#else
+  vec4 colour = sampleTile(v_world, v_origins.xy, level, v_info.y);
+#endif
   if (lambda > float(level) && v_info.z >= 0) {
-    vec4 parent = borderless ? sampleBorderless(v_world, v_origins.zw, level + 1, v_tile / 2, 9)
-                             : sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
+#if BORDERLESS
+    vec4 parent = sampleBorderless(v_world, v_origins.zw, level + 1, v_tile / 2, 9);
+#else
+    vec4 parent = sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
+#endif
     colour = mix(colour, parent, clamp(lambda - float(level), 0.0, 1.0));
   }
   o_colour = colour;
@@ -118,7 +126,12 @@ class TileQuadsRenderer final : public RendererBase {
       : RendererBase(info, options) {}
 
   Result<void> init() {
-    TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, kFragmentShader));
+    // One program per way of filtering across tile edges, chosen here: a software renderer
+    // runs both sides of a branch on every fragment, and the borderless fetches cost a
+    // bordered archive's frames several times the bilinear sample it needs.
+    const std::string fragment = std::string("#define BORDERLESS ") +
+                                 (info_.border_px == 0 ? "1\n" : "0\n") + kFragmentShader;
+    TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, fragment.c_str()));
     const GLuint p = program_.get();
     glProgramUniform1i(p, glGetUniformLocation(p, "u_tiles"), 0);
     glProgramUniform1f(p, glGetUniformLocation(p, "u_tile_size"), float(info_.tile_size_px));
@@ -154,9 +167,20 @@ class TileQuadsRenderer final : public RendererBase {
     beginApply();
     for (const TileId& id : update.releases) release(id);
     // Layers first, so a tile with no room is declined before any byte is copied.
+    // Storage for every tile the streamer may keep resident, allocated once at the first
+    // frame (nothing to copy yet): growing by doubling later copies every layer in use, a
+    // 50-150 ms stall of the render thread on llvmpipe each time.
+    if (!sized_from_bound_) {
+      sized_from_bound_ = true;
+      const uint64_t wanted =
+          std::min<uint64_t>(update.resident_tiles_bound, uint64_t(std::max(max_layers_, 1)));
+      if (wanted > layer_capacity_ && layers_.empty()) (void)growLayers(uint32_t(wanted));
+    }
     pending_.clear();
+    size_t room = stagingRoom();
     for (const auto& tile : update.uploads) {
-      if (!holds(*tile)) {
+      // Not this image's, or no room left in the staging ring this frame (offered again).
+      if (!holds(*tile) || tile->texels.texels.size() > room) {
         decline(tile->id);
         continue;
       }
@@ -168,6 +192,7 @@ class TileQuadsRenderer final : public RendererBase {
       }
       layers_[tile->id] = layer;
       pending_.push_back({tile.get(), uint32_t(layer)});
+      room -= tile->texels.texels.size();
     }
     const GLsizei side = GLsizei(info_.storedTileSidePx());
     uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
@@ -215,13 +240,13 @@ class TileQuadsRenderer final : public RendererBase {
     const uint32_t finest_drawn =
         ortho ? desiredLevelFor(texelsPerPixelOf(view.ortho), info_.level_count) : 0;
     for (const auto& [id, layer] : layers_) {
-      if (id.level < finest_drawn || (ortho && hiddenByChildren(id, finest_drawn))) continue;
+      if (id.level < finest_drawn) continue;
       const double span = std::ldexp(double(info_.tile_size_px), int(id.level));
       const double x0 = id.x * span, y0 = id.y * span;
       const double x1 = std::min(x0 + span, double(info_.width_px));
       const double y1 = std::min(y0 + span, double(info_.height_px));
-      if (x1 <= footprint.x0 || x0 >= footprint.x1 || y1 <= footprint.y0 || y0 >= footprint.y1)
-        continue;  // outside the field of view
+      if (!meetsFootprint(footprint, x0, y0, x1, y1)) continue;  // outside the field of view
+      if (ortho && hiddenByChildren(id, finest_drawn, footprint)) continue;
       Instance instance{};
       instance.rect[0] = float(x0 - transform.anchor_x);
       instance.rect[1] = float(y0 - transform.anchor_y);
@@ -252,15 +277,27 @@ class TileQuadsRenderer final : public RendererBase {
               [](const Instance& a, const Instance& b) { return a.info[0] > b.info[0]; });
   }
 
-  /// True when every child of `id` that lies on the image is resident, at a level an
-  /// orthographic view at `finest_drawn` draws: they hide it.
-  bool hiddenByChildren(const TileId& id, uint32_t finest_drawn) const {
+  static bool meetsFootprint(const tessera::detail::Footprint& footprint, double x0, double y0,
+                             double x1, double y1) {
+    return x1 > footprint.x0 && x0 < footprint.x1 && y1 > footprint.y0 && y0 < footprint.y1;
+  }
+
+  /// True when every child of `id` that lies on the image and meets the view's footprint is
+  /// resident, at a level an orthographic view at `finest_drawn` draws: they hide all of it
+  /// that is on screen. Children off screen do not count: with them, each coarse level of the
+  /// stack drew a whole-screen quad whose every fragment was discarded, eight layers of
+  /// overdraw at full detail (a frame cost about 8 times the floor on llvmpipe).
+  bool hiddenByChildren(const TileId& id, uint32_t finest_drawn,
+                        const tessera::detail::Footprint& footprint) const {
     if (id.level == 0 || id.level - 1 < finest_drawn) return false;
     const uint32_t child_level = id.level - 1;
+    const double span = std::ldexp(double(info_.tile_size_px), int(child_level));
     for (uint32_t dy = 0; dy < 2; ++dy)
       for (uint32_t dx = 0; dx < 2; ++dx) {
         const uint32_t cx = id.x * 2 + dx, cy = id.y * 2 + dy;
         if (cx >= info_.tilesX(child_level) || cy >= info_.tilesY(child_level)) continue;
+        if (!meetsFootprint(footprint, cx * span, cy * span, (cx + 1) * span, (cy + 1) * span))
+          continue;
         if (!layers_.count({id.image, child_level, cx, cy})) return false;
       }
     return true;
@@ -331,6 +368,7 @@ class TileQuadsRenderer final : public RendererBase {
   }
 
   Texture tiles_;
+  bool sized_from_bound_ = false;  ///< the first apply sized the array from the streamer
   GLint max_layers_ = 0;
   uint32_t layer_capacity_ = 0;
   std::vector<GLint> free_layers_;

@@ -13,6 +13,7 @@
 #include "adaptive.h"
 #include "loader_pool.h"
 #include "residency.h"
+#include "upload_budget.h"
 
 namespace tessera {
 
@@ -45,6 +46,9 @@ struct TileStreamer::Impl {
   std::unordered_set<TileId, TileIdHash> in_flight;
   /// This frame's uploads; while they are chosen, the candidates so far.
   std::unordered_set<TileId, TileIdHash> uploading;
+  /// The byte budget of each frame's uploads, fed the renderer's measured upload times.
+  std::optional<detail::UploadBudgetController> upload_budget;
+  uint64_t frame_budget_bytes = 0;  ///< this frame's, chosen at the start of chooseUploads
 
   /// A tile's payload bytes, from its directory entry when its page is in memory (never a
   /// read: the render thread must not wait), else the mean of known ones at its level, else
@@ -115,6 +119,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   auto impl = std::make_unique<Impl>();
   impl->archive = archive;
   impl->options = options;
+  impl->upload_budget.emplace(options.residency);
   impl->cache = std::make_unique<TileCache>(
       options.cache_budget_bytes,
       options.viewer_shift_eviction ? makeViewerShiftPolicy() : makeLruPolicy());
@@ -164,6 +169,7 @@ uint64_t TileStreamer::Impl::chooseUploads(const detail::ResidencyPlan& plan,
   candidate_requests.clear();
   uploading.clear();
   const ResidencyOptions& budget = options.residency;
+  frame_budget_bytes = upload_budget->budgetBytes();
   const uint32_t coarsest = info.level_count - 1;
   auto parentReady = [&](const TileId& id) {
     TileId parent{id.image, id.level + 1, id.x / 2, id.y / 2};
@@ -178,8 +184,8 @@ uint64_t TileStreamer::Impl::chooseUploads(const detail::ResidencyPlan& plan,
       continue;
     }
     bool budget_left = candidates.size() < budget.upload_budget_tiles &&
-                       (budget.upload_budget_bytes == 0 || candidates.empty() ||
-                        candidate_bytes + info.storedTileBytes() <= budget.upload_budget_bytes);
+                       (frame_budget_bytes == 0 || candidates.empty() ||
+                        candidate_bytes + info.storedTileBytes() <= frame_budget_bytes);
     if (budget_left && parentReady(id)) {
       candidates.push_back(id);
       candidate_requests.push_back(request);
@@ -294,6 +300,11 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   out.regions = plan.clip_regions;
   out.clip_region_tiles =
       clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info.tile_size_px);
+  const uint64_t side = out.clip_region_tiles + 2 * uint64_t(s.options.residency.keep_margin_tiles);
+  out.resident_tiles_bound = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    out.resident_tiles_bound +=
+        std::min(side * side, uint64_t(info.tilesX(level)) * info.tilesY(level));
 
   const uint64_t upload_bytes = s.chooseUploads(plan, info);
   FrameReport& report = out.report;
@@ -309,14 +320,19 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   s.reportLoader(report);
   report.uploads = out.uploads.size();
   report.upload_bytes = upload_bytes;
+  report.upload_budget_bytes = s.frame_budget_bytes;
+  report.upload_bytes_per_ms =
+      s.options.residency.adaptive_upload.enabled ? s.upload_budget->bytesPerMs() : 0;
   report.update_ms = std::chrono::duration<double, std::milli>(Clock::now() - started).count();
   return out;
 }
 
 void TileStreamer::acknowledge(const ApplyResult& result) {
   Impl& s = *impl_;
+  uint64_t accepted_bytes = 0;
   for (const TileId& id : result.accepted) {
     if (s.awaiting_upload.erase(id) == 0) continue;
+    accepted_bytes += s.archive->images()[id.image].storedTileBytes();
     s.resident.insert(id);
     s.cache->unpin(id);
   }
@@ -330,6 +346,7 @@ void TileStreamer::acknowledge(const ApplyResult& result) {
   // it was evicted meanwhile.
   for (const TileId& id : result.dropped)
     if (s.resident.erase(id)) s.loaded.insert(id);
+  if (result.upload_ms >= 0) s.upload_budget->observe(accepted_bytes, result.upload_ms);
 }
 
 TileState TileStreamer::state(const TileId& id) const {

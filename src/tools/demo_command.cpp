@@ -85,6 +85,14 @@ void printFlightLine(const DemoFlight& flight) {
     line += fmt::format("{}{} {}{}", line.size() > 8 ? ", " : "", f.short_label, f.text,
                         fail ? fmt::format(" (FAIL, target {})", f.target) : "");
   }
+  const nlohmann::json& s = flight.summary;
+  if (s.contains("upload_budget"))
+    line += fmt::format(
+        "\n        upload budget {} {:.1f} MiB a frame (median); {} frames drawn, {} skipped "
+        "while the GPU was busy",
+        s["upload_budget"].value("mode", std::string()),
+        s["upload_budget"].value("bytes_p50", 0.0) / 1048576.0, s.value("frames", 0),
+        s.value("dropped_frames", 0));
   std::printf(
       "%s\n        %d pass, %d fail (targets: docs/demo.md)%s\n", line.c_str(), passed, failed,
       slowdownNote(flight.summary).empty()

@@ -234,7 +234,9 @@ StreamerOptions flightStreamerOptions(const FlyArgs& args, const FlightSetup& se
   options.viewer_shift_eviction = args.eviction != "lru";
   if (args.threads != 0 || !setup.remote) options.loader_threads = args.threads;
   options.residency.upload_budget_tiles = args.upload_budget;
-  options.residency.upload_budget_bytes = args.upload_budget_mib << 20;
+  if (args.upload_budget_mib) options.residency.upload_budget_bytes = *args.upload_budget_mib << 20;
+  options.residency.adaptive_upload.enabled = !args.upload_budget_mib && args.render != "none";
+  options.residency.adaptive_upload.frame_ms = 1000 / args.fps;
   if (args.merge_gap_kib) options.merge_gap_bytes = *args.merge_gap_kib << 10;
   if (!setup.remote || args.read_ahead_kib != FlyArgs{}.read_ahead_kib)
     options.read_ahead_bytes = args.read_ahead_kib << 10;
@@ -275,6 +277,10 @@ struct FlightLog {
   /// ran slower than real time when frames took longer than 1/fps.
   double wall_s = 0;
   size_t late_frames = 0;  ///< frames shown more than a frame interval after their time
+  /// Frames of the path not drawn: their time had passed, or the GPU was still busy.
+  size_t dropped_frames = 0;
+  double capture_s = 0;  ///< time the clock stood still for pictures at rest and screenshots
+  std::vector<double> upload_budget_bytes;  ///< the budget each frame's uploads had
 
   /// Notes the frame's failed loads, and the uploads of tiles that had failed before.
   void noteLoads(const FrameUpdate& update) {
@@ -293,6 +299,7 @@ struct FlightLog {
               const FrameReport& r, double frame_render_ms, double fps) {
     last = r;
     update_ms.push_back(r.update_ms);
+    upload_budget_bytes.push_back(double(r.upload_budget_bytes));
     wall_s = now_s;
     late_frames += now_s > double(k + 1) / fps;
     ++frames;
@@ -317,10 +324,11 @@ struct FlightLog {
         r.queue_length, r.in_flight, r.uploads, r.upload_bytes, r.bytes_read_total,
         r.tiles_loaded_total, r.load_failures_total, r.update_ms, frame_render_ms));
     csv_tails.push_back(fmt::format(
-        "{:.0f},{:.2f},{:.2f},{},{},{},{},{},{},{},{},{}", r.link_bytes_per_s, r.link_latency_ms,
+        "{:.0f},{:.2f},{:.2f},{},{},{},{},{},{},{},{},{},{}", r.link_bytes_per_s, r.link_latency_ms,
         r.queue_wait_ms, r.adaptive ? 1 : 0, r.view_still ? 1 : 0, r.requested_level,
         r.budget_bytes == UINT64_MAX ? int64_t(-1) : int64_t(r.budget_bytes), r.memory_bytes,
-        r.requested_bytes, r.deferred_tiles, r.cancelled_total, r.reads_cancelled_total));
+        r.requested_bytes, r.deferred_tiles, r.cancelled_total, r.reads_cancelled_total,
+        r.upload_budget_bytes));
     report_frames.push_back({now_s * 1000, r.update_ms, frame_render_ms, -1, r.coverage_desired,
                              r.fully_covered, r.bytes_read_total, r.link_bytes_per_s,
                              r.desired_level, r.requested_level, r.finest_full_level});
@@ -372,13 +380,28 @@ Result<void> captureFlightPictures(const FlyArgs& args, const FlightSetup& setup
   return {};
 }
 
+/// Frames a real-time flight draws even while the GPU is busy (without uploading): the first,
+/// the first after a jump (its time is the jump's), the last before a jump or the end (the
+/// picture at rest) and the screenshots asked for.
+bool mustDraw(const FlyArgs& args, const FlightSetup& setup, uint64_t k) {
+  const double t_s = k / args.fps, next_t = (k + 1) / args.fps;
+  return k == 0 || next_t > setup.path.durationS() ||
+         setup.path.jumpsBetween((k - 1) / args.fps, t_s) || setup.path.jumpsBetween(t_s, next_t) ||
+         std::find(args.screenshot_frames.begin(), args.screenshot_frames.end(), k) !=
+             args.screenshot_frames.end();
+}
+
 /// Flies the path in real time at args.fps, one streamer update (and with `gpu`, one apply and
-/// draw) per frame, and records each frame in `log`.
+/// draw) per frame, and records each frame in `log`. With `gpu` (unless --every-frame), a
+/// frame whose time has passed or that comes while the GPU is still busy with the last one is
+/// skipped, as a display drops it, so the flight keeps to the wall clock.
 Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStreamer& streamer,
                        FlyRenderer* gpu, FlightLog& log) {
   if (args.cold && !isRemoteUri(args.archive)) dropFromPageCache(args.archive);
-  const auto start = Clock::now();
+  auto start = Clock::now();
   const double duration = setup.path.durationS();
+  const bool real_time = gpu && !args.every_frame;
+  double last_t_s = 0;  // the path time of the last frame drawn
   for (uint64_t k = 0;; ++k) {
     double t_s = k / args.fps;
     if (t_s > duration) break;
@@ -386,7 +409,12 @@ Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStream
     std::this_thread::sleep_until(
         start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t_s)));
     double now_s = std::chrono::duration<double>(Clock::now() - start).count();
-    if (k > 0 && setup.path.jumpsBetween((k - 1) / args.fps, t_s)) {
+    const bool must_draw = !real_time || mustDraw(args, setup, k);
+    if (!must_draw && (now_s > (k + 1) / args.fps || gpu->busy())) {
+      ++log.dropped_frames;
+      continue;
+    }
+    if (k > 0 && setup.path.jumpsBetween(last_t_s, t_s)) {
       if (args.cold && !setup.remote) dropFromPageCache(args.archive);
       log.jumps.push_back({std::chrono::duration<double>(Clock::now() - start).count()});
     }
@@ -396,16 +424,28 @@ Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStream
     const FrameUpdate& update = streamer.update(view);
     if (args.decode_bound)
       for (const auto& tile : update.uploads) log.jumps.back().uploaded.push_back(tile->id);
+    last_t_s = t_s;
     double frame_render_ms = -1;
     if (gpu) {
-      frame_render_ms = gpu->frame(k, view, update, streamer);
+      // A frame drawn while the GPU is busy uploads nothing: on a software renderer a texture
+      // update waits for the frames that read the texture.
+      frame_render_ms = gpu->frame(k, view, update, streamer, !real_time || !gpu->busy());
       log.render_ms.push_back(frame_render_ms);
     } else {
       streamer.acknowledge(acceptEverything(update));  // no GPU: a renderer of infinite room
     }
     log.noteLoads(update);
     log.record(k, now_s, start, view, update.report, frame_render_ms, args.fps);
-    if (gpu) TESSERA_TRY(captureFlightPictures(args, setup, *gpu, view, k, t_s, log));
+    if (gpu) {
+      // The flight's clock stops while pictures are read back and compared with the CPU
+      // reference: the harness's work, no viewer's, and up to a second a jump on llvmpipe,
+      // which would otherwise come out of the next spot's time.
+      const auto capture_started = Clock::now();
+      TESSERA_TRY(captureFlightPictures(args, setup, *gpu, view, k, t_s, log));
+      const auto spent = Clock::now() - capture_started;
+      start += spent;
+      log.capture_s += std::chrono::duration<double>(spent).count();
+    }
   }
   return {};
 }
@@ -509,6 +549,20 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"wall_s", log.wall_s},
       {"slowdown", setup.path.durationS() > 0 ? log.wall_s / setup.path.durationS() : 1.0},
       {"late_frames_pct", frames ? 100.0 * log.late_frames / frames : 0},
+      {"dropped_frames", log.dropped_frames},
+      {"capture_s", log.capture_s},
+      {"drawn_fps", log.wall_s > 0 ? double(frames) / log.wall_s : 0},
+      {"pacing", args.render == "none" ? "every frame (no rendering)"
+                 : args.every_frame    ? "every frame (--every-frame)"
+                                       : "real time (frames skipped while the GPU is busy)"},
+      {"upload_budget",
+       {{"mode", options.residency.adaptive_upload.enabled ? "adaptive" : "fixed"},
+        {"frame_ms", options.residency.adaptive_upload.frame_ms},
+        {"share", options.residency.adaptive_upload.upload_share},
+        {"bytes_p50", percentile(log.upload_budget_bytes, 50)},
+        {"bytes_min", percentile(log.upload_budget_bytes, 0)},
+        {"bytes_max", percentile(log.upload_budget_bytes, 100)},
+        {"bytes_per_ms_last", last.upload_bytes_per_ms}}},
       {"frames_full_detail_pct", frames ? 100.0 * log.frames_full_detail / frames : 0},
       {"startup_frames", log.startup_frames},
       {"open_ms", setup.open_ms},
@@ -617,6 +671,19 @@ void printFlightSummary(const FlyArgs& args, const FlightSetup& setup, const Fli
     std::printf("FAILED: %llu loads of %zu tiles failed (%lld loaded on a later try)\n",
                 (unsigned long long)failures, log.failed_tiles.size(),
                 (long long)summary["failed_tiles_loaded_later"].get<int64_t>());
+  if (args.render != "none")
+    std::printf(
+        "upload budget %s: %s a frame (median; %s to %s)%s; %zu frames drawn, %zu "
+        "skipped (%s)\n",
+        summary["upload_budget"]["mode"].get<std::string>().c_str(),
+        formatBytes(uint64_t(percentile(log.upload_budget_bytes, 50))).c_str(),
+        formatBytes(uint64_t(percentile(log.upload_budget_bytes, 0))).c_str(),
+        formatBytes(uint64_t(percentile(log.upload_budget_bytes, 100))).c_str(),
+        last.upload_bytes_per_ms > 0
+            ? fmt::format(", measured {}/ms", formatBytes(uint64_t(last.upload_bytes_per_ms)))
+                  .c_str()
+            : "",
+        log.frames, log.dropped_frames, summary["pacing"].get<std::string>().c_str());
   if (const double slowdown = summary["slowdown"].get<double>(); slowdown > kSlowdownNoted)
     std::printf(
         "slower than real time: the %.1f-s path took %.1f s (%.0f%% of frames late); times "
@@ -643,7 +710,8 @@ Result<void> startFramesCsv(const FlyArgs& args) {
          "coverage_desired,fully_covered,queue,in_flight,uploads,upload_bytes,bytes_read,"
          "tiles_loaded,load_failures,update_ms,render_ms,gpu_ms,link_bytes_per_s,"
          "link_latency_ms,queue_wait_ms,adaptive,view_still,requested_level,budget_bytes,"
-         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled\n";
+         "memory_bytes,requested_bytes,deferred_tiles,requests_cancelled,reads_cancelled,"
+         "upload_budget_bytes\n";
   return {};
 }
 
@@ -750,8 +818,12 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--upload-budget", args->upload_budget, "Most tiles uploaded per frame")
       ->capture_default_str();
   cmd->add_option("--upload-budget-mib", args->upload_budget_mib,
-                  "Most texel MiB uploaded per frame (0 = no byte limit)")
-      ->capture_default_str();
+                  "A fixed budget of texel MiB uploaded per frame (0 = no byte limit); "
+                  "default: with --render, what the renderer's measured upload rate fits in a "
+                  "quarter of a frame, else 16");
+  cmd->add_flag("--every-frame", args->every_frame,
+                "With --render, draw every frame of the path however long each takes, "
+                "instead of skipping those that come while the GPU is busy");
   cmd->add_option("--loader-priority", args->loader_priority,
                   "auto (SCHED_IDLE, with normal-priority helpers while those starve), idle "
                   "(SCHED_IDLE only) or nice (niceness 5); docs/runtime.md")

@@ -22,7 +22,14 @@ struct FlyArgs {
   std::string eviction = "viewer-shift";
   uint32_t threads = 0;
   uint32_t upload_budget = ResidencyOptions{}.upload_budget_tiles;
-  uint64_t upload_budget_mib = ResidencyOptions{}.upload_budget_bytes >> 20;
+  /// A fixed byte budget per frame (0 = no byte limit). Unset: with --render the budget
+  /// follows the renderer's measured upload cost at the --fps frame target; without, the
+  /// streamer's fixed default (no renderer, no cost to measure).
+  std::optional<uint64_t> upload_budget_mib;
+  /// With --render, draw every frame of the path however long each takes (the flight then
+  /// runs slower than real time); by default frames that come while the GPU is still busy
+  /// are skipped, as a display drops them.
+  bool every_frame = false;
   /// Unset: StreamerOptions' default, or tuneForRemoteSource's for a URL or --link.
   std::optional<uint64_t> merge_gap_kib;
   uint64_t read_ahead_kib = StreamerOptions{}.read_ahead_bytes >> 10;

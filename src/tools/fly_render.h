@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include <epoxy/gl.h>
 #include <nlohmann/json.hpp>
 
 #include <tessera/gl.h>
@@ -24,11 +25,19 @@ class FlyRenderer {
                                                                    const ImageInfo& info);
   ~FlyRenderer();
 
-  /// Applies the frame's uploads (acknowledged to `streamer`) and draws `view`, timing the
-  /// GPU's work with a timer query read back a few frames later (never waited for). Returns
-  /// the render thread's time, ms.
-  double frame(uint64_t index, const View& view, const FrameUpdate& update, TileStreamer& streamer);
-  /// GPU time per frame, ms; -1 where the driver gave none. Waits for queries still running.
+  /// Applies the frame's uploads (acknowledged to `streamer`; with `upload` false they are all
+  /// declined, offered again later, and no texture is touched) and draws `view`, timing the
+  /// GPU's work with a timer query read back a few frames later. Nothing here waits for the
+  /// GPU: when every query is still running the frame goes untimed. Ends the frame with a
+  /// fence (busy()). Returns the render thread's time, ms.
+  double frame(uint64_t index, const View& view, const FrameUpdate& update, TileStreamer& streamer,
+               bool upload = true);
+  /// True while the GPU has not finished the last frame (its fence, polled: never waits). A
+  /// real-time flight skips the frames that come while it is busy, as a display would drop
+  /// them: queuing more work than the GPU does only makes every later frame later.
+  bool busy();
+  /// GPU time per frame, ms; -1 where the driver gave none or the frame went untimed. Waits
+  /// for queries still running (after the flight).
   std::vector<double> finishGpuTimes();
 
   Renderer& renderer() { return *renderer_; }
@@ -49,6 +58,7 @@ class FlyRenderer {
   std::vector<Query> queries_;
   size_t next_query_ = 0;
   std::vector<double> gpu_ms_;
+  GLsync frame_fence_ = nullptr;  ///< the last frame's end; null once seen signalled
 };
 
 /// The picture with each pixel tinted by the level that draws it (Backes et al., Fig. 1), as

@@ -60,7 +60,8 @@ struct Rig {
   std::unique_ptr<TileStreamer> streamer;
   std::unique_ptr<Renderer> renderer;
 
-  explicit Rig(const test::SyntheticArchiveSpec& spec, RendererKind kind) {
+  explicit Rig(const test::SyntheticArchiveSpec& spec, RendererKind kind,
+               const RendererOptions& renderer_options = {}) {
     sharedContext();
     const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
     source = std::make_shared<test::FaultSource>(makeMemorySource(bytes, "mem:gl.tess"));
@@ -73,7 +74,7 @@ struct Rig {
     auto created = TileStreamer::create(archive, options);
     EXPECT_TRUE(created) << created.error().message;
     if (created) streamer = std::move(*created);
-    auto made = createRenderer(kind, archive->images()[0]);
+    auto made = createRenderer(kind, archive->images()[0], renderer_options);
     EXPECT_TRUE(made) << made.error().message;
     if (made) renderer = std::move(*made);
   }
@@ -432,6 +433,62 @@ TEST_P(Renderers, ApplyAnswersForEveryUploadAndHoldsWhatItAccepted) {
     rig.streamer->waitIdleForTesting();
   }
   EXPECT_GT(accepted, 0u);
+}
+
+// The staging ring (src/gl/upload_ring.h) on the real driver: a ring of a tile and a half
+// takes one tile a frame and declines the rest at once (never waiting for the GPU), the
+// declined tiles go up in later frames, and the picture at rest is the one a renderer with
+// the default ring draws.
+TEST_P(Renderers, AFullStagingRingDeclinesUploadsAndTheyGoUpLater) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig roomy(spec, GetParam());
+  RendererOptions tight;
+  tight.staging_ring_bytes = spec.tile_size_px * spec.tile_size_px * 4 * 3 / 2;
+  Rig cramped(spec, GetParam(), tight);
+  ASSERT_TRUE(roomy.ready() && cramped.ready());
+  const ImageInfo& info = cramped.archive->images()[0];
+  const View view = orthoAt(info.width_px / 2.0, info.height_px / 2.0, 1, 160, 120);
+  size_t most_accepted = 0, declined = 0;
+  for (int i = 0; i < 200; ++i) {
+    const FrameUpdate& update = cramped.streamer->update(view);
+    const ApplyResult& result = cramped.renderer->apply(update);
+    most_accepted = std::max(most_accepted, result.accepted.size());
+    declined += result.declined.size();
+    cramped.streamer->acknowledge(result);
+    cramped.renderer->draw(view);
+    const bool idle =
+        update.uploads.empty() && update.report.queue_length == 0 && update.report.in_flight == 0;
+    if (idle && i > 2) break;
+    (void)cramped.renderer->readPixels();  // the test waits for the GPU; a renderer never does
+    cramped.streamer->waitIdleForTesting();
+  }
+  EXPECT_EQ(most_accepted, 1u) << "one tile fits the ring a frame";
+  EXPECT_GT(declined, 0u);
+  roomy.settle(view);
+  const Picture a = roomy.renderer->readPixels(), b = cramped.renderer->readPixels();
+  auto difference = comparePictures(a, b);
+  ASSERT_TRUE(difference) << difference.error().message;
+  EXPECT_EQ(difference->max_abs, 0u);
+}
+
+TEST(TileQuads, TheTileArrayIsSizedFromTheResidencyBoundAtTheFirstFrameAndNeverGrowsInAPan) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  const View first = orthoAt(100, info.height_px / 2.0, 1, 128, 96);
+  const uint64_t bound = rig.frame(first).resident_tiles_bound;
+  ASSERT_GT(bound, RendererOptions{}.initial_layers) << "the test needs a bound above the default";
+  const uint64_t sized = rig.renderer->stats().gpu_bytes;
+  EXPECT_EQ(sized, bound * info.storedTileBytes());
+  for (int i = 0; i < 40; ++i) {
+    rig.streamer->waitIdleForTesting();
+    rig.frame(orthoAt(100 + (info.width_px - 200.0) * i / 39.0, info.height_px / 2.0, 1, 128, 96));
+    EXPECT_LE(rig.renderer->stats().resident_tiles, bound);
+    EXPECT_EQ(rig.renderer->stats().gpu_bytes, sized) << "frame " << i;
+  }
 }
 
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {

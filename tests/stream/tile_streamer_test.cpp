@@ -249,6 +249,7 @@ TEST_P(TileStreamerTest, UploadsKeepTheByteBudget) {
   const uint64_t tile_bytes = info().storedTileBytes();
   options_.residency.upload_budget_tiles = 1000;
   options_.residency.upload_budget_bytes = tile_bytes * 5 / 2;  // two and a half tiles
+  options_.residency.adaptive_upload.enabled = false;           // fixed
   TileStreamer& streamer = start();
   for (int i = 0; i < 20; ++i) {
     streamer.waitIdleForTesting();
@@ -261,6 +262,35 @@ TEST_P(TileStreamerTest, UploadsKeepTheByteBudget) {
     for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
     streamer.acknowledge(result);
   }
+}
+
+TEST_P(TileStreamerTest, TheAdaptiveBudgetFollowsTheRenderersMeasuredUploadTime) {
+  const uint64_t tile_bytes = info().storedTileBytes();
+  options_.residency.upload_budget_tiles = 1000;
+  AdaptiveUploadOptions& adaptive = options_.residency.adaptive_upload;
+  adaptive.frame_ms = 10;
+  adaptive.upload_share = 0.5;  // 5 ms a frame
+  adaptive.min_bytes = 1;
+  adaptive.max_bytes = tile_bytes * 1000;
+  adaptive.smoothing = 1;  // each frame's measurement is the estimate
+  TileStreamer& streamer = start();
+  // The renderer says each tile took 2.5 ms: two tiles fit in 5 ms.
+  bool measured = false, limited = false;
+  for (int i = 0; i < 20; ++i) {
+    streamer.waitIdleForTesting();
+    const FrameUpdate& update = streamer.update(orthoView(512, 384));
+    if (measured && !update.uploads.empty()) {
+      EXPECT_EQ(update.report.upload_budget_bytes, 2 * tile_bytes) << "frame " << i;
+      EXPECT_LE(update.uploads.size(), 2u) << "frame " << i;
+      limited = true;
+    }
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+    result.upload_ms = 2.5 * double(update.uploads.size());
+    streamer.acknowledge(result);
+    measured = measured || !update.uploads.empty();
+  }
+  EXPECT_TRUE(limited);
 }
 
 TEST_P(TileStreamerTest, UpdateDoesNotBlockWhileEveryLoaderIsStuckInARead) {
