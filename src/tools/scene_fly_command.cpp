@@ -29,6 +29,8 @@ namespace tessera::cli {
 
 namespace {
 
+constexpr uint64_t kSceneUploadBudgetMib = 16;
+
 using Clock = std::chrono::steady_clock;
 
 /// Frames the settling at the end may take before the rest picture is taken anyway.
@@ -279,7 +281,7 @@ nlohmann::json sceneFlightSummary(const FlyArgs& args, const SceneFlightSetup& s
       {"full_quality_ms_median",
        reached.empty() ? nlohmann::json() : nlohmann::json(reached[reached.size() / 2])},
       {"peak_texel_bytes", log.peak_texel_bytes},
-      {"upload_budget_mib", args.upload_budget_mib},
+      {"upload_budget_mib", args.upload_budget_mib.value_or(kSceneUploadBudgetMib)},
       {"rest",
        {{"settle_frames", rest.settle_frames},
         {"psnr_db", psnr},
@@ -327,9 +329,10 @@ Result<nlohmann::json> runSceneFlight(const FlyArgs& args, const SceneFlightSetu
   Result<std::unique_ptr<GlContext>> context = GlContext::createHeadless();
   if (!context) return forwardError(context);
   SceneRenderOptions render_options;
-  // 0 is "no byte limit", as for image flights.
-  render_options.upload_budget_bytes =
-      args.upload_budget_mib ? args.upload_budget_mib << 20 : UINT64_MAX;
+  // 0 is "no byte limit", as for image flights; the scene renderer's budget does not adapt
+  // yet, so without --upload-budget-mib it is the image flights' former fixed 16 MiB.
+  const uint64_t budget_mib = args.upload_budget_mib.value_or(kSceneUploadBudgetMib);
+  render_options.upload_budget_bytes = budget_mib ? budget_mib << 20 : UINT64_MAX;
   Result<std::unique_ptr<SceneRenderer>> renderer =
       SceneRenderer::create(setup.archive, render_options);
   if (!renderer) return forwardError(renderer);
