@@ -66,23 +66,33 @@ void drawTriangle(ScreenPoint v0, ScreenPoint v1, ScreenPoint v2, uint32_t id, I
   const int64_t j0 = int64_t(std::max(0.0, std::ceil(min_y - 0.5)));
   const int64_t j1 = int64_t(std::min(h - 1, std::floor(max_y - 0.5)));
   const bool own12 = ownsEdge(v1, v2), own20 = ownsEdge(v2, v0), own01 = ownsEdge(v0, v1);
+  // Each edge function is affine in x along a row, so the pixels it keeps are a half-line
+  // starting where it crosses zero, and that crossing moves linearly from row to row:
+  // i*(j) = cross0 + cross_step * j. Rows are narrowed to the intersection of the three
+  // half-lines, one pixel wider each side against rounding; the exact test below decides.
   const ScreenPoint* from[3] = {&v1, &v2, &v0};
   const ScreenPoint* to[3] = {&v2, &v0, &v1};
+  double cross0[3], cross_step[3], constant[3];
+  int side[3];  // +1: keeps i >= i*, -1: keeps i <= i*, 0: the row decides alone
+  for (int e = 0; e < 3; ++e) {
+    const double slope = -(to[e]->y - from[e]->y);
+    side[e] = slope > 0 ? 1 : slope < 0 ? -1 : 0;
+    const double at_origin = edge(*from[e], *to[e], 0.5, 0.5);  // pixel (0, 0)
+    constant[e] = to[e]->x - from[e]->x;                        // d edge / d row
+    cross0[e] = side[e] ? -at_origin / slope : 0;
+    cross_step[e] = side[e] ? -constant[e] / slope : 0;
+    if (!side[e]) cross0[e] = at_origin;
+  }
   for (int64_t j = j0; j <= j1; ++j) {
     const double py = double(j) + 0.5;
-    // Each edge function is affine in x along the row: the pixels it keeps are a half-line.
-    // Narrow the row to their intersection, one pixel wider each side against rounding; the
-    // exact test below decides.
     double lo = double(i0), hi = double(i1);
     for (int e = 0; e < 3; ++e) {
-      const double slope = -(to[e]->y - from[e]->y);
-      const double at0 = edge(*from[e], *to[e], 0.5, py);
-      if (slope > 0) {
-        lo = std::max(lo, std::floor(-at0 / slope) - 1);
-      } else if (slope < 0) {
-        hi = std::min(hi, std::ceil(-at0 / slope) + 1);
-      } else if (at0 < 0) {
-        hi = -1;
+      if (side[e] > 0) {
+        lo = std::max(lo, std::floor(cross0[e] + cross_step[e] * double(j)) - 1);
+      } else if (side[e] < 0) {
+        hi = std::min(hi, std::ceil(cross0[e] + cross_step[e] * double(j)) + 1);
+      } else if (cross0[e] + constant[e] * double(j) < 0) {
+        hi = -1;  // a horizontal edge with the whole row outside it
       }
     }
     lo = std::min(lo, double(i1) + 1);

@@ -311,7 +311,8 @@ Result<SceneBuildReport> buildScene(
         {"cells_u", hints->cells_u},        {"cells_v", hints->cells_v},
         {"cell_size", hints->cell_size},    {"resolution", hints->resolution_px},
         {"eye_low", hints->eye_low},        {"eye_high", hints->eye_high},
-        {"entries", hints->entries.size()}, {"seconds", hint_stats.seconds}};
+        {"entries", hints->entries.size()}, {"seconds", hint_stats.seconds},
+        {"views", hint_stats.views},        {"objects_drawn", hint_stats.objects_drawn}};
   }
   SceneBuildReport report;
   for (const SpooledTexture& t : textures) report.tiles_encoded += t.tiles_encoded;
