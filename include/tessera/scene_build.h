@@ -37,8 +37,9 @@ struct SceneBuildOptions {
   /// Largest texture side accepted; larger textures are refused (kTooLarge) naming the file.
   uint32_t max_texture_side_px = 16384;
   /// Average coverage hints (Marvie & Bouatouch, seed 003 part II; docs/scenes.md, "Coverage
-  /// hints"): computed and stored unless false.
-  bool coverage_hints = true;
+  /// hints"): computed and stored when true. Off by default: they cost 2 to 17 times the
+  /// rest of the build in CPU time (docs/scenes.md has the figures).
+  bool coverage_hints = false;
   double hint_cell_size = 0;         ///< world units; 0: the longer ground side / 16
   uint32_t hint_resolution_px = 64;  ///< per cube face, 1..4096
 };

@@ -307,12 +307,15 @@ Result<SceneBuildReport> buildScene(
   input.metadata = sceneMetadata(options, scene, tree, placement, textures);
   if (hints) {
     input.hints = &*hints;
-    input.metadata["scene"]["coverage_hints"] = {
-        {"cells_u", hints->cells_u},        {"cells_v", hints->cells_v},
-        {"cell_size", hints->cell_size},    {"resolution", hints->resolution_px},
-        {"eye_low", hints->eye_low},        {"eye_high", hints->eye_high},
-        {"entries", hints->entries.size()}, {"seconds", hint_stats.seconds},
-        {"views", hint_stats.views},        {"objects_drawn", hint_stats.objects_drawn}};
+    input.metadata["scene"]["coverage_hints"] = {{"cells_u", hints->cells_u},
+                                                 {"cells_v", hints->cells_v},
+                                                 {"cell_size", hints->cell_size},
+                                                 {"resolution", hints->resolution_px},
+                                                 {"eye_low", hints->eye_low},
+                                                 {"eye_high", hints->eye_high},
+                                                 {"entries", hints->entries.size()},
+                                                 {"views", hint_stats.views},
+                                                 {"objects_drawn", hint_stats.objects_drawn}};
   }
   SceneBuildReport report;
   for (const SpooledTexture& t : textures) report.tiles_encoded += t.tiles_encoded;

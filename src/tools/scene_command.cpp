@@ -23,7 +23,7 @@ struct SceneCliOptions {
   std::vector<std::string> texture_sources;
   uint32_t max_texture_side_px = 16384;
   uint32_t tree_depth = 2;
-  bool coverage_hints = true;
+  bool coverage_hints = false;
   double hint_cell_size = 0;
   uint32_t hint_resolution_px = 64;
 };
@@ -160,7 +160,8 @@ void addSceneBuildOptions(CLI::App& build) {
                   "Scenes: largest texture side accepted, px")
       ->capture_default_str();
   build.add_flag("--coverage-hints,!--no-coverage-hints", o.coverage_hints,
-                 "Scenes: compute and store average coverage hints (default on)");
+                 "Scenes: compute and store average coverage hints (default off: they cost more "
+                 "than the rest of the build)");
   build
       .add_option("--hint-cell", o.hint_cell_size,
                   "Scenes: coverage hint cell side, world units (0: the longer ground side / 16)")

@@ -95,6 +95,8 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
   options.output = dir.file("sf.tess");
   options.tile_size_px = 128;
   options.threads = 2;
+  options.coverage_hints = true;
+  options.hint_resolution_px = 32;
   Result<SceneBuildReport> report = buildScene(options);
   ASSERT_TRUE(report.has_value()) << report.error().message;
   std::printf(
