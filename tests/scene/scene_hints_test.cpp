@@ -73,29 +73,9 @@ TEST(SceneHints, LevelForPixelsByHand) {
   EXPECT_EQ(detail::levelForPixels(info, 65536, 1), 1u) << "the bias makes it coarser";
 }
 
-// Looking straight down at the whole y-up city from above.
-PerspectiveView above(const SceneSummary& summary, double height) {
-  PerspectiveView camera;
-  camera.eye_x = (summary.bounds.min[0] + summary.bounds.max[0]) / 2;
-  camera.eye_y = summary.bounds.max[1] + height;
-  camera.eye_z = (summary.bounds.min[2] + summary.bounds.max[2]) / 2;
-  camera.yaw_rad = 0;
-  camera.pitch_rad = 0;
-  camera.fov_y_rad = 1.2;
-  camera.viewport_w = 640;
-  camera.viewport_h = 480;
-  return camera;
-}
-
 TEST(SceneHints, StreamerReadsTheHintedLeafFirstAndSizesTexturesBeforeTheirUsersArrive) {
   ScratchDir dir;
-  SceneBuildOptions build;
-  build.input = "synthetic-scene:200:40:3";
-  build.output = dir.file("city.tess");
-  build.tile_size_px = 64;
-  build.threads = 2;
-  build.leaf_capacity = 8;
-  build.max_children = 4;
+  const SceneBuildOptions build = test::testCityOptions(dir, "200:40:3");
   ASSERT_TRUE(buildScene(build).has_value());
   auto archive = SceneArchive::openFile(build.output);
   ASSERT_TRUE(archive.has_value());
@@ -103,7 +83,7 @@ TEST(SceneHints, StreamerReadsTheHintedLeafFirstAndSizesTexturesBeforeTheirUsers
   auto nodes = scene.allNodes();
   auto textures = scene.textures(0, scene.summary().textures);
   ASSERT_TRUE(nodes && textures);
-  const PerspectiveView camera = above(scene.summary(), 400);
+  const PerspectiveView camera = test::cameraAbove(scene.summary(), 400, 1.2);
 
   // The last leaf in tree order holding a texture of its own: the projected-size order (tree
   // order, one leaf a frame here) reads it last; the hints say its texture fills the view.
@@ -160,11 +140,7 @@ TEST(SceneHints, StreamerReadsTheHintedLeafFirstAndSizesTexturesBeforeTheirUsers
 
 TEST(SceneHints, StreamerRefusesHintsForAnotherScene) {
   ScratchDir dir;
-  SceneBuildOptions build;
-  build.input = "synthetic-scene:50:10:1";
-  build.output = dir.file("city.tess");
-  build.tile_size_px = 64;
-  build.threads = 2;
+  const SceneBuildOptions build = test::testCityOptions(dir, "50:10:1");
   ASSERT_TRUE(buildScene(build).has_value());
   auto archive = SceneArchive::openFile(build.output);
   ASSERT_TRUE(archive.has_value());

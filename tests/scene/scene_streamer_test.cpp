@@ -19,30 +19,14 @@ using test::CountingSource;
 using test::ScratchDir;
 
 std::string buildCity(const ScratchDir& dir, const std::string& spec) {
-  SceneBuildOptions options;
-  options.input = "synthetic-scene:" + spec;
-  options.output = dir.file("city.tess");
-  options.tile_size_px = 64;
-  options.threads = 2;
-  options.leaf_capacity = 8;
-  options.max_children = 4;
+  const SceneBuildOptions options = test::testCityOptions(dir, spec);
   Result<SceneBuildReport> report = buildScene(options);
   EXPECT_TRUE(report.has_value()) << report.error().message;
   return options.output;
 }
 
-// The synthetic city is y-up: yaw 0 and pitch 0 look straight down -y.
 PerspectiveView above(const SceneSummary& summary, double height) {
-  PerspectiveView camera;
-  camera.eye_x = (summary.bounds.min[0] + summary.bounds.max[0]) / 2;
-  camera.eye_y = summary.bounds.max[1] + height;
-  camera.eye_z = (summary.bounds.min[2] + summary.bounds.max[2]) / 2;
-  camera.yaw_rad = 0;
-  camera.pitch_rad = 0;
-  camera.fov_y_rad = 1.0;
-  camera.viewport_w = 640;
-  camera.viewport_h = 480;
-  return camera;
+  return test::cameraAbove(summary, height);
 }
 
 struct Opened {
