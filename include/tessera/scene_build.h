@@ -37,7 +37,7 @@ struct SceneBuildOptions {
   /// Largest texture side accepted; larger textures are refused (kTooLarge) naming the file.
   uint32_t max_texture_side_px = 16384;
   /// Average coverage hints (Marvie & Bouatouch, seed 003 part II; docs/scenes.md, "Coverage
-  /// hints"): computed and stored when true. Off by default: they cost 2 to 17 times the
+  /// hints"): computed and stored when true. Off by default: they cost 3 to 17 times the
   /// rest of the build in CPU time (docs/scenes.md has the figures).
   bool coverage_hints = false;
   double hint_cell_size = 0;         ///< world units; 0: the longer ground side / 16
