@@ -261,11 +261,11 @@ TEST(CoverageHints, BuilderMatchesBruteForcePixelCount) {
   EXPECT_GT(compared, 8u);
 }
 
-TEST(CoverageHints, CullingSmallObjectsChangesLittleAndThreadsChangeNothing) {
+TEST(CoverageHints, ThreadCountChangesNothingAndTheDefaultGridIs16Cells) {
   std::mt19937 rng(5);
   const HintScene scene = randomBoxes(rng, 40, 6);
   HintBuildOptions options;
-  options.resolution_px = 24;
+  options.resolution_px = 8;
   options.threads = 1;
   auto one = buildCoverageHints(scene, options);
   options.threads = 3;
