@@ -21,6 +21,7 @@
 
 #include <tessera/byte_source.h>
 #include <tessera/codec_scratch.h>
+#include <tessera/coverage_hints.h>
 #include <tessera/format.h>
 #include <tessera/result.h>
 
@@ -173,6 +174,13 @@ class SceneArchive {
   FileRange nodeTableRange() const;
   /// The coarse block: every texture's coarsest-level payload, in texture order.
   FileRange coarseRange() const;
+  /// The coverage hints block (docs/format.md, "Coverage hints"); length 0 when the archive
+  /// has none (built with --no-coverage-hints, or by an older writer).
+  FileRange coverageHintsRange() const;
+  /// Reads (one verified read, none when inside the header region) and decodes the coverage
+  /// hints. kNotFound when there are none; kCorrupt (naming the archive and the field) for a
+  /// block over 64 MiB, a checksum mismatch or a broken rule; kUnsupported for a newer version.
+  [[nodiscard]] Result<CoverageHints> readCoverageHints() const;
 
   /// A node record: from the cache or the header region, else one read of 96 bytes.
   [[nodiscard]] Result<SceneNode> node(uint32_t index) const;
@@ -227,7 +235,9 @@ struct SceneVerifyReport {
   uint64_t nodes_checked = 0;   ///< node heads and pages read and checksummed
   uint64_t meshes_checked = 0;  ///< mesh blobs checksummed (and decoded when asked)
   uint64_t objects_checked = 0;
-  uint64_t textures_checked = 0;  ///< texture records matched against the image records
+  uint64_t textures_checked = 0;      ///< texture records matched against the image records
+  uint64_t hint_cells_checked = 0;    ///< coverage hint cells decoded and checked (0: none)
+  uint64_t hint_entries_checked = 0;  ///< their (texture, coverage) entries
   uint64_t fault_count = 0;
   std::vector<std::string> faults;  ///< the first 100, each naming the archive and the item
   bool ok() const { return fault_count == 0; }
@@ -238,7 +248,8 @@ struct SceneVerifyReport {
 /// texture references and its holders (an ancestor of its leaf), and the texture table
 /// against the image records a 1.0 reader sees (`images`: size, channels, tile size, levels;
 /// each texture stored at exactly the node that lists it, its coarsest tile inside the coarse
-/// block). Texture payloads are Archive::verify's. Blocking; thread-safe like the archive.
+/// block), and the coverage hints when present (checksum and every rule of the format).
+/// Texture payloads are Archive::verify's. Blocking; thread-safe like the archive.
 SceneVerifyReport verifyScene(const SceneArchive& scene, const std::vector<ImageInfo>& images,
                               bool decode);
 

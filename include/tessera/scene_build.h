@@ -36,6 +36,12 @@ struct SceneBuildOptions {
   uint32_t threads = 0;         ///< texture encoders; 0 = all cores
   /// Largest texture side accepted; larger textures are refused (kTooLarge) naming the file.
   uint32_t max_texture_side_px = 16384;
+  /// Average coverage hints (Marvie & Bouatouch, seed 003 part II; docs/scenes.md, "Coverage
+  /// hints"): computed and stored when true. Off by default: they cost 3 to 17 times the
+  /// rest of the build in CPU time (docs/scenes.md has the figures).
+  bool coverage_hints = false;
+  double hint_cell_size = 0;         ///< world units; 0: the longer ground side / 16
+  uint32_t hint_resolution_px = 64;  ///< per cube face, 1..4096
 };
 
 /// Progress, from the building thread.
@@ -66,6 +72,12 @@ struct SceneBuildReport {
   uint64_t tiles_encoded = 0;
   std::string importer;  ///< "gltf", "assimp", "stg", "synthetic"
   double elapsed_s = 0;
+  /// Coverage hints: cells, (cell, texture) entries, bytes stored, seconds spent (all 0
+  /// without hints).
+  uint64_t hint_cells = 0;
+  uint64_t hint_entries = 0;
+  uint64_t hint_bytes = 0;
+  double hint_seconds = 0;
 };
 
 /// Builds a scene archive. On failure or cancel nothing is left at `options.output` (a file

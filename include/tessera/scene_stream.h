@@ -12,6 +12,7 @@
 #include <vector>
 
 #include <tessera/byte_source.h>
+#include <tessera/coverage_hints.h>
 #include <tessera/result.h>
 #include <tessera/scene.h>
 #include <tessera/view.h>
@@ -64,6 +65,14 @@ struct SceneStreamOptions {
   double lod_bias = 0;
   /// The source's cost model; unset: measureLinkCost at every plan.
   std::optional<LinkCost> link;
+  /// Average coverage hints (Marvie & Bouatouch, seed 003 part II; docs/scenes.md, "Coverage
+  /// hints"): when the archive has them, open reads them (one read) and every frame the hints
+  /// of the camera's cell rank leaf reads and texture loads and set the levels of textures
+  /// whose users have not arrived yet; false: the projected-size estimate alone.
+  bool use_coverage_hints = true;
+  /// Hints to use instead of the archive's (for instance computed for another grid); they must
+  /// be for this scene's textures. Null: the archive's.
+  std::shared_ptr<const CoverageHints> coverage_hints;
 };
 
 /// What one update did and saw.
@@ -80,6 +89,10 @@ struct SceneFrameStats {
   uint64_t texel_budget_bytes = 0;
   uint64_t pinned_texel_bytes = 0;  ///< coarsest levels, outside the budget
   bool moving = false;
+  /// The camera's cell had coverage hints this frame, and how many textures they asked for
+  /// before any of their users had arrived.
+  bool hinted = false;
+  uint32_t hint_only_textures = 0;
 };
 
 /// Totals since open, for reports and tests.
@@ -97,7 +110,10 @@ struct SceneStreamTotals {
 class SceneStreamer {
  public:
   /// Reads the node table, the texture table and the coarse block (three reads, blocking:
-  /// call it before the first frame) and starts the workers. Errors name the archive.
+  /// call it before the first frame), and the coverage hints when used (a fourth, unless in the
+  /// header region: they are small, about 4 bytes per (cell, texture) seen, so loading them
+  /// all at open keeps the workers and the frame free of them), and starts the workers. Errors
+  /// name the archive (a corrupt hints block included).
   [[nodiscard]] static Result<std::unique_ptr<SceneStreamer>> open(
       std::shared_ptr<const SceneArchive> archive, const SceneStreamOptions& options = {});
   ~SceneStreamer();  ///< cancels queued reads and joins the workers

@@ -15,13 +15,6 @@ namespace tessera::detail {
 
 namespace {
 
-void storeF32(uint8_t* p, float v) {
-  storeU32(p, std::bit_cast<uint32_t>(v));
-}
-float loadF32(const uint8_t* p) {
-  return std::bit_cast<float>(loadU32(p));
-}
-
 void storeBox(uint8_t* p, const SceneBox& box) {
   for (int a = 0; a < 3; ++a) {
     storeF32(p + 4 * a, box.min[a]);

@@ -11,6 +11,7 @@
 
 #include "codecs/decode.h"
 #include "format/checksum.h"
+#include "format/coverage_hints.h"
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/scene.h"
@@ -82,6 +83,7 @@ struct SceneArchive::Impl {
   std::string name;
   FileHeader header;
   SceneDirectory directory;
+  BlockRef hints;  ///< the coverage hints section; length 0 when there is none
   SceneSummary summary;
   std::vector<uint8_t> header_region;
   /// Head checksums need the head's own record: they are kept with it.
@@ -197,6 +199,7 @@ Result<std::shared_ptr<SceneArchive>> SceneArchive::open(std::shared_ptr<ByteSou
   TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes,
                            impl->readVerified(scene, "scene directory"));
   TESSERA_ASSIGN_OR_RETURN(impl->directory, decodeSceneDirectory(bytes, impl->header, impl->name));
+  impl->hints = findSection(sections, SectionKind::kCoverageHints);
   const SceneDirectory& d = impl->directory;
   impl->summary = {d.node_count, d.object_count, d.mesh_count,    d.texture_count,
                    d.tree_depth, d.max_children, d.leaf_capacity, toBox(d.bounds)};
@@ -232,6 +235,22 @@ FileRange SceneArchive::nodeTableRange() const {
 }
 FileRange SceneArchive::coarseRange() const {
   return {impl_->directory.coarse.offset_bytes, impl_->directory.coarse.length_bytes};
+}
+FileRange SceneArchive::coverageHintsRange() const {
+  return {impl_->hints.offset_bytes, impl_->hints.length_bytes};
+}
+
+Result<CoverageHints> SceneArchive::readCoverageHints() const {
+  const BlockRef& block = impl_->hints;
+  if (block.length_bytes == 0)
+    return fail(ErrorCode::kNotFound, impl_->name + ": no coverage hints");
+  if (block.length_bytes > kMaxCoverageHintsBytes)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: coverage hints of {} bytes exceed {}", impl_->name,
+                            block.length_bytes, kMaxCoverageHintsBytes));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> bytes,
+                           impl_->readVerified(block, "coverage hints"));
+  return decodeCoverageHints(bytes, impl_->directory.texture_count, impl_->name);
 }
 
 Result<SceneNode> SceneArchive::node(uint32_t index) const {

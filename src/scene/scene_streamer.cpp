@@ -9,6 +9,7 @@
 
 #include "format/directory.h"
 #include "io_plan.h"
+#include "scene_hints.h"
 #include "scene_loader.h"
 #include "scene_lod.h"
 #include "scene_residency.h"
@@ -141,6 +142,9 @@ struct SceneStreamer::Impl {
   std::vector<uint32_t> levels_in_flight;  ///< per texture: its levels queued or running
   /// Decoded levels finer than their texture's next one, waiting for it (another read).
   std::vector<detail::DecodedLevel> early_levels;
+  std::unique_ptr<detail::CellHints> hints;  ///< null: coverage hints not used
+  std::vector<uint64_t> demanded_frame;      ///< per texture: the last frame of a feedback demand
+  uint64_t frame = 0;
   std::unique_ptr<detail::SceneLoaderPool> pool;  // last: its workers stop before the rest goes
 
   PerspectiveView last_camera;
@@ -174,7 +178,10 @@ struct SceneStreamer::Impl {
   }
   void queryVisible(const detail::Frustum& frustum);
   void collectDemands(const PerspectiveView& camera, const detail::Frustum& frustum,
-                      SceneFrameStats& stats);
+                      uint64_t budget, SceneFrameStats& stats);
+  void applyHints(const PerspectiveView& camera, const detail::Frustum& frustum, uint64_t budget,
+                  SceneFrameStats& stats);
+  std::vector<uint32_t> leavesToRead(uint32_t slots) const;
   void evict(uint64_t budget, SceneFrameStats& stats);
   void planAndSubmit(const PerspectiveView& camera, uint64_t budget, bool moving,
                      SceneFrameStats& stats);
@@ -257,6 +264,23 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
     impl->plan[i].subtree_nodes = impl->nodes[i].subtree_nodes;
     impl->plan[i].own = impl->nodes[i].own;
     impl->plan[i].subtree = impl->nodes[i].subtree;
+  }
+  std::shared_ptr<const CoverageHints> hints = options.coverage_hints;
+  if (!hints && options.use_coverage_hints && archive->coverageHintsRange().length_bytes != 0) {
+    TESSERA_ASSIGN_OR_RETURN(CoverageHints read, archive->readCoverageHints());
+    hints = std::make_shared<const CoverageHints>(std::move(read));
+  }
+  if (hints && options.use_coverage_hints) {
+    if (hints->texture_count != texture_count)
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: coverage hints for {} textures, the scene has {}",
+                              archive->name(), hints->texture_count, texture_count));
+    std::vector<uint32_t> texture_node;
+    for (const SceneTexture& texture : context->textures)
+      texture_node.push_back(std::min<uint32_t>(texture.node, uint32_t(node_count - 1)));
+    impl->hints =
+        std::make_unique<detail::CellHints>(hints, std::move(texture_node), uint32_t(node_count));
+    impl->demanded_frame.assign(texture_count, 0);
   }
   impl->context = context;
   impl->pool = std::make_unique<detail::SceneLoaderPool>(context, options.worker_threads);
@@ -389,7 +413,8 @@ void SceneStreamer::Impl::queryVisible(const detail::Frustum& frustum) {
 }
 
 void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
-                                         const detail::Frustum& frustum, SceneFrameStats& stats) {
+                                         const detail::Frustum& frustum, uint64_t budget,
+                                         SceneFrameStats& stats) {
   demands.clear();
   drawable.clear();
   missing_meshes.clear();
@@ -430,7 +455,65 @@ void SceneStreamer::Impl::collectDemands(const PerspectiveView& camera,
       if (textured && object.mesh < meshes.size() && meshes[object.mesh]) drawable.push_back(o);
     }
   }
+  applyHints(camera, frustum, budget, stats);
   residency.setDemand(demands);
+}
+
+void SceneStreamer::Impl::applyHints(const PerspectiveView& camera, const detail::Frustum& frustum,
+                                     uint64_t budget, SceneFrameStats& stats) {
+  if (!hints || !hints->setCamera(camera)) return;
+  stats.hinted = true;
+  ++frame;
+  // With feedback: the projected size bounds what the objects can cover, the cell's samples
+  // discount what they found hidden; the smaller ranks the load (and the eviction). The level
+  // stays the projected-size estimate's: it is what the screen resolves.
+  for (detail::TextureDemand& demand : demands) {
+    const double hinted = std::max(hints->pixels(demand.texture), hints->floorPixels());
+    demand.pixels = std::min(demand.pixels, uint64_t(hinted));
+    demanded_frame[demand.texture] = frame;
+  }
+  // Before feedback (seed 003): a texture the cell sees whose users have not arrived gets the
+  // level its hint pixels need, no finer than its share of the budget by hint allows, when its
+  // node is known and may be in view.
+  for (uint32_t t : hints->textures()) {
+    if (demanded_frame[t] == frame || !holder_entry[t]) continue;
+    if (!detail::boxMayBeVisible(frustum, nodes[context->textures[t].node].bounds)) continue;
+    const double pixels = hints->pixels(t);
+    const uint32_t coarsest_level = residency.coarsest(t);
+    uint32_t level = detail::levelForPixels(context->textures[t].info, pixels, options.lod_bias);
+    const double share = double(budget) * pixels / hints->totalPixels();
+    // S(L), the pyramid from L down: about 4/3 of level L.
+    for (; level < coarsest_level; ++level) {
+      if (double(residency.levelBytes(t, level)) * 4 / 3 <= share) break;
+    }
+    demands.push_back({t, level, uint64_t(pixels)});
+    ++stats.hint_only_textures;
+  }
+}
+
+std::vector<uint32_t> SceneStreamer::Impl::leavesToRead(uint32_t slots) const {
+  std::vector<uint32_t> leaves;
+  for (uint32_t leaf : visible_leaves)
+    if (node_state[leaf] == NodeState::kUnknown) leaves.push_back(leaf);
+  if (!hints || !hints->active()) {
+    if (leaves.size() > slots) leaves.resize(slots);
+    return leaves;
+  }
+  // The hinted pixels a read of the leaf brings: its textures' and its unread ancestors'.
+  std::vector<std::pair<double, uint32_t>> ranked;
+  for (uint32_t leaf : leaves) {
+    double pixels = 0;
+    for (uint32_t n = leaf;; n = parent[n]) {
+      if (n == leaf || node_state[n] == NodeState::kUnknown) pixels += hints->nodePixels(n);
+      if (n == 0) break;
+    }
+    ranked.push_back({-pixels, leaf});
+  }
+  const size_t take = std::min<size_t>(slots, ranked.size());
+  std::partial_sort(ranked.begin(), ranked.begin() + take, ranked.end());
+  leaves.clear();
+  for (size_t k = 0; k < take; ++k) leaves.push_back(ranked[k].second);
+  return leaves;
 }
 
 void SceneStreamer::Impl::evict(uint64_t budget, SceneFrameStats& stats) {
@@ -551,10 +634,9 @@ void SceneStreamer::Impl::planAndSubmit(const PerspectiveView& camera, uint64_t 
   if (pending >= options.max_reads_in_flight) return;
   uint32_t slots = options.max_reads_in_flight - pending;
   const LinkCost cost = link();
-  uint32_t leaves = 0;
-  for (uint32_t leaf : visible_leaves) {
-    if (node_state[leaf] != NodeState::kUnknown || leaves >= slots * kWantsPerSlot) continue;
-    ++leaves;
+  const std::vector<uint32_t> to_read = leavesToRead(slots * kWantsPerSlot);
+  const uint32_t leaves = uint32_t(to_read.size());
+  for (uint32_t leaf : to_read) {
     // The leaf and every unknown ancestor: they hold its objects' shared meshes and textures.
     for (uint32_t n = leaf;; n = parent[n]) {
       if (node_state[n] == NodeState::kUnknown && !plan[n].wanted) {
@@ -599,7 +681,7 @@ SceneFrameStats SceneStreamer::update(const PerspectiveView& camera) {
   const detail::Frustum frustum = detail::frustumOf(camera);
   s.queryVisible(frustum);
   stats.visible_leaves = uint32_t(s.visible_leaves.size());
-  s.collectDemands(camera, frustum, stats);
+  s.collectDemands(camera, frustum, budget, stats);
   s.evict(budget, stats);
   s.planAndSubmit(camera, budget, stats.moving, stats);
   for (uint32_t o : s.drawable) {

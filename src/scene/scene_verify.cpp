@@ -133,6 +133,16 @@ SceneVerifyReport verifyScene(const SceneArchive& scene, const std::vector<Image
     checkNode(scene, *nodes, node, decode, stored_at, report, faults);
   }
   checkTextures(scene, *textures, images, stored_at, report, faults);
+  // The coverage hints: checksum and every rule of the format (decodeCoverageHints).
+  if (scene.coverageHintsRange().length_bytes != 0) {
+    Result<CoverageHints> hints = scene.readCoverageHints();
+    if (!hints) {
+      faults.add(hints.error().message);
+    } else {
+      report.hint_cells_checked = hints->cellCount();
+      report.hint_entries_checked = hints->entries.size();
+    }
+  }
   return report;
 }
 

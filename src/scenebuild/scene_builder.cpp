@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <optional>
 #include <set>
 #include <thread>
 
@@ -12,6 +13,8 @@
 #include <nlohmann/json.hpp>
 
 #include "codecs/encode.h"
+#include "format/coverage_hints.h"
+#include "hint_builder.h"
 #include "importers.h"
 #include "output/output_file.h"
 #include "scene_model.h"
@@ -195,6 +198,38 @@ nlohmann::json sceneMetadata(const SceneBuildOptions& o, const ImportedScene& sc
               {"stored_at_depth", p.stats.stored_at_depth}}}}}};
 }
 
+// The scene in world space, textures in the archive's numbering, for the hint builder.
+HintScene hintSceneOf(const ImportedScene& scene, const Placement& p) {
+  HintScene out;
+  std::vector<uint32_t> final_texture(scene.textures.size(), kNoSceneTexture);
+  for (uint32_t t = 0; t < p.texture_order.size(); ++t) final_texture[p.texture_order[t]] = t;
+  out.texture_count = uint32_t(p.texture_order.size());
+  out.bounds = scene.objects.empty() ? SceneBox{} : scene.objects[0].bounds;
+  out.object_first.push_back(0);
+  for (const ImportedObject& object : scene.objects) {
+    const ImportedMesh& mesh = scene.meshes[object.mesh];
+    const std::array<float, 12>& m = object.transform;
+    for (uint32_t index : mesh.indices) {
+      const float* v = mesh.positions.data() + 3 * size_t(index);
+      for (int r = 0; r < 3; ++r)
+        out.triangles.push_back(m[4 * r] * v[0] + m[4 * r + 1] * v[1] + m[4 * r + 2] * v[2] +
+                                m[4 * r + 3]);
+    }
+    out.object_first.push_back(uint32_t(out.triangles.size() / 9));
+    out.object_bounds.push_back(object.bounds);
+    std::array<uint32_t, kSceneTextureSlots> slots;
+    for (uint32_t k = 0; k < kSceneTextureSlots; ++k)
+      slots[k] = object.textures[k] == kNoSceneTexture ? kNoSceneTexture
+                                                       : final_texture[object.textures[k]];
+    out.object_textures.push_back(slots);
+    for (int a = 0; a < 3; ++a) {
+      out.bounds.min[a] = std::min(out.bounds.min[a], object.bounds.min[a]);
+      out.bounds.max[a] = std::max(out.bounds.max[a], object.bounds.max[a]);
+    }
+  }
+  return out;
+}
+
 }  // namespace
 
 bool isSceneInput(const std::string& input) {
@@ -223,6 +258,17 @@ Result<SceneBuildReport> buildScene(
   if (tree.depth > kMaxSceneDepth || tree.nodes.size() > kMaxSceneNodes)
     return fail(ErrorCode::kTooLarge, scene.source + ": the R-tree is too deep or too large");
   const Placement placement = place(scene, tree);
+  std::optional<CoverageHints> hints;
+  HintBuildStats hint_stats;
+  if (options.coverage_hints) {
+    HintBuildOptions hint_options;
+    hint_options.cell_size = options.hint_cell_size;
+    hint_options.resolution_px = options.hint_resolution_px;
+    hint_options.threads =
+        options.threads ? options.threads : std::max(1u, std::thread::hardware_concurrency());
+    TESSERA_ASSIGN_OR_RETURN(
+        hints, buildCoverageHints(hintSceneOf(scene, placement), hint_options, &hint_stats));
+  }
 
   TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(options.output));
   TESSERA_ASSIGN_OR_RETURN(TempFile spool, TempFile::create(options.output));
@@ -259,6 +305,18 @@ Result<SceneBuildReport> buildScene(
   input.leaf_capacity = options.leaf_capacity;
   input.max_children = options.max_children;
   input.metadata = sceneMetadata(options, scene, tree, placement, textures);
+  if (hints) {
+    input.hints = &*hints;
+    input.metadata["scene"]["coverage_hints"] = {{"cells_u", hints->cells_u},
+                                                 {"cells_v", hints->cells_v},
+                                                 {"cell_size", hints->cell_size},
+                                                 {"resolution", hints->resolution_px},
+                                                 {"eye_low", hints->eye_low},
+                                                 {"eye_high", hints->eye_high},
+                                                 {"entries", hints->entries.size()},
+                                                 {"views", hint_stats.views},
+                                                 {"objects_drawn", hint_stats.objects_drawn}};
+  }
   SceneBuildReport report;
   for (const SpooledTexture& t : textures) report.tiles_encoded += t.tiles_encoded;
   input.textures = std::move(textures);
@@ -281,6 +339,12 @@ Result<SceneBuildReport> buildScene(
   report.geometry_raw_bytes = written.geometry_raw_bytes;
   report.geometry_stored_bytes = written.geometry_stored_bytes;
   report.importer = scene.importer;
+  if (hints) {
+    report.hint_cells = hints->cellCount();
+    report.hint_entries = hints->entries.size();
+    report.hint_bytes = written.hint_bytes;
+    report.hint_seconds = hint_stats.seconds;
+  }
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();
   return report;
 }

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 
 #include "format/checksum.h"
+#include "format/coverage_hints.h"
 #include "format/directory.h"
 #include "format/header.h"
 #include "format/sections.h"
@@ -264,12 +265,13 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
     TESSERA_ASSIGN_OR_RETURN(block.ref.offset_bytes, s.appender.append(block.bytes));
     return {};
   };
-  // The scene directory and the one-entry section table that points at it have fixed sizes:
-  // reserve them first so they are always in the region (one read opens a scene).
+  // The scene directory and the section table that points at it (and at the hints) have
+  // fixed sizes: reserve them first so they are always in the region (one read opens a scene).
   const uint64_t scene_offset = region_used;
   region_used += kSceneDirectoryBytes;
   const uint64_t sections_offset = region_used;
-  region_used += kSectionEntryBytes;
+  const uint32_t section_count = in.hints ? 2 : 1;
+  region_used += uint64_t(section_count) * kSectionEntryBytes;
   PlacedBlock node_table = makeBlock(encodeNodeRecords(s.nodes));
   PlacedBlock texture_table = makeBlock(encodeTextureRecords(texture_records));
   TESSERA_TRY(place(node_table));
@@ -291,6 +293,13 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
     return fail(ErrorCode::kTooLarge, name + ": metadata exceeds 16 MiB");
   PlacedBlock metadata = makeBlock({metadata_text.begin(), metadata_text.end()});
   TESSERA_TRY(place(metadata));
+  // The hints last: the runtime reads them once at open, the tables come first in the region.
+  PlacedBlock hints;
+  if (in.hints) {
+    hints = makeBlock(encodeCoverageHints(*in.hints));
+    s.result.hint_bytes = hints.bytes.size();
+    TESSERA_TRY(place(hints));
+  }
   TESSERA_TRY(s.appender.flush());
 
   directory.node_table = node_table.ref;
@@ -298,8 +307,9 @@ Result<SceneLayoutResult> writeSceneArchive(const SceneLayoutInput& in, const Te
   std::vector<uint8_t> directory_bytes = encodeSceneDirectory(directory);
   std::memcpy(region.data() + scene_offset, directory_bytes.data(), directory_bytes.size());
   const BlockRef scene{scene_offset, directory_bytes.size(), checksum64(directory_bytes)};
-  const SectionEntry section{uint32_t(SectionKind::kScene), scene};
-  const std::vector<uint8_t> table_bytes = encodeSectionTable({&section, 1});
+  std::vector<SectionEntry> sections = {{uint32_t(SectionKind::kScene), scene}};
+  if (in.hints) sections.push_back({uint32_t(SectionKind::kCoverageHints), hints.ref});
+  const std::vector<uint8_t> table_bytes = encodeSectionTable(sections);
   std::memcpy(region.data() + sections_offset, table_bytes.data(), table_bytes.size());
   const BlockRef table{sections_offset, table_bytes.size(), checksum64(table_bytes)};
 

@@ -9,6 +9,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <tessera/coverage_hints.h>
 #include <tessera/result.h>
 
 #include "format/scene.h"
@@ -36,6 +37,8 @@ struct SceneLayoutInput {
   uint32_t leaf_capacity = 16;
   uint32_t max_children = 8;
   nlohmann::json metadata;
+  /// Average coverage hints in the final texture numbering, or null for none.
+  const CoverageHints* hints = nullptr;
 };
 
 struct SceneLayoutResult {
@@ -44,6 +47,7 @@ struct SceneLayoutResult {
   uint64_t coarse_bytes = 0;
   uint64_t geometry_raw_bytes = 0;
   uint64_t geometry_stored_bytes = 0;
+  uint64_t hint_bytes = 0;  ///< the coverage hints block; 0 without
 };
 
 /// Writes the archive into `out` (not committed). Errors name the output file.

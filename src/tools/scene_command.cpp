@@ -1,6 +1,8 @@
 // Scene archives in `tessera build` and `tessera info`.
 #include "scene_command.h"
 
+#include <algorithm>
+
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
@@ -21,6 +23,9 @@ struct SceneCliOptions {
   std::vector<std::string> texture_sources;
   uint32_t max_texture_side_px = 16384;
   uint32_t tree_depth = 2;
+  bool coverage_hints = false;
+  double hint_cell_size = 0;
+  uint32_t hint_resolution_px = 64;
 };
 
 SceneCliOptions& sceneCliOptions() {
@@ -46,6 +51,10 @@ void printSceneReport(const SceneBuildReport& r, const std::string& output, bool
                           {"copies_avoided", p.copies_avoided},
                           {"leaf_copies", p.leaf_copies},
                           {"stored_at_depth", p.stored_at_depth},
+                          {"hint_cells", r.hint_cells},
+                          {"hint_entries", r.hint_entries},
+                          {"hint_bytes", r.hint_bytes},
+                          {"hint_seconds", r.hint_seconds},
                           {"elapsed_s", r.elapsed_s}};
     std::printf("%s\n", out.dump(2).c_str());
     return;
@@ -62,6 +71,10 @@ void printSceneReport(const SceneBuildReport& r, const std::string& output, bool
       formatBytes(r.geometry_stored_bytes).c_str(), formatBytes(r.geometry_raw_bytes).c_str(),
       (unsigned long long)p.leaf_copies, (unsigned long long)p.stored,
       (unsigned long long)p.copies_avoided);
+  if (r.hint_cells)
+    std::printf("  coverage hints: %llu cells, %llu entries, %s, computed in %.2f s\n",
+                (unsigned long long)r.hint_cells, (unsigned long long)r.hint_entries,
+                formatBytes(r.hint_bytes).c_str(), r.hint_seconds);
 }
 
 void printTree(const SceneArchive& scene, const SceneNode& node, uint32_t max_depth,
@@ -90,6 +103,46 @@ void printTree(const SceneArchive& scene, const SceneNode& node, uint32_t max_de
   for (const SceneNode& child : *children) printTree(scene, child, max_depth, out, json);
 }
 
+// Coverage hint statistics (docs/scenes.md, "Coverage hints") for `tessera info`.
+nlohmann::json hintSummary(const SceneArchive& scene, bool json) {
+  if (scene.coverageHintsRange().length_bytes == 0) {
+    if (!json) std::printf("  coverage hints: none\n");
+    return nullptr;
+  }
+  Result<CoverageHints> hints = scene.readCoverageHints();
+  if (!hints) {
+    if (!json) std::printf("  coverage hints: unreadable: %s\n", hints.error().message.c_str());
+    return {{"error", hints.error().message}};
+  }
+  const CoverageHints& h = *hints;
+  size_t most = 0, empty = 0;
+  double covered = 0;
+  for (uint32_t c = 0; c < h.cellCount(); ++c) {
+    most = std::max(most, h.cell(c).size());
+    empty += h.cell(c).empty();
+    for (const CoverageHint& e : h.cell(c)) covered += e.coverage();
+  }
+  const double mean = double(h.entries.size()) / h.cellCount();
+  if (!json)
+    std::printf(
+        "  coverage hints: %u x %u cells of %.4g, %u px faces, eyes at %.4g..%.4g; %zu entries "
+        "(%.1f textures a cell, at most %zu; %zu cells see none), %s\n",
+        h.cells_u, h.cells_v, h.cell_size, h.resolution_px, h.eye_low, h.eye_high, h.entries.size(),
+        mean, most, empty, formatBytes(scene.coverageHintsRange().length_bytes).c_str());
+  return {{"cells_u", h.cells_u},
+          {"cells_v", h.cells_v},
+          {"cell_size", h.cell_size},
+          {"resolution", h.resolution_px},
+          {"eye_low", h.eye_low},
+          {"eye_high", h.eye_high},
+          {"entries", h.entries.size()},
+          {"textures_per_cell_mean", mean},
+          {"textures_per_cell_max", most},
+          {"cells_seeing_nothing", empty},
+          {"coverage_sum_mean", covered / h.cellCount()},
+          {"bytes", scene.coverageHintsRange().length_bytes}};
+}
+
 }  // namespace
 
 void addSceneBuildOptions(CLI::App& build) {
@@ -105,6 +158,17 @@ void addSceneBuildOptions(CLI::App& build) {
   build
       .add_option("--max-texture-side", o.max_texture_side_px,
                   "Scenes: largest texture side accepted, px")
+      ->capture_default_str();
+  build.add_flag("--coverage-hints,!--no-coverage-hints", o.coverage_hints,
+                 "Scenes: compute and store average coverage hints (default off: they cost more "
+                 "than the rest of the build)");
+  build
+      .add_option("--hint-cell", o.hint_cell_size,
+                  "Scenes: coverage hint cell side, world units (0: the longer ground side / 16)")
+      ->capture_default_str();
+  build
+      .add_option("--hint-resolution", o.hint_resolution_px,
+                  "Scenes: coverage hint cube-face resolution, px (1..4096)")
       ->capture_default_str();
 }
 
@@ -127,6 +191,9 @@ int runSceneBuild(const BuildOptions& options, bool quiet, bool json,
   scene.leaf_capacity = o.leaf_capacity;
   scene.max_children = o.max_children;
   scene.max_texture_side_px = o.max_texture_side_px;
+  scene.coverage_hints = o.coverage_hints;
+  scene.hint_cell_size = o.hint_cell_size;
+  scene.hint_resolution_px = o.hint_resolution_px;
   if (!parseGeometryCodecName(o.geometry_codec, &scene.geometry_codec))
     return reportError({ErrorCode::kInvalidArgument, "unknown geometry codec " + o.geometry_codec});
   const bool show = !quiet && !json && stderrIsTerminal();
@@ -204,8 +271,9 @@ bool runSceneInfo(const std::string& path, bool json, int* exit_code) {
                   formatBytes(b.value("geometry_raw", 0ull)).c_str(),
                   scene_meta.value("geometry_codec", "?").c_str());
     }
-    std::printf("  tree (to depth %u):\n", sceneCliOptions().tree_depth);
   }
+  out["coverage_hints"] = hintSummary(scene, json);
+  if (!json) std::printf("  tree (to depth %u):\n", sceneCliOptions().tree_depth);
   Result<SceneNode> root = scene.node(0);
   if (!root) {
     *exit_code = reportError(root.error());

@@ -15,7 +15,7 @@ namespace {
 // The scene half (docs/scenes.md): a scene archive's tree, meshes and texture table, its
 // faults added to the 1.0 checks' report. Nothing for an archive without a scene.
 void verifySceneInto(const std::string& path, const Archive& archive, bool decode,
-                     VerifyReport& report, uint64_t* nodes_checked) {
+                     VerifyReport& report, uint64_t* nodes_checked, uint64_t* hint_cells) {
   Result<std::shared_ptr<ByteSource>> source = openByteSource(path);
   if (!source) return;
   Result<std::shared_ptr<SceneArchive>> scene = SceneArchive::open(*source);
@@ -27,6 +27,7 @@ void verifySceneInto(const std::string& path, const Archive& archive, bool decod
   }
   SceneVerifyReport walked = verifyScene(**scene, archive.images(), decode);
   *nodes_checked = walked.nodes_checked;
+  *hint_cells = walked.hint_cells_checked;
   report.fault_count += walked.fault_count;
   report.faults.insert(report.faults.end(), walked.faults.begin(), walked.faults.end());
 }
@@ -50,8 +51,8 @@ int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
     if (show_progress) bar.update(double(done), double(total), 0, 1, "levels");
   });
   bar.finish();
-  uint64_t scene_nodes = 0;
-  verifySceneInto(path, **opened, decode, report, &scene_nodes);
+  uint64_t scene_nodes = 0, hint_cells = 0;
+  verifySceneInto(path, **opened, decode, report, &scene_nodes, &hint_cells);
   if (json) {
     std::printf("%s\n", nlohmann::json({{"path", path},
                                         {"ok", report.ok()},
@@ -61,7 +62,8 @@ int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
                                         {"payloads_checked", report.payloads_checked},
                                         {"payload_bytes", report.payload_bytes},
                                         {"pages_checked", report.pages_checked},
-                                        {"scene_nodes_checked", scene_nodes}})
+                                        {"scene_nodes_checked", scene_nodes},
+                                        {"coverage_hint_cells_checked", hint_cells}})
                             .dump(2)
                             .c_str());
   } else {
@@ -75,7 +77,11 @@ int runVerify(const std::string& path, bool json, bool decode, bool quiet) {
             "%s: OK (%llu tiles, %llu payloads, %s, %llu directory pages%s)\n", path.c_str(),
             (unsigned long long)report.tiles_checked, (unsigned long long)report.payloads_checked,
             formatBytes(report.payload_bytes).c_str(), (unsigned long long)report.pages_checked,
-            scene_nodes ? fmt::format(", {} scene nodes", scene_nodes).c_str() : "");
+            scene_nodes
+                ? fmt::format(", {} scene nodes{}", scene_nodes,
+                              hint_cells ? fmt::format(", {} coverage hint cells", hint_cells) : "")
+                      .c_str()
+                : "");
     } else {
       std::printf("%s: %llu fault(s); first: %s\n", path.c_str(),
                   (unsigned long long)report.fault_count, report.faults.front().c_str());

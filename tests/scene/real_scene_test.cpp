@@ -80,11 +80,14 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
   const std::vector<std::string> usable = usableModels(models);
   ASSERT_GT(usable.size(), 100u) << "fewer usable models than expected in " << models;
   test::ScratchDir dir;
-  {
-    std::ofstream stg(dir.file("sf.stg"));
+  // The same placements are kept beside the fetched package (scene-data/sf.stg) for the
+  // coverage hints benchmark (docs/scenes.md, "Coverage hints"), which builds them itself.
+  const fs::path kept_dir = fs::path(TESSERA_BINARY_DIR) / "scene-data";
+  for (const fs::path& folder : {fs::path(dir.path()), kept_dir}) {
+    std::ofstream stg(folder / "sf.stg");
     for (size_t k = 0; k < 2 * usable.size(); ++k) {
       const double lon = -122.40 + 0.004 * double(k % 30), lat = 37.62 + 0.004 * double(k / 30);
-      stg << "OBJECT_STATIC " << fs::relative(usable[k % usable.size()], dir.path()).string() << " "
+      stg << "OBJECT_STATIC " << fs::relative(usable[k % usable.size()], folder).string() << " "
           << lon << " " << lat << " " << 5.0 + k % 7 << " " << (k * 37) % 360 << "\n";
     }
   }
@@ -93,24 +96,30 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
   options.output = dir.file("sf.tess");
   options.tile_size_px = 128;
   options.threads = 2;
+  options.coverage_hints = true;
+  options.hint_resolution_px = 32;
   Result<SceneBuildReport> report = buildScene(options);
   ASSERT_TRUE(report.has_value()) << report.error().message;
   std::printf(
       "FlightGear scene: %zu models placed twice, %u objects, %u meshes, %u textures, "
       "%u nodes (depth %u), %llu bytes in %.1f s; %llu leaf copies, %llu copies avoided; "
-      "geometry %llu bytes (%llu raw)\n",
+      "geometry %llu bytes (%llu raw); coverage hints: %llu cells, %llu entries, %llu bytes in "
+      "%.1f s\n",
       usable.size(), report->summary.objects, report->summary.meshes, report->summary.textures,
       report->summary.nodes, report->summary.tree_depth, (unsigned long long)report->output_bytes,
       report->elapsed_s, (unsigned long long)report->promotion.leaf_copies,
       (unsigned long long)report->promotion.copies_avoided,
       (unsigned long long)report->geometry_stored_bytes,
-      (unsigned long long)report->geometry_raw_bytes);
+      (unsigned long long)report->geometry_raw_bytes, (unsigned long long)report->hint_cells,
+      (unsigned long long)report->hint_entries, (unsigned long long)report->hint_bytes,
+      report->hint_seconds);
   // bench/scene_texel_memory.sh flies this scene: it asks for a copy of the archive.
   if (const char* keep = std::getenv("TESSERA_KEEP_SCENE"))
     fs::copy_file(options.output, keep, fs::copy_options::overwrite_existing);
   EXPECT_GE(report->summary.objects, 300u);
   EXPECT_GE(report->summary.textures, 100u);
   EXPECT_GT(report->promotion.copies_avoided, 0u) << "placements share textures";
+  EXPECT_GT(report->hint_entries, report->hint_cells) << "cells see several textures each";
 
   auto scene = SceneArchive::openFile(options.output);
   ASSERT_TRUE(scene.has_value()) << scene.error().message;
@@ -125,6 +134,9 @@ TEST(RealScene, FlightGearModelsPlacedAroundSanFranciscoBuildAndRead) {
   auto archive = Archive::openFile(options.output);
   ASSERT_TRUE(archive.has_value()) << archive.error().message;
   EXPECT_TRUE((*archive)->verify(true).ok());
+  const SceneVerifyReport walked = verifyScene(**scene, (*archive)->images(), false);
+  EXPECT_TRUE(walked.ok()) << (walked.faults.empty() ? "" : walked.faults[0]);
+  EXPECT_EQ(walked.hint_cells_checked, report->hint_cells);
 }
 
 }  // namespace

@@ -15,13 +15,7 @@ namespace {
 
 TEST(SceneStreamerConcurrency, FramesRunWhileWorkersLoadAndEvict) {
   test::ScratchDir dir;
-  SceneBuildOptions build;
-  build.input = "synthetic-scene:500:50:11";
-  build.output = dir.file("city.tess");
-  build.tile_size_px = 64;
-  build.threads = 2;
-  build.leaf_capacity = 8;
-  build.max_children = 4;
+  const SceneBuildOptions build = test::testCityOptions(dir, "500:50:11");
   ASSERT_TRUE(buildScene(build).has_value());
   auto archive = SceneArchive::openFile(build.output);
   ASSERT_TRUE(archive.has_value());

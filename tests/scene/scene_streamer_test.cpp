@@ -26,18 +26,8 @@ std::string buildCity(const ScratchDir& dir, const std::string& spec) {
   return test::buildSyntheticCity(dir, spec);
 }
 
-// The synthetic city is y-up: yaw 0 and pitch 0 look straight down -y.
 PerspectiveView above(const SceneSummary& summary, double height) {
-  PerspectiveView camera;
-  camera.eye_x = (summary.bounds.min[0] + summary.bounds.max[0]) / 2;
-  camera.eye_y = summary.bounds.max[1] + height;
-  camera.eye_z = (summary.bounds.min[2] + summary.bounds.max[2]) / 2;
-  camera.yaw_rad = 0;
-  camera.pitch_rad = 0;
-  camera.fov_y_rad = 1.0;
-  camera.viewport_w = 640;
-  camera.viewport_h = 480;
-  return camera;
+  return test::cameraAbove(summary, height);
 }
 
 struct Opened {

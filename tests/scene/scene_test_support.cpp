@@ -14,13 +14,7 @@
 namespace tessera::test {
 
 std::string buildSyntheticCity(const ScratchDir& dir, const std::string& spec) {
-  SceneBuildOptions options;
-  options.input = "synthetic-scene:" + spec;
-  options.output = dir.file("city.tess");
-  options.tile_size_px = 64;
-  options.threads = 2;
-  options.leaf_capacity = 8;
-  options.max_children = 4;
+  const SceneBuildOptions options = testCityOptions(dir, spec);
   Result<SceneBuildReport> report = buildScene(options);
   EXPECT_TRUE(report.has_value()) << report.error().message;
   return options.output;
@@ -176,6 +170,30 @@ std::string GltfBuilder::writeGlb(const ScratchDir& dir, const std::string& name
   file.insert(file.end(), data.begin(), data.end());
   writeFileBytes(dir.file(name + ".glb"), file);
   return dir.file(name + ".glb");
+}
+
+SceneBuildOptions testCityOptions(const ScratchDir& dir, const std::string& spec) {
+  SceneBuildOptions options;
+  options.input = "synthetic-scene:" + spec;
+  options.output = dir.file("city.tess");
+  options.tile_size_px = 64;
+  options.threads = 2;
+  options.leaf_capacity = 8;
+  options.max_children = 4;
+  return options;
+}
+
+PerspectiveView cameraAbove(const SceneSummary& summary, double height, double fov_y_rad) {
+  PerspectiveView camera;
+  camera.eye_x = (summary.bounds.min[0] + summary.bounds.max[0]) / 2;
+  camera.eye_y = summary.bounds.max[1] + height;
+  camera.eye_z = (summary.bounds.min[2] + summary.bounds.max[2]) / 2;
+  camera.yaw_rad = 0;
+  camera.pitch_rad = 0;
+  camera.fov_y_rad = fov_y_rad;
+  camera.viewport_w = 640;
+  camera.viewport_h = 480;
+  return camera;
 }
 
 }  // namespace tessera::test

@@ -13,6 +13,9 @@
 
 #include <tessera/byte_source.h>
 #include <tessera/format.h>
+#include <tessera/scene.h>
+#include <tessera/scene_build.h>
+#include <tessera/view.h>
 
 namespace tessera::test {
 
@@ -34,6 +37,14 @@ class ScratchDir {
 /// and fan-out (4), so that a few hundred objects make a tree of several levels; returns the
 /// path (a failed build fails the test).
 std::string buildSyntheticCity(const ScratchDir& dir, const std::string& spec);
+
+/// Build options for a synthetic city made at test time: "synthetic-scene:" + spec into
+/// `dir`/city.tess, 64-px tiles, 2 threads, leaves of 8, fan-out 4.
+SceneBuildOptions testCityOptions(const ScratchDir& dir, const std::string& spec);
+
+/// A y-up scene seen straight down from `height` above its top, centred (yaw 0 and pitch 0
+/// look down -y), 640 x 480.
+PerspectiveView cameraAbove(const SceneSummary& summary, double height, double fov_y_rad = 1.0);
 
 /// Writes a w x h RGB PNG with a pattern that depends on `seed`.
 void writeTestPng(const std::string& path, uint32_t width, uint32_t height, uint32_t seed);

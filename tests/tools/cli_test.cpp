@@ -262,6 +262,33 @@ TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
   EXPECT_FALSE(std::filesystem::exists(bad_out));
 }
 
+TEST_F(Cli, CoverageHintsAreBuiltPrintedVerifiedAndTheirDamageNamed) {
+  const std::string path = work_ + "hinted.tess";
+  RunResult built = run({"build", "synthetic-scene:60:6:5", "-o", path, "--tile", "64",
+                         "--coverage-hints", "--hint-resolution", "8", "--hint-cell", "40"});
+  ASSERT_EQ(built.exit_code, 0) << built.err;
+  EXPECT_NE(built.out.find("coverage hints:"), std::string::npos) << built.out;
+  RunResult info = run({"info", path});
+  EXPECT_NE(info.out.find("8 px faces"), std::string::npos) << info.out;
+  auto scene = SceneArchive::openFile(path);
+  ASSERT_TRUE(scene.has_value());
+  auto hints = (*scene)->readCoverageHints();
+  ASSERT_TRUE(hints.has_value()) << hints.error().message;
+  RunResult verified = run({"verify", path});
+  EXPECT_EQ(verified.exit_code, 0) << verified.err;
+  EXPECT_NE(verified.out.find(std::to_string(hints->cellCount()) + " coverage hint cells"),
+            std::string::npos)
+      << verified.out;
+  const FileRange range = (*scene)->coverageHintsRange();
+  scene->reset();
+  std::vector<uint8_t> bytes = test::readFileBytes(path);
+  bytes[range.offset_bytes + range.length_bytes - 1] ^= 0x01;
+  ASSERT_TRUE(test::writeFileBytes(path, bytes));
+  RunResult damaged = run({"verify", path});
+  EXPECT_EQ(damaged.exit_code, 3);
+  EXPECT_NE(damaged.err.find("coverage hints checksum mismatch"), std::string::npos) << damaged.err;
+}
+
 TEST_F(Cli, VerifyWalksTheSceneAndNamesADamagedMesh) {
   const std::string path = work_ + "city.tess";
   RunResult built = run({"build", "synthetic-scene:120:12:5", "-o", path, "--tile", "64", "-q"});

@@ -2,6 +2,7 @@
 // Little-endian field access for the on-disk structures (docs/format.md: all integers are
 // little-endian). Bounds are the caller's job: every decoder checks the span size first.
 
+#include <bit>
 #include <cstdint>
 #include <cstring>
 #include <span>
@@ -28,6 +29,13 @@ inline void storeU32(uint8_t* p, uint32_t v) {
 }
 inline void storeU64(uint8_t* p, uint64_t v) {
   for (int i = 0; i < 8; ++i) p[i] = uint8_t(v >> (8 * i));
+}
+/// IEEE 754 binary32, little-endian.
+inline void storeF32(uint8_t* p, float v) {
+  storeU32(p, std::bit_cast<uint32_t>(v));
+}
+inline float loadF32(const uint8_t* p) {
+  return std::bit_cast<float>(loadU32(p));
 }
 inline void appendU32(std::vector<uint8_t>& out, uint32_t v) {
   for (int i = 0; i < 4; ++i) out.push_back(uint8_t(v >> (8 * i)));

@@ -28,6 +28,8 @@ inline constexpr uint32_t kMaxSections = 64;
 enum class SectionKind : uint32_t {
   kScene = 1,       ///< the 128-byte scene directory ("Scenes")
   kProcedural = 2,  ///< the procedural directory ("Procedural tiles")
+  /// A scene's average coverage hints ("Coverage hints"); only beside a kScene section.
+  kCoverageHints = 3,
 };
 
 /// One section: its kind (any non-zero u32, known or not) and where its first block lives.
