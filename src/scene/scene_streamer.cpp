@@ -217,9 +217,14 @@ Result<std::unique_ptr<SceneStreamer>> SceneStreamer::open(
   const uint64_t tables_end =
       std::min(archive->fileBytes(), node_table.offset_bytes + node_table.length_bytes +
                                          uint64_t(archive->summary().textures) * 64);
-  const ByteRange hints[2] = {{node_table.offset_bytes, tables_end - node_table.offset_bytes},
-                              {coarse.offset_bytes, coarse.length_bytes}};
-  archive->source().prefetch(hints);
+  std::vector<ByteRange> open_reads = {
+      {node_table.offset_bytes, tables_end - node_table.offset_bytes},
+      {coarse.offset_bytes, coarse.length_bytes}};
+  // The coverage hints too, when they will be read: still the same round trip.
+  if (const FileRange hint_range = archive->coverageHintsRange();
+      !options.coverage_hints && options.use_coverage_hints && hint_range.length_bytes != 0)
+    open_reads.push_back({hint_range.offset_bytes, hint_range.length_bytes});
+  archive->source().prefetch(open_reads);
   TESSERA_ASSIGN_OR_RETURN(std::vector<SceneNode> nodes, archive->allNodes());
   TESSERA_ASSIGN_OR_RETURN(context->textures, archive->textures(0, archive->summary().textures));
   context->coarse_block.resize(coarse.length_bytes);

@@ -75,7 +75,9 @@ TEST(SceneHints, LevelForPixelsByHand) {
 
 TEST(SceneHints, StreamerReadsTheHintedLeafFirstAndSizesTexturesBeforeTheirUsersArrive) {
   ScratchDir dir;
-  const SceneBuildOptions build = test::testCityOptions(dir, "200:40:3");
+  // More leaves than the streamer reads in its first wave (kWantsPerSlot per slot), so the
+  // order it picks them in shows.
+  const SceneBuildOptions build = test::testCityOptions(dir, "600:200:3");
   ASSERT_TRUE(buildScene(build).has_value());
   auto archive = SceneArchive::openFile(build.output);
   ASSERT_TRUE(archive.has_value());
@@ -106,7 +108,7 @@ TEST(SceneHints, StreamerReadsTheHintedLeafFirstAndSizesTexturesBeforeTheirUsers
       oneCellHints(scene.summary().bounds, scene.summary().textures, entries));
 
   SceneStreamOptions options;
-  options.max_reads_in_flight = 1;  // one leaf a frame: the order shows
+  options.max_reads_in_flight = 1;  // one wave of leaves a frame: the order shows
   options.worker_threads = 1;
   options.link = LinkCost{0, 500e6};
   auto leafKnown = [&](const SceneStreamer& s, uint32_t leaf) {
