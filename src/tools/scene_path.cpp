@@ -150,4 +150,18 @@ Result<ScenePath> loadScenePathFile(const std::string& file) {
   return path;
 }
 
+std::optional<Box3> viewCellBox(const CoverageHints& hints, const PerspectiveView& camera,
+                                const Box3& scene_bounds) {
+  const double eye[3] = {camera.eye_x, camera.eye_y, camera.eye_z};
+  const int64_t cell = hints.cellAt(eye);
+  if (cell < 0) return std::nullopt;
+  const uint32_t i = uint32_t(cell) % hints.cells_u, j = uint32_t(cell) / hints.cells_u;
+  Box3 box = scene_bounds;
+  box.min[hints.axisU()] = hints.origin_u + float(i) * hints.cell_size;
+  box.max[hints.axisU()] = hints.origin_u + float(i + 1) * hints.cell_size;
+  box.min[hints.axisV()] = hints.origin_v + float(j) * hints.cell_size;
+  box.max[hints.axisV()] = hints.origin_v + float(j + 1) * hints.cell_size;
+  return box;
+}
+
 }  // namespace tessera::cli

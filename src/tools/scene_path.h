@@ -3,9 +3,11 @@
 // walk and fly controls (docs/fly.md, "Scenes"): a pose in the scene's y-up world, keyframe
 // files, the built-in orbit, and the PerspectiveView the streamer and renderer take.
 
+#include <optional>
 #include <string>
 #include <vector>
 
+#include <tessera/coverage_hints.h>
 #include <tessera/result.h>
 #include <tessera/scene.h>
 #include <tessera/view.h>
@@ -62,5 +64,11 @@ ScenePath orbitPath(const SceneSummary& scene, double duration_s);
 /// "t x y z yaw_deg pitch_deg [jump]" or "t x y z look tx ty tz [jump]"; '#' comments. Errors
 /// name the file and line.
 [[nodiscard]] Result<ScenePath> loadScenePathFile(const std::string& path);
+
+/// The view cell of coverage hints holding the eye of `camera`, as a box: the cell's ground
+/// rectangle, spanning `scene_bounds` along the up axis; nullopt when the eye is outside the
+/// grid (CoverageHints::cellAt).
+std::optional<Box3> viewCellBox(const CoverageHints& hints, const PerspectiveView& camera,
+                                const Box3& scene_bounds);
 
 }  // namespace tessera::cli

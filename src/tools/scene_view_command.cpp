@@ -32,6 +32,8 @@ using Clock = std::chrono::steady_clock;
 constexpr double kTurnRadPerPx = 0.004;
 /// R-tree nodes drawn by the node overlay: the upper levels (a deep tree has thousands).
 constexpr uint32_t kNodeOverlayDepth = 3;
+/// The view-cell box: white, so it stands apart from the node boxes' level colours.
+constexpr uint32_t kViewCellColour = 0xFFFFFFFFu;
 
 /// What the window's callbacks change; read by the frame loop on the same thread.
 struct SceneViewer {
@@ -41,6 +43,7 @@ struct SceneViewer {
   bool walk = true;       ///< walk: moves stay level; fly: forward follows the pitch
   SceneOverlays overlays;
   bool show_nodes = false;
+  bool show_cell = false;
   bool screenshot_requested = false;
   bool dragging = false;
   double last_x = 0, last_y = 0;
@@ -58,6 +61,7 @@ void onKey(GLFWwindow* window, int key, int, int action, int) {
     case GLFW_KEY_F: v.walk = !v.walk; break;
     case GLFW_KEY_L: v.overlays.level_tint = !v.overlays.level_tint; break;
     case GLFW_KEY_N: v.show_nodes = !v.show_nodes; break;
+    case GLFW_KEY_C: v.show_cell = !v.show_cell; break;
     case GLFW_KEY_P:
     case GLFW_KEY_F12: v.screenshot_requested = true; break;
     case GLFW_KEY_HOME: v.pose = v.home; break;
@@ -113,6 +117,8 @@ struct SceneViewLoop {
   SceneStreamer& streamer;
   SceneRenderer& renderer;
   std::vector<OverlayBox> node_boxes;
+  std::optional<CoverageHints> hints;  ///< the archive's coverage hints, for the view-cell overlay
+  Box3 scene_bounds;
   int exit_code = kExitOk;
 };
 
@@ -144,8 +150,11 @@ int runSceneViewLoop(SceneViewLoop& loop) {
     }
     const PerspectiveView camera = perspectiveOf(v.pose, kSceneFovYRad, uint32_t(fw), uint32_t(fh));
     const SceneFrameStats stats = loop.streamer.update(camera);
-    // Overlays: the node boxes; the view cell of coverage hints is one more box here.
+    // Overlays: the node boxes, and the view cell whose coverage hints rank the loads.
     v.overlays.boxes = v.show_nodes ? loop.node_boxes : std::vector<OverlayBox>{};
+    if (v.show_cell && loop.hints)
+      if (std::optional<Box3> cell = viewCellBox(*loop.hints, camera, loop.scene_bounds))
+        v.overlays.boxes.push_back({*cell, kViewCellColour});
     const SceneDrawStats drawn = loop.renderer.draw(loop.streamer, camera, v.overlays);
     const bool settled = stats.waiting_leaves == 0 && stats.missing_pixels == 0 &&
                          drawn.textures_below_wanted == 0 && stats.reads_started == 0;
@@ -203,13 +212,21 @@ int runSceneView(const ViewArgs& args) {
   for (const std::string& overlay : args.overlays) {
     if (overlay == "levels") v.overlays.level_tint = true;
     if (overlay == "nodes") v.show_nodes = true;
+    if (overlay == "cell") v.show_cell = true;
   }
   glfwSwapInterval(1);
   glfwSetWindowUserPointer(v.window, &v);
   glfwSetKeyCallback(v.window, onKey);
   glfwSetMouseButtonCallback(v.window, onMouseButton);
   glfwSetCursorPosCallback(v.window, onCursor);
-  SceneViewLoop loop{args, v, **streamer, **renderer, nodeBoxes(*nodes)};
+  SceneViewLoop loop{args,         v,           **streamer, **renderer, nodeBoxes(*nodes),
+                     std::nullopt, scene.bounds};
+  // Hints are optional (an archive built without --coverage-hints has none).
+  if ((*archive)->coverageHintsRange().length_bytes != 0) {
+    Result<CoverageHints> hints = (*archive)->readCoverageHints();
+    if (!hints) return reportError(hints.error());
+    loop.hints = std::move(*hints);
+  }
   const int code = runSceneViewLoop(loop);
   glfwSetWindowUserPointer(v.window, nullptr);
   return code;

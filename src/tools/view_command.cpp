@@ -672,9 +672,9 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   cmd->add_flag("--perspective", args->perspective, "Start in the perspective fly-over");
   cmd->add_option("--overlays", args->overlays,
                   "Overlays on from the start: levels, clip, grid (comma-separated); for a "
-                  "scene levels, nodes")
+                  "scene levels, nodes, cell")
       ->delimiter(',')
-      ->check(CLI::IsMember({"levels", "clip", "grid", "nodes"}));
+      ->check(CLI::IsMember({"levels", "clip", "grid", "nodes", "cell"}));
   cmd->add_option("--screenshot-dir", args->screenshot_dir, "Folder for tessera-screenshot-<n>.png")
       ->capture_default_str();
   // For tests and scripted runs: an empty group hides it from --help.

@@ -83,5 +83,29 @@ TEST(ScenePath, FilesParseBothFormsAndNameBadLines) {
   std::filesystem::remove(file);
 }
 
+// The view cell is the hints' grid cell under the eye, spanning the scene's height.
+TEST(ScenePath, ViewCellBoxIsTheGridCellUnderTheEye) {
+  CoverageHints hints;
+  hints.up_axis = 1;  // y up: cells on x (u) and z (v)
+  hints.cells_u = 4;
+  hints.cells_v = 3;
+  hints.origin_u = -100;
+  hints.origin_v = 50;
+  hints.cell_size = 25;
+  const Box3 bounds{{-100, -5, 50}, {0, 40, 125}};
+  PerspectiveView camera;
+  camera.eye_x = -40;  // u cell 2
+  camera.eye_y = 10;
+  camera.eye_z = 80;  // v cell 1
+  const std::optional<Box3> cell = viewCellBox(hints, camera, bounds);
+  ASSERT_TRUE(cell);
+  EXPECT_EQ(*cell, (Box3{{-50, -5, 75}, {-25, 40, 100}}));
+  camera.eye_x = 1000;  // far outside the grid
+  EXPECT_FALSE(viewCellBox(hints, camera, bounds));
+  camera.eye_x = -110;  // within one cell of the grid: clamped to its edge cell
+  ASSERT_TRUE(viewCellBox(hints, camera, bounds));
+  EXPECT_EQ(viewCellBox(hints, camera, bounds)->min[0], -100.f);
+}
+
 }  // namespace
 }  // namespace tessera::cli
