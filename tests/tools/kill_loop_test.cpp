@@ -8,6 +8,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <random>
@@ -57,14 +58,19 @@ TEST(KillLoop, SigkillAnywhereInABuildLeavesTheOldOrTheNewArchive) {
   // The archive that is there before every killed build.
   ASSERT_EQ(WEXITSTATUS(waitExit(startBuild(old_input, output))), 0);
   const uint64_t old_bytes = std::filesystem::file_size(output);
-  const auto started = std::chrono::steady_clock::now();
-  ASSERT_EQ(WEXITSTATUS(waitExit(startBuild(new_input, dir + "new.tess"))), 0);
-  const double build_s =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count();
+  // The longest of two builds: on a busy machine (CI runs tests two at a time) one build can
+  // be much quicker than the killed ones, and points must reach past their commits too.
+  double build_s = 0;
+  for (int i = 0; i < 2; ++i) {
+    const auto started = std::chrono::steady_clock::now();
+    ASSERT_EQ(WEXITSTATUS(waitExit(startBuild(new_input, dir + "new.tess"))), 0);
+    build_s = std::max(
+        build_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  }
   const uint64_t new_bytes = std::filesystem::file_size(dir + "new.tess");
 
   std::mt19937 random(27);
-  std::uniform_real_distribution<double> point(0.0, build_s * 1.1);
+  std::uniform_real_distribution<double> point(0.0, build_s * 1.6);
   int old_kept = 0, new_written = 0;
   for (int round = 0; round < 100; ++round) {
     ASSERT_EQ(WEXITSTATUS(waitExit(startBuild(old_input, output))), 0) << "round " << round;
