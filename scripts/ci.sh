@@ -18,14 +18,14 @@
 #   TESSERA_CI_TIMEOUT  per-test timeout in seconds, default 300 (sanitizer stages: 3x)
 #   TESSERA_CI_FILTER   ctest -R regex, to run a subset while iterating
 #   TESSERA_CI_WERROR   ON/OFF for -Werror in the Release stage, default ON
-#   TESSERA_CI_FUZZ_SECONDS  seconds each fuzzer runs in the fuzz stage, default 40
+#   TESSERA_CI_FUZZ_SECONDS  seconds each fuzzer runs in the fuzz stage, default 25
 set -uo pipefail
 
 repo=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 cd "$repo" || exit 1
 
 stages=${TESSERA_CI_STAGES:-format release asan tsan fuzz}
-fuzz_seconds=${TESSERA_CI_FUZZ_SECONDS:-40}
+fuzz_seconds=${TESSERA_CI_FUZZ_SECONDS:-25}
 build_root=${TESSERA_CI_BUILD:-$repo/build-ci}
 jobs=${TESSERA_CI_JOBS:-$(nproc)}
 timeout_s=${TESSERA_CI_TIMEOUT:-300}
