@@ -3,7 +3,8 @@
 # llvmpipe without one) it runs the GL tests, then the standard jump and pan flights at FHD
 # and 4K for both renderers, in real time at 60 fps, and writes one table naming the GL
 # renderer the flights ran on (summary.json's `gl`), so figures from llvmpipe are never taken
-# for a GPU's. The single-fetch floor frame is not measured yet (docs/rendering.md, "Not done").
+# for a GPU's; then each renderer's still frame against the single-fetch floor at FHD and 4K
+# (bench/gpu_floor.cpp), a second table.
 #
 #   bench/gpu_check.sh                         # 65536^2 archive, 5-s flights
 #   bench/gpu_check.sh --size 16384x16384 --seconds 2
@@ -63,4 +64,11 @@ PY
     done
   done
 done
+{
+  echo
+  echo "Still frame against the single-fetch floor (tessera-gpu-floor):"
+  echo
+  "$BUILD/bench/tessera-gpu-floor" "$ARCHIVE" --viewport 1920x1080,3840x2160 \
+    --json "$WORK/gpu_floor.json"
+} >> "$TABLE"
 cat "$TABLE"
