@@ -75,13 +75,16 @@ done
 input=${positionals[0]}
 output=${positionals[1]}
 [[ -n $parts ]] || die_usage "--parts N is required"
-is_uint "$parts" && ((10#$parts >= 1 && 10#$parts <= 10000)) || die_usage "--parts $parts: expected 1..10000"
+{ is_uint "$parts" && ((10#$parts >= 1 && 10#$parts <= 10000)); } || die_usage "--parts $parts: expected 1..10000"
 parts=$((10#$parts))
-is_uint "$retries" && ((10#$retries <= 100)) || die_usage "--retries $retries: expected 0..100"
+{ is_uint "$retries" && ((10#$retries <= 100)); } || die_usage "--retries $retries: expected 0..100"
 is_uint "$retry_delay_s" || die_usage "--retry-delay $retry_delay_s: expected whole seconds"
-is_uint "$poll_s" && ((10#$poll_s >= 1)) || die_usage "--poll $poll_s: expected 1 or more seconds"
+{ is_uint "$poll_s" && ((10#$poll_s >= 1)); } || die_usage "--poll $poll_s: expected 1 or more seconds"
 [[ -z $only || $only =~ ^[0-9]+(-[0-9]+)?(,[0-9]+(-[0-9]+)?)*$ ]] ||
   die_usage "--only $only: expected a list such as 3,5-6"
+for index in ${only//[,-]/ }; do
+  ((10#$index >= 1 && 10#$index <= parts)) || die_usage "--only $only: part $index is not in 1..$parts"
+done
 for option in "${build_options[@]}"; do
   case $option in
     -o | --output | --output=* | --part | --part=*)

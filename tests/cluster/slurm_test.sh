@@ -36,7 +36,7 @@ if [[ $mode == build ]]; then
   "$tessera" merge --help >/dev/null 2>&1 || skip "$tessera has no merge subcommand"
 fi
 
-# shellcheck source=slurm_cluster.sh
+# shellcheck source=tests/cluster/slurm_cluster.sh
 source "$(dirname "$0")/slurm_cluster.sh"
 work=$(mktemp -d "${TMPDIR:-/tmp}/tessera-slurm.XXXXXX")
 cleanup() {
@@ -61,7 +61,7 @@ expect_usage_error() {
 # A stand-in for tessera: `build INPUT --part I/N ... -o OUT` writes one line naming the part;
 # `merge P1 .. PN -o OUT` concatenates the parts, so the merged file shows that the merge
 # found every part, in order. Files named fail-once-I and fail-always-I in the folder make
-# part I fail on its first attempt or on all of them.
+# part I fail on its first attempt or on all of them, and fail-merge makes the merge exit 3.
 write_stub_tessera() {
   local stub=$1
   cat >"$stub" <<'EOF'
@@ -83,6 +83,7 @@ case $command in
     echo "part ${args[2]} of ${args[0]} with ${args[*]:3:${#args[@]}-5}" >"$output.tmp"
     mv "$output.tmp" "$output" ;;
   merge)
+    [[ ! -e $here/fail-merge ]] || { echo "stub: merge fails" >&2; exit 3; }
     cat "${args[@]:0:${#args[@]}-2}" >"$output.tmp"
     mv "$output.tmp" "$output" ;;
 esac
@@ -106,7 +107,7 @@ run_harness() {
   ids=$("$slurm_build" synthetic:64x64 "$work/ok/out.tess" --parts $parts --tessera "$stub" \
     --retries 1 --retry-delay 0 --poll 1 --wait -- --tile 64) ||
     fail "slurm-build.sh --wait exited $? on a build whose parts all succeed"
-  grep -qE '^parts_job=[0-9]+$' <<<"$ids" && grep -qE '^merge_job=[0-9]+$' <<<"$ids" ||
+  { grep -qE '^parts_job=[0-9]+$' <<<"$ids" && grep -qE '^merge_job=[0-9]+$' <<<"$ids"; } ||
     fail "job ids not printed: $ids"
   local expected="" i
   for ((i = 1; i <= parts; i++)); do
@@ -121,13 +122,31 @@ run_harness() {
   touch "$work/stub/fail-always-5"
   local status=0
   "$slurm_build" synthetic:64x64 "$work/bad/out.tess" --parts $parts --tessera "$stub" \
-    --retries 1 --retry-delay 0 --poll 1 --wait >/dev/null 2>"$work/bad.err" || status=$?
+    --retries 1 --retry-delay 0 --poll 1 --wait -- --tile 64 >/dev/null 2>"$work/bad.err" ||
+    status=$?
   ((status == 1)) || fail "slurm-build.sh --wait exited $status with a failing part, expected 1"
   grep -q "part 5: FAILED" "$work/bad.err" || fail "the failing part is not named: $(<"$work/bad.err")"
   [[ ! -e $work/bad/out.tess ]] || fail "the merge ran although part 5 failed"
   [[ $(grep -c "^part 5/$parts: attempt" "$work/bad/out.parts/logs/part-5.log") == 2 ]] ||
     fail "part 5 was not tried twice (--retries 1)"
-  echo "harness: array of $parts tasks, dependent merge, retry and failed part all as expected"
+
+  # Rebuilding only the failed part, as --wait's message advises, completes the build.
+  rm "$work/stub/fail-always-5"
+  "$slurm_build" synthetic:64x64 "$work/bad/out.tess" --parts $parts --tessera "$stub" \
+    --only 5 --poll 1 --wait -- --tile 64 >/dev/null 2>"$work/only.err" ||
+    fail "slurm-build.sh --only 5 exited $?: $(<"$work/only.err")"
+  [[ $(<"$work/bad/out.tess") == "${expected%$'\n'}" ]] ||
+    fail "after --only 5 the merged output is not the $parts parts in order"
+  [[ $(grep -c "^part 1/$parts: attempt" "$work/bad/out.parts/logs/part-1.log") == 1 ]] ||
+    fail "--only 5 ran part 1 again"
+
+  # A failing merge: --wait exits with the merge's own code.
+  touch "$work/stub/fail-merge"
+  status=0
+  "$slurm_build" synthetic:64x64 "$work/ok/again.tess" --parts 2 --tessera "$stub" --poll 1 \
+    --wait >/dev/null 2>"$work/merge.err" || status=$?
+  ((status == 3)) || fail "slurm-build.sh --wait exited $status after a merge exiting 3"
+  echo "harness: array of $parts tasks, dependent merge, retry, failed part, --only and failed merge as expected"
 }
 
 run_build() {
