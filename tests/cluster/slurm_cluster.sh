@@ -133,10 +133,20 @@ slurm_cluster_start() {
   slurm_cluster_log "up in $dir (SLURM_CONF=$SLURM_CONF, $(sinfo -h -o '%c CPUs, %m MiB'))"
 }
 
-# Stops the daemons in reverse order of start: slurmd first, so no job is left running
-# without its controller, munged last, as both Slurm daemons authenticate through it.
+# Cancels what is still queued or running (a test that failed half-way), then stops the
+# daemons in reverse order of start: slurmd first, munged last, as both Slurm daemons
+# authenticate through it. Job steps run under slurmstepd, outside slurmd, so they are
+# cancelled and waited for (with a deadline) rather than orphaned.
 slurm_cluster_stop() {
   local i pid
+  if ((${#slurm_cluster_pids[@]} >= 2)) && [[ -n ${SLURM_CONF:-} ]]; then
+    scancel --user="$(id -un)" 2>/dev/null || true
+    local deadline=$((SECONDS + 10))
+    while [[ -n $(squeue -h -t PENDING,RUNNING,COMPLETING -o %i 2>/dev/null) ]] &&
+      ((SECONDS < deadline)); do
+      sleep 0.2
+    done
+  fi
   for ((i = ${#slurm_cluster_pids[@]} - 1; i >= 0; i--)); do
     pid=${slurm_cluster_pids[i]}
     kill -TERM "$pid" 2>/dev/null || continue
