@@ -137,8 +137,9 @@ attempt=0
 while true; do
   attempt=$((attempt + 1))
   echo "part $part/$parts: attempt $attempt on $(hostname)"
-  "$tessera" build "$input" --part "$part/$parts" "${build_options[@]}" "${threads[@]}" \
-    -o "$workdir/part-$part.tess"
+  # ${a[@]+"${a[@]}"}: an empty array under set -u, which bash before 4.4 calls unbound.
+  "$tessera" build "$input" --part "$part/$parts" ${build_options[@]+"${build_options[@]}"} \
+    ${threads[@]+"${threads[@]}"} -o "$workdir/part-$part.tess"
   status=$?
   if ((status == 0)); then exit 0; fi
   echo "part $part/$parts: tessera build exited $status on attempt $attempt" >&2
