@@ -130,7 +130,7 @@ part_script=$workdir/part.sbatch
 part=${SLURM_ARRAY_TASK_ID:?not started as a Slurm array task}
 # Slurm gives the task its CPUs; without --threads the build would use every core of the node.
 threads=()
-if [[ -n ${SLURM_CPUS_PER_TASK:-} && " ${build_options[*]} " != *" --threads"* ]]; then
+if [[ -n ${SLURM_CPUS_PER_TASK:-} && " ${build_options[*]-} " != *" --threads"* ]]; then
   threads=(--threads "$SLURM_CPUS_PER_TASK")
 fi
 attempt=0
