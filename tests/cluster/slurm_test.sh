@@ -140,12 +140,15 @@ run_harness() {
   [[ $(grep -c "^part 1/$parts: attempt" "$work/bad/out.parts/logs/part-1.log") == 1 ]] ||
     fail "--only 5 ran part 1 again"
 
-  # A failing merge: --wait exits with the merge's own code.
+  # A failing merge: --wait exits with the merge's own code. The parts were given 2 CPUs each,
+  # so they build with 2 threads.
   touch "$work/stub/fail-merge"
   status=0
   "$slurm_build" synthetic:64x64 "$work/ok/again.tess" --parts 2 --tessera "$stub" --poll 1 \
-    --wait >/dev/null 2>"$work/merge.err" || status=$?
+    --sbatch --cpus-per-task=2 --wait >/dev/null 2>"$work/merge.err" || status=$?
   ((status == 3)) || fail "slurm-build.sh --wait exited $status after a merge exiting 3"
+  grep -q -- "--threads 2" "$work/ok/again.parts/part-1.tess" ||
+    fail "a part given 2 CPUs did not build with --threads 2: $(<"$work/ok/again.parts/part-1.tess")"
   echo "harness: array of $parts tasks, dependent merge, retry, failed part, --only and failed merge as expected"
 }
 
