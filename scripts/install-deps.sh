@@ -22,6 +22,7 @@ packages=(
   libminizip-dev libssl-dev
   gdal-bin libvips-tools
   pybind11-dev python3-dev python3-numpy python3-pytest python3-venv
+  slurm-wlm munge
 )
 
 # Node.js and npm for the web viewer's tests (tests/web): the machine's own Node.js (20 and
