@@ -21,7 +21,6 @@
 #include "output/output_file.h"
 #include "pyramid_builder.h"
 #include "tile_cutter.h"
-#include "uninitialized_buffer.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
 #include "codecs/encode.h"

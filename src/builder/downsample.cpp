@@ -225,39 +225,42 @@ bool allOpaque(const uint8_t* row, uint32_t width, uint32_t channels) {
   return true;
 }
 
-}  // namespace
+template <bool kVector, uint32_t kChannels>
+void averagePlainWith(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint8_t* out) {
+  if constexpr (kVector)
+    averagePlainFast<kChannels>(top, bottom, width, out);
+  else
+    averagePlain<kChannels>(top, bottom, width, out);
+}
 
-void downsampleRowPair(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint32_t channels,
-                       bool srgb, uint8_t* out) {
+template <bool kVector>
+void downsampleRowPairWith(const uint8_t* top, const uint8_t* bottom, uint32_t width,
+                           uint32_t channels, bool srgb, uint8_t* out) {
   bool has_alpha = channels == 2 || channels == 4;
   // Opaque rows weight every texel equally, so the plain mean is the alpha-weighted mean.
   bool plain = !srgb && (!has_alpha ||
                          (allOpaque(top, width, channels) && allOpaque(bottom, width, channels)));
   if (plain) {
     switch (channels) {
-      case 1: return averagePlainFast<1>(top, bottom, width, out);
-      case 2: return averagePlain<2>(top, bottom, width, out);
-      case 3: return averagePlainFast<3>(top, bottom, width, out);
-      case 4: return averagePlainFast<4>(top, bottom, width, out);
+      case 1: return averagePlainWith<kVector, 1>(top, bottom, width, out);
+      case 2: return averagePlain<2>(top, bottom, width, out);  // no vector kernel: rare
+      case 3: return averagePlainWith<kVector, 3>(top, bottom, width, out);
+      case 4: return averagePlainWith<kVector, 4>(top, bottom, width, out);
     }
   }
   averageGeneral(top, bottom, width, channels, srgb, out);
 }
 
+}  // namespace
+
+void downsampleRowPair(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint32_t channels,
+                       bool srgb, uint8_t* out) {
+  downsampleRowPairWith<true>(top, bottom, width, channels, srgb, out);
+}
+
 void downsampleRowPairScalar(const uint8_t* top, const uint8_t* bottom, uint32_t width,
                              uint32_t channels, bool srgb, uint8_t* out) {
-  bool has_alpha = channels == 2 || channels == 4;
-  bool plain = !srgb && (!has_alpha ||
-                         (allOpaque(top, width, channels) && allOpaque(bottom, width, channels)));
-  if (plain) {
-    switch (channels) {
-      case 1: return averagePlain<1>(top, bottom, width, out);
-      case 2: return averagePlain<2>(top, bottom, width, out);
-      case 3: return averagePlain<3>(top, bottom, width, out);
-      case 4: return averagePlain<4>(top, bottom, width, out);
-    }
-  }
-  averageGeneral(top, bottom, width, channels, srgb, out);
+  downsampleRowPairWith<false>(top, bottom, width, channels, srgb, out);
 }
 
 void downsampleRowPairFloor(const uint8_t* top, const uint8_t* bottom, uint32_t width,

@@ -71,10 +71,14 @@ std::span<uint8_t> PyramidBuilder::rowsToFill(uint32_t max_rows) {
     rows = uint32_t(std::min<uint64_t>(rows, std::max<uint64_t>(last_needed, y + 1) - y));
   }
   if ((y & 1) == 1) rows = std::min(rows, std::max(1u, level.ring_rows - 1));
+  offered_rows_ = rows;
   return {level.mutableRow(y), size_t(rows) * level.row_bytes};
 }
 
 Result<void> PyramidBuilder::commitRows(uint32_t count) {
+  TESSERA_CHECK(count <= offered_rows_)
+      << "committing " << count << " rows, " << offered_rows_ << " offered";
+  offered_rows_ = 0;
   for (uint32_t i = 0; i < count; ++i) TESSERA_TRY(rowArrived(0));
   return {};
 }

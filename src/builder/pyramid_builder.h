@@ -62,6 +62,7 @@ class PyramidBuilder {
   TileSink& sink_;
   bool floor_average_;
   std::vector<std::unique_ptr<Level>> levels_;
+  uint32_t offered_rows_ = 0;  ///< rows the last rowsToFill offered, until committed
 };
 
 }  // namespace tessera::detail

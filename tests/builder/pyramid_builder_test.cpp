@@ -62,6 +62,17 @@ ImageInfo makeInfo(const Image& image, uint32_t tile, uint32_t border) {
   return info;
 }
 
+// Every level announced all its tile rows and every tile was cut once, equal to the reference.
+void expectEveryTileOnce(const ImageInfo& info, CollectingSink& sink) {
+  int expected_tiles = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level) {
+    EXPECT_EQ(sink.rowsAnnounced(level), info.tilesY(level)) << "level " << level;
+    expected_tiles += info.tilesX(level) * info.tilesY(level);
+  }
+  EXPECT_EQ(sink.tiles, expected_tiles);
+  EXPECT_EQ(sink.mismatches, 0);
+}
+
 struct Case {
   uint32_t width, height, channels, tile, border, band_rows;
 };
@@ -73,38 +84,18 @@ void PrintTo(const Case& c, std::ostream* out) {
 
 class PyramidBuilderTest : public testing::TestWithParam<Case> {};
 
-TEST_P(PyramidBuilderTest, EmitsEveryTileOnceAndEqualToTheReference) {
-  const Case c = GetParam();
-  Image image = test::makePatternImage(c.width, c.height, c.channels, c.width ^ c.height);
-  test::ReferencePyramid reference(image);
-  ImageInfo info = makeInfo(image, c.tile, c.border);
-  CollectingSink sink(info, reference);
-  PyramidBuilder pyramid(info, sink);
+// Rows through addRows, in bands of the case's height.
+void feedCopies(const Case& c, const Image& image, PyramidBuilder& pyramid) {
   for (uint32_t y = 0; y < c.height; y += c.band_rows) {
     uint32_t rows = std::min(c.band_rows, c.height - y);
     ASSERT_TRUE(pyramid.addRows(image.row(y), rows));
     EXPECT_EQ(pyramid.rowsReceived(), y + rows);
   }
-  ASSERT_TRUE(pyramid.finish());
-  int expected_tiles = 0;
-  for (uint32_t level = 0; level < info.level_count; ++level) {
-    EXPECT_EQ(sink.rowsAnnounced(level), info.tilesY(level)) << "level " << level;
-    expected_tiles += info.tilesX(level) * info.tilesY(level);
-  }
-  EXPECT_EQ(sink.tiles, expected_tiles);
-  EXPECT_EQ(sink.mismatches, 0);
 }
 
-// The same through rowsToFill/commitRows (the builder's path: the reader decodes into the band):
-// each span is filled and committed, sometimes only in part, and the tiles still equal the
-// reference, so no span ever covers a row an announcement or a 2x2 pair still needed.
-TEST_P(PyramidBuilderTest, InPlaceRowsGiveTheSameTiles) {
-  const Case c = GetParam();
-  Image image = test::makePatternImage(c.width, c.height, c.channels, c.width ^ c.height);
-  test::ReferencePyramid reference(image);
-  ImageInfo info = makeInfo(image, c.tile, c.border);
-  CollectingSink sink(info, reference);
-  PyramidBuilder pyramid(info, sink);
+// Rows through rowsToFill/commitRows (the builder's path: the reader decodes into the band),
+// each span filled and committed, sometimes only in part.
+void feedInPlace(const Case& c, const Image& image, PyramidBuilder& pyramid) {
   const size_t row_bytes = size_t(c.width) * c.channels;
   uint32_t y = 0, step = 0;
   while (y < c.height) {
@@ -120,12 +111,27 @@ TEST_P(PyramidBuilderTest, InPlaceRowsGiveTheSameTiles) {
     ASSERT_EQ(pyramid.rowsReceived(), y);
   }
   EXPECT_TRUE(pyramid.rowsToFill(c.band_rows).empty());
+}
+
+void buildAndCompare(const Case& c, void (*feed)(const Case&, const Image&, PyramidBuilder&)) {
+  Image image = test::makePatternImage(c.width, c.height, c.channels, c.width ^ c.height);
+  test::ReferencePyramid reference(image);
+  ImageInfo info = makeInfo(image, c.tile, c.border);
+  CollectingSink sink(info, reference);
+  PyramidBuilder pyramid(info, sink);
+  feed(c, image, pyramid);
   ASSERT_TRUE(pyramid.finish());
-  int expected_tiles = 0;
-  for (uint32_t level = 0; level < info.level_count; ++level)
-    expected_tiles += info.tilesX(level) * info.tilesY(level);
-  EXPECT_EQ(sink.tiles, expected_tiles);
-  EXPECT_EQ(sink.mismatches, 0);
+  expectEveryTileOnce(info, sink);
+}
+
+TEST_P(PyramidBuilderTest, EmitsEveryTileOnceAndEqualToTheReference) {
+  buildAndCompare(GetParam(), feedCopies);
+}
+
+// In place, the tiles still equal the reference: no span ever covers a row that a tile row's
+// announcement or a 2x2 pair still needed.
+TEST_P(PyramidBuilderTest, InPlaceRowsGiveTheSameTiles) {
+  buildAndCompare(GetParam(), feedInPlace);
 }
 
 INSTANTIATE_TEST_SUITE_P(
