@@ -9,6 +9,11 @@
 # Usage: bench/build_vs_peers.sh [options]
 #   --sizes "32768 16384"  square input sides in px (default: 1 GP and 268 MP)
 #   --input FILE           use this TIFF instead of generated ones (repeatable)
+#   --real                 real content instead of the synthetic source: Debian's xplanet-images
+#                          earth.jpg (a 2048x1024 satellite map) replicated to each size
+#   --peers "A B"          peer rows to run (default: all): tiffsave dzsave dzsave-zip gdal
+#   --bound                add the build's speed limit: every tile JPEG-encoded on all cores,
+#                          nothing else timed (tessera-encode-bound), and Tessera's time over it
 #   --dir DIR              work folder for inputs, outputs and results (default out/bench)
 #   --no-tessera           peers only (also automatic when `tessera build` is not usable)
 #   --no-peers             Tessera only
@@ -17,7 +22,7 @@
 #   --runs N               run each command N times and report the run of median wall time
 #                          (default 3; peak RSS is the highest of the N)
 # Environment: TESSERA_BENCH_BUILD (build folder, default build-bench), TESSERA_BIN,
-# TESSERA_PSNR_BIN, TESSERA_MAKE_TIFF_BIN (use these binaries instead of building them),
+# TESSERA_PSNR_BIN, TESSERA_MAKE_TIFF_BIN, TESSERA_BOUND_BIN (use these binaries instead of building them),
 # TESSERA_BENCH_JOBS (compile jobs, default nproc), TESSERA_BENCH_REVISION (the Tessera revision
 # to name in the report when TESSERA_BIN comes from another checkout).
 set -euo pipefail
@@ -33,10 +38,16 @@ run_peers=1
 run_lossless=1
 keep=0
 runs=3
+real=0
+peers="tiffsave dzsave dzsave-zip gdal"
+bound=0
 while (($#)); do
   case $1 in
     --sizes) read -r -a sizes <<<"$2"; shift 2 ;;
     --input) inputs+=("$(realpath "$2")"); shift 2 ;;
+    --real) real=1; shift ;;
+    --peers) peers=$2; shift 2 ;;
+    --bound) bound=1; shift ;;
     --dir) bench_dir=$2; shift 2 ;;
     --no-tessera) run_tessera=0; shift ;;
     --no-peers) run_peers=0; shift ;;
@@ -62,7 +73,8 @@ mkdir -p "$log_dir"
 tessera=${TESSERA_BIN:-}
 psnr=${TESSERA_PSNR_BIN:-}
 make_tiff=${TESSERA_MAKE_TIFF_BIN:-}
-if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
+bound_bin=${TESSERA_BOUND_BIN:-}
+if [[ -z $tessera || -z $psnr || ( -z $make_tiff && $real == 0 ) || ( -z $bound_bin && $bound == 1 ) ]]; then
   cmake -S "$repo" -B "$build_dir" -G Ninja -DCMAKE_BUILD_TYPE=Release -DTESSERA_BUILD_TOOLS=ON \
     -DTESSERA_BUILD_BENCH=ON -DTESSERA_BUILD_TESTS=OFF >"$log_dir/configure.log" 2>&1 ||
     { cat "$log_dir/configure.log"; exit 1; }
@@ -81,7 +93,10 @@ if [[ -z $tessera || -z $psnr || -z $make_tiff ]]; then
   }
   [[ -n $tessera ]] || tessera=$(build_target tessera tessera_cli)
   [[ -n $psnr ]] || psnr=$(build_target tessera-psnr tessera_psnr)
-  if [[ -z $make_tiff ]] && ((${#inputs[@]} == 0)); then
+  if ((bound)) && [[ -z $bound_bin ]]; then
+    bound_bin=$(build_target tessera-encode-bound tessera_encode_bound)
+  fi
+  if [[ -z $make_tiff ]] && ((${#inputs[@]} == 0)) && ((!real)); then
     make_tiff=$(build_target tessera-make-tiff tessera_make_tiff tessera-make-tiff)
   fi
 fi
@@ -93,6 +108,34 @@ fi
 [[ -n $psnr ]] || echo "build_vs_peers: no tessera-psnr: PSNR column left empty" >&2
 
 # ---- inputs ----------------------------------------------------------------------------------
+if ((${#inputs[@]} == 0)) && ((real)); then
+  earth=$bench_dir/earth.jpg
+  if [[ ! -s $earth ]]; then
+    fetch=$(mktemp -d)
+    (cd "$fetch" && apt-get download xplanet-images >/dev/null 2>&1) ||
+      { echo "build_vs_peers: apt-get download xplanet-images failed" >&2; exit 1; }
+    dpkg-deb -x "$fetch"/xplanet-images_*.deb "$fetch/x"
+    cp "$fetch/x/usr/share/xplanet/images/earth.jpg" "$earth"
+    rm -rf "$fetch"
+  fi
+  for side in "${sizes[@]}"; do
+    input=$bench_dir/real-${side}x${side}.tif
+    if [[ ! -s $input ]]; then
+      echo "build_vs_peers: writing $input (earth.jpg replicated)"
+      # Tiled like the synthetic inputs; BigTIFF past 4 GiB.
+      big=""
+      ((side * side * 3 > 4000000000)) && big=",bigtiff"
+      vips replicate "$earth" "$input[tile,tile-width=256,tile-height=256$big]" \
+        $(((side + 2047) / 2048)) $(((side + 1023) / 1024)) >"$log_dir/make-real-$side.log" 2>&1 ||
+        { cat "$log_dir/make-real-$side.log"; exit 1; }
+      if ((side % 2048 || side % 1024)); then
+        vips crop "$input" "$input.crop.tif[tile,tile-width=256,tile-height=256$big]" 0 0 "$side" "$side" &&
+          mv "$input.crop.tif" "$input"
+      fi
+    fi
+    inputs+=("$input")
+  done
+fi
 if ((${#inputs[@]} == 0)); then
   [[ -n $make_tiff ]] || { echo "build_vs_peers: no tessera-make-tiff and no --input" >&2; exit 1; }
   for side in "${sizes[@]}"; do
@@ -109,6 +152,7 @@ fi
 # ---- measuring -------------------------------------------------------------------------------
 threads=$(nproc)
 rows=()  # "input|tool|codec|wall_s|rss_kib|bytes|psnr|chroma|load|command"
+bounds=()  # "input|encode_s|load"
 
 # Filters read their whole input: an early exit would kill the writer with SIGPIPE, which
 # pipefail turns into a failure.
@@ -205,10 +249,19 @@ for input in "${inputs[@]}"; do
       "$tessera" build "$input" -o "$out/tessera.tess" --tile 256 --codec jpeg --quality 85 \
       --threads "$threads" --quiet
   fi
-  if ((run_peers)); then
+  if ((bound)) && [[ -n $bound_bin ]]; then
+    echo "build_vs_peers: [$(date +%H:%M:%S)] encode bound on $(basename "$input"), load $(cut -d' ' -f1 /proc/loadavg)"
+    bound_json=$("$bound_bin" "$input" --tile 256 --quality 85 --threads "$threads" --runs "$runs")
+    echo "  $bound_json"
+    bounds+=("$(basename "$input")|$(sed -n 's/.*"encode_s_median": \([0-9.]*\).*/\1/p' <<<"$bound_json")|$(sed -n 's/.*"encode_cpu_s": \([0-9.]*\).*/\1/p' <<<"$bound_json")|$(cut -d' ' -f1 /proc/loadavg)")
+  fi
+  if ((run_peers)) && [[ " $peers " == *" tiffsave "* ]]; then
     measure "$input" "vips tiffsave" "jpeg q85" "$out/vips.tif" "$out/vips.tif" tiff -- \
       vips tiffsave "$input" "$out/vips.tif" --tile --pyramid --compression jpeg --Q 85 \
       --tile-width 256 --tile-height 256
+  fi
+  dz_psnr="" dz_chroma=""
+  if ((run_peers)) && [[ " $peers " == *" dzsave "* ]]; then
     # The zip row writes the same tiles as the folder row, so it shares its PSNR; keep the
     # folder until the zip row has run, then measure the zip (its own wall and RSS).
     keep_was=$keep
@@ -216,13 +269,17 @@ for input in "${inputs[@]}"; do
     measure "$input" "vips dzsave" "jpeg q85" "$out/dz.dzi" "$out/dz.dzi" dz -- \
       vips dzsave "$input" "$out/dz" --tile-size 256 --overlap 0 --suffix '.jpg[Q=85]'
     keep=$keep_was
-    dz_psnr=$(IFS='|' read -r -a f <<<"${rows[-1]}"; echo "${f[6]}")
+    dz_psnr="=$(IFS='|' read -r -a f <<<"${rows[-1]}"; echo "${f[6]}")"
     dz_chroma=$(IFS='|' read -r -a f <<<"${rows[-1]}"; echo "${f[7]}")
     ((keep)) || rm -rf "$out/dz.dzi" "$out/dz_files"
-    measure "$input" "vips dzsave --container zip" "jpeg q85" "$out/dz.zip" "=$dz_psnr" \
-      "$dz_chroma" -- \
+  fi
+  if ((run_peers)) && [[ " $peers " == *" dzsave-zip "* ]]; then
+    measure "$input" "vips dzsave --container zip" "jpeg q85" "$out/dz.zip" "$dz_psnr" \
+      "${dz_chroma:-?}" -- \
       vips dzsave "$input" "$out/dz.zip" --tile-size 256 --overlap 0 --suffix '.jpg[Q=85]' \
       --container zip
+  fi
+  if ((run_peers)) && [[ " $peers " == *" gdal "* ]]; then
     # GDAL: YCbCr 4:2:0 is what the COG driver writes for 3-band JPEG (checked per run by
     # tiffinfo below); QUALITY and OVERVIEW_QUALITY both 85; box-filtered overviews like the
     # others; all cores for compression, as vips and Tessera use all cores.
@@ -303,6 +360,23 @@ report=$bench_dir/build_vs_peers-$(date +%Y%m%d-%H%M%S).md
       br=$(awk -v a="$bytes" -v b="$ref_bytes" 'BEGIN { printf "%.2f", a / b }')
     fi
     echo "| $in | $tool | $codec | $wall | $mps | $((rss / 1024)) | $bytes | $wr | $br | ${psnr_db:-—} | $chroma | $load |"
+  done
+  for b in "${bounds[@]}"; do
+    IFS='|' read -r in encode_s encode_cpu load <<<"$b"
+    for r in "${rows[@]}"; do
+      IFS='|' read -r rin rtool rcodec rwall _ <<<"$r"
+      if [[ $rin == "$in" && $rtool == tessera && $rcodec == "jpeg q85" && $rwall != FAIL ]]; then
+        # The build's CPU seconds, from the run of median wall time: on a busy machine wall
+        # time depends on how many threads compete for the cores (the build has one more).
+        build_cpu=$(awk -F': ' '/User time|System time/ { s += $2 } END { printf "%.2f", s }' \
+          "$log_dir/$(basename "${in%.*}")-tessera_jpeg_q85.time")
+        echo
+        echo "Encode bound on $in (every stored tile JPEG-encoded on $threads threads, nothing else" \
+          "timed; load $load): $encode_s s wall, $encode_cpu CPU-s. Tessera's build:" \
+          "$(awk -v a="$rwall" -v b="$encode_s" 'BEGIN { printf "%.2f", a / b }')x the bound's wall" \
+          "time, $build_cpu CPU-s ($(awk -v a="$build_cpu" -v b="$encode_cpu" 'BEGIN { printf "%.2f", a / b }')x)."
+      fi
+    done
   done
   echo
   echo "Commands, in the order run:"

@@ -21,7 +21,6 @@
 #include "output/output_file.h"
 #include "pyramid_builder.h"
 #include "tile_cutter.h"
-#include "uninitialized_buffer.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
 #include "codecs/encode.h"
@@ -445,14 +444,16 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::strin
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
   const uint32_t band_rows = bandRowsFor(info, reader.info());
   const size_t row_bytes = size_t(info.width_px) * info.channels;
-  UninitializedBuffer band(row_bytes * band_rows);
   PoolDrain drain{stage.pool};
+  // The reader decodes straight into the pyramid's level-0 band: no copy of the image's rows.
   for (uint32_t y = 0; y < info.height_px;) {
     if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
     if (auto error = stage.context.error()) return Unexpected(*error);
-    uint32_t rows = std::min(band_rows, info.height_px - y);
-    TESSERA_TRY(reader.readRows(rows, {band.data(), row_bytes * rows}));
-    TESSERA_TRY(pyramid.addRows(band.data(), rows));
+    std::span<uint8_t> slots = pyramid.rowsToFill(band_rows);
+    TESSERA_CHECK(!slots.empty()) << "pyramid full at row " << y << " of " << info.height_px;
+    const uint32_t rows = uint32_t(slots.size() / row_bytes);
+    TESSERA_TRY(reader.readRows(rows, slots));
+    TESSERA_TRY(pyramid.commitRows(rows));
     y += rows;
     stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
   }

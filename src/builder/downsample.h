@@ -13,6 +13,11 @@ namespace tessera::detail {
 void downsampleRowPair(const uint8_t* top, const uint8_t* bottom, uint32_t width, uint32_t channels,
                        bool srgb, uint8_t* out);
 
+/// downsampleRowPair without the vector kernels: the rule written out one texel at a time,
+/// kept as the oracle the vector kernels are tested against (the same bytes for every input).
+void downsampleRowPairScalar(const uint8_t* top, const uint8_t* bottom, uint32_t width,
+                             uint32_t channels, bool srgb, uint8_t* out);
+
 /// The integer pyramid of progressive texture maps (Marvie & Bouatouch, eq. 1 with the integer
 /// solution of eq. 3): every channel, alpha included and unweighted, is floor(sum / 4), so the
 /// remainder sum % 4 lets a child be rebuilt from its parent. Same geometry as

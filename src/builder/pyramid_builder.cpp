@@ -21,7 +21,6 @@ struct PyramidBuilder::Level final : LevelRows {
   uint32_t received = 0;
   uint32_t next_tile_row = 0;
   uint32_t tile_rows = 0;
-  std::vector<uint8_t> downsampled;  ///< one row of the next level
 
   const uint8_t* row(uint32_t y) const override {
     return ring.data() + size_t(y % ring_rows) * row_bytes;
@@ -41,8 +40,6 @@ PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor
     level->ring_rows = std::min(level->height_px, info.tile_size_px + 2 * info.border_px);
     level->ring.resize(level->row_bytes * level->ring_rows);
     level->tile_rows = info.tilesY(l);
-    if (l + 1 < info.level_count)
-      level->downsampled.resize(size_t(info.levelWidthPx(l + 1)) * info.channels);
     levels_.push_back(std::move(level));
   }
 }
@@ -59,24 +56,61 @@ Result<void> PyramidBuilder::addRows(const uint8_t* rows, uint32_t count) {
   return {};
 }
 
+std::span<uint8_t> PyramidBuilder::rowsToFill(uint32_t max_rows) {
+  Level& level = *levels_[0];
+  const uint32_t y = level.received;
+  if (y >= level.height_px || max_rows == 0) return {};
+  uint32_t rows = std::min(max_rows, level.height_px - y);
+  rows = std::min(rows, level.ring_rows - y % level.ring_rows);
+  // Writing past the row that completes the next tile row would overwrite rows that tile row
+  // still needs (a row y replaces y - ring_rows), and, from an odd row on, writing ring_rows rows
+  // would overwrite the top of the first pair.
+  if (level.next_tile_row < level.tile_rows) {
+    const uint64_t last_needed = std::min<uint64_t>(
+        level.height_px, uint64_t(level.next_tile_row + 1) * info_.tile_size_px + info_.border_px);
+    rows = uint32_t(std::min<uint64_t>(rows, std::max<uint64_t>(last_needed, y + 1) - y));
+  }
+  if ((y & 1) == 1) rows = std::min(rows, std::max(1u, level.ring_rows - 1));
+  offered_rows_ = rows;
+  return {level.mutableRow(y), size_t(rows) * level.row_bytes};
+}
+
+Result<void> PyramidBuilder::commitRows(uint32_t count) {
+  TESSERA_CHECK(count <= offered_rows_)
+      << "committing " << count << " rows, " << offered_rows_ << " offered";
+  offered_rows_ = 0;
+  for (uint32_t i = 0; i < count; ++i) TESSERA_TRY(rowArrived(0));
+  return {};
+}
+
 Result<void> PyramidBuilder::addRow(uint32_t level_index, const uint8_t* row) {
   Level& level = *levels_[level_index];
   TESSERA_CHECK(level.received < level.height_px) << "more rows than the level has";
+  std::memcpy(level.mutableRow(level.received), row, level.row_bytes);
+  return rowArrived(level_index);
+}
+
+Result<void> PyramidBuilder::rowArrived(uint32_t level_index) {
+  Level& level = *levels_[level_index];
+  TESSERA_CHECK(level.received < level.height_px) << "more rows than the level has";
   const uint32_t y = level.received++;
-  std::memcpy(level.mutableRow(y), row, level.row_bytes);
 
   if (level_index + 1 < levels_.size()) {
     const bool pair_complete = (y & 1) == 1;
     const bool odd_last_row = (y & 1) == 0 && y + 1 == level.height_px;
     if (pair_complete || odd_last_row) {
+      // Averaged straight into the next level's band: the slot it replaces is no longer needed
+      // there, exactly as when a row is copied in.
+      Level& next = *levels_[level_index + 1];
+      TESSERA_CHECK(next.received < next.height_px) << "more rows than the level has";
+      uint8_t* target = next.mutableRow(next.received);
       const uint8_t* top = level.row(pair_complete ? y - 1 : y);
       if (floor_average_)
-        downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels,
-                               level.downsampled.data());
+        downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels, target);
       else
         downsampleRowPair(top, level.row(y), level.width_px, info_.channels, info_.srgb_downsample,
-                          level.downsampled.data());
-      TESSERA_TRY(addRow(level_index + 1, level.downsampled.data()));
+                          target);
+      TESSERA_TRY(rowArrived(level_index + 1));
     }
   }
 

@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include <tessera/format.h>
@@ -36,6 +37,15 @@ class PyramidBuilder {
 
   /// Adds `count` level-0 rows (tightly packed). Fails if the sink fails.
   [[nodiscard]] Result<void> addRows(const uint8_t* rows, uint32_t count);
+  /// Where the next level-0 rows go, for a reader to decode straight into the band (no copy):
+  /// room for 1 to `max_rows` rows, tightly packed, never more than the rows still to come,
+  /// the band's contiguous slots, or the rows up to the next tile row's announcement (so no
+  /// row a pending announcement or 2x2 pair needs is overwritten). Empty when all rows arrived.
+  /// Fill a prefix of it, then commitRows with how many rows were written.
+  [[nodiscard]] std::span<uint8_t> rowsToFill(uint32_t max_rows);
+  /// Takes `count` rows written into the span of the last rowsToFill (count at most its rows),
+  /// as addRows would. Fails if the sink fails.
+  [[nodiscard]] Result<void> commitRows(uint32_t count);
   /// Rows received so far at level 0.
   uint32_t rowsReceived() const;
   /// Valid after all rows were added: checks every level emitted all its tile rows.
@@ -44,11 +54,15 @@ class PyramidBuilder {
  private:
   struct Level;
   Result<void> addRow(uint32_t level, const uint8_t* row);
+  /// Takes the row already written at the level's next slot: averages it into the next level
+  /// when it completes a pair, and announces the tile rows it completes.
+  Result<void> rowArrived(uint32_t level);
 
   ImageInfo info_;
   TileSink& sink_;
   bool floor_average_;
   std::vector<std::unique_ptr<Level>> levels_;
+  uint32_t offered_rows_ = 0;  ///< rows the last rowsToFill offered, until committed
 };
 
 }  // namespace tessera::detail

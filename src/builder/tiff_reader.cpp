@@ -192,7 +192,8 @@ class TiffReader final : public BandReader {
   // Samples of one pixel in a decoded unit: one plane's when separate, else every sample.
   uint64_t samplesPerUnitPixel() const { return separate_ ? 1 : spp_; }
   Result<void> readGeoreference();
-  Result<void> fillBand(uint32_t first_row);
+  /// Decodes the band from `first_row` into `dest`, or into band_ (then valid) when null.
+  Result<void> fillBand(uint32_t first_row, uint8_t* dest = nullptr);
   Result<void> readScanline(uint32_t row, uint16_t plane);
   // Spreads `pixels` interleaved samples (spp_ per pixel) into output channels: sample c
   // feeds channel c, samples past the output channels are dropped.
@@ -543,13 +544,16 @@ Result<void> TiffReader::readScanline(uint32_t row, uint16_t plane) {
   return {};
 }
 
-Result<void> TiffReader::fillBand(uint32_t first_row) {
+Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
   const uint32_t width = info_.width_px;
   const uint32_t channels = info_.channels;
   const uint32_t band_rows = std::min(info_.natural_band_rows, info_.height_px - first_row);
   const size_t row_bytes = size_t(width) * channels;
-  band_.resize(row_bytes * info_.natural_band_rows);
   band_rows_ = 0;  // invalid until filled, so an error leaves no half-filled band behind
+  if (!dest) {
+    band_.resize(row_bytes * info_.natural_band_rows);
+    dest = band_.data();
+  }
   const uint16_t planes = separate_ ? uint16_t(std::min<uint32_t>(spp_, channels)) : 1;
 
   switch (layout_) {
@@ -557,7 +561,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row) {
       for (uint16_t plane = 0; plane < planes; ++plane) {
         for (uint32_t r = 0; r < band_rows; ++r) {
           TESSERA_TRY(readScanline(first_row + r, plane));
-          convertPlane(unit_.data(), band_.data() + r * row_bytes, width, plane);
+          convertPlane(unit_.data(), dest + r * row_bytes, width, plane);
         }
       }
       break;
@@ -574,8 +578,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row) {
                                          plane, first_row, first_row + band_rows - 1));
         }
         for (uint32_t r = 0; r < band_rows; ++r) {
-          convertPlane(unit_.data() + size_t(r) * width, band_.data() + r * row_bytes, width,
-                       plane);
+          convertPlane(unit_.data() + size_t(r) * width, dest + r * row_bytes, width, plane);
         }
       }
       break;
@@ -594,7 +597,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row) {
           }
           for (uint32_t r = 0; r < band_rows; ++r) {
             const uint8_t* src = unit_.data() + size_t(r) * tile_width_px_ * samples;
-            uint8_t* dst = band_.data() + r * row_bytes + size_t(tile_x) * channels;
+            uint8_t* dst = dest + r * row_bytes + size_t(tile_x) * channels;
             if (separate_) {
               convertPlane(src, dst, tile_cols, plane);
             } else {
@@ -606,8 +609,10 @@ Result<void> TiffReader::fillBand(uint32_t first_row) {
       break;
     }
   }
-  band_first_row_ = first_row;
-  band_rows_ = band_rows;
+  if (dest == band_.data()) {
+    band_first_row_ = first_row;
+    band_rows_ = band_rows;
+  }
   return {};
 }
 
@@ -630,6 +635,14 @@ Result<void> TiffReader::readRows(uint32_t rows, std::span<uint8_t> out) {
     if (band_rows_ == 0 || next_row_ < band_first_row_ ||
         next_row_ >= band_first_row_ + band_rows_) {
       const uint32_t band_start = next_row_ - next_row_ % info_.natural_band_rows;
+      const uint32_t whole_band = std::min(info_.natural_band_rows, info_.height_px - band_start);
+      if (band_start == next_row_ && rows - done >= whole_band) {
+        // The caller wants the whole band: decoded in place, one copy fewer.
+        TESSERA_TRY(fillBand(band_start, out.data() + done * row_bytes));
+        done += whole_band;
+        next_row_ += whole_band;
+        continue;
+      }
       TESSERA_TRY(fillBand(band_start));
     }
     const uint32_t offset = next_row_ - band_first_row_;
