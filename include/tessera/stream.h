@@ -249,8 +249,9 @@ struct AdaptiveBudget {
 /// the clip regions and the prefetch ring (urgency 2-3) cost bytes and requests that a metered
 /// link, a phone or a CDN billed per byte and per request pays for. Counted over the
 /// streamer's life (a flight), each tile once: the view's own tiles (urgency 0-1, every level
-/// the residency wants, full detail included) when first wanted, whether fetched or already
-/// held, and those beyond the view when first requested. The view's tiles are never limited.
+/// the residency wants, full detail included) once their payload size is known (their
+/// directory entry read), whether fetched or already held; those beyond the view when first
+/// requested. The view's tiles are never limited.
 /// Prefetch also waits, as before, until the view's tiles have arrived and while its bytes on the
 /// way fit what the measured link delivers in the time limit, so a slow link prefetches later and
 /// less.

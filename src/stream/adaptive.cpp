@@ -101,7 +101,7 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
     const uint32_t level = std::min(request.id.level, coarsest);
     const TileFacts f = facts(request.id);
     if (request.urgency <= 1) {
-      countEgress(request, f.payload_bytes);
+      if (f.payload_known) countEgress(request, f.payload_bytes);
       level_shown[level] = true;
       level_memory_[level] += tile_bytes_;
       if (!f.held && !f.in_flight) missing_bytes_[level] += f.payload_bytes;

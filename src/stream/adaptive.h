@@ -22,6 +22,9 @@ struct TileFacts {
   bool held = false;           ///< loaded or resident: occupies memory, needs no transfer
   bool in_flight = false;      ///< being read: its bytes are on their way
   uint64_t payload_bytes = 0;  ///< what its transfer costs (an estimate when not yet known)
+  /// payload_bytes is the tile's own (its directory entry was read), not an estimate: only
+  /// then does a view's tile count towards the egress budget's base.
+  bool payload_known = true;
   /// Dependent codecs (ptm; docs/runtime.md, "Dependent codecs"): whether the loader can
   /// decode the tile without loading its parent first, because the parent is in the host
   /// cache or on its way. True for a tile without a parent, and for every other codec.

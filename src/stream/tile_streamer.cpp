@@ -236,6 +236,7 @@ void TileStreamer::Impl::scheduleAdaptive(const View& view, uint32_t image,
         resident.count(id) || awaiting_upload.count(id) || loaded.count(id) || uploading.count(id);
     f.in_flight = in_flight.count(id) > 0;
     f.payload_bytes = payloadBytes(id);
+    f.payload_known = payload_sizes.count(id) > 0;
     if (dependent && id.level + 1 < info.level_count) {
       const TileId parent = Archive::parentTile(id);
       f.parent_ready = cache->contains(parent) || in_flight.count(parent) > 0;

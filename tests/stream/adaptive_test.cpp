@@ -84,6 +84,7 @@ class AdaptivePolicyTest : public testing::Test {
           TileFacts f;
           f.held = held_.count(key(id)) > 0;
           f.payload_bytes = kPayload;
+          f.payload_known = sizes_known_;
           f.parent_ready = not_ready_.count(key(id)) == 0;
           return f;
         },
@@ -110,6 +111,7 @@ class AdaptivePolicyTest : public testing::Test {
   std::set<std::tuple<uint32_t, uint32_t, uint32_t>> not_ready_;
   AdaptiveOptions options_;
   FrameReport report_;
+  bool sizes_known_ = true;  ///< TileFacts::payload_known of every tile
 };
 
 TEST_F(AdaptivePolicyTest, RequestsCoarseLevelsFirstAndOnlyWhatCanArriveInTime) {
@@ -557,6 +559,11 @@ TEST_F(AdaptivePolicyTest, TheEgressBudgetBoundsTheRingByTheViewsBytesAndRequest
   EXPECT_EQ(report_.view_tiles_total, 85u);
   EXPECT_EQ(report_.prefetch_tiles_total, 3u);
   EXPECT_EQ(report_.prefetch_bytes_total, 3 * kPayload);
+  // Sizes still estimated (directory pages not read): the view's tiles are not counted yet,
+  // so nothing goes beyond the view on an estimate.
+  sizes_known_ = false;
+  EXPECT_EQ(ringOf(EgressBudget{}), 0u);
+  EXPECT_EQ(report_.view_bytes_total, 0u);
 }
 
 TEST_F(AdaptivePolicyTest, ATileBeyondTheViewIsChargedOnceAndStaysRequestedUntilItArrives) {
