@@ -722,16 +722,16 @@ TEST(LinkSizedReadsTest, MergedReadsNeverSpanAWiderGapAndEveryTileGetsItsOwnByte
   std::mt19937 random(34);
   size_t merged_reads = 0;
   for (int trial = 0; trial < 4; ++trial) {
-    // 2 ms round trips at 1 Gbit/s: 250 kB a round trip, so the link sizing takes over.
+    // 5 ms round trips at 1 Gbit/s, read by 16 threads: the loader measures a round trip
+    // carrying well over 16 KiB, so the link sizing takes over (checked below).
     auto recording = std::make_shared<RecordingSource>(
-        makeThrottledSource(makeMemorySource(bytes, "mem:link-sized.tess"), LinkModel{1e9, 0.002}));
+        makeThrottledSource(makeMemorySource(bytes, "mem:link-sized.tess"), LinkModel{1e9, 0.005}));
     std::shared_ptr<Archive> archive = test::openArchiveOrFail(recording);
     ASSERT_TRUE(archive);
     test::warmDirectory(*archive);
     recording->takeReads();
     StreamerOptions options;
     tuneForRemoteSource(options);
-    options.loader_threads = 2;
     options.adaptive.enabled = false;
     options.merge_gap_bytes = 0;
     options.batch_gap_bytes = 0;
@@ -740,11 +740,14 @@ TEST(LinkSizedReadsTest, MergedReadsNeverSpanAWiderGapAndEveryTileGetsItsOwnByte
     auto streamer = TileStreamer::create(archive, options);
     ASSERT_TRUE(streamer);
     size_t checked = 0;
+    double round_trip_bytes = 0;
     for (int view = 0; view < 3; ++view) {
       const double x = std::uniform_real_distribution<double>(0, 2048)(random);
       const double y = std::uniform_real_distribution<double>(0, 2048)(random);
       for (int frame = 0; frame < 6; ++frame) {
         const FrameUpdate& update = (*streamer)->update(orthoView(x, y, 1, 640, 480));
+        round_trip_bytes = std::max(round_trip_bytes, update.report.link_bytes_per_s *
+                                                          update.report.link_latency_ms / 1000);
         ApplyResult result;
         for (const auto& tile : update.uploads) {
           Result<Image> expected = reference->readTile(tile->id);
@@ -758,6 +761,7 @@ TEST(LinkSizedReadsTest, MergedReadsNeverSpanAWiderGapAndEveryTileGetsItsOwnByte
       }
     }
     EXPECT_GT(checked, 0u);
+    EXPECT_GT(round_trip_bytes, 16 * 1024) << "the link sizing never applied";
     // Inside every read, the bytes between consecutive payloads are at most the gap.
     for (const auto& [offset, length] : recording->takeReads()) {
       uint64_t end = offset;
