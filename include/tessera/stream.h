@@ -169,6 +169,14 @@ struct FrameReport {
   uint64_t memory_bytes = 0;         ///< decoded bytes of the wanted tiles held or requested
   uint64_t requested_bytes = 0;      ///< payload bytes requested and not yet arrived
   uint64_t deferred_tiles = 0;       ///< wanted tiles not requested (beyond the budgets)
+  /// Egress over the flight so far (AdaptiveOptions::egress, which says what is counted):
+  /// payload bytes and tiles the views needed and those requested beyond them; and the tiles
+  /// this frame held back by the budget.
+  uint64_t view_bytes_total = 0;
+  uint64_t view_tiles_total = 0;
+  uint64_t prefetch_bytes_total = 0;
+  uint64_t prefetch_tiles_total = 0;
+  uint64_t egress_deferred_tiles = 0;
 };
 
 /// A load that failed (a read, a checksum, a decode): the loader retries it after a backoff
@@ -237,6 +245,34 @@ struct AdaptiveBudget {
   double level_time_limit_s = 0;
 };
 
+/// What adaptive scheduling may spend beyond the view (docs/remote.md, "Egress"): the rest of
+/// the clip regions and the prefetch ring (urgency 2-3) cost bytes and requests that a metered
+/// link, a phone or a CDN billed per byte and per request pays for. Counted over the
+/// streamer's life (a flight), each tile once: the view's own tiles (urgency 0-1, every level
+/// the residency wants, full detail included) once their payload size is known (their
+/// directory entry read), whether fetched or already held; those beyond the view when first
+/// requested. The view's tiles are never limited.
+/// Prefetch also waits, as before, until the view's tiles have arrived and while its bytes on the
+/// way fit what the measured link delivers in the time limit, so a slow link prefetches later and
+/// less.
+struct EgressBudget {
+  /// The flight's bytes are at most this many times the bytes of the view's own tiles: what
+  /// goes beyond the view is at most (byte_factor - 1) times them. 1 or less: nothing beyond
+  /// the view; 0: no bound from the view's bytes.
+  double byte_factor = 1.5;
+  /// The same for requests, counted one per tile requested (the coalescing of reads makes
+  /// fewer, so this bounds them from above). 0: no bound.
+  double request_factor = 1.5;
+  /// Absolute caps on what goes beyond the view over the flight; 0: none.
+  uint64_t max_prefetch_bytes = 0;
+  uint64_t max_prefetch_requests = 0;
+
+  /// Only the view: for metered links (`--egress metered`).
+  static EgressBudget metered() { return {1.0, 1.0, 0, 0}; }
+  /// No bound but the link's time and the memory budgets (`--egress unbounded`).
+  static EgressBudget unbounded() { return {0, 0, 0, 0}; }
+};
+
 /// Adaptive scheduling (Marvie & Bouatouch, "Remote Rendering of Massively Textured 3D
 /// Scenes Through Progressive Texture Maps", part III): from the loader's throughput and
 /// latency estimates, request only the levels whose tiles can arrive within a time limit and
@@ -252,6 +288,8 @@ struct AdaptiveOptions {
   /// Throughput assumed until the first read is measured; 0: request only the coarsest level
   /// until then (one round trip on a remote link, a frame on a local disk).
   double assumed_bytes_per_s = 0;
+  /// Bytes and requests beyond the view over a flight.
+  EgressBudget egress;
   /// The time source for the still/moving switch; tests inject one. Empty: steady_clock.
   std::function<std::chrono::steady_clock::time_point()> clock;
 };
@@ -302,6 +340,17 @@ struct StreamerOptions {
   uint64_t read_ahead_bytes = 4u << 20;
   /// The most bytes a batch spans in the file; 0 makes every tile its own read and batch.
   uint64_t max_merged_read_bytes = 4 << 20;
+  /// Batches and merged reads sized by the measured link (docs/remote.md, "Fewer requests";
+  /// tuneForRemoteSource turns it on). Once a round trip carries more than a tile's worth of
+  /// bytes (bandwidth x latency over 16 KiB), a request costs more than the bytes around it:
+  /// a batch then takes every queued neighbour of its level and urgency instead of a fair
+  /// share per thread (within max_merged_read_bytes), and both gaps grow to
+  /// `gap_round_trip_share` of a round trip's bytes, at most `max_link_gap_bytes` (never
+  /// below batch_gap_bytes and merge_gap_bytes). Until the first read is measured, and on a
+  /// fast local link, the fixed values apply.
+  bool link_sized_reads = false;
+  double gap_round_trip_share = 0.25;
+  uint64_t max_link_gap_bytes = 256u << 10;
   /// Retry a failed read or checksum after this, doubling per failure up to the maximum.
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
@@ -317,8 +366,14 @@ struct StreamerOptions {
 ///   another, each a round trip, and bytes in the gaps cost link time;
 /// - no read-ahead: the loaders' parallel reads keep the link busy, and fetched-ahead tiles
 ///   that adaptive scheduling then drops cost link time the view needed;
-/// - adaptive scheduling (Marvie & Bouatouch, part III).
+/// - adaptive scheduling (Marvie & Bouatouch, part III), with its egress budget;
+/// - batches and gaps sized by the measured link (link_sized_reads).
 void tuneForRemoteSource(StreamerOptions& options);
+
+/// An egress budget from its command-line spelling (`tessera fly|view --egress`): `default`
+/// (1.5 times the view's bytes and requests), `metered` (only the view), `unbounded`, or a
+/// factor >= 1 for both bytes and requests (`2.5`). kInvalidArgument otherwise.
+[[nodiscard]] Result<EgressBudget> parseEgressBudget(const std::string& spec);
 /// Loader threads tuneForRemoteSource asks for (more if the machine has more cores); the HTTP
 /// source's default connection count matches it.
 inline constexpr uint32_t kRemoteLoaderThreads = 16;

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <string>
+
+#include <fmt/format.h>
 
 #include <tessera/archive.h>
 
@@ -38,6 +41,32 @@ AdaptiveScheduler::AdaptiveScheduler(const AdaptiveOptions& options, uint32_t le
       tile_bytes_(tile_bytes),
       cache_budget_bytes_(cache_budget_bytes) {}
 
+bool AdaptiveScheduler::egressAllows(uint64_t payload_bytes) const {
+  const EgressBudget& egress = options_.egress;
+  const uint64_t bytes = prefetch_bytes_ + payload_bytes;
+  const uint64_t tiles = prefetch_tiles_ + 1;
+  if (egress.byte_factor > 0 &&
+      double(bytes) > std::max(0.0, egress.byte_factor - 1.0) * double(view_bytes_))
+    return false;
+  if (egress.request_factor > 0 &&
+      double(tiles) > std::max(0.0, egress.request_factor - 1.0) * double(view_tiles_))
+    return false;
+  if (egress.max_prefetch_bytes && bytes > egress.max_prefetch_bytes) return false;
+  if (egress.max_prefetch_requests && tiles > egress.max_prefetch_requests) return false;
+  return true;
+}
+
+void AdaptiveScheduler::countEgress(const TileRequest& request, uint64_t payload_bytes) {
+  if (!counted_.insert(request.id).second) return;
+  if (request.urgency <= 1) {
+    view_bytes_ += payload_bytes;
+    ++view_tiles_;
+  } else {
+    prefetch_bytes_ += payload_bytes;
+    ++prefetch_tiles_;
+  }
+}
+
 bool AdaptiveScheduler::observe(const View& view, Clock::time_point now) {
   // A new view counts as a change: a first picture is refined after n seconds like any other.
   if (!have_view_ || !sameView(view, last_view_)) last_change_ = now;
@@ -72,6 +101,7 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
     const uint32_t level = std::min(request.id.level, coarsest);
     const TileFacts f = facts(request.id);
     if (request.urgency <= 1) {
+      if (f.payload_known) countEgress(request, f.payload_bytes);
       level_shown[level] = true;
       level_memory_[level] += tile_bytes_;
       if (!f.held && !f.in_flight) missing_bytes_[level] += f.payload_bytes;
@@ -108,6 +138,7 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
     }
   memory += held_other;
   uint64_t deferred = 0;
+  uint64_t egress_deferred = 0;
   uint64_t requested_bytes = 0;
   size_t kept = 0;
   admitted_.clear();
@@ -121,6 +152,11 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
       admit = !parent_missing && !view_pending &&
               on_the_way + double(f.payload_bytes) <= byte_budget &&
               memory + tile_bytes_ <= memory_budget;
+      // Egress: a tile requested before stays requested (its bytes are counted already).
+      if (admit && !counted_.count(request.id) && !egressAllows(f.payload_bytes)) {
+        admit = false;
+        ++egress_deferred;
+      }
       if (admit) {
         on_the_way += double(f.payload_bytes);
         memory += tile_bytes_;
@@ -138,6 +174,7 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
       admitted_.insert(Archive::parentTile(request.id));
     }
     admitted_.insert(request.id);
+    if (request.urgency > 1) countEgress(request, f.payload_bytes);
     requested_bytes += f.payload_bytes;
     requests[kept++] = request;
   }
@@ -152,6 +189,37 @@ void AdaptiveScheduler::schedule(const View& view, Clock::time_point now, const 
   report.memory_bytes = memory;
   report.requested_bytes = requested_bytes;
   report.deferred_tiles = deferred;
+  report.egress_deferred_tiles = egress_deferred;
+  report.view_bytes_total = view_bytes_;
+  report.view_tiles_total = view_tiles_;
+  report.prefetch_bytes_total = prefetch_bytes_;
+  report.prefetch_tiles_total = prefetch_tiles_;
 }
 
 }  // namespace tessera::detail
+
+namespace tessera {
+
+Result<EgressBudget> parseEgressBudget(const std::string& spec) {
+  if (spec == "default") return EgressBudget{};
+  if (spec == "metered") return EgressBudget::metered();
+  if (spec == "unbounded") return EgressBudget::unbounded();
+  size_t used = 0;
+  double factor = 0;
+  try {
+    factor = std::stod(spec, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  if (used == 0 || used != spec.size() || !std::isfinite(factor) || factor < 1.0)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("egress budget '{}': expected default, metered, unbounded or a "
+                            "factor of the view's bytes of at least 1 (e.g. 2.5)",
+                            spec));
+  EgressBudget budget;
+  budget.byte_factor = factor;
+  budget.request_factor = factor;
+  return budget;
+}
+
+}  // namespace tessera

@@ -22,6 +22,9 @@ struct TileFacts {
   bool held = false;           ///< loaded or resident: occupies memory, needs no transfer
   bool in_flight = false;      ///< being read: its bytes are on their way
   uint64_t payload_bytes = 0;  ///< what its transfer costs (an estimate when not yet known)
+  /// payload_bytes is the tile's own (its directory entry was read), not an estimate: only
+  /// then does a view's tile count towards the egress budget's base.
+  bool payload_known = true;
   /// Dependent codecs (ptm; docs/runtime.md, "Dependent codecs"): whether the loader can
   /// decode the tile without loading its parent first, because the parent is in the host
   /// cache or on its way. True for a tile without a parent, and for every other codec.
@@ -57,6 +60,12 @@ class AdaptiveScheduler {
   /// Updates the still/moving state with this frame's view; true when still.
   bool observe(const View& view, Clock::time_point now);
 
+  /// Whether a tile beyond the view of `payload_bytes` still fits the egress budget.
+  bool egressAllows(uint64_t payload_bytes) const;
+
+  /// Counts a tile requested for the first time into the flight's egress totals.
+  void countEgress(const TileRequest& request, uint64_t payload_bytes);
+
   AdaptiveOptions options_;
   uint32_t level_count_;
   uint64_t tile_bytes_;
@@ -72,6 +81,10 @@ class AdaptiveScheduler {
   std::vector<uint64_t> missing_bytes_, level_memory_;
   std::vector<TileFacts> facts_;
   std::unordered_set<TileId, TileIdHash> admitted_;  ///< this frame's requests so far
+  /// Egress over the flight: the tiles counted (each once, so a tile wanted or requested on
+  /// many frames is charged once) and the totals.
+  std::unordered_set<TileId, TileIdHash> counted_;
+  uint64_t view_bytes_ = 0, view_tiles_ = 0, prefetch_bytes_ = 0, prefetch_tiles_ = 0;
 };
 
 }  // namespace tessera::detail

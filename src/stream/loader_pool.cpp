@@ -37,6 +37,12 @@ constexpr std::chrono::milliseconds kRescueProbe{500};
 
 /// Requests of the same level considered for merging with the one a worker takes.
 constexpr size_t kMergeCandidates = 32;
+/// The same when round trips dominate (LoaderOptions::link_sized_reads): a view's tiles of
+/// one level at full HD are about 40-60.
+constexpr size_t kLinkMergeCandidates = 128;
+/// Bytes a round trip carries (bandwidth x latency) above which a request costs more than a
+/// tile's transfer, and batches grow to save requests.
+constexpr double kRoundTripMergeBytes = 16 * 1024;
 
 /// Adds a payload, in file order, to `runs`: into the last run when the gap to it is at most
 /// `gap_bytes` (one read, gap included), else as a new run. Returns the run's index. The
@@ -378,7 +384,9 @@ void LoaderPool::takeLocked(Batch& batch, size_t index, bool early, Clock::time_
   // screen in parallel instead of waiting for one worker's long batch.
   size_t same_class = 0;
   for (size_t j = index; j < queue_.size(); ++j) same_class += queue_[j].urgency == first_urgency;
-  const size_t share = std::min(kMergeCandidates, same_class / thread_count_);
+  const size_t share = readSizing().whole_class
+                           ? std::min(kLinkMergeCandidates, same_class)
+                           : std::min(kMergeCandidates, same_class / thread_count_);
   for (size_t j = index; j < queue_.size() && batch.candidates.size() < share; ++j) {
     const TileId& other = queue_[j].id;
     if (other.image != batch.first.image || other.level != batch.first.level ||
@@ -814,7 +822,7 @@ void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
     return a.entry.offset_bytes < b.entry.offset_bytes;
   });
   const std::vector<BatchItem> chosen = neighboursInRange(
-      neighbours, first_entry, options_.batch_gap_bytes, options_.max_merged_read_bytes);
+      neighbours, first_entry, readSizing().batch_gap_bytes, options_.max_merged_read_bytes);
   // Claim the chosen ones that are still queued (another worker or a new frame may have taken
   // or cancelled them meanwhile).
   const auto now = Clock::now();
@@ -835,6 +843,21 @@ void LoaderPool::addNeighbours(Batch& batch, const TileEntry& first_entry) {
   stats_.queued = queue_.size();
 }
 
+LoaderPool::ReadSizing LoaderPool::readSizing() const {
+  ReadSizing sizing{options_.batch_gap_bytes, options_.merge_gap_bytes, false};
+  if (!options_.link_sized_reads) return sizing;
+  const LinkEstimate link = link_.estimate();
+  const double round_trip_bytes = link.bytes_per_s * link.latency_s;
+  if (link.reads == 0 || round_trip_bytes < kRoundTripMergeBytes) return sizing;
+  // Over a long link a wasted KB costs less than a round trip: a share of one in gap bytes.
+  const auto gap = uint64_t(std::min(round_trip_bytes * options_.gap_round_trip_share,
+                                     double(options_.max_link_gap_bytes)));
+  sizing.batch_gap_bytes = std::max(sizing.batch_gap_bytes, gap);
+  sizing.merge_gap_bytes = std::max(sizing.merge_gap_bytes, gap);
+  sizing.whole_class = true;
+  return sizing;
+}
+
 LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
   // The batch's payloads in file order, each run whose gaps are under merge_gap_bytes in one
   // call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set on one
@@ -848,9 +871,10 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
   BatchReads reads;
   std::vector<ByteRange> spans;
   reads.run_of_item.resize(batch.items.size());
+  const uint64_t merge_gap = readSizing().merge_gap_bytes;
   for (const BatchItem* item : encoded)
-    reads.run_of_item[size_t(item - batch.items.data())] = addToRuns(
-        spans, item->entry.offset_bytes, item->entry.length_bytes, options_.merge_gap_bytes);
+    reads.run_of_item[size_t(item - batch.items.data())] =
+        addToRuns(spans, item->entry.offset_bytes, item->entry.length_bytes, merge_gap);
   std::vector<std::vector<TileId>> run_tiles(spans.size());
   for (size_t i = 0; i < batch.items.size(); ++i)
     if (batch.items[i].entry.hasPayload())

@@ -33,6 +33,10 @@ struct LoaderOptions {
   uint64_t batch_gap_bytes = 64 * 1024;  ///< StreamerOptions::batch_gap_bytes
   uint64_t merge_gap_bytes = 16 * 1024;  ///< StreamerOptions::merge_gap_bytes
   uint64_t max_merged_read_bytes = 4 << 20;
+  /// StreamerOptions::link_sized_reads and its two settings.
+  bool link_sized_reads = false;
+  double gap_round_trip_share = 0.25;
+  uint64_t max_link_gap_bytes = 256u << 10;
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
   LoaderPriority priority = LoaderPriority::kAuto;  ///< StreamerOptions::loader_priority
@@ -119,6 +123,14 @@ class LoaderPool {
   LoaderStats stats() const;
   /// The link as measured so far (without the pool's lock).
   LinkEstimate linkEstimate() const { return link_.estimate(); }
+
+  /// What a batch may take and waste, from the options and (link_sized_reads) the link.
+  struct ReadSizing {
+    uint64_t batch_gap_bytes = 0;
+    uint64_t merge_gap_bytes = 0;
+    bool whole_class = false;  ///< take every queued neighbour, not a fair share per thread
+  };
+  ReadSizing readSizing() const;
   /// Idle tile buffers kept for the next decodes (recycled or prewarmed).
   uint64_t idleBufferBytes() const { return texel_pool_->idleBytes(); }
   /// Blocks until the idle workers have filled the buffer pool as far as they will (up to

@@ -130,6 +130,9 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   loader_options.batch_gap_bytes = options.batch_gap_bytes;
   loader_options.merge_gap_bytes = options.merge_gap_bytes;
   loader_options.max_merged_read_bytes = options.max_merged_read_bytes;
+  loader_options.link_sized_reads = options.link_sized_reads;
+  loader_options.gap_round_trip_share = options.gap_round_trip_share;
+  loader_options.max_link_gap_bytes = options.max_link_gap_bytes;
   loader_options.read_ahead_bytes = options.read_ahead_bytes;
   loader_options.retry_initial = options.retry_initial;
   loader_options.retry_max = options.retry_max;
@@ -233,6 +236,7 @@ void TileStreamer::Impl::scheduleAdaptive(const View& view, uint32_t image,
         resident.count(id) || awaiting_upload.count(id) || loaded.count(id) || uploading.count(id);
     f.in_flight = in_flight.count(id) > 0;
     f.payload_bytes = payloadBytes(id);
+    f.payload_known = payload_sizes.count(id) > 0;
     if (dependent && id.level + 1 < info.level_count) {
       const TileId parent = Archive::parentTile(id);
       f.parent_ready = cache->contains(parent) || in_flight.count(parent) > 0;
@@ -379,6 +383,7 @@ void tuneForRemoteSource(StreamerOptions& options) {
   options.batch_gap_bytes = options.merge_gap_bytes;
   options.read_ahead_bytes = 0;
   options.adaptive.enabled = true;
+  options.link_sized_reads = true;
 }
 
 }  // namespace tessera

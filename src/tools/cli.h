@@ -68,6 +68,10 @@ std::string nearestName(std::string_view word, const std::vector<std::string>& c
 /// Parses a strict "WxH" viewport: digits only on both sides, each side 1..16384.
 bool parseViewport(const std::string& text, uint32_t& w, uint32_t& h);
 
+/// Checks an `--egress` value (parseEgressBudget) as CLI11 parses the command line, so a
+/// wrong one is a usage error before anything opens.
+CLI::Validator egressSpecValidator();
+
 /// "a, b or c": the accepted values of an option, for its "unknown value" message.
 std::string listChoices(const std::vector<std::string>& choices);
 

@@ -213,6 +213,8 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
     return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
   setup.remote = setup.link || isRemoteUri(args.archive);
   setup.adaptive = args.adaptive == "on" || (args.adaptive == "auto" && setup.remote);
+  if (Result<EgressBudget> egress = parseEgressBudget(args.egress); !egress)
+    return forwardError(egress);
   if (args.image >= setup.archive->images().size())
     return fail(ErrorCode::kInvalidArgument, fmt::format("no image {}", args.image));
   setup.info = setup.archive->images()[args.image];
@@ -245,6 +247,10 @@ StreamerOptions flightStreamerOptions(const FlyArgs& args, const FlightSetup& se
                                                              : LoaderPriority::kAuto;
   options.adaptive.enabled = setup.adaptive;
   options.adaptive.still_after_s = args.still_after_s;
+  if (Result<EgressBudget> egress = parseEgressBudget(args.egress); egress)
+    options.adaptive.egress = *egress;  // checked when the command line was parsed
+  options.adaptive.egress.max_prefetch_bytes = args.prefetch_max_kib << 10;
+  options.adaptive.egress.max_prefetch_requests = args.prefetch_max_requests;
   if (args.batch_gap_kib) options.batch_gap_bytes = *args.batch_gap_kib << 10;
   if (args.max_read_kib) options.max_merged_read_bytes = *args.max_read_kib << 10;
   return options;
@@ -540,6 +546,7 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
                                   : "as found"},
       {"merge_gap_bytes", options.merge_gap_bytes},
       {"batch_gap_bytes", options.batch_gap_bytes},
+      {"link_sized_reads", options.link_sized_reads},
       {"read_ahead_bytes", options.read_ahead_bytes},
       {"loader_threads", options.loader_threads},
       {"eviction", policy_name},
@@ -610,7 +617,17 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"loader_priority", args.loader_priority},
       {"loader_rescues", last.loader_rescues_total},
       {"rescued_batches", last.rescued_batches_total}};
-  if (setup.adaptive) summary["still_after_s"] = args.still_after_s;
+  if (setup.adaptive) {
+    summary["still_after_s"] = args.still_after_s;
+    // Egress against what the view needed (docs/remote.md, "Egress"): payload bytes and
+    // tiles as the scheduler requested them, each once.
+    summary["egress"] = {{"budget", args.egress},
+                         {"view_bytes", last.view_bytes_total},
+                         {"view_tiles", last.view_tiles_total},
+                         {"beyond_view_bytes", last.prefetch_bytes_total},
+                         {"beyond_view_tiles", last.prefetch_tiles_total},
+                         {"held_back_tiles_last_frame", last.egress_deferred_tiles}};
+  }
   return summary;
 }
 
@@ -633,6 +650,14 @@ void addFlightLinkSummary(const Archive& archive, nlohmann::json& summary) {
                      {"recent_requests", link_stats->recent.size()},
                      {"recent_mib_s_p50", percentile(mib_s, 50)},
                      {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};
+  // The flight's cost on the wire per byte the view needed: what a metered link pays.
+  if (summary.contains("egress")) {
+    const auto view_bytes = summary["egress"]["view_bytes"].get<uint64_t>();
+    summary["egress"]["requests"] = link_stats->requests;
+    summary["egress"]["bytes_received"] = link_stats->bytes_received;
+    summary["egress"]["bytes_per_view_byte"] =
+        view_bytes ? double(link_stats->bytes_received) / double(view_bytes) : 0.0;
+  }
 }
 
 /// With --render: the renderer, the driver, and the render thread's and GPU's time per frame.
@@ -794,6 +819,15 @@ int runFly(const FlyArgs& args) {
   return kExitLoadFailures;
 }
 
+CLI::Validator egressSpecValidator() {
+  return CLI::Validator(
+      [](std::string& spec) {
+        Result<EgressBudget> budget = parseEgressBudget(spec);
+        return budget ? std::string() : budget.error().message;
+      },
+      "default|metered|unbounded|FACTOR", "egress budget");
+}
+
 void registerFlyCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<FlyArgs>();
   CLI::App* cmd = app.add_subcommand(
@@ -873,6 +907,16 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
          "time limits, refine when the view is still): auto (on with --link or a URL), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
       ->capture_default_str();
+  cmd->add_option("--egress", args->egress,
+                  "What adaptive scheduling fetches beyond the view over the flight: default "
+                  "(at most 1.5x the view's bytes and requests), metered (only the view), "
+                  "unbounded, or a factor such as 3")
+      ->check(egressSpecValidator())
+      ->capture_default_str();
+  cmd->add_option("--prefetch-max-kib", args->prefetch_max_kib,
+                  "Most KiB fetched beyond the view over the flight (0: no cap)");
+  cmd->add_option("--prefetch-max-requests", args->prefetch_max_requests,
+                  "Most tiles requested beyond the view over the flight (0: no cap)");
   cmd->add_option("--still-after", args->still_after_s,
                   "Seconds without a view change before the still budgets apply (adaptive)")
       ->capture_default_str();

@@ -55,6 +55,11 @@ struct FlyArgs {
   std::string adaptive = "auto";
   /// Seconds the view must be still before the still budgets apply (AdaptiveOptions).
   double still_after_s = AdaptiveOptions{}.still_after_s;
+  /// What adaptive scheduling may fetch beyond the view (parseEgressBudget): default, metered,
+  /// unbounded or a factor; and absolute caps over the flight (0: none).
+  std::string egress = "default";
+  uint64_t prefetch_max_kib = 0;
+  uint64_t prefetch_max_requests = 0;
 };
 
 /// Flies and writes frames.csv, summary.json (and with `report`, report.html) to `out_dir`.

@@ -640,6 +640,8 @@ int runView(const ViewArgs& args) {
   // Wherever reads cross a network, simulated or real: the remote tuning (docs/runtime.md).
   if (over_link || isRemoteUri(args.archive)) tuneForRemoteSource(options);
   if (args.adaptive != "auto") options.adaptive.enabled = args.adaptive == "on";
+  if (Result<EgressBudget> egress = parseEgressBudget(args.egress); egress)
+    options.adaptive.egress = *egress;  // checked when the command line was parsed
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(*archive, options);
   if (!streamer) return reportError(streamer.error());
   Result<std::unique_ptr<Renderer>> renderer = createRenderer(*kind, info);
@@ -683,6 +685,11 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--adaptive", args->adaptive,
                   "Adaptive scheduling: auto (on with --link or a URL), on, off")
       ->check(CLI::IsMember({"auto", "on", "off"}))
+      ->capture_default_str();
+  cmd->add_option("--egress", args->egress,
+                  "What adaptive scheduling fetches beyond the view: default (at most 1.5x the "
+                  "view's bytes and requests), metered (only the view), unbounded, or a factor")
+      ->check(egressSpecValidator())
       ->capture_default_str();
   cmd->add_option("--frames", args->frames,
                   "Quit after this many frames, once loading settles, writing a screenshot")

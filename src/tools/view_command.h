@@ -22,6 +22,8 @@ struct ViewArgs {
   std::string link;
   /// Adaptive scheduling: "auto" (on over --link), "on" or "off".
   std::string adaptive = "auto";
+  /// What adaptive scheduling fetches beyond the view (parseEgressBudget).
+  std::string egress = "default";
   uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
 };
 

@@ -9,9 +9,13 @@
 #include <condition_variable>
 #include <map>
 #include <mutex>
+#include <random>
 #include <set>
+#include <utility>
 
 #include <gtest/gtest.h>
+
+#include <tessera/link.h>
 
 #include "support/synthetic_archive.h"
 
@@ -80,6 +84,7 @@ class AdaptivePolicyTest : public testing::Test {
           TileFacts f;
           f.held = held_.count(key(id)) > 0;
           f.payload_bytes = kPayload;
+          f.payload_known = sizes_known_;
           f.parent_ready = not_ready_.count(key(id)) == 0;
           return f;
         },
@@ -106,6 +111,7 @@ class AdaptivePolicyTest : public testing::Test {
   std::set<std::tuple<uint32_t, uint32_t, uint32_t>> not_ready_;
   AdaptiveOptions options_;
   FrameReport report_;
+  bool sizes_known_ = true;  ///< TileFacts::payload_known of every tile
 };
 
 TEST_F(AdaptivePolicyTest, RequestsCoarseLevelsFirstAndOnlyWhatCanArriveInTime) {
@@ -527,6 +533,250 @@ TEST_F(AdaptiveStreamerTest, TheMemoryBudgetBoundsWhatIsRequestedAndLoaded) {
   EXPECT_LE(streamer.cacheStats().tiles, 40u);
   EXPECT_GT(streamer.cacheStats().tiles, 20u);
   EXPECT_GT(report.deferred_tiles, 0u);
+}
+
+// ---- Egress (docs/remote.md, "Egress"): what goes beyond the view over a flight.
+
+TEST_F(AdaptivePolicyTest, TheEgressBudgetBoundsTheRingByTheViewsBytesAndRequests) {
+  // The view's 85 tiles (850 kB) are held; the ring's 36 (360 kB) would all fit the link.
+  for (const TileRequest& r : wanted_)
+    if (r.urgency <= 1) held_.insert(key(r.id));
+  const LinkEstimate fast = linkOf(1e6, 0.1);
+  auto ringOf = [&](const EgressBudget& egress) {
+    options_.egress = egress;
+    AdaptiveScheduler policy = make();
+    return countAt(schedule(policy, 0, fast), 0, 2);
+  };
+  EXPECT_EQ(ringOf(EgressBudget::unbounded()), 36u);
+  EXPECT_EQ(ringOf(EgressBudget{}), 36u);  // 1.5x: 425 kB and 42 tiles beyond the view
+  EXPECT_EQ(ringOf(EgressBudget::metered()), 0u);
+  EXPECT_EQ(report_.egress_deferred_tiles, 36u);
+  EXPECT_EQ(ringOf({1.25, 0, 0, 0}), 21u);  // 212.5 kB
+  EXPECT_EQ(ringOf({0, 1.1, 0, 0}), 8u);    // 8.5 requests
+  EXPECT_EQ(ringOf({0, 0, 55'000, 0}), 5u);
+  EXPECT_EQ(ringOf({0, 0, 0, 3}), 3u);
+  EXPECT_EQ(report_.view_bytes_total, 85 * kPayload);
+  EXPECT_EQ(report_.view_tiles_total, 85u);
+  EXPECT_EQ(report_.prefetch_tiles_total, 3u);
+  EXPECT_EQ(report_.prefetch_bytes_total, 3 * kPayload);
+  // Sizes still estimated (directory pages not read): the view's tiles are not counted yet,
+  // so nothing goes beyond the view on an estimate.
+  sizes_known_ = false;
+  EXPECT_EQ(ringOf(EgressBudget{}), 0u);
+  EXPECT_EQ(report_.view_bytes_total, 0u);
+}
+
+TEST_F(AdaptivePolicyTest, ATileBeyondTheViewIsChargedOnceAndStaysRequestedUntilItArrives) {
+  for (const TileRequest& r : wanted_)
+    if (r.urgency <= 1) held_.insert(key(r.id));
+  options_.egress = {1.25, 0, 0, 0};
+  AdaptiveScheduler policy = make();
+  const std::vector<TileRequest> first = schedule(policy, 0, linkOf(1e6, 0.1));
+  ASSERT_EQ(countAt(first, 0, 2), 21u);
+  // Nothing arrived: the next frames request the same 21 and charge nothing more.
+  for (double t : {0.1, 0.2}) {
+    const std::vector<TileRequest> again = schedule(policy, t, linkOf(1e6, 0.1));
+    ASSERT_EQ(again.size(), first.size());
+    for (size_t i = 0; i < again.size(); ++i) EXPECT_EQ(again[i].id, first[i].id);
+    EXPECT_EQ(report_.prefetch_tiles_total, 21u);
+    EXPECT_EQ(report_.view_tiles_total, 85u);
+  }
+  // They arrive: the budget is spent, no more of the ring follows.
+  for (const TileRequest& r : first) held_.insert(key(r.id));
+  EXPECT_TRUE(schedule(policy, 0.3, linkOf(1e6, 0.1)).empty());
+  EXPECT_EQ(report_.egress_deferred_tiles, 15u);
+}
+
+TEST(EgressBudgetTest, ParsesPresetsAndFactorsAndRefusesTheRest) {
+  ASSERT_TRUE(parseEgressBudget("default"));
+  EXPECT_EQ(parseEgressBudget("default")->byte_factor, 1.5);
+  EXPECT_EQ(parseEgressBudget("metered")->byte_factor, 1.0);
+  EXPECT_EQ(parseEgressBudget("unbounded")->request_factor, 0.0);
+  EXPECT_EQ(parseEgressBudget("2.5")->request_factor, 2.5);
+  for (const char* bad : {"", "0.5", "2x", "-1", "nan", "inf", "cheap"}) {
+    Result<EgressBudget> budget = parseEgressBudget(bad);
+    ASSERT_FALSE(budget) << bad;
+    EXPECT_EQ(budget.error().code, ErrorCode::kInvalidArgument);
+    EXPECT_NE(budget.error().message.find("metered"), std::string::npos);
+  }
+}
+
+/// A flight over a simulated link: the streamer, its residency prefetch and the loader, with
+/// the egress budget as the tools set it. The bytes the link carried for tiles stay within
+/// the budget's multiple of what the view needed.
+class EgressFlightTest : public testing::Test {
+ protected:
+  /// Flies one still view until loading settles; returns the last frame's report and sets
+  /// `link_bytes` to the bytes the simulated link carried after the open.
+  FrameReport fly(const EgressBudget& egress, uint64_t& link_bytes) {
+    test::SyntheticArchiveSpec spec;
+    spec.width_px = 2048;
+    spec.height_px = 2048;
+    const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
+    EXPECT_FALSE(bytes.empty());
+    auto link =
+        makeThrottledSource(makeMemorySource(bytes, "mem:egress.tess"), LinkModel{1e9, 0.0005});
+    std::shared_ptr<Archive> archive = test::openArchiveOrFail(link);
+    EXPECT_TRUE(archive);
+    if (!archive) return {};
+    test::warmDirectory(*archive);
+    const uint64_t bytes_before = link->totals().bytes;
+    StreamerOptions options;
+    tuneForRemoteSource(options);
+    options.loader_threads = 2;
+    options.merge_gap_bytes = 0;  // gap bytes would be charged to neither side
+    options.batch_gap_bytes = 0;
+    options.cache_budget_bytes = size_t(64) << 20;
+    options.adaptive.egress = egress;
+    Clock::time_point now = at(0);
+    options.adaptive.clock = [&now] { return now; };
+    auto streamer = TileStreamer::create(archive, options);
+    EXPECT_TRUE(streamer);
+    if (!streamer) return {};
+    FrameReport report;
+    // Still after the first second: the still budgets refine to full detail and let the
+    // prefetch follow. Each frame waits for the loads it started, so the flight ends settled.
+    for (int frame = 0; frame < 40; ++frame) {
+      now = at(0.1 * frame);
+      const FrameUpdate& update = (*streamer)->update(orthoView(1024, 1024, 1, 640, 480));
+      report = update.report;
+      ApplyResult result;
+      for (const auto& tile : update.uploads) result.accepted.push_back(tile->id);
+      (*streamer)->acknowledge(result);
+      (*streamer)->waitIdleForTesting();
+    }
+    link_bytes = link->totals().bytes - bytes_before;
+    return report;
+  }
+};
+
+TEST_F(EgressFlightTest, TheFlightStaysWithinTheBudgetsMultipleOfTheViewsBytes) {
+  uint64_t unbounded_bytes = 0, default_bytes = 0, metered_bytes = 0;
+  const FrameReport unbounded = fly(EgressBudget::unbounded(), unbounded_bytes);
+  const FrameReport bounded = fly(EgressBudget{}, default_bytes);
+  const FrameReport metered = fly(EgressBudget::metered(), metered_bytes);
+  ASSERT_GT(bounded.view_bytes_total, 0u);
+  EXPECT_EQ(bounded.coverage_desired, 1.0);
+  EXPECT_EQ(metered.coverage_desired, 1.0);
+  // Without a bound the prefetch takes more than half the view again: the bound binds.
+  EXPECT_GT(unbounded.prefetch_bytes_total * 2, unbounded.view_bytes_total);
+  EXPECT_LE(bounded.prefetch_bytes_total * 2, bounded.view_bytes_total);
+  EXPECT_LE(bounded.prefetch_tiles_total * 2, bounded.view_tiles_total);
+  EXPECT_GT(bounded.prefetch_tiles_total, 0u);
+  EXPECT_EQ(metered.prefetch_tiles_total, 0u);
+  // On the wire (directory pages included, read before the flight): within the multiple.
+  EXPECT_LE(double(default_bytes), 1.5 * double(bounded.view_bytes_total));
+  EXPECT_LE(metered_bytes, metered.view_bytes_total);
+  EXPECT_LT(default_bytes, unbounded_bytes);
+}
+
+// ---- Reads sized by the link (StreamerOptions::link_sized_reads; docs/remote.md).
+
+/// Forwards to `inner` and records every read's range.
+class RecordingSource final : public ByteSource {
+ public:
+  explicit RecordingSource(std::shared_ptr<ByteSource> inner) : inner_(std::move(inner)) {}
+  uint64_t sizeBytes() const override { return inner_->sizeBytes(); }
+  const std::string& name() const override { return inner_->name(); }
+  Result<void> read(uint64_t offset, std::span<uint8_t> out) const override {
+    record(offset, out.size());
+    return inner_->read(offset, out);
+  }
+  Result<void> readCancellable(uint64_t offset, std::span<uint8_t> out,
+                               const std::atomic<bool>& cancel) const override {
+    record(offset, out.size());
+    return inner_->readCancellable(offset, out, cancel);
+  }
+  std::vector<std::pair<uint64_t, uint64_t>> takeReads() {
+    std::lock_guard lock(mutex_);
+    return std::exchange(reads_, {});
+  }
+
+ private:
+  void record(uint64_t offset, uint64_t length) const {
+    std::lock_guard lock(mutex_);
+    reads_.emplace_back(offset, length);
+  }
+  std::shared_ptr<ByteSource> inner_;
+  mutable std::mutex mutex_;
+  mutable std::vector<std::pair<uint64_t, uint64_t>> reads_;
+};
+
+TEST(LinkSizedReadsTest, MergedReadsNeverSpanAWiderGapAndEveryTileGetsItsOwnBytes) {
+  test::SyntheticArchiveSpec spec;
+  spec.width_px = 2048;
+  spec.height_px = 2048;
+  const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
+  ASSERT_FALSE(bytes.empty());
+  std::shared_ptr<Archive> reference =
+      test::openArchiveOrFail(makeMemorySource(bytes, "mem:reference.tess"));
+  ASSERT_TRUE(reference);
+  // Payloads in file order, to find the gaps inside a read.
+  std::vector<std::pair<uint64_t, uint64_t>> payloads;
+  for (const TileId& id : test::allTiles(*reference)) {
+    auto entry = reference->tileEntry(id);
+    if (entry && entry->hasPayload())
+      payloads.emplace_back(entry->offset_bytes, entry->length_bytes);
+  }
+  std::sort(payloads.begin(), payloads.end());
+  std::mt19937 random(34);
+  size_t merged_reads = 0;
+  for (int trial = 0; trial < 4; ++trial) {
+    // 5 ms round trips at 1 Gbit/s, read by 16 threads: the loader measures a round trip
+    // carrying well over 16 KiB, so the link sizing takes over (checked below).
+    auto recording = std::make_shared<RecordingSource>(
+        makeThrottledSource(makeMemorySource(bytes, "mem:link-sized.tess"), LinkModel{1e9, 0.005}));
+    std::shared_ptr<Archive> archive = test::openArchiveOrFail(recording);
+    ASSERT_TRUE(archive);
+    test::warmDirectory(*archive);
+    recording->takeReads();
+    StreamerOptions options;
+    tuneForRemoteSource(options);
+    options.adaptive.enabled = false;
+    options.merge_gap_bytes = 0;
+    options.batch_gap_bytes = 0;
+    const uint64_t gap = std::uniform_int_distribution<uint64_t>(0, 40'000)(random);
+    options.max_link_gap_bytes = gap;
+    auto streamer = TileStreamer::create(archive, options);
+    ASSERT_TRUE(streamer);
+    size_t checked = 0;
+    double round_trip_bytes = 0;
+    for (int view = 0; view < 3; ++view) {
+      const double x = std::uniform_real_distribution<double>(0, 2048)(random);
+      const double y = std::uniform_real_distribution<double>(0, 2048)(random);
+      for (int frame = 0; frame < 6; ++frame) {
+        const FrameUpdate& update = (*streamer)->update(orthoView(x, y, 1, 640, 480));
+        round_trip_bytes = std::max(round_trip_bytes, update.report.link_bytes_per_s *
+                                                          update.report.link_latency_ms / 1000);
+        ApplyResult result;
+        for (const auto& tile : update.uploads) {
+          Result<Image> expected = reference->readTile(tile->id);
+          ASSERT_TRUE(expected) << expected.error().message;
+          EXPECT_EQ(tile->texels.texels, expected->texels) << "trial " << trial;
+          result.accepted.push_back(tile->id);
+          ++checked;
+        }
+        (*streamer)->acknowledge(result);
+        (*streamer)->waitIdleForTesting();
+      }
+    }
+    EXPECT_GT(checked, 0u);
+    EXPECT_GT(round_trip_bytes, 16 * 1024) << "the link sizing never applied";
+    // Inside every read, the bytes between consecutive payloads are at most the gap.
+    for (const auto& [offset, length] : recording->takeReads()) {
+      uint64_t end = offset;
+      size_t carried = 0;
+      for (const auto& [p_offset, p_length] : payloads) {
+        if (p_offset < offset || p_offset + p_length > offset + length) continue;
+        EXPECT_LE(p_offset - end, gap) << "read [" << offset << ", +" << length << ")";
+        end = p_offset + p_length;
+        ++carried;
+      }
+      EXPECT_EQ(end, offset + length) << "a read ends on a payload";
+      merged_reads += carried > 1;
+    }
+  }
+  EXPECT_GT(merged_reads, 0u) << "the link sizing merged nothing";
 }
 
 }  // namespace

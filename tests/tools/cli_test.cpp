@@ -488,6 +488,17 @@ TEST_F(Cli, FlyOverASimulatedLinkReportsTheLinkAndTheScheduler) {
     nlohmann::json s = nlohmann::json::parse(slurp(out + "/summary.json"));
     EXPECT_EQ(s["simulated_link"], "50mbit:5ms");
     EXPECT_EQ(s["adaptive"], adaptive == "auto" ? "on" : "off");
+    // The egress report: beyond the views at most half their bytes again (the default).
+    if (adaptive == "auto") {
+      const nlohmann::json& egress = s["egress"];
+      EXPECT_EQ(egress["budget"], "default");
+      EXPECT_GT(egress["view_bytes"].get<uint64_t>(), 0u);
+      EXPECT_LE(2 * egress["beyond_view_bytes"].get<uint64_t>(),
+                egress["view_bytes"].get<uint64_t>());
+      EXPECT_EQ(egress["requests"], s["link"]["requests"]);
+    } else {
+      EXPECT_FALSE(s.contains("egress"));
+    }
     // Every byte the loader read crossed the link (the header and directory pages too).
     EXPECT_GT(s["bytes_read"].get<uint64_t>(), 0u);
     EXPECT_GE(s["link"]["bytes_received"].get<uint64_t>(), s["bytes_read"].get<uint64_t>());

@@ -110,6 +110,8 @@ TEST_F(FlyCli, RefusesNumbersThatAreNotNumbersOrOutOfRange) {
       {"--upload-budget", "0"},
       {"--threads", "100000"},
       {"--loader-priority", "realtime"},
+      {"--egress", "0.5"},
+      {"--egress", "cheap"},
   };
   for (const std::vector<std::string>& options : bad) {
     std::string joined;
