@@ -1,8 +1,9 @@
 #pragma once
 /// \file
 /// A ByteSource over HTTP byte ranges (RFC 9110, section 14), on libcurl: an archive served by
-/// `tessera serve`, nginx, a CDN or any server that honours `Range`. The runtime uses it
-/// unchanged; docs/remote.md has the failure behaviour and the version (ETag) rule.
+/// `tessera serve`, nginx, a CDN, an S3-compatible object store, or any server that honours
+/// `Range`. The runtime uses it unchanged; docs/remote.md has the failure behaviour and the
+/// version (ETag) rule.
 
 #include <chrono>
 #include <cstdint>
@@ -59,6 +60,17 @@ struct HttpOptions {
   /// or no callback, fails the request. Runs on the source's I/O thread between transfers:
   /// it must be thread-safe, must not read from this source, and should be quick.
   std::function<std::string(const std::string& refused_url)> renew_url;
+  /// AWS Signature Version 4 for object stores (S3 and S3-compatible: MinIO, Ceph RGW, R2...):
+  /// when `access_key_id` is set, libcurl signs every request with these (region and service
+  /// in the credential scope), and `session_token` is sent as x-amz-security-token. Never in an
+  /// error message or a log. openS3Source fills it from the environment.
+  struct AwsSigning {
+    std::string access_key_id;
+    std::string secret_access_key;
+    std::string session_token;
+    std::string region = "us-east-1";
+    std::string service = "s3";
+  } aws;
 };
 
 /// Opens `url` (http:// or https://) with one request: a GET of the first 16 KiB, which
@@ -76,5 +88,40 @@ struct HttpOptions {
 /// server offers h2), driven by one I/O thread per source.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openHttpSource(const std::string& url,
                                                                  const HttpOptions& options = {});
+
+/// Where an `s3://BUCKET/KEY` URL is fetched from and how, resolved as the AWS command-line
+/// tools resolve it (docs/remote.md, "Object stores"):
+/// - endpoint: `endpoint` if set, else $AWS_ENDPOINT_URL_S3, else $AWS_ENDPOINT_URL (then the
+///   bucket goes in the path: http://host:port/BUCKET/KEY, as S3-compatible stores expect),
+///   else AWS itself, the bucket in the host name (https://BUCKET.s3.REGION.amazonaws.com/KEY);
+/// - region: `region`, else $AWS_REGION, else $AWS_DEFAULT_REGION, else the profile's
+///   `region` in the config file ($AWS_CONFIG_FILE, ~/.aws/config), else us-east-1;
+/// - credentials: $AWS_ACCESS_KEY_ID with $AWS_SECRET_ACCESS_KEY (and $AWS_SESSION_TOKEN),
+///   else the profile ($AWS_PROFILE, else "default") in the credentials file
+///   ($AWS_SHARED_CREDENTIALS_FILE, ~/.aws/credentials); none found: unsigned requests, which
+///   public buckets answer.
+struct S3Options {
+  std::string endpoint;  ///< e.g. "http://127.0.0.1:9000"; empty: from the environment
+  std::string region;    ///< empty: from the environment
+  /// Everything else of the HTTP client (timeouts, retries, connections); its `aws` member is
+  /// replaced by the credentials found.
+  HttpOptions http;
+};
+
+/// The https:// (or the endpoint's http://) URL an `s3://` URL resolves to, with the signing
+/// options, without opening it. Fails (kInvalidArgument) on a URL without a bucket or a key,
+/// or a malformed endpoint, naming the URL; on an unreadable credentials file naming the file.
+struct S3Target {
+  std::string url;
+  HttpOptions options;
+};
+[[nodiscard]] Result<S3Target> resolveS3Url(const std::string& s3_url,
+                                            const S3Options& options = {});
+
+/// Opens an archive in an object store: resolveS3Url, then openHttpSource. Ranges, the version
+/// rule (ETag) and the retries are the HTTP source's; a 403 names the access key id used (never
+/// the secret) and where it came from.
+[[nodiscard]] Result<std::shared_ptr<ByteSource>> openS3Source(const std::string& s3_url,
+                                                               const S3Options& options = {});
 
 }  // namespace tessera

@@ -1,7 +1,7 @@
 #pragma once
 /// \file
-/// Opening an archive wherever it is: a local path or an http(s):// URL. What the command-line
-/// tools accept wherever they take an archive.
+/// Opening an archive wherever it is: a local path, an http(s):// URL or an s3:// URL. What the
+/// command-line tools accept wherever they take an archive.
 
 #include <memory>
 #include <string>
@@ -12,12 +12,13 @@
 
 namespace tessera {
 
-/// True when `path_or_url` starts with http:// or https:// (case-insensitive scheme).
+/// True when `path_or_url` starts with http://, https:// (case-insensitive scheme) or s3://.
 bool isRemoteUri(const std::string& path_or_url);
 
 /// Opens an archive's bytes: an http:// or https:// URL through openHttpSource
 /// (tessera/http_source.h) with default HttpOptions, plus the bearer token in the
-/// TESSERA_TOKEN environment variable when it is set, anything else as a local file
+/// TESSERA_TOKEN environment variable when it is set, an s3:// URL through openS3Source (its
+/// endpoint, region and credentials from the environment), anything else as a local file
 /// (openFileSource). Fails as those do, naming the path or URL.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url);
 

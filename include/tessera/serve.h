@@ -17,8 +17,10 @@ namespace tessera {
 
 /// Everything `tessera serve` can set. Defaults are the CLI's defaults.
 struct ServeOptions {
-  /// Archives (`.tess` files) or folders of them (every `.tess` inside, not recursive). Each
-  /// archive is named by its file stem, which must match [A-Za-z0-9._-]+ and be unique.
+  /// Archives (`.tess` files), folders of them (every `.tess` inside, not recursive), or
+  /// `s3://BUCKET/KEY` URLs of archives in an object store (tessera/http_source.h,
+  /// openS3Source: endpoint, region and credentials from the environment). Each archive is
+  /// named by its file (or key) stem, which must match [A-Za-z0-9._-]+ and be unique.
   std::vector<std::string> paths;
   std::string bind_address = "127.0.0.1";  ///< IPv4 or IPv6 literal
   uint16_t port = 8080;                    ///< 0 picks an ephemeral port; see TileServer::port()

@@ -5,9 +5,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
+#include <ctime>
 #include <filesystem>
 
 #include <fmt/format.h>
+
+#include <tessera/http_source.h>
 
 namespace tessera::detail {
 
@@ -21,6 +25,27 @@ bool isValidArchiveName(std::string_view name) {
 
 namespace {
 
+/// An archive in an object store: named by its key's stem, validated by the header's own
+/// checksum (which covers the file's size and the checksums of its root and metadata, so any
+/// other version of the archive has another), and dated by when it was opened.
+Result<std::shared_ptr<ServedArchive>> openRemoteArchive(const std::string& url) {
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ByteSource> source, openS3Source(url));
+  TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<Archive> archive, Archive::open(source));
+  std::array<uint8_t, 8> header_checksum{};
+  TESSERA_TRY(source->read(120, header_checksum));
+  uint64_t checksum = 0;
+  for (size_t i = 0; i < header_checksum.size(); ++i)
+    checksum |= uint64_t(header_checksum[i]) << (8 * i);
+  auto served = std::make_shared<ServedArchive>();
+  served->archive = archive;
+  served->source = source;
+  served->file_bytes = source->sizeBytes();
+  served->etag = fmt::format("\"{:x}-{:x}\"", served->file_bytes, checksum);
+  served->modified = std::time(nullptr);
+  served->remote = true;
+  return served;
+}
+
 Result<void> addArchive(const std::string& path, Catalog& catalog) {
   std::string name = std::filesystem::path(path).stem().string();
   if (!isValidArchiveName(name))
@@ -31,6 +56,13 @@ Result<void> addArchive(const std::string& path, Catalog& catalog) {
     return Unexpected(ErrorCode::kInvalidArgument,
                       fmt::format("{}: archive name \"{}\" is already served from {}", path, name,
                                   catalog.at(name)->path));
+  if (path.rfind("s3://", 0) == 0) {
+    TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<ServedArchive> served, openRemoteArchive(path));
+    served->name = name;
+    served->path = path;
+    catalog[name] = std::move(served);
+    return {};
+  }
   struct stat status {};
   if (::stat(path.c_str(), &status) != 0)
     return Unexpected(ErrorCode::kNotFound, fmt::format("{}: cannot stat the file", path));
@@ -62,6 +94,7 @@ ServedArchive::~ServedArchive() {
 }
 
 bool ServedArchive::unchangedOnDisk() const {
+  if (remote) return true;
   struct stat status {};
   if (stat_fd < 0 || ::fstat(stat_fd, &status) != 0) return false;
   const uint64_t now_ns =
@@ -73,7 +106,7 @@ Result<Catalog> loadCatalog(const std::vector<std::string>& paths) {
   Catalog catalog;
   for (const std::string& path : paths) {
     std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) {
+    if (path.rfind("s3://", 0) != 0 && std::filesystem::is_directory(path, ec)) {
       std::vector<std::string> files;
       for (const auto& entry : std::filesystem::directory_iterator(path, ec))
         if (entry.path().extension() == ".tess" && entry.is_regular_file())

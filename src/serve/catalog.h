@@ -29,11 +29,15 @@ struct ServedArchive {
   /// detect. A file replaced by rename keeps being served from the old inode, consistently.
   int stat_fd = -1;
   uint64_t mtime_ns = 0;
+  /// In an object store (s3://): there is no file to stat, and the source itself refuses
+  /// bytes of another version of the object (the HTTP source's ETag rule), failing the read.
+  bool remote = false;
   ServedArchive() = default;
   ServedArchive(const ServedArchive&) = delete;
   ServedArchive& operator=(const ServedArchive&) = delete;
   ~ServedArchive();
-  /// False once the file's size or modification time differ from those at start.
+  /// False once the file's size or modification time differ from those at start. Always true
+  /// for a remote archive, whose source checks its version on every read.
   bool unchangedOnDisk() const;
 };
 

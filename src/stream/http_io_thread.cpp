@@ -222,6 +222,7 @@ void HttpSource::startAttempt(Transfer& transfer) {
   if (!options_.bearer_token.empty())
     transfer.headers = curl_slist_append(
         transfer.headers, ("Authorization: Bearer " + options_.bearer_token).c_str());
+  if (!options_.aws.access_key_id.empty()) signForAws(easy, transfer);
   if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
     curl_easy_setopt(easy, CURLOPT_NOBODY, 1L);
   } else {
@@ -247,6 +248,24 @@ void HttpSource::startAttempt(Transfer& transfer) {
   std::lock_guard lock(mutex_);
   ++stats_.requests;
   if (transfer.attempt > 1) ++stats_.retries;
+}
+
+void HttpSource::signForAws(CURL* easy, Transfer& transfer) {
+  // libcurl computes the signature (CURLOPT_AWS_SIGV4); S3 also wants the payload's hash as a
+  // header, which libcurl then signs as it is: every request here is a GET or HEAD without a
+  // body, whose hash is that of the empty string.
+  const HttpOptions::AwsSigning& aws = options_.aws;
+  // libcurl copies string options: the temporary may go.
+  curl_easy_setopt(easy, CURLOPT_AWS_SIGV4,
+                   fmt::format("aws:amz:{}:{}", aws.region, aws.service).c_str());
+  curl_easy_setopt(easy, CURLOPT_USERNAME, aws.access_key_id.c_str());
+  curl_easy_setopt(easy, CURLOPT_PASSWORD, aws.secret_access_key.c_str());
+  transfer.headers = curl_slist_append(
+      transfer.headers,
+      "x-amz-content-sha256: e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855");
+  if (!aws.session_token.empty())
+    transfer.headers =
+        curl_slist_append(transfer.headers, ("x-amz-security-token: " + aws.session_token).c_str());
 }
 
 void HttpSource::stopAttempt(Transfer& transfer) {
@@ -400,10 +419,15 @@ bool HttpSource::finishRefused(Transfer& transfer, const std::string& what,
       return true;
     }
   }
-  const char* hint = transfer.status == 401
+  std::string hint = transfer.status == 401
                          ? "the server wants a bearer token (HttpOptions::bearer_token, "
                            "TESSERA_TOKEN for the tools) or a signed URL"
                          : "the token or signed URL does not grant this request, or expired";
+  if (!options_.aws.access_key_id.empty())
+    hint = fmt::format(
+        "the object store refused the request signed with access key id {} "
+        "(region {}): wrong secret, expired session token, or no read access",
+        options_.aws.access_key_id, options_.aws.region);
   complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}: {}", what, status_line, hint)),
            true);
   return false;

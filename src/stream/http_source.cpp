@@ -273,7 +273,7 @@ Result<void> HttpSource::run(const std::shared_ptr<Transfer>& transfer) const {
 
 Result<std::shared_ptr<ByteSource>> openHttpSource(const std::string& url,
                                                    const HttpOptions& options) {
-  if (!isRemoteUri(url))
+  if (!isRemoteUri(url) || url.rfind("s3://", 0) == 0)
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}: not an http:// or https:// URL", url));
   if (options.max_attempts == 0 || options.max_connections == 0)

@@ -175,6 +175,8 @@ class HttpSource final : public ByteSource {
 
   /// Takes the handle out of the multi and back to the pool (the connection stays cached).
   void stopAttempt(Transfer& transfer);
+  /// Adds AWS Signature Version 4 to an attempt (HttpOptions::aws).
+  void signForAws(CURL* easy, Transfer& transfer);
 
   /// After one attempt: completes the transfer, or returns true to retry it (not_before set).
   bool finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_64& random);

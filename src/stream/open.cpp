@@ -9,10 +9,12 @@ namespace tessera {
 bool isRemoteUri(const std::string& path_or_url) {
   std::string head = path_or_url.substr(0, 8);
   for (char& c : head) c = char(c >= 'A' && c <= 'Z' ? c - 'A' + 'a' : c);
-  return head.rfind("http://", 0) == 0 || head.rfind("https://", 0) == 0;
+  return head.rfind("http://", 0) == 0 || head.rfind("https://", 0) == 0 ||
+         head.rfind("s3://", 0) == 0;
 }
 
 Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url) {
+  if (path_or_url.rfind("s3://", 0) == 0) return openS3Source(path_or_url);
   if (isRemoteUri(path_or_url)) {
     HttpOptions options;
     // The tools' way to pass a token: the environment, never the command line, which every

@@ -49,8 +49,8 @@ class ProgressBar {
 
 /// Help text of every subcommand's archive argument.
 inline constexpr const char* kArchiveArgumentHelp =
-    "Archive: a .tess file, or an http:// or https:// URL of one on a server that honours "
-    "byte ranges (docs/remote.md)";
+    "Archive: a .tess file, an http:// or https:// URL of one on a server that honours "
+    "byte ranges, or an s3://BUCKET/KEY URL (docs/remote.md)";
 
 /// Formats a byte count as "12.3 MiB".
 std::string formatBytes(uint64_t bytes);

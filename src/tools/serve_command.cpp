@@ -18,10 +18,12 @@ namespace tessera::cli {
 
 namespace {
 
-/// Every path exists and is a file or a folder; else an error naming the path and the reason
-/// ("No such file or directory", "Permission denied"), before the server starts.
+/// Every local path exists and is a file or a folder; else an error naming the path and the
+/// reason ("No such file or directory", "Permission denied"), before the server starts. An
+/// s3:// URL is checked when the server opens it.
 Result<void> checkServedPaths(const std::vector<std::string>& paths) {
   for (const std::string& path : paths) {
+    if (path.rfind("s3://", 0) == 0) continue;
     struct stat status {};
     if (::stat(path.c_str(), &status) != 0) {
       const int error = errno;
@@ -87,7 +89,9 @@ void registerServeCommand(CLI::App& app, int& exit_code) {
       "serve",
       "Serve archives over HTTP: tiles, byte ranges, Deep Zoom, XYZ, metrics and the web viewer "
       "(docs/serve.md)");
-  cmd->add_option("paths", options->paths, "Archives (.tess) or folders of them")->required();
+  cmd->add_option("paths", options->paths,
+                  "Archives (.tess), folders of them, or s3:// URLs of archives")
+      ->required();
   cmd->add_option("--bind", options->bind_address, "Address to listen on")->capture_default_str();
   cmd->add_option("--port", *port, "TCP port, 0..65535; 0 picks a free one")
       ->capture_default_str()
