@@ -504,8 +504,11 @@ Result<void> submitPaddedTile(const ImageInfo& info, uint32_t level, uint32_t x,
                               SourceTile tile, SpoolEntry& entry, EncodeStage& stage,
                               std::string what) {
   const uint32_t side = info.storedTileSidePx();
-  const uint32_t width = std::min(info.tile_size_px, info.levelWidthPx(level) - x * side);
-  const uint32_t height = std::min(info.tile_size_px, info.levelHeightPx(level) - y * side);
+  // Copied levels have no border: the stored tile is the tile.
+  const uint32_t width =
+      std::min(info.tile_size_px, info.levelWidthPx(level) - x * info.tile_size_px);
+  const uint32_t height =
+      std::min(info.tile_size_px, info.levelHeightPx(level) - y * info.tile_size_px);
   if (tile.width_px != width || tile.height_px != height ||
       tile.texels.size() != size_t(width) * height * info.channels)
     return fail(ErrorCode::kCorrupt,

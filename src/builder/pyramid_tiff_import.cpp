@@ -23,6 +23,8 @@ namespace {
 // A raw JPEG tile larger than this is hostile: a 2048-px tile stored losslessly is 12 MiB.
 constexpr uint64_t kMaxRawTileBytes = uint64_t(64) << 20;
 constexpr uint64_t kMaxTablesBytes = uint64_t(1) << 20;
+// A pyramid of 2^24 px has 25 levels; slides add a label, a macro and a thumbnail.
+constexpr uint32_t kMaxDirectories = 64;
 
 int captureError(TIFF*, void* user_data, const char* module, const char* format, va_list args) {
   auto* to = static_cast<std::string*>(user_data);
@@ -139,7 +141,10 @@ Result<bool> TiffPyramid::open() {
     tiff_levels_.push_back(describeDirectory({0, offset}));
   }
   if (subifds.empty()) {
-    for (uint32_t index = 1; TIFFSetDirectory(tif_, tdir_t(index)); ++index) {
+    // TIFFSetDirectory walks the chain from the start: the cap keeps a hostile chain of
+    // thousands of directories from costing their square.
+    for (uint32_t index = 1; index < kMaxDirectories && TIFFSetDirectory(tif_, tdir_t(index));
+         ++index) {
       uint32_t subfile = 0;
       TIFFGetField(tif_, TIFFTAG_SUBFILETYPE, &subfile);
       if ((subfile & FILETYPE_REDUCEDIMAGE) && !(subfile & FILETYPE_MASK))

@@ -45,6 +45,17 @@ class PyramidImport : public ::testing::Test {
               "");
   }
 
+  // Writes flat.tif as a JPEG-tiled vips pyramid `name` (tiles `tile_px` square) with `extra`
+  // tiffsave options, and returns its path.
+  std::string vipsPyramid(const std::string& name, uint32_t tile_px = 256,
+                          const std::string& extra = "") {
+    run(
+        fmt::format("vips tiffsave {0}flat.tif {0}{1} --tile --pyramid --compression jpeg "
+                    "--tile-width {2} --tile-height {2} {3}",
+                    dir_, name, tile_px, extra));
+    return dir_ + name;
+  }
+
   Result<BuildReport> build(const std::string& input, const std::string& output) {
     BuildOptions options;
     options.inputs = {input};
@@ -133,19 +144,13 @@ class PyramidImport : public ::testing::Test {
 
 TEST_F(PyramidImport, VipsPyramidCopiesMatchingTilesAndEqualsTheSourceLevels) {
   if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
-  run(
-      fmt::format("vips tiffsave {0}flat.tif {0}vips.tif --tile --pyramid --compression jpeg "
-                  "--tile-width 256 --tile-height 256",
-                  dir_));
+  vipsPyramid("vips.tif");
   expectTiffImportMatches(dir_ + "vips.tif", true);
 }
 
 TEST_F(PyramidImport, VipsSubIfdPyramidIsImported) {
   if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
-  run(
-      fmt::format("vips tiffsave {0}flat.tif {0}subifd.tif --tile --pyramid --subifd "
-                  "--compression jpeg --tile-width 256 --tile-height 256 --bigtiff",
-                  dir_));
+  vipsPyramid("subifd.tif", 256, "--subifd --bigtiff");
   expectTiffImportMatches(dir_ + "subifd.tif", true);
 }
 
@@ -160,10 +165,7 @@ TEST_F(PyramidImport, CogFromGdalCopiesMatchingTiles) {
 
 TEST_F(PyramidImport, OtherTileSizeIsReencodedLevelByLevel) {
   if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
-  run(
-      fmt::format("vips tiffsave {0}flat.tif {0}t128.tif --tile --pyramid --compression jpeg "
-                  "--tile-width 128 --tile-height 128",
-                  dir_));
+  vipsPyramid("t128.tif", 128);
   Result<BuildReport> report = build(dir_ + "t128.tif", "t128.tess");
   ASSERT_TRUE(report) << report.error().message;
   EXPECT_EQ(report->tiles_copied, 0u);
@@ -172,10 +174,7 @@ TEST_F(PyramidImport, OtherTileSizeIsReencodedLevelByLevel) {
 
 TEST_F(PyramidImport, SplicedTablesDecodeAsLibtiffDecodesTheTile) {
   if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
-  run(
-      fmt::format("vips tiffsave {0}flat.tif {0}vips.tif --tile --pyramid --compression jpeg "
-                  "--tile-width 256 --tile-height 256",
-                  dir_));
+  vipsPyramid("vips.tif");
   auto source = openTiffPyramid(dir_ + "vips.tif");
   ASSERT_TRUE(source && *source);
   auto tile = (*source)->readTile(0, 1, 1);
@@ -260,10 +259,7 @@ TEST_F(PyramidImport, FileOpenSlideCannotReadIsRefusedNamingIt) {
 
 TEST_F(PyramidImport, GenericTiledTiffThroughOpenSlide) {
   if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
-  run(
-      fmt::format("vips tiffsave {0}flat.tif {0}slide.tif --tile --pyramid --compression jpeg "
-                  "--tile-width 256 --tile-height 256",
-                  dir_));
+  vipsPyramid("slide.tif");
   auto slide = openSlide(dir_ + "slide.tif");
   if (!slide && slide.error().code == ErrorCode::kUnsupported)
     GTEST_SKIP() << slide.error().message;
