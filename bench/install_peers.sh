@@ -14,6 +14,7 @@ packages=(
   libjxl-dev     # JPEG XL lossless column of the ptm codec study (pyramid_study.sh)
   libjxl-tools   # cjxl, djxl: JPEG XL flat and Squeeze pyramids (multiresolution_peers.sh)
   libopenjp2-tools  # opj_compress, opj_decompress: JPEG 2000 lossless (multiresolution_peers.sh)
+  gir1.2-vips-8.0 python3-gi python3-gdal  # read_region peers from Python (read_region_peers.py)
 )
 
 missing=()

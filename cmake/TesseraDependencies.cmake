@@ -13,6 +13,8 @@ pkg_check_modules(TESSERA_LZ4 REQUIRED IMPORTED_TARGET GLOBAL liblz4)
 pkg_check_modules(TESSERA_XXHASH REQUIRED IMPORTED_TARGET GLOBAL libxxhash)
 pkg_check_modules(TESSERA_WEBP REQUIRED IMPORTED_TARGET GLOBAL libwebp)
 pkg_check_modules(TESSERA_TURBOJPEG REQUIRED IMPORTED_TARGET GLOBAL libturbojpeg)
+# Optional: whole-slide import through OpenSlide (libopenslide-dev).
+pkg_check_modules(TESSERA_OPENSLIDE IMPORTED_TARGET GLOBAL openslide)
 find_package(Boost 1.74 REQUIRED)
 # The HTTP byte source (src/stream/http_source.cpp).
 pkg_check_modules(TESSERA_CURL REQUIRED IMPORTED_TARGET GLOBAL libcurl)

@@ -21,6 +21,7 @@ packages=(
   libmeshoptimizer-dev
   libminizip-dev libssl-dev
   gdal-bin libvips-tools
+  libopenslide-dev
   pybind11-dev python3-dev python3-numpy python3-pytest python3-venv
   slurm-wlm munge
 )

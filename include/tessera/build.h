@@ -80,6 +80,9 @@ struct BuildProgress {
 struct BuildReport {
   uint64_t output_bytes = 0;
   uint64_t tiles_encoded = 0;
+  /// Tiles an import took as stored, neither decoded nor encoded (docs/import.md); they are not
+  /// counted in tiles_encoded.
+  uint64_t tiles_copied = 0;
   uint64_t tiles_uniform = 0;
   uint64_t tiles_empty = 0;
   uint64_t payload_bytes = 0;

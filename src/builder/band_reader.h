@@ -57,8 +57,16 @@ class BandReader {
 /// unsupported sample format (16-bit, float, palette, CMYK, planar where unsupported).
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openBandReader(const std::string& source);
 
+/// One image of a multi-image TIFF: directory `directory` of the main chain, or, when
+/// `subifd_offset` is nonzero, the SubIFD at that file offset (a pyramid's reduced levels).
+struct TiffImageRef {
+  uint32_t directory = 0;
+  uint64_t subifd_offset = 0;
+};
+
 /// Readers by format, used by openBandReader and tests.
-[[nodiscard]] Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path);
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path,
+                                                                 const TiffImageRef& image = {});
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openPngReader(const std::string& path);
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openJpegReader(const std::string& path);
 /// `spec` is the part after "synthetic:": "WxH[:seed[:channels]]", e.g. "4096x4096:7" or

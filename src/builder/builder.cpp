@@ -20,6 +20,7 @@
 #include "build_budget.h"
 #include "output/output_file.h"
 #include "pyramid_builder.h"
+#include "pyramid_source.h"
 #include "tile_cutter.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
@@ -82,7 +83,8 @@ struct EncodeContext {
   Codec codec = Codec::kJpeg;
   std::vector<WorkerSpool> worker_spools;  ///< indexed by WorkerState::index
   std::atomic<uint64_t> tiles_encoded{0}, tiles_uniform{0}, tiles_empty{0};
-  std::mutex error_mutex;  // guards first_error
+  uint64_t tiles_copied = 0;  ///< imported payloads taken as stored (the building thread's)
+  std::mutex error_mutex;     // guards first_error
   std::optional<Error> first_error;
 
   void recordError(Error error) {
@@ -343,6 +345,8 @@ std::string displayName(const std::string& input) {
 /// The build's sources, opened, with the images they become.
 struct OpenedSources {
   std::vector<std::unique_ptr<BandReader>> readers;
+  /// One per reader: the pyramid an input already is (docs/import.md), or null.
+  std::vector<std::unique_ptr<PyramidSource>> pyramids;
   std::vector<ImageInfo> infos;    ///< one per reader, level_count set
   std::vector<std::string> names;  ///< one per reader: the input path or the row source's name
   uint64_t pixels_total = 0;       ///< level-0 pixels of every image
@@ -357,10 +361,15 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
     const bool is_file = i < options.inputs.size();
     const std::string& name =
         is_file ? options.inputs[i] : options.row_sources[i - options.inputs.size()].name;
+    std::unique_ptr<PyramidSource> pyramid;
+    if (is_file) {
+      TESSERA_ASSIGN_OR_RETURN(pyramid, openPyramidSource(name));
+    }
     TESSERA_ASSIGN_OR_RETURN(
         std::unique_ptr<BandReader> reader,
-        is_file ? openBandReader(name)
-                : openRowSourceReader(options.row_sources[i - options.inputs.size()]));
+        pyramid   ? pyramid->openLevel(0)
+        : is_file ? openBandReader(name)
+                  : openRowSourceReader(options.row_sources[i - options.inputs.size()]));
     const SourceInfo& source = reader->info();
     ImageInfo info;
     info.width_px = source.width_px;
@@ -378,6 +387,7 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
     sources.pixels_total += uint64_t(info.width_px) * info.height_px;
     sources.readers.push_back(std::move(reader));
+    sources.pyramids.push_back(std::move(pyramid));
     sources.infos.push_back(info);
     sources.names.push_back(name);
   }
@@ -431,6 +441,26 @@ struct PoolDrain {
   ~PoolDrain() { pool.waitIdle(); }
 };
 
+/// Feeds every row of `reader` (an image of `info`'s size) to `pyramid`, then finishes it.
+Result<void> streamRows(const BuildOptions& options, const ImageInfo& info, BandReader& reader,
+                        PyramidBuilder& pyramid, EncodeStage& stage, bool count_progress) {
+  const uint32_t band_rows = bandRowsFor(info, reader.info());
+  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  // The reader decodes straight into the pyramid's level-0 band: no copy of the image's rows.
+  for (uint32_t y = 0; y < info.height_px;) {
+    if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
+    if (auto error = stage.context.error()) return Unexpected(*error);
+    std::span<uint8_t> slots = pyramid.rowsToFill(band_rows);
+    TESSERA_CHECK(!slots.empty()) << "pyramid full at row " << y << " of " << info.height_px;
+    const uint32_t rows = uint32_t(slots.size() / row_bytes);
+    TESSERA_TRY(reader.readRows(rows, slots));
+    TESSERA_TRY(pyramid.commitRows(rows));
+    y += rows;
+    if (count_progress) stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
+  }
+  return pyramid.finish();
+}
+
 /// Streams image `index` band by band through the pyramid into the encoders and returns its
 /// metadata; every tile is encoded into `spooled` when it returns.
 Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::string& source_name,
@@ -442,27 +472,155 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::strin
     spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
   EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
-  const uint32_t band_rows = bandRowsFor(info, reader.info());
-  const size_t row_bytes = size_t(info.width_px) * info.channels;
   PoolDrain drain{stage.pool};
-  // The reader decodes straight into the pyramid's level-0 band: no copy of the image's rows.
-  for (uint32_t y = 0; y < info.height_px;) {
-    if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
-    if (auto error = stage.context.error()) return Unexpected(*error);
-    std::span<uint8_t> slots = pyramid.rowsToFill(band_rows);
-    TESSERA_CHECK(!slots.empty()) << "pyramid full at row " << y << " of " << info.height_px;
-    const uint32_t rows = uint32_t(slots.size() / row_bytes);
-    TESSERA_TRY(reader.readRows(rows, slots));
-    TESSERA_TRY(pyramid.commitRows(rows));
-    y += rows;
-    stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
-  }
-  TESSERA_TRY(pyramid.finish());
+  TESSERA_TRY(streamRows(options, info, reader, pyramid, stage, /*count_progress=*/true));
   for (uint32_t l = 0; l < info.level_count; ++l)
     TESSERA_CHECK(spooled.entries[l].size() == size_t(info.tilesX(l)) * info.tilesY(l))
         << "level " << l << " has tile rows the pyramid never announced";
   stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
   return imageMetadata(info, source_name, reader.info(), sink.statistics);
+}
+
+/// Hands the rows of a pass over an imported level to the image's sink at their archive level,
+/// dropping the levels the import copies.
+class LevelShiftSink final : public TileSink {
+ public:
+  LevelShiftSink(TileSink& sink, uint32_t first_level, const std::vector<int>& copied_from)
+      : sink_(sink), first_level_(first_level), copied_from_(copied_from) {}
+  Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    const uint32_t archive_level = first_level_ + level;
+    if (copied_from_[archive_level] >= 0) return {};
+    return sink_.tileRowReady(archive_level, tile_row, rows);
+  }
+
+ private:
+  TileSink& sink_;
+  const uint32_t first_level_;
+  const std::vector<int>& copied_from_;
+};
+
+/// A tile the source stores cropped (a Deep Zoom edge tile) or not at all (a sparse TIFF
+/// tile): padded to the stored tile by edge replication, as cutTile pads, and encoded.
+Result<void> submitPaddedTile(const ImageInfo& info, uint32_t level, uint32_t x, uint32_t y,
+                              SourceTile tile, SpoolEntry& entry, EncodeStage& stage,
+                              std::string what) {
+  const uint32_t side = info.storedTileSidePx();
+  // Copied levels have no border: the stored tile is the tile.
+  const uint32_t width =
+      std::min(info.tile_size_px, info.levelWidthPx(level) - x * info.tile_size_px);
+  const uint32_t height =
+      std::min(info.tile_size_px, info.levelHeightPx(level) - y * info.tile_size_px);
+  if (tile.width_px != width || tile.height_px != height ||
+      tile.texels.size() != size_t(width) * height * info.channels)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: the source's tile is {}x{} px, not {}x{}", what, tile.width_px,
+                            tile.height_px, width, height));
+  auto buffer = stage.buffers.acquire();
+  const uint32_t c = info.channels;
+  for (uint32_t row = 0; row < side; ++row) {
+    const uint8_t* src = tile.texels.data() + size_t(std::min(row, height - 1)) * width * c;
+    uint8_t* dst = buffer->data() + size_t(row) * side * c;
+    std::memcpy(dst, src, size_t(width) * c);
+    for (uint32_t col = width; col < side; ++col)
+      std::memcpy(dst + col * c, src + (width - 1) * c, c);
+  }
+  auto* raw = buffer.release();
+  stage.pool.submit(
+      [&stage, &info, raw, &entry, side, what = std::move(what)](WorkerState& worker) {
+        std::unique_ptr<std::vector<uint8_t>> owned(raw);
+        encodeJob(stage.context, worker, entry, owned->data(), side, info.channels, what);
+        stage.buffers.release(std::move(owned));
+      });
+  return {};
+}
+
+/// Copies archive level `level` tile for tile from the source's level `source_level`: whole
+/// JPEG payloads go to the spool as stored; other tiles are padded and encoded.
+Result<void> copyLevel(const std::string& source_name, const ImageInfo& info, uint32_t level,
+                       PyramidSource& source, uint32_t source_level, SpooledImage& spooled,
+                       WorkerSpool& copy_spool, EncodeStage& stage) {
+  std::vector<SpoolEntry>& entries = spooled.entries[level];
+  entries.resize(size_t(info.tilesX(level)) * info.tilesY(level));
+  for (uint32_t y = 0; y < info.tilesY(level); ++y) {
+    if (stage.cancelled()) return fail(ErrorCode::kCancelled, source_name + ": build cancelled");
+    if (auto error = stage.context.error()) return Unexpected(*error);
+    for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+      std::string what = fmt::format("{}: tile ({},{},{})", source_name, level, x, y);
+      TESSERA_ASSIGN_OR_RETURN(SourceTile tile, source.readTile(source_level, x, y));
+      SpoolEntry& entry = entries[size_t(y) * info.tilesX(level) + x];
+      if (tile.jpeg.empty()) {
+        TESSERA_TRY(submitPaddedTile(info, level, x, y, std::move(tile), entry, stage, what));
+        continue;
+      }
+      TESSERA_TRY(checkJpegTile(tile.jpeg, info.storedTileSidePx(), info.channels, what));
+      entry.kind = TileKind::kEncoded;
+      entry.codec = Codec::kJpeg;
+      entry.length_bytes = uint32_t(tile.jpeg.size());
+      entry.checksum = checksum64(tile.jpeg);
+      copy_spool.pending.push_back({&entry, copy_spool.chunk.size()});
+      copy_spool.chunk.insert(copy_spool.chunk.end(), tile.jpeg.begin(), tile.jpeg.end());
+      ++stage.context.tiles_copied;
+      if (copy_spool.chunk.size() >= kSpoolChunkBytes)
+        TESSERA_TRY(flushWorkerSpool(stage.context, copy_spool));
+    }
+    if (level == 0) {
+      const uint32_t rows = std::min(info.tile_size_px, info.height_px - y * info.tile_size_px);
+      stage.progress.rowsRead(uint64_t(rows) * info.width_px, stage.context);
+    }
+  }
+  return {};
+}
+
+/// Imports an image that is already a pyramid (docs/import.md): the levels planImport copies
+/// are copied, then each pass streams a decoded source level through the pyramid for the
+/// levels computed from it. `base` reads the source's level 0.
+Result<nlohmann::json> importImage(const BuildOptions& options, const std::string& source_name,
+                                   const ImageInfo& info, PyramidSource& source, BandReader& base,
+                                   SpooledImage& spooled, EncodeStage& stage) {
+  spooled.info = info;
+  spooled.entries.resize(info.level_count);
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
+  const ImportPlan plan = planImport(info, source.levels(), !codecNeedsParent(options.codec));
+  EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
+  PoolDrain drain{stage.pool};
+  WorkerSpool copy_spool;
+  nlohmann::json copied = nlohmann::json::array();
+  for (uint32_t l = 0; l < info.level_count; ++l) {
+    if (plan.copied_from[l] < 0) continue;
+    TESSERA_TRY(copyLevel(source_name, info, l, source, uint32_t(plan.copied_from[l]), spooled,
+                          copy_spool, stage));
+    copied.push_back(l);
+  }
+  TESSERA_TRY(flushWorkerSpool(stage.context, copy_spool));
+  for (const ImportPlan::Pass& pass : plan.passes) {
+    std::unique_ptr<BandReader> opened;
+    if (pass.source_level != 0) {
+      TESSERA_ASSIGN_OR_RETURN(opened, source.openLevel(pass.source_level));
+    }
+    BandReader& reader = opened ? *opened : base;
+    ImageInfo pass_info = info;
+    pass_info.width_px = info.levelWidthPx(pass.first_level);
+    pass_info.height_px = info.levelHeightPx(pass.first_level);
+    pass_info.level_count = pass.last_level - pass.first_level + 1;
+    if (reader.info().width_px != pass_info.width_px ||
+        reader.info().height_px != pass_info.height_px || reader.info().channels != info.channels)
+      return fail(ErrorCode::kCorrupt,
+                  fmt::format("{}: pyramid level {} decodes as {}x{} px with {} channel(s), not "
+                              "{}x{} with {}",
+                              source_name, pass.source_level, reader.info().width_px,
+                              reader.info().height_px, reader.info().channels, pass_info.width_px,
+                              pass_info.height_px, info.channels));
+    LevelShiftSink shifted(sink, pass.first_level, plan.copied_from);
+    PyramidBuilder pyramid(pass_info, shifted, /*floor_average=*/options.codec == Codec::kPtm);
+    const bool counts = pass.source_level == 0 && plan.copied_from[0] < 0;
+    TESSERA_TRY(streamRows(options, pass_info, reader, pyramid, stage, counts));
+  }
+  stage.pool.waitIdle();  // queued jobs hold `sink`, which dies with this call
+  if (auto error = stage.context.error()) return Unexpected(*error);
+  nlohmann::json meta = imageMetadata(info, source_name, base.info(), sink.statistics);
+  meta["import"] = {{"source_levels", source.levels().size()}, {"copied_levels", copied}};
+  return meta;
 }
 
 /// The archive's metadata: the format, the build's options and each image's entry.
@@ -502,9 +660,13 @@ Result<nlohmann::json> encodeImages(const BuildOptions& options, OpenedSources& 
   TileBufferPool buffers(3 * threads + 2, max_tile_bytes);
   EncodeStage stage{context, pool, buffers, progress, cancel};
   for (uint32_t i = 0; i < sources.infos.size(); ++i) {
-    TESSERA_ASSIGN_OR_RETURN(nlohmann::json meta,
-                             encodeImage(options, sources.names[i], sources.infos[i],
-                                         *sources.readers[i], spooled[i], stage));
+    TESSERA_ASSIGN_OR_RETURN(
+        nlohmann::json meta,
+        sources.pyramids[i]
+            ? importImage(options, sources.names[i], sources.infos[i], *sources.pyramids[i],
+                          *sources.readers[i], spooled[i], stage)
+            : encodeImage(options, sources.names[i], sources.infos[i], *sources.readers[i],
+                          spooled[i], stage));
     image_metadata.push_back(std::move(meta));
   }
   pool.waitIdle();
@@ -588,6 +750,7 @@ Result<BuildReport> buildArchive(const BuildOptions& options,
   report.output_bytes = written.file_bytes;
   report.payload_bytes = written.payload_bytes;
   report.tiles_encoded = context.tiles_encoded;
+  report.tiles_copied = context.tiles_copied;
   report.tiles_uniform = context.tiles_uniform;
   report.tiles_empty = context.tiles_empty;
   report.elapsed_s = std::chrono::duration<double>(Clock::now() - start).count();

@@ -155,8 +155,8 @@ enum class Layout {
 
 class TiffReader final : public BandReader {
  public:
-  explicit TiffReader(std::string path)
-      : path_(std::move(path)), messages_(std::make_unique<TiffMessages>()) {}
+  TiffReader(std::string path, const TiffImageRef& image)
+      : path_(std::move(path)), image_(image), messages_(std::make_unique<TiffMessages>()) {}
   ~TiffReader() override {
     if (tif_) TIFFClose(tif_);
   }
@@ -203,6 +203,7 @@ class TiffReader final : public BandReader {
   void convertPlane(const uint8_t* src, uint8_t* dst, uint32_t pixels, uint32_t channel) const;
 
   std::string path_;
+  TiffImageRef image_;
   std::unique_ptr<TiffMessages> messages_;  // outlives tif_, which points at it
   TIFF* tif_ = nullptr;
   SourceInfo info_;
@@ -286,6 +287,13 @@ Result<void> TiffReader::openFile() {
   tif_ = TIFFOpenExt(path_.c_str(), "rm", options);
   TIFFOpenOptionsFree(options);
   if (!tif_) return tiffFailure(ErrorCode::kCorrupt, "not a readable TIFF");
+  const bool selected = image_.subifd_offset    ? TIFFSetSubDirectory(tif_, image_.subifd_offset)
+                        : image_.directory != 0 ? TIFFSetDirectory(tif_, tdir_t(image_.directory))
+                                                : 1;
+  if (!selected)
+    return tiffFailure(ErrorCode::kCorrupt,
+                       fmt::format("cannot read directory {} (SubIFD offset {})", image_.directory,
+                                   image_.subifd_offset));
   return {};
 }
 
@@ -661,10 +669,11 @@ void registerGeoTiffTags() {
   std::call_once(once, [] { g_previous_extender = TIFFSetTagExtender(extendWithGeoTiff); });
 }
 
-Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path) {
+Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path,
+                                                   const TiffImageRef& image) {
   TESSERA_TRY(checkSourceFile(path));
   registerGeoTiffTags();
-  auto reader = std::make_unique<TiffReader>(path);
+  auto reader = std::make_unique<TiffReader>(path, image);
   TESSERA_TRY(reader->open());
   return std::unique_ptr<BandReader>(std::move(reader));
 }

@@ -137,6 +137,7 @@ void registerBuild(py::module_& module) {
   py::class_<BuildReport>(module, "BuildReport", "What a finished build reports.")
       .def_readonly("output_bytes", &BuildReport::output_bytes)
       .def_readonly("tiles_encoded", &BuildReport::tiles_encoded)
+      .def_readonly("tiles_copied", &BuildReport::tiles_copied)
       .def_readonly("tiles_uniform", &BuildReport::tiles_uniform)
       .def_readonly("tiles_empty", &BuildReport::tiles_empty)
       .def_readonly("payload_bytes", &BuildReport::payload_bytes)

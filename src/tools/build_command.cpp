@@ -136,6 +136,7 @@ int runBuild(BuildArgs& args) {
                           {"output_bytes", report->output_bytes},
                           {"payload_bytes", report->payload_bytes},
                           {"tiles_encoded", report->tiles_encoded},
+                          {"tiles_copied", report->tiles_copied},
                           {"tiles_uniform", report->tiles_uniform},
                           {"tiles_empty", report->tiles_empty},
                           {"elapsed_s", report->elapsed_s},
@@ -149,11 +150,13 @@ int runBuild(BuildArgs& args) {
       pixels += uint64_t(image.width_px) * image.height_px;
     std::printf(
         "%s: %zu image(s), %.1f MP, %s in %.2f s (%.1f MP/s); tiles: %llu encoded, %llu "
-        "uniform, %llu empty\n",
+        "uniform, %llu empty%s\n",
         args.options.output.c_str(), report->images.size(), pixels / 1e6,
         formatBytes(report->output_bytes).c_str(), report->elapsed_s, report->megapixels_per_s,
         (unsigned long long)report->tiles_encoded, (unsigned long long)report->tiles_uniform,
-        (unsigned long long)report->tiles_empty);
+        (unsigned long long)report->tiles_empty,
+        report->tiles_copied ? fmt::format(", {} copied as stored", report->tiles_copied).c_str()
+                             : "");
   }
   return kExitOk;
 }
@@ -163,8 +166,10 @@ int runBuild(BuildArgs& args) {
 void registerBuildCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<BuildArgs>();
   CLI::App* cmd = app.add_subcommand("build",
-                                     "Build an archive from TIFF/BigTIFF, PNG, JPEG or "
-                                     "synthetic:WxH[:seed[:channels]]");
+                                     "Build an archive from TIFF/BigTIFF, PNG, JPEG, "
+                                     "synthetic:WxH[:seed[:channels]], or a pyramid to import "
+                                     "(pyramidal TIFF/COG, NAME.dzi, a whole-slide image, "
+                                     "openslide:PATH)");
   cmd->add_option("inputs", args->options.inputs, "Source image(s); several make a texture set");
   cmd->add_option("-o,--output", args->options.output, "Archive to write (atomically)")->required();
   cmd->add_option("--tile", args->options.tile_size_px,
