@@ -67,12 +67,14 @@ Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths)
     for (const char* key : {"count", "input", "archive_metadata", "page_tiles_log2"}) {
       if (part.meta[key] == first.meta[key]) continue;
       const std::string where = firstDifference(first.meta[key], part.meta[key]);
-      return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{}: not a part of the same build as {}: its {}{} differs ({} vs "
-                              "{})",
-                              part.path, first.path, key, where,
-                              first.meta[key].dump().substr(0, 200),
-                              part.meta[key].dump().substr(0, 200)));
+      const nlohmann::json::json_pointer pointer(where);
+      auto at = [&](const nlohmann::json& value) {
+        return value.contains(pointer) ? value.at(pointer).dump().substr(0, 200) : "none";
+      };
+      return fail(
+          ErrorCode::kInvalidArgument,
+          fmt::format("{}: not a part of the same build as {}: its {}{} is {}, not {}", part.path,
+                      first.path, key, where, at(part.meta[key]), at(first.meta[key])));
     }
     const uint32_t index = part.meta["index"].get<uint32_t>();
     if (index < 1 || index > count)
@@ -80,19 +82,19 @@ Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths)
                   fmt::format("{}: part index {} outside 1..{}", part.path, index, count));
     if (by_index[index - 1])
       return fail(ErrorCode::kInvalidArgument,
-                  fmt::format("{} and {} are both part {}/{}", by_index[index - 1]->path,
-                              part.path, index, count));
+                  fmt::format("{} and {} are both part {}/{}", by_index[index - 1]->path, part.path,
+                              index, count));
     by_index[index - 1] = &part;
   }
   std::vector<uint32_t> missing;
   for (uint32_t i = 0; i < count; ++i)
     if (!by_index[i]) missing.push_back(i + 1);
   if (!missing.empty())
-    return fail(ErrorCode::kInvalidArgument,
-                fmt::format("merge: {} of {} parts missing (parts {}); given {} file(s) from the "
-                            "build of {}",
-                            missing.size(), count, fmt::join(missing, ", "), paths.size(),
-                            first.path));
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("merge: {} of {} parts missing (parts {}); given {} file(s) from the "
+                    "build of {}",
+                    missing.size(), count, fmt::join(missing, ", "), paths.size(), first.path));
   std::vector<OpenedPart> ordered;
   for (const OpenedPart* part : by_index) ordered.push_back(*part);
   return ordered;
@@ -186,8 +188,7 @@ Result<void> computeCoarseLevels(const std::vector<OpenedPart>& parts, const Ima
   if (pyramid.rowsReceived() != info.levelHeightPx(merge_level))
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("merge: the parts hold {} of the {} rows of level {}",
-                            pyramid.rowsReceived(), info.levelHeightPx(merge_level),
-                            merge_level));
+                            pyramid.rowsReceived(), info.levelHeightPx(merge_level), merge_level));
   return pyramid.finish();
 }
 
@@ -200,7 +201,8 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   for (uint32_t l = 0; l < plan.merge_level; ++l) owner[l].resize(info.tilesY(l));
   for (uint32_t p = 0; p < parts.size(); ++p) {
     const nlohmann::json& rows = parts[p].meta["rows"];
-    if (rows[0].get<uint32_t>() != plan.firstRow(p) || rows[1].get<uint32_t>() != plan.firstRow(p + 1))
+    if (rows[0].get<uint32_t>() != plan.firstRow(p) ||
+        rows[1].get<uint32_t>() != plan.firstRow(p + 1))
       return fail(ErrorCode::kInvalidArgument,
                   parts[p].path + ": its rows are not those the split assigns to its index");
     for (uint32_t l = 0; l < plan.merge_level; ++l) {
@@ -232,8 +234,7 @@ TileOrder orderNamed(const std::string& name) {
 }  // namespace
 
 Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
-                                      const std::string& output,
-                                      const std::atomic<bool>* cancel) {
+                                      const std::string& output, const std::atomic<bool>* cancel) {
   const auto start = std::chrono::steady_clock::now();
   TESSERA_TRY(checkOutputPath(output));
   TESSERA_ASSIGN_OR_RETURN(std::vector<OpenedPart> parts, openParts(paths));
@@ -274,9 +275,8 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
     const OpenedPart& part = parts[owner[tile.level][tile.y]];
     TESSERA_TRY(part.archive->source().read(entry.spool_offset, payload));
     if (checksum64(payload) != entry.checksum)
-      return fail(ErrorCode::kCorrupt,
-                  fmt::format("{}: tile ({},{},{}) fails its checksum", part.path, tile.level,
-                              tile.x, tile.y));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
+                                                   part.path, tile.level, tile.x, tile.y));
     report.payload_bytes_copied += payload.size();
     ++report.tiles_copied;
     return {};

@@ -16,9 +16,7 @@ namespace {
 /// Rows held whole in memory, as the tile cutter reads them.
 struct BufferRows final : LevelRows {
   const uint8_t* data = nullptr;
-  const uint8_t* row(uint32_t y) const override {
-    return data + size_t(y) * width_px * channels;
-  }
+  const uint8_t* row(uint32_t y) const override { return data + size_t(y) * width_px * channels; }
 };
 
 /// Image 0: the whole image's directory with the tiles the part owns, taken from the window
@@ -33,8 +31,8 @@ Result<SpooledImage> ownedTiles(const PartLayout& layout, const Archive* window)
   if (!window) return image;
   for (uint32_t l = 0; l < layout.plan.merge_level; ++l) {
     const uint32_t shift = tileRowAt(info, l, layout.window_first_row);
-    for (uint32_t y = tileRowAt(info, l, layout.first_row);
-         y < tileRowAt(info, l, layout.end_row); ++y) {
+    for (uint32_t y = tileRowAt(info, l, layout.first_row); y < tileRowAt(info, l, layout.end_row);
+         ++y) {
       for (uint32_t x = 0; x < info.tilesX(l); ++x) {
         TESSERA_ASSIGN_OR_RETURN(TileEntry entry, window->tileEntry({0, l, x, y - shift}));
         SpoolEntry& spooled = image.entries[l][size_t(y) * info.tilesX(l) + x];
@@ -73,12 +71,12 @@ Result<uint64_t> writePartArchive(const PartLayout& layout, const Archive* windo
   TESSERA_ASSIGN_OR_RETURN(SpooledImage owned, ownedTiles(layout, window));
   images.push_back(std::move(owned));
   std::vector<std::vector<uint8_t>> row_payloads;
-  const size_t row_bytes = size_t(layout.info.levelWidthPx(layout.plan.merge_level)) *
-                           layout.info.channels;
+  const size_t row_bytes =
+      size_t(layout.info.levelWidthPx(layout.plan.merge_level)) * layout.info.channels;
   if (!level_rows.empty()) {
     SpooledImage rows_image;
-    rows_image.info = partRowsInfo(layout.info, layout.plan.merge_level,
-                                   uint32_t(level_rows.size() / row_bytes));
+    rows_image.info =
+        partRowsInfo(layout.info, layout.plan.merge_level, uint32_t(level_rows.size() / row_bytes));
     const ImageInfo& info = rows_image.info;
     rows_image.entries.resize(info.level_count);
     BufferRows buffer;
@@ -134,12 +132,12 @@ Result<uint64_t> writePartArchive(const PartLayout& layout, const Archive* windo
   };
   nlohmann::json image_names = nlohmann::json::array();
   for (const SpooledImage& image : images) image_names.push_back({{"name", image.info.name}});
-  const nlohmann::json metadata = {{"format", "tessera"},
-                                   {"format_version", fmt::format("{}.{}", kFormatVersionMajor,
-                                                                  kFormatVersionMinor)},
-                                   {"created_by", "tessera build --part"},
-                                   {"images", image_names},
-                                   {"split_part", part}};
+  const nlohmann::json metadata = {
+      {"format", "tessera"},
+      {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+      {"created_by", "tessera build --part"},
+      {"images", image_names},
+      {"split_part", part}};
   TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(output));
   TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
                            writeArchive(fetch, images, TileOrder::kRowMajor, metadata, out));

@@ -71,8 +71,8 @@ class RowDownsampler {
   void emitPair(uint32_t level, const uint8_t* top, const uint8_t* bottom) {
     std::vector<uint8_t>& out = scratch_[level];
     out.resize(size_t(info_.levelWidthPx(level + 1)) * info_.channels);
-    downsampleRowPair(top, bottom, info_.levelWidthPx(level), info_.channels,
-                      info_.srgb_downsample, out.data());
+    downsampleRowPair(top, bottom, info_.levelWidthPx(level), info_.channels, info_.srgb_downsample,
+                      out.data());
     addAt(level + 1, out.data());
   }
 
@@ -110,8 +110,7 @@ Result<ImageInfo> imageInfoFor(const BuildOptions& options, const SourceInfo& so
   info.page_tiles_log2 = options.page_tiles_log2;
   info.default_codec = options.codec;
   info.srgb_downsample = options.srgb_downsample;
-  info.name = options.image_names.empty() ? displayName(options.inputs[0])
-                                          : options.image_names[0];
+  info.name = options.image_names.empty() ? displayName(options.inputs[0]) : options.image_names[0];
   TESSERA_TRY(validateImageInfo(info, options.inputs[0]));
   info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
   return info;
@@ -120,11 +119,10 @@ Result<ImageInfo> imageInfoFor(const BuildOptions& options, const SourceInfo& so
 Result<void> checkPartRequest(const BuildOptions& options, PartSpec part) {
   if (part.count < 1 || part.count > kMaxBuildParts || part.index < 1 || part.index > part.count)
     return fail(ErrorCode::kInvalidArgument,
-                fmt::format("--part {}/{}: want I/N with 1 <= I <= N <= {}", part.index,
-                            part.count, kMaxBuildParts));
+                fmt::format("--part {}/{}: want I/N with 1 <= I <= N <= {}", part.index, part.count,
+                            kMaxBuildParts));
   if (options.inputs.size() != 1 || !options.row_sources.empty())
-    return fail(ErrorCode::kInvalidArgument,
-                "--part: a split build takes exactly one input image");
+    return fail(ErrorCode::kInvalidArgument, "--part: a split build takes exactly one input image");
   if (options.codec == Codec::kPtm)
     return fail(ErrorCode::kInvalidArgument,
                 "--part: codec ptm codes tiles against their parents, which another part "
@@ -237,8 +235,8 @@ Result<BuildReport> buildArchivePart(const BuildOptions& options, PartSpec part,
     }
   } remove_window{window_path};
   if (rows.end > rows.first && plan.merge_level > 0) {
-    TESSERA_ASSIGN_OR_RETURN(report, buildWindow(options, *reader, rows, levels, window_path,
-                                                 on_progress, cancel));
+    TESSERA_ASSIGN_OR_RETURN(
+        report, buildWindow(options, *reader, rows, levels, window_path, on_progress, cancel));
     TESSERA_ASSIGN_OR_RETURN(window, Archive::openFile(window_path));
   } else if (rows.end > rows.first) {
     std::vector<uint8_t> all(size_t(info.width_px) * info.channels * info.height_px);
@@ -257,9 +255,8 @@ Result<BuildReport> buildArchivePart(const BuildOptions& options, PartSpec part,
       {"image", info.name},
       {"page_tiles_log2", info.page_tiles_log2},
       {"archive_metadata", archiveMetadata(options, nlohmann::json::array({image_meta}))}};
-  TESSERA_ASSIGN_OR_RETURN(uint64_t bytes,
-                           writePartArchive(layout, window.get(), levels.rows, part_meta,
-                                            options.output));
+  TESSERA_ASSIGN_OR_RETURN(uint64_t bytes, writePartArchive(layout, window.get(), levels.rows,
+                                                            part_meta, options.output));
   report.output_bytes = bytes;
   report.images = {info};
   return report;
