@@ -5,6 +5,7 @@
 // below M; the merge builds levels M and up from the exact level-M rows each part stores.
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 
 #include <tessera/format.h>
@@ -25,9 +26,10 @@ struct PartPlan {
   }
 };
 
-/// Levels below M split into at least 4 bands per part where the image allows it (the bands
-/// then balance the parts to within a quarter of a share), M as high as that allows so the
-/// merge's share stays small; M = 0 for a single-tile image.
+/// M minimises the estimated time of the slowest part plus the merge, in units of the base
+/// level's work: a part reads its share of the bands (rounded up, plus a band on each side
+/// for borders), and the merge computes the 4^-M x 4/3 of the pixels above the parts on one
+/// thread, counted twice against the parts' all-core encoding. M = 0 for a single-tile image.
 inline PartPlan planParts(const ImageInfo& info, uint32_t part_count) {
   PartPlan plan;
   plan.part_count = part_count;
@@ -37,9 +39,17 @@ inline PartPlan planParts(const ImageInfo& info, uint32_t part_count) {
     plan.band_count = 1;
     return plan;
   }
-  plan.merge_level = 1;
-  for (uint32_t m = 2; m < info.level_count; ++m)
-    if (info.tilesY(m - 1) >= 4ull * part_count) plan.merge_level = m;
+  double best = 0;
+  for (uint32_t m = 1; m < info.level_count; ++m) {
+    const double bands = info.tilesY(m - 1);
+    const double share = std::ceil(bands / part_count) + (info.border_px > 0 ? 2 : 0);
+    const double cost =
+        std::min(share, bands) / bands + 2.0 * (4.0 / 3.0) * std::pow(4.0, -double(m));
+    if (m == 1 || cost < best) {
+      best = cost;
+      plan.merge_level = m;
+    }
+  }
   plan.band_rows = info.tile_size_px << (plan.merge_level - 1);
   plan.band_count = info.tilesY(plan.merge_level - 1);
   return plan;
