@@ -211,13 +211,7 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
         owner[l][y] = p;
         for (uint32_t x = 0; x < info.tilesX(l); ++x) {
           TESSERA_ASSIGN_OR_RETURN(TileEntry entry, parts[p].archive->tileEntry({0, l, x, y}));
-          SpoolEntry& spooled = out.entries[l][size_t(y) * info.tilesX(l) + x];
-          spooled.kind = entry.kind;
-          spooled.codec = entry.codec;
-          spooled.uniform_rgba = entry.uniform_rgba;
-          spooled.length_bytes = entry.length_bytes;
-          spooled.checksum = entry.checksum;
-          spooled.spool_offset = entry.offset_bytes;
+          out.entries[l][size_t(y) * info.tilesX(l) + x] = spoolEntryOf(entry);
         }
       }
     }

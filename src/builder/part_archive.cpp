@@ -35,13 +35,7 @@ Result<SpooledImage> ownedTiles(const PartLayout& layout, const Archive* window)
          ++y) {
       for (uint32_t x = 0; x < info.tilesX(l); ++x) {
         TESSERA_ASSIGN_OR_RETURN(TileEntry entry, window->tileEntry({0, l, x, y - shift}));
-        SpoolEntry& spooled = image.entries[l][size_t(y) * info.tilesX(l) + x];
-        spooled.kind = entry.kind;
-        spooled.codec = entry.codec;
-        spooled.uniform_rgba = entry.uniform_rgba;
-        spooled.length_bytes = entry.length_bytes;
-        spooled.checksum = entry.checksum;
-        spooled.spool_offset = entry.offset_bytes;
+        image.entries[l][size_t(y) * info.tilesX(l) + x] = spoolEntryOf(entry);
       }
     }
   }
@@ -49,6 +43,17 @@ Result<SpooledImage> ownedTiles(const PartLayout& layout, const Archive* window)
 }
 
 }  // namespace
+
+SpoolEntry spoolEntryOf(const TileEntry& entry) {
+  SpoolEntry spooled;
+  spooled.kind = entry.kind;
+  spooled.codec = entry.codec;
+  spooled.uniform_rgba = entry.uniform_rgba;
+  spooled.length_bytes = entry.length_bytes;
+  spooled.checksum = entry.checksum;
+  spooled.spool_offset = entry.offset_bytes;
+  return spooled;
+}
 
 ImageInfo partRowsInfo(const ImageInfo& info, uint32_t merge_level, uint32_t rows) {
   ImageInfo level;

@@ -14,6 +14,7 @@
 #include <tessera/format.h>
 #include <tessera/result.h>
 
+#include "archive_writer.h"
 #include "part_plan.h"
 
 namespace tessera::detail {
@@ -28,6 +29,10 @@ struct PartLayout {
   uint32_t first_row = 0, end_row = 0;  ///< the part's level-0 rows
   uint32_t window_first_row = 0;        ///< level-0 row 0 of the window archive
 };
+
+/// A part's stored entry as the writer takes it, spool_offset being the payload's offset in
+/// the part's file.
+SpoolEntry spoolEntryOf(const TileEntry& entry);
 
 /// The image holding `rows` exact rows of level `plan.merge_level` of `info`.
 ImageInfo partRowsInfo(const ImageInfo& info, uint32_t merge_level, uint32_t rows);
