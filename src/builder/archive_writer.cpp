@@ -85,11 +85,9 @@ std::vector<std::vector<TileEntry>> entriesOf(const SpooledImage& image) {
 
 /// Copies the payloads from the spool to the output in the clustering order. The entries are
 /// copies, so the caller's spool offsets stay intact.
-Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
+Result<CopiedPayloads> copyPayloads(const PayloadFetcher& fetch,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     FileAppender& appender) {
-  // pread, not a mapping: mapped spool pages count in the process's resident set, which would
-  // then grow with the archive.
   std::vector<uint8_t> payload;
   CopiedPayloads copied;
   copied.entries.resize(images.size());
@@ -101,10 +99,8 @@ Result<CopiedPayloads> copyPayloads(const TempFile& spool, uint64_t spool_bytes,
       size_t slot = size_t(tile.y) * image.info.tilesX(tile.level) + tile.x;
       const SpoolEntry& spooled = image.entries[tile.level][slot];
       if (spooled.kind != TileKind::kEncoded) continue;
-      TESSERA_CHECK(spooled.spool_offset + spooled.length_bytes <= spool_bytes)
-          << "spool entry past the spool end";
       payload.resize(spooled.length_bytes);
-      TESSERA_TRY(spool.pread(spooled.spool_offset, payload));
+      TESSERA_TRY(fetch(tile, spooled, payload));
       TESSERA_ASSIGN_OR_RETURN(levels[tile.level][slot].offset_bytes, appender.append(payload));
       copied.payload_bytes += spooled.length_bytes;
     }
@@ -183,10 +179,23 @@ Result<uint64_t> writeHeaderRegion(const TempFile& out, HeaderRegion& region,
 Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     const nlohmann::json& metadata, const TempFile& out) {
+  // pread, not a mapping: mapped spool pages count in the process's resident set, which would
+  // then grow with the archive.
+  auto from_spool = [&](const TileId&, const SpoolEntry& spooled,
+                        std::span<uint8_t> payload) -> Result<void> {
+    TESSERA_CHECK(spooled.spool_offset + spooled.length_bytes <= spool_bytes)
+        << "spool entry past the spool end";
+    return spool.pread(spooled.spool_offset, payload);
+  };
+  return writeArchive(from_spool, images, order, metadata, out);
+}
+
+Result<WrittenArchive> writeArchive(const PayloadFetcher& fetch,
+                                    std::span<const SpooledImage> images, TileOrder order,
+                                    const nlohmann::json& metadata, const TempFile& out) {
   const std::string& name = out.finalPath();
   FileAppender appender(out, kHeaderRegionBytes);
-  TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads,
-                           copyPayloads(spool, spool_bytes, images, order, appender));
+  TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads, copyPayloads(fetch, images, order, appender));
   TESSERA_ASSIGN_OR_RETURN(WrittenDirectory directory,
                            writeDirectoryPages(images, payloads.entries, appender));
 

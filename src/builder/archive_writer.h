@@ -4,6 +4,7 @@
 // (docs/format.md, "Writing").
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <vector>
 
@@ -41,6 +42,18 @@ struct WrittenArchive {
 /// Writes the archive into `out` (not yet committed). `spool` holds `spool_bytes` of payloads.
 /// `metadata` is stored as the archive's JSON metadata.
 [[nodiscard]] Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
+                                                  std::span<const SpooledImage> images,
+                                                  TileOrder order, const nlohmann::json& metadata,
+                                                  const TempFile& out);
+
+/// Fills `payload` (sized to the entry's length) with the payload of `tile`, an encoded entry:
+/// where it comes from is the caller's (a spool, the parts of a split build).
+using PayloadFetcher = std::function<Result<void>(const TileId& tile, const SpoolEntry& entry,
+                                                  std::span<uint8_t> payload)>;
+
+/// writeArchive with payloads from `fetch`, called once per encoded tile in the clustering
+/// order.
+[[nodiscard]] Result<WrittenArchive> writeArchive(const PayloadFetcher& fetch,
                                                   std::span<const SpooledImage> images,
                                                   TileOrder order, const nlohmann::json& metadata,
                                                   const TempFile& out);

@@ -6,6 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/build.h>
+#include <tessera/split_build.h>
 
 #include "cli.h"
 #include "procedural_cli.h"
@@ -30,6 +31,7 @@ struct BuildArgs {
   std::string order = "hilbert";
   std::string chroma = "420";
   std::string memory_limit;  ///< SIZE; empty = the default
+  std::string part;          ///< --part I/N; empty = the whole build
   bool quiet = false;
   bool json = false;
 };
@@ -128,7 +130,11 @@ int runBuild(BuildArgs& args) {
       bar.update(double(progress.pixels_done), double(progress.pixels_total), progress.elapsed_s,
                  1e6, "MP/s");
   };
-  Result<BuildReport> report = buildArchive(args.options, on_progress, &g_interrupted);
+  Result<PartSpec> part = args.part.empty() ? PartSpec{} : parsePartSpec(args.part);
+  if (!part) return reportError(part.error());
+  Result<BuildReport> report =
+      args.part.empty() ? buildArchive(args.options, on_progress, &g_interrupted)
+                        : buildArchivePart(args.options, *part, on_progress, &g_interrupted);
   bar.finish();
   if (!report) return reportBuildError(report.error());
   if (args.json) {
@@ -207,6 +213,9 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
                   "Directory page side as a power of two of tiles (3..8)")
       ->capture_default_str();
   cmd->add_option("--name", args->options.image_names, "Image name(s), one per input");
+  cmd->add_option("--part", args->part,
+                  "Build part I of N (I from 1) of a split build; join the parts with "
+                  "`tessera merge` (docs/builder.md)");
   addSceneBuildOptions(*cmd);
   cmd->add_flag("-q,--quiet", args->quiet, "No progress and no summary");
   cmd->add_flag("--json", args->json, "Print the build report as JSON");

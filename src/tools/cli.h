@@ -78,6 +78,7 @@ std::string listChoices(const std::vector<std::string>& choices);
 void registerBuildCommand(CLI::App& app, int& exit_code);
 void registerInfoCommand(CLI::App& app, int& exit_code);
 void registerVerifyCommand(CLI::App& app, int& exit_code);
+void registerMergeCommand(CLI::App& app, int& exit_code);
 void registerExtractCommand(CLI::App& app, int& exit_code);
 void registerFlyCommand(CLI::App& app, int& exit_code);
 void registerViewCommand(CLI::App& app, int& exit_code);

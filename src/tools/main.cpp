@@ -173,6 +173,7 @@ int main(int argc, char** argv) {
   registerBuildCommand(app, exit_code);
   registerInfoCommand(app, exit_code);
   registerVerifyCommand(app, exit_code);
+  registerMergeCommand(app, exit_code);
   registerExtractCommand(app, exit_code);
   registerFlyCommand(app, exit_code);
   registerDemoCommand(app, exit_code);

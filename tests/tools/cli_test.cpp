@@ -169,6 +169,36 @@ TEST_F(Cli, BuildInfoVerifyCorruptVerifyExtract) {
 // known without the renderer: at 1 texel per pixel with pixel centres on texel centres each
 // pixel is its level-0 texel; at 2 texels per pixel, on level-1 texel centres, its level-1
 // texel; outside the image transparent black; a 90-degree rotation swaps the axes.
+// A split build through the commands the Slurm script runs: `build --part I/N` then `merge`
+// equals the single build; a malformed part and a missing part are refused with exit 2.
+TEST_F(Cli, SplitBuildMergesIntoTheSingleBuild) {
+  const std::vector<std::string> common = {
+      "synthetic:300x200:4:3", "--tile", "64", "--border", "1", "--threads", "2", "--quiet"};
+  auto build = [&](std::vector<std::string> extra) {
+    std::vector<std::string> args = {"build"};
+    args.insert(args.end(), common.begin(), common.end());
+    args.insert(args.end(), extra.begin(), extra.end());
+    return run(args);
+  };
+  ASSERT_EQ(build({"-o", work_ + "single.tess"}).exit_code, 0);
+  for (const char* part : {"1/3", "2/3", "3/3"}) {
+    RunResult built = build({"--part", part, "-o", work_ + "part-" + part[0] + ".tess"});
+    ASSERT_EQ(built.exit_code, 0) << built.err;
+  }
+  RunResult bad = build({"--part", "4/3", "-o", work_ + "bad.tess"});
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.err.find("4/3"), std::string::npos) << bad.err;
+  RunResult missing =
+      run({"merge", work_ + "part-1.tess", work_ + "part-3.tess", "-o", work_ + "merged.tess"});
+  EXPECT_EQ(missing.exit_code, 2);
+  EXPECT_NE(missing.err.find("parts 2"), std::string::npos) << missing.err;
+  RunResult merged = run({"merge", work_ + "part-3.tess", work_ + "part-1.tess",
+                          work_ + "part-2.tess", "-o", work_ + "merged.tess", "--quiet"});
+  ASSERT_EQ(merged.exit_code, 0) << merged.err;
+  EXPECT_TRUE(test::readFileBytes(work_ + "single.tess") ==
+              test::readFileBytes(work_ + "merged.tess"));
+}
+
 TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
   const std::string archive_path = work_ + "r.tess";
   const std::string source = "synthetic:300x200:5:3";

@@ -1,0 +1,291 @@
+// mergeArchiveParts: N part archives -> the archive of a single build (docs/builder.md,
+// "Split and merge"). Payloads below level M are copied unchanged, one at a time, in the
+// output's clustering order; levels M and up are computed from the parts' exact level-M rows.
+#include <tessera/split_build.h>
+
+#include <chrono>
+#include <cstring>
+
+#include <fmt/format.h>
+
+#include "archive_writer.h"
+#include "build_internals.h"
+#include "codecs/encode.h"
+#include "format/checksum.h"
+#include "output/output_file.h"
+#include "part_build.h"
+#include "pyramid_builder.h"
+
+namespace tessera {
+
+using namespace detail;
+
+namespace {
+
+struct OpenedPart {
+  std::string path;
+  std::shared_ptr<Archive> archive;
+  nlohmann::json meta;  ///< its "split_part" metadata
+};
+
+/// The first place two JSON values differ, as a JSON pointer ("/build/quality").
+std::string firstDifference(const nlohmann::json& a, const nlohmann::json& b) {
+  const nlohmann::json patch = nlohmann::json::diff(a, b);
+  return patch.empty() ? std::string() : patch[0]["path"].get<std::string>();
+}
+
+Result<OpenedPart> openPart(const std::string& path) {
+  OpenedPart part;
+  part.path = path;
+  TESSERA_ASSIGN_OR_RETURN(part.archive, Archive::openFile(path));
+  const nlohmann::json metadata = nlohmann::json::parse(part.archive->metadataJson(), nullptr,
+                                                        /*allow_exceptions=*/false);
+  if (!metadata.is_object() || !metadata.contains("split_part") ||
+      !metadata["split_part"].is_object())
+    return fail(ErrorCode::kInvalidArgument,
+                path + ": not a part of a split build (no \"split_part\" in its metadata)");
+  part.meta = metadata["split_part"];
+  for (const char* key : {"index", "count", "merge_level", "rows", "input", "archive_metadata"})
+    if (!part.meta.contains(key))
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: split_part metadata lacks \"{}\"", path, key));
+  return part;
+}
+
+/// Every part of one build, exactly once, ordered by index.
+Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths) {
+  if (paths.empty()) return fail(ErrorCode::kInvalidArgument, "merge: no parts given");
+  std::vector<OpenedPart> opened;
+  for (const std::string& path : paths) {
+    TESSERA_ASSIGN_OR_RETURN(OpenedPart part, openPart(path));
+    opened.push_back(std::move(part));
+  }
+  const OpenedPart& first = opened[0];
+  const uint32_t count = first.meta["count"].get<uint32_t>();
+  std::vector<const OpenedPart*> by_index(count, nullptr);
+  for (const OpenedPart& part : opened) {
+    for (const char* key : {"count", "input", "archive_metadata", "page_tiles_log2"}) {
+      if (part.meta[key] == first.meta[key]) continue;
+      const std::string where = firstDifference(first.meta[key], part.meta[key]);
+      const nlohmann::json::json_pointer pointer(where);
+      auto at = [&](const nlohmann::json& value) {
+        return value.contains(pointer) ? value.at(pointer).dump().substr(0, 200) : "none";
+      };
+      return fail(
+          ErrorCode::kInvalidArgument,
+          fmt::format("{}: not a part of the same build as {}: its {}{} is {}, not {}", part.path,
+                      first.path, key, where, at(part.meta[key]), at(first.meta[key])));
+    }
+    const uint32_t index = part.meta["index"].get<uint32_t>();
+    if (index < 1 || index > count)
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: part index {} outside 1..{}", part.path, index, count));
+    if (by_index[index - 1])
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{} and {} are both part {}/{}", by_index[index - 1]->path, part.path,
+                              index, count));
+    by_index[index - 1] = &part;
+  }
+  std::vector<uint32_t> missing;
+  for (uint32_t i = 0; i < count; ++i)
+    if (!by_index[i]) missing.push_back(i + 1);
+  if (!missing.empty())
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("merge: {} of {} parts missing (parts {}); given {} file(s) from the "
+                    "build of {}",
+                    missing.size(), count, fmt::join(missing, ", "), paths.size(), first.path));
+  std::vector<OpenedPart> ordered;
+  for (const OpenedPart* part : by_index) ordered.push_back(*part);
+  return ordered;
+}
+
+/// Encodes the coarse levels' tiles as the pyramid announces them, like the builder's
+/// encoders but on this thread: the levels above the parts are a small share of the pixels.
+class CoarseSink final : public TileSink {
+ public:
+  CoarseSink(const ImageInfo& level_info, uint32_t merge_level, SpooledImage& out,
+             const nlohmann::json& build)
+      : info_(level_info), merge_level_(merge_level), out_(out) {
+    parseCodecName(build["codec"].get<std::string>(), &codec_);
+    options_.quality = build["quality"].get<int>();
+    options_.effort = build["effort"].get<int>();
+    options_.chroma_subsampling = build["chroma_subsampling"] == "4:2:0";
+    tile_.resize(info_.storedTileBytes());
+  }
+
+  Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
+    if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
+    const uint32_t side = info_.storedTileSidePx();
+    for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile_.data());
+      SpoolEntry& entry =
+          out_.entries[merge_level_ + level][size_t(tile_row) * info_.tilesX(level) + x];
+      uint32_t colour = 0;
+      const TileClass kind = classifyTile(tile_.data(), side, info_.channels, &colour);
+      if (kind != TileClass::kMixed) {
+        entry.kind = kind == TileClass::kEmpty ? TileKind::kEmpty : TileKind::kUniform;
+        entry.uniform_rgba = kind == TileClass::kEmpty ? 0 : colour;
+        continue;
+      }
+      ImageView view{tile_.data(), side, side, info_.channels, size_t(side) * info_.channels};
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
+                               encodeTile(codec_, view, options_, nullptr, &scratch_));
+      entry.kind = TileKind::kEncoded;
+      entry.codec = codec_;
+      entry.length_bytes = uint32_t(payload.size());
+      entry.checksum = checksum64(payload);
+      entry.spool_offset = payloads.size();
+      payloads.push_back(std::move(payload));
+    }
+    return {};
+  }
+
+  nlohmann::json statistics;
+  std::vector<std::vector<uint8_t>> payloads;  ///< by SpoolEntry::spool_offset
+
+ private:
+  const ImageInfo& info_;
+  uint32_t merge_level_;
+  SpooledImage& out_;
+  Codec codec_ = Codec::kJpeg;
+  EncodeOptions options_;
+  CodecScratch scratch_;
+  std::vector<uint8_t> tile_;
+};
+
+/// Streams the parts' exact level-M rows, part by part and tile row by tile row, through the
+/// pyramid of levels M and up.
+Result<void> computeCoarseLevels(const std::vector<OpenedPart>& parts, const ImageInfo& info,
+                                 uint32_t merge_level, PyramidBuilder& pyramid) {
+  const uint32_t width = info.levelWidthPx(merge_level);
+  const size_t row_bytes = size_t(width) * info.channels;
+  std::vector<uint8_t> band;
+  for (const OpenedPart& part : parts) {
+    if (part.archive->images().size() < 2) continue;
+    const ImageInfo& rows_info = part.archive->images()[1];
+    if (rows_info.width_px != width || rows_info.channels != info.channels)
+      return fail(ErrorCode::kInvalidArgument,
+                  part.path + ": its level rows do not match the image's geometry");
+    const uint32_t t = rows_info.tile_size_px;
+    for (uint32_t ty = 0; ty < rows_info.tilesY(0); ++ty) {
+      const uint32_t rows = std::min(t, rows_info.height_px - ty * t);
+      band.resize(row_bytes * rows);
+      for (uint32_t tx = 0; tx < rows_info.tilesX(0); ++tx) {
+        TESSERA_ASSIGN_OR_RETURN(Image tile, part.archive->readTile({1, 0, tx, ty}));
+        const uint32_t columns = std::min(t, width - tx * t);
+        for (uint32_t y = 0; y < rows; ++y)
+          std::memcpy(band.data() + y * row_bytes + size_t(tx) * t * info.channels,
+                      tile.texels.data() + size_t(y) * tile.strideBytes(),
+                      size_t(columns) * info.channels);
+      }
+      if (pyramid.rowsReceived() + rows > info.levelHeightPx(merge_level))
+        return fail(ErrorCode::kInvalidArgument,
+                    part.path + ": the parts hold more level rows than the image has");
+      TESSERA_TRY(pyramid.addRows(band.data(), rows));
+    }
+  }
+  if (pyramid.rowsReceived() != info.levelHeightPx(merge_level))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("merge: the parts hold {} of the {} rows of level {}",
+                            pyramid.rowsReceived(), info.levelHeightPx(merge_level), merge_level));
+  return pyramid.finish();
+}
+
+/// The output's directory below level M, from the parts (spool_offset: the payload's offset
+/// in its part); `owner[level][tile_row]` is the part holding each tile row.
+Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPlan& plan,
+                             SpooledImage& out, std::vector<std::vector<uint32_t>>& owner) {
+  const ImageInfo& info = out.info;
+  owner.resize(plan.merge_level);
+  for (uint32_t l = 0; l < plan.merge_level; ++l) owner[l].resize(info.tilesY(l));
+  for (uint32_t p = 0; p < parts.size(); ++p) {
+    const nlohmann::json& rows = parts[p].meta["rows"];
+    if (rows[0].get<uint32_t>() != plan.firstRow(p) ||
+        rows[1].get<uint32_t>() != plan.firstRow(p + 1))
+      return fail(ErrorCode::kInvalidArgument,
+                  parts[p].path + ": its rows are not those the split assigns to its index");
+    for (uint32_t l = 0; l < plan.merge_level; ++l) {
+      for (uint32_t y = tileRowAt(info, l, plan.firstRow(p));
+           y < tileRowAt(info, l, plan.firstRow(p + 1)); ++y) {
+        owner[l][y] = p;
+        for (uint32_t x = 0; x < info.tilesX(l); ++x) {
+          TESSERA_ASSIGN_OR_RETURN(TileEntry entry, parts[p].archive->tileEntry({0, l, x, y}));
+          out.entries[l][size_t(y) * info.tilesX(l) + x] = spoolEntryOf(entry);
+        }
+      }
+    }
+  }
+  return {};
+}
+
+TileOrder orderNamed(const std::string& name) {
+  return name == "hilbert"    ? TileOrder::kHilbert
+         : name == "quadtree" ? TileOrder::kQuadtree
+                              : TileOrder::kRowMajor;
+}
+
+}  // namespace
+
+Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
+                                      const std::string& output, const std::atomic<bool>* cancel) {
+  const auto start = std::chrono::steady_clock::now();
+  TESSERA_TRY(checkOutputPath(output));
+  TESSERA_ASSIGN_OR_RETURN(std::vector<OpenedPart> parts, openParts(paths));
+  ImageInfo info = parts[0].archive->images()[0];
+  const PartPlan plan = planParts(info, uint32_t(parts.size()));
+  if (parts[0].meta["merge_level"].get<uint32_t>() != plan.merge_level)
+    return fail(ErrorCode::kInvalidArgument,
+                parts[0].path + ": split at another level than this version of tessera splits");
+  SpooledImage out;
+  out.info = info;
+  out.entries.resize(info.level_count);
+  for (uint32_t l = 0; l < info.level_count; ++l)
+    out.entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
+  std::vector<std::vector<uint32_t>> owner;
+  TESSERA_TRY(copyPartEntries(parts, plan, out, owner));
+
+  nlohmann::json metadata = parts[0].meta["archive_metadata"];
+  ImageInfo level_info = info;
+  level_info.width_px = info.levelWidthPx(plan.merge_level);
+  level_info.height_px = info.levelHeightPx(plan.merge_level);
+  level_info.level_count = info.level_count - plan.merge_level;
+  CoarseSink sink(level_info, plan.merge_level, out, metadata["build"]);
+  {
+    PyramidBuilder pyramid(level_info, sink);
+    TESSERA_TRY(computeCoarseLevels(parts, info, plan.merge_level, pyramid));
+  }
+  metadata["images"][0]["statistics"] = sink.statistics;
+  if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
+
+  MergeReport report;
+  auto fetch = [&](const TileId& tile, const SpoolEntry& entry,
+                   std::span<uint8_t> payload) -> Result<void> {
+    if (tile.level >= plan.merge_level) {
+      std::memcpy(payload.data(), sink.payloads[entry.spool_offset].data(), payload.size());
+      return {};
+    }
+    if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
+    const OpenedPart& part = parts[owner[tile.level][tile.y]];
+    TESSERA_TRY(part.archive->source().read(entry.spool_offset, payload));
+    if (checksum64(payload) != entry.checksum)
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
+                                                   part.path, tile.level, tile.x, tile.y));
+    report.payload_bytes_copied += payload.size();
+    ++report.tiles_copied;
+    return {};
+  };
+  TESSERA_ASSIGN_OR_RETURN(TempFile file, TempFile::create(output));
+  TESSERA_ASSIGN_OR_RETURN(
+      WrittenArchive written,
+      writeArchive(fetch, std::span<const SpooledImage>(&out, 1),
+                   orderNamed(metadata["build"]["order"].get<std::string>()), metadata, file));
+  TESSERA_TRY(file.commit());
+  report.output_bytes = written.file_bytes;
+  report.tiles_computed = sink.payloads.size();
+  report.elapsed_s =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+}  // namespace tessera

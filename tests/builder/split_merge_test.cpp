@@ -1,0 +1,146 @@
+// Split builds (tessera/split_build.h): the merge of N parts is byte for byte the archive of a
+// single build with the same options, over random sizes, part counts, tile sizes, borders,
+// codecs and orders; missing, duplicate and foreign parts are refused naming the file, and
+// leave no output.
+#include <filesystem>
+#include <random>
+
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <tessera/archive.h>
+#include <tessera/split_build.h>
+
+#include "support/test_images.h"
+
+namespace tessera {
+namespace {
+
+BuildOptions syntheticOptions(const std::string& input, const std::string& output) {
+  BuildOptions options;
+  options.inputs = {input};
+  options.output = output;
+  options.tile_size_px = 64;
+  options.threads = 2;
+  return options;
+}
+
+/// Builds the N parts of `options` into `dir` and returns their paths.
+std::vector<std::string> buildParts(BuildOptions options, uint32_t count, const std::string& dir) {
+  std::vector<std::string> paths;
+  for (uint32_t i = 1; i <= count; ++i) {
+    options.output = fmt::format("{}/part-{}.tess", dir, i);
+    Result<BuildReport> built = buildArchivePart(options, {i, count});
+    EXPECT_TRUE(built) << built.error().message;
+    paths.push_back(options.output);
+  }
+  return paths;
+}
+
+TEST(SplitMerge, MergeEqualsTheSingleBuild) {
+  const std::string dir = test::testTempDir();
+  std::mt19937 random(32);
+  const Codec codecs[] = {Codec::kJpeg, Codec::kZstd, Codec::kPng,
+                          Codec::kLz4,  Codec::kRaw,  Codec::kWebp};
+  const TileOrder orders[] = {TileOrder::kHilbert, TileOrder::kQuadtree, TileOrder::kRowMajor};
+  const uint32_t borders[] = {0, 1, 3, 16};
+  for (int round = 0; round < 14; ++round) {
+    const uint32_t width = 1 + random() % 900, height = 1 + random() % 900;
+    const std::string input =
+        fmt::format("synthetic:{}x{}:{}:{}", width, height, round, 3 + random() % 2);
+    BuildOptions options = syntheticOptions(input, dir + "/single.tess");
+    options.tile_size_px = random() % 3 == 0 ? 128 : 64;
+    options.border_px = borders[random() % 4];
+    options.codec = codecs[random() % 6];
+    options.order = orders[random() % 3];
+    options.srgb_downsample = random() % 4 == 0;
+    options.quality = 50 + random() % 50;
+    if (!validateBuildOptions(options)) options.codec = Codec::kJpeg;  // webp not built in
+    const uint32_t parts = 1 + random() % 8;
+    SCOPED_TRACE(fmt::format("{} tile {} border {} codec {} parts {}", input, options.tile_size_px,
+                             options.border_px, codecName(options.codec), parts));
+    Result<BuildReport> single = buildArchive(options);
+    ASSERT_TRUE(single) << single.error().message;
+    std::vector<std::string> paths = buildParts(options, parts, dir);
+    std::reverse(paths.begin(), paths.end());  // any order
+    Result<MergeReport> merged = mergeArchiveParts(paths, dir + "/merged.tess");
+    ASSERT_TRUE(merged) << merged.error().message;
+    EXPECT_TRUE(test::readFileBytes(dir + "/single.tess") ==
+                test::readFileBytes(dir + "/merged.tess"));
+    auto archive = Archive::openFile(dir + "/merged.tess");
+    ASSERT_TRUE(archive) << archive.error().message;
+    EXPECT_TRUE((*archive)->verify(/*decode=*/false).ok());
+    for (const std::string& path : paths) std::filesystem::remove(path);
+  }
+}
+
+/// The error of a merge that must fail, and that it left no output.
+std::string mergeError(const std::vector<std::string>& paths, const std::string& output) {
+  Result<MergeReport> merged = mergeArchiveParts(paths, output);
+  EXPECT_FALSE(merged);
+  EXPECT_FALSE(std::filesystem::exists(output));
+  return merged ? std::string() : merged.error().message;
+}
+
+TEST(SplitMerge, RefusesMissingDuplicateAndForeignParts) {
+  const std::string dir = test::testTempDir();
+  const std::string out = dir + "/out.tess";
+  BuildOptions options = syntheticOptions("synthetic:700x500:5:3", out);
+  options.border_px = 1;
+  const std::vector<std::string> parts = buildParts(options, 3, dir);
+
+  EXPECT_NE(mergeError({parts[0], parts[2]}, out).find("parts 2"), std::string::npos);
+  const std::string duplicate = mergeError({parts[0], parts[1], parts[1], parts[2]}, out);
+  EXPECT_NE(duplicate.find("both part 2/3"), std::string::npos) << duplicate;
+
+  BuildOptions other = options;
+  other.quality = 70;
+  other.output = dir + "/other-2.tess";
+  ASSERT_TRUE(buildArchivePart(other, {2, 3}));
+  const std::string foreign = mergeError({parts[0], other.output, parts[2]}, out);
+  EXPECT_NE(foreign.find(other.output), std::string::npos) << foreign;
+  EXPECT_NE(foreign.find("quality"), std::string::npos) << foreign;
+
+  other = options;
+  other.inputs = {"synthetic:700x500:6:3"};
+  other.output = dir + "/input-2.tess";
+  ASSERT_TRUE(buildArchivePart(other, {2, 3}));
+  EXPECT_NE(mergeError({parts[0], other.output, parts[2]}, out).find("input"), std::string::npos);
+
+  other = options;
+  other.output = dir + "/four-2.tess";
+  ASSERT_TRUE(buildArchivePart(other, {2, 4}));
+  EXPECT_NE(mergeError({parts[0], other.output, parts[2]}, out).find("count"), std::string::npos);
+
+  options.output = dir + "/whole.tess";
+  ASSERT_TRUE(buildArchive(options));
+  EXPECT_NE(mergeError({parts[0], parts[1], options.output}, out).find("not a part"),
+            std::string::npos);
+  EXPECT_TRUE(mergeArchiveParts({parts[2], parts[0], parts[1]}, out));
+}
+
+TEST(SplitMerge, ParsesPartsCountedFromOne) {
+  Result<PartSpec> part = parsePartSpec("3/8");
+  ASSERT_TRUE(part);
+  EXPECT_EQ(part->index, 3u);
+  EXPECT_EQ(part->count, 8u);
+  for (const char* bad : {"0/8", "9/8", "1/0", "3", "3/", "/8", "a/b", "3/8x", "-1/8", "1/65537"})
+    EXPECT_FALSE(parsePartSpec(bad)) << bad;
+}
+
+TEST(SplitMerge, RefusesWhatItCannotSplit) {
+  const std::string dir = test::testTempDir();
+  BuildOptions options = syntheticOptions("synthetic:300x300:1:3", dir + "/p.tess");
+  options.codec = Codec::kPtm;
+  Result<BuildReport> ptm = buildArchivePart(options, {1, 2});
+  ASSERT_FALSE(ptm);
+  EXPECT_NE(ptm.error().message.find("ptm"), std::string::npos);
+  options.codec = Codec::kJpeg;
+  options.inputs.push_back("synthetic:100x100:2:3");
+  EXPECT_FALSE(buildArchivePart(options, {1, 2}));
+  EXPECT_FALSE(buildArchivePart(options, {3, 2}));
+  EXPECT_FALSE(std::filesystem::exists(options.output));
+}
+
+}  // namespace
+}  // namespace tessera
