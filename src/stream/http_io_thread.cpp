@@ -209,6 +209,8 @@ void HttpSource::startAttempt(Transfer& transfer) {
   if (!options_.verify_tls) {
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYPEER, 0L);
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYHOST, 0L);
+  } else if (!options_.ca_file.empty()) {
+    curl_easy_setopt(easy, CURLOPT_CAINFO, options_.ca_file.c_str());
   }
   curl_easy_setopt(easy, CURLOPT_HEADERFUNCTION, &HttpSource::onHeader);
   curl_easy_setopt(easy, CURLOPT_HEADERDATA, &transfer);
@@ -251,12 +253,23 @@ void HttpSource::startAttempt(Transfer& transfer) {
 
 void HttpSource::stopAttempt(Transfer& transfer) {
   if (!transfer.easy) return;
+  // A transfer that opened a connection tells which protocol that connection settled on.
+  long connects = 0, version = CURL_HTTP_VERSION_NONE;
+  curl_easy_getinfo(transfer.easy, CURLINFO_NUM_CONNECTS, &connects);
+  curl_easy_getinfo(transfer.easy, CURLINFO_HTTP_VERSION, &version);
   curl_multi_remove_handle(multi_, transfer.easy);
   idle_easy_.push_back(transfer.easy);
   transfer.easy = nullptr;
   std::lock_guard lock(mutex_);
   stats_.bytes_received += transfer.wire_bytes;
   transfer.wire_bytes = 0;
+  if (connects > 0) {
+    stats_.connections += uint64_t(connects);
+    if (version == CURL_HTTP_VERSION_2_0)
+      stats_.http2_connections += uint64_t(connects);
+    else if (version == CURL_HTTP_VERSION_1_0 || version == CURL_HTTP_VERSION_1_1)
+      stats_.http1_connections += uint64_t(connects);
+  }
 }
 
 bool HttpSource::finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_64& random) {

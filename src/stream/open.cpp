@@ -1,6 +1,7 @@
 #include <tessera/open.h>
 
 #include <cstdlib>
+#include <string_view>
 
 #include <tessera/http_source.h>
 
@@ -19,6 +20,12 @@ Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_ur
     // user of the machine can read in the process list.
     if (const char* token = std::getenv("TESSERA_TOKEN"); token && *token)
       options.bearer_token = token;
+    if (const char* ca_file = std::getenv("TESSERA_CA_FILE"); ca_file && *ca_file)
+      options.ca_file = ca_file;
+    // Spelled out in full so that it is never set by accident.
+    if (const char* insecure = std::getenv("TESSERA_TLS_INSECURE");
+        insecure && std::string_view(insecure) == "1")
+      options.verify_tls = false;
     return openHttpSource(path_or_url, options);
   }
   return openFileSource(path_or_url);
