@@ -46,6 +46,9 @@ struct HttpOptions {
   /// Speak HTTP/2 from the first byte over plain http:// (h2c "prior knowledge"): only for a
   /// server known to accept it. Over https:// HTTP/2 is negotiated (ALPN) without this.
   bool http2_prior_knowledge = false;
+  /// Offer HTTP/2 by ALPN over https:// (the server picks). False: HTTP/1.1 only, one request
+  /// in flight per connection. LinkStats tells which version each connection spoke.
+  bool http2 = true;
   /// Check the server's TLS certificate and host name (https://). Off only for tests and
   /// throwaway self-signed setups: anyone on the path can then read and alter the bytes.
   bool verify_tls = true;

@@ -200,12 +200,14 @@ void HttpSource::startAttempt(Transfer& transfer) {
   curl_easy_setopt(easy, CURLOPT_CONNECTTIMEOUT_MS, long(options_.connect_timeout.count()));
   curl_easy_setopt(easy, CURLOPT_TIMEOUT_MS, long(options_.request_timeout.count()));
   const bool https = lowercase(url_.substr(0, 8)) == "https://";
-  curl_easy_setopt(easy, CURLOPT_HTTP_VERSION,
-                   long(options_.http2_prior_knowledge ? CURL_HTTP_VERSION_2_PRIOR_KNOWLEDGE
-                                                       : CURL_HTTP_VERSION_2TLS));
+  const long version = options_.http2_prior_knowledge ? CURL_HTTP_VERSION_2_PRIOR_KNOWLEDGE
+                       : options_.http2               ? CURL_HTTP_VERSION_2TLS
+                                                      : CURL_HTTP_VERSION_1_1;
+  curl_easy_setopt(easy, CURLOPT_HTTP_VERSION, version);
   // Where HTTP/2 is possible, a new request waits for the connection being set up rather
   // than opening another: it becomes a stream of that one.
-  if (https || options_.http2_prior_knowledge) curl_easy_setopt(easy, CURLOPT_PIPEWAIT, 1L);
+  if ((https && options_.http2) || options_.http2_prior_knowledge)
+    curl_easy_setopt(easy, CURLOPT_PIPEWAIT, 1L);
   if (!options_.verify_tls) {
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYPEER, 0L);
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYHOST, 0L);
