@@ -18,7 +18,8 @@ bool isRemoteUri(const std::string& path_or_url);
 /// Opens an archive's bytes: an http:// or https:// URL through openHttpSource
 /// (tessera/http_source.h) with default HttpOptions, plus from the environment when set: the
 /// bearer token in TESSERA_TOKEN, the trusted CA file in TESSERA_CA_FILE, and no certificate
-/// check at all when TESSERA_TLS_INSECURE is "1"; anything else as a local file
+/// check at all when TESSERA_TLS_INSECURE is "1", HTTP/1.1 only when TESSERA_HTTP2 is "0";
+/// anything else as a local file
 /// (openFileSource). Fails as those do, naming the path or URL.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url);
 

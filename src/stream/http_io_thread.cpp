@@ -104,6 +104,7 @@ void HttpSource::ioLoop() {
     {
       std::lock_guard lock(mutex_);
       stats_.in_flight = uint32_t(active.size());
+      stats_.max_in_flight = std::max(stats_.max_in_flight, stats_.in_flight);
     }
     int running = 0;
     curl_multi_perform(multi_, &running);

@@ -26,6 +26,8 @@ Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_ur
     if (const char* insecure = std::getenv("TESSERA_TLS_INSECURE");
         insecure && std::string_view(insecure) == "1")
       options.verify_tls = false;
+    if (const char* http2 = std::getenv("TESSERA_HTTP2"); http2 && std::string_view(http2) == "0")
+      options.http2 = false;
     return openHttpSource(path_or_url, options);
   }
   return openFileSource(path_or_url);

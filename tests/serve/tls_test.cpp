@@ -84,6 +84,16 @@ std::string readFile(const std::string& path) {
   return text.str();
 }
 
+// The SHA-256 of a certificate as hex; empty for none.
+std::string fingerprint(X509* cert) {
+  unsigned char digest[EVP_MAX_MD_SIZE];
+  unsigned int length = 0;
+  std::string hex;
+  if (cert && X509_digest(cert, EVP_sha256(), digest, &length) == 1)
+    for (unsigned int i = 0; i < length; ++i) hex += fmt::format("{:02x}", digest[i]);
+  return hex;
+}
+
 // The SHA-256 of the certificate a TLS handshake with 127.0.0.1:port presents, as hex; empty
 // when the handshake fails. `max_version` caps what this client offers.
 std::string servedFingerprint(uint16_t port, int max_version = TLS1_3_VERSION) {
@@ -106,10 +116,7 @@ std::string servedFingerprint(uint16_t port, int max_version = TLS1_3_VERSION) {
     SSL_set_fd(ssl, fd);
     if (SSL_connect(ssl) == 1) {
       X509* peer = SSL_get1_peer_certificate(ssl);
-      unsigned char digest[EVP_MAX_MD_SIZE];
-      unsigned int length = 0;
-      if (peer && X509_digest(peer, EVP_sha256(), digest, &length) == 1)
-        for (unsigned int i = 0; i < length; ++i) hex += fmt::format("{:02x}", digest[i]);
+      hex = fingerprint(peer);
       X509_free(peer);
       SSL_shutdown(ssl);
     }
@@ -124,12 +131,7 @@ std::string fingerprintOf(const std::string& pem) {
                                                 BIO_free);
   std::unique_ptr<X509, decltype(&X509_free)> cert(
       PEM_read_bio_X509(bio.get(), nullptr, nullptr, nullptr), X509_free);
-  unsigned char digest[EVP_MAX_MD_SIZE];
-  unsigned int length = 0;
-  std::string hex;
-  if (cert && X509_digest(cert.get(), EVP_sha256(), digest, &length) == 1)
-    for (unsigned int i = 0; i < length; ++i) hex += fmt::format("{:02x}", digest[i]);
-  return hex;
+  return fingerprint(cert.get());
 }
 
 class TlsServe : public ::testing::Test {
