@@ -15,7 +15,8 @@ port_of() {
 
 # start_nginx RUN ROOT PROBE [DIRECTIVES]: nginx serving ROOT on a free loopback port, its
 # configuration and logs under RUN (access log RUN/nginx-access.log), DIRECTIVES added to the
-# server block; waits until PROBE (a path under ROOT) answers and sets NGINX_PORT.
+# server block; waits until PROBE (a path under ROOT) answers and sets NGINX_PORT. For TLS:
+# NGINX_LISTEN_FLAGS="ssl http2", NGINX_SCHEME=https and the certificate in DIRECTIVES.
 start_nginx() {
   local run=$1 root=$2 probe=$3 directives=${4:-} i
   NGINX_PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
@@ -34,7 +35,7 @@ http {
   sendfile on; tcp_nopush on; keepalive_requests 10000;
   types { application/octet-stream tess; application/xml dzi; }
   server {
-    listen 127.0.0.1:$NGINX_PORT;
+    listen 127.0.0.1:$NGINX_PORT ${NGINX_LISTEN_FLAGS:-};
     root $root;
     $directives
   }
@@ -43,7 +44,7 @@ EOF
   nginx -c "$run/nginx/nginx.conf" -p "$run/nginx" &
   pids+=($!)
   for ((i = 0; i < 200; ++i)); do
-    curl -sf -o /dev/null "http://127.0.0.1:$NGINX_PORT/$probe" && return 0
+    curl -skf -o /dev/null "${NGINX_SCHEME:-http}://127.0.0.1:$NGINX_PORT/$probe" && return 0
     sleep 0.05
   done
   echo "${0##*/}: nginx did not answer on port $NGINX_PORT" >&2; return 1

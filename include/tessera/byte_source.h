@@ -43,6 +43,13 @@ struct LinkStats {
   uint64_t prefetched_bytes = 0;    ///< bytes fetched ahead on a prefetch hint
   uint64_t prefetch_hit_bytes = 0;  ///< bytes reads then took from fetched-ahead data
   uint32_t in_flight = 0;           ///< requests on the wire now
+  uint32_t max_in_flight = 0;       ///< the most requests on the wire at once so far
+  /// Connections opened (TCP, plus TLS for https://), and of those the ones that spoke
+  /// HTTP/1.x and HTTP/2 (negotiated by ALPN, or h2c prior knowledge). A connection that
+  /// failed before a response counts in `connections` only.
+  uint64_t connections = 0;
+  uint64_t http1_connections = 0;
+  uint64_t http2_connections = 0;
   /// The last (at most 64) successful requests, oldest first: bytes over seconds is the
   /// throughput one request saw, first_byte_seconds the round trip plus server time.
   std::vector<LinkSample> recent;

@@ -47,8 +47,15 @@ struct HttpOptions {
   /// Speak HTTP/2 from the first byte over plain http:// (h2c "prior knowledge"): only for a
   /// server known to accept it. Over https:// HTTP/2 is negotiated (ALPN) without this.
   bool http2_prior_knowledge = false;
-  /// Check the server's TLS certificate and host name (https://). Off only for tests.
+  /// Offer HTTP/2 by ALPN over https:// (the server picks). False: HTTP/1.1 only, one request
+  /// in flight per connection. LinkStats tells which version each connection spoke.
+  bool http2 = true;
+  /// Check the server's TLS certificate and host name (https://). Off only for tests and
+  /// throwaway self-signed setups: anyone on the path can then read and alter the bytes.
   bool verify_tls = true;
+  /// PEM file of the certificate authorities to trust for https:// instead of the system's
+  /// (a private CA, or a self-signed server certificate itself). Empty: the system's store.
+  std::string ca_file;
   /// Sent as User-Agent.
   std::string user_agent = "tessera/0.1";
   /// Sent as `Authorization: Bearer <token>` on every request when not empty: a token of

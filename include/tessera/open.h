@@ -16,10 +16,12 @@ namespace tessera {
 bool isRemoteUri(const std::string& path_or_url);
 
 /// Opens an archive's bytes: an http:// or https:// URL through openHttpSource
-/// (tessera/http_source.h) with default HttpOptions, plus the bearer token in the
-/// TESSERA_TOKEN environment variable when it is set, an s3:// URL through openS3Source (its
-/// endpoint, region and credentials from the environment), anything else as a local file
-/// (openFileSource). Fails as those do, naming the path or URL.
+/// (tessera/http_source.h) with default HttpOptions, plus from the environment when set: the
+/// bearer token in TESSERA_TOKEN, the trusted CA file in TESSERA_CA_FILE, and no certificate
+/// check at all when TESSERA_TLS_INSECURE is "1", HTTP/1.1 only when TESSERA_HTTP2 is "0"; an
+/// s3:// URL through openS3Source (its endpoint, region and credentials from the environment,
+/// and the TLS settings above); anything else as a local file (openFileSource). Fails as those do,
+/// naming the path or URL.
 [[nodiscard]] Result<std::shared_ptr<ByteSource>> openByteSource(const std::string& path_or_url);
 
 /// openByteSource, then Archive::open. Over HTTP the open costs one request, the ranged GET of

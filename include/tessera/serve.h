@@ -44,6 +44,11 @@ struct ServeOptions {
   /// URL-signing keys per archive or pattern, per-archive CORS origins, a per-client rate
   /// limit. Empty: every archive is readable by every client that reaches the port.
   std::string access_file;
+  /// TLS: the certificate chain (PEM: the server's certificate, then any intermediates) and
+  /// its private key (PEM, unencrypted). Both set: every connection speaks TLS 1.2 or 1.3,
+  /// HTTP/1.1 inside; both empty: plain HTTP. TileServer::reloadTls reads them again.
+  std::string tls_cert_file;
+  std::string tls_key_file;
   /// Called once by `start`, on the calling thread, after the socket is bound and before any
   /// connection is accepted, with the bound address and port: the CLI prints its "listening
   /// on" line here, so that line precedes every access log line on stdout. May be empty.
@@ -76,6 +81,7 @@ struct ServeStats {
   uint64_t connections_open = 0;      ///< gauge
   uint64_t timeouts = 0;              ///< connections closed by a header/body/idle/send timeout
   uint64_t parse_errors = 0;          ///< malformed requests answered 4xx and closed
+  uint64_t tls_handshake_errors = 0;  ///< connections closed in a failed TLS handshake
   uint64_t transcode_cache_hits = 0;
   uint64_t transcode_cache_misses = 0;
   uint64_t transcode_cache_bytes = 0;    ///< gauge
@@ -87,7 +93,8 @@ struct ServeStats {
 class TileServer {
  public:
   /// Opens the archives named by `options.paths` and starts listening. Fails naming the file
-  /// (not an archive, bad or duplicate name, empty folder) or the address (cannot bind).
+  /// (not an archive, bad or duplicate name, empty folder; a TLS certificate or key that is
+  /// missing, not PEM or not a pair) or the address (cannot bind).
   [[nodiscard]] static Result<std::unique_ptr<TileServer>> start(const ServeOptions& options);
 
   /// Stops if still running.
@@ -102,6 +109,13 @@ class TileServer {
   /// Names of the archives served, sorted.
   std::vector<std::string> archiveNames() const;
   ServeStats stats() const;
+  /// True when serving TLS (ServeOptions::tls_cert_file).
+  bool tls() const;
+  /// Reads the certificate and key files again and hands the result to connections accepted
+  /// from then on; connections already open keep theirs. On an error (naming the file) the
+  /// previous certificate stays in use. Fails when not serving TLS. Thread-safe; `tessera
+  /// serve` calls it on SIGHUP.
+  [[nodiscard]] Result<void> reloadTls();
 
   /// Stops accepting, closes idle connections, lets responses in flight finish for up to
   /// `grace_ms`, then closes the rest and joins the threads. Idempotent.

@@ -27,6 +27,7 @@ const char* errorName(ServeError kind) {
     case ServeError::kParse: return "parse";
     case ServeError::kTimeout: return "timeout";
     case ServeError::kIo: return "io";
+    case ServeError::kTls: return "tls";
     default: return "archive";
   }
 }

@@ -36,6 +36,7 @@ enum class ServeError : uint8_t {
   kTimeout,  ///< header, body, idle or send timeout
   kIo,       ///< socket errors other than a timeout or a clean close
   kArchive,  ///< an archive read, checksum or decode failed (answered 500)
+  kTls,      ///< a TLS handshake failed (plain HTTP to the TLS port, a bad client hello)
   kCount,
 };
 

@@ -1,6 +1,8 @@
 // TileServer: the accept loop and one Connection per socket, over Boost.Beast and Asio. Each
 // connection lives on one I/O thread's io_context; request handling (pread, decode, encode)
 // runs there too, which is cheap for stored tiles and bounded for transcodes by the cache.
+// One Connection template serves plain TCP and TLS (beast::ssl_stream over the same TCP
+// stream): only the handshake and the close differ.
 #include <tessera/serve.h>
 
 #include <chrono>
@@ -10,6 +12,7 @@
 #include <mutex>
 #include <optional>
 #include <thread>
+#include <type_traits>
 #include <unordered_map>
 
 #include <boost/asio/executor_work_guard.hpp>
@@ -17,7 +20,10 @@
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/dispatch.hpp>
 #include <boost/asio/post.hpp>
+#include <boost/asio/ssl/context.hpp>
+#include <boost/asio/ssl/error.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <boost/beast/core/stream_traits.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/string.hpp>
 #include <boost/beast/core/tcp_stream.hpp>
@@ -25,15 +31,18 @@
 #include <boost/beast/http/read.hpp>
 #include <boost/beast/http/serializer.hpp>
 #include <boost/beast/http/write.hpp>
+#include <boost/beast/ssl/ssl_stream.hpp>
 #include <fmt/format.h>
 
 #include "router.h"
+#include "tls_context.h"
 
 namespace tessera {
 
 namespace net = boost::asio;
 namespace beast = boost::beast;
 namespace http = beast::http;
+namespace ssl = net::ssl;
 using tcp = net::ip::tcp;
 using Clock = std::chrono::steady_clock;
 
@@ -103,7 +112,14 @@ class AccessLog {
 
 }  // namespace
 
-class Connection;
+// What the server needs of a connection of either kind, to stop it.
+class ConnectionBase {
+ public:
+  virtual ~ConnectionBase() = default;
+  /// From any thread: closes the connection if it is waiting for a request, otherwise after
+  /// the response in progress. `force` closes it whatever it is doing.
+  virtual void requestStop(bool force) = 0;
+};
 
 struct TileServer::Impl {
   ServeOptions options;
@@ -113,7 +129,11 @@ struct TileServer::Impl {
   std::atomic<bool> stopping{false};
   std::mutex registry_mutex;  // guards connections; taken after no other lock
   std::condition_variable registry_changed;
-  std::unordered_map<Connection*, std::weak_ptr<Connection>> connections;
+  std::unordered_map<ConnectionBase*, std::weak_ptr<ConnectionBase>> connections;
+  std::mutex tls_mutex;  // guards tls_context; taken after no other lock
+  // The context new connections handshake with; null when serving plain HTTP. reloadTls swaps
+  // it; each TLS connection holds the one it started with.
+  std::shared_ptr<ssl::context> tls_context;
   // One io_context per thread, each run by that thread alone (nginx's worker model): a
   // connection's handlers never change threads, so it needs no strand and a request wakes no
   // other thread. Connections are dealt to the contexts in turn as they are accepted.
@@ -131,14 +151,26 @@ struct TileServer::Impl {
   std::mutex stop_mutex;  // serialises stop()
 
   void accept();
+  std::shared_ptr<ssl::context> currentTls() {
+    std::lock_guard lock(tls_mutex);
+    return tls_context;
+  }
 };
 
-class Connection : public std::enable_shared_from_this<Connection> {
+using PlainStream = beast::tcp_stream;
+using TlsStream = beast::ssl_stream<beast::tcp_stream>;
+
+template <class Stream>
+class Connection : public ConnectionBase, public std::enable_shared_from_this<Connection<Stream>> {
+  static constexpr bool kTls = std::is_same_v<Stream, TlsStream>;
+
  public:
-  Connection(TileServer::Impl& server, tcp::socket socket)
-      : server_(server), stream_(std::move(socket)) {
+  /// `tls` is the context of a TLS connection (kept alive as long as the connection), null
+  /// for a plain one.
+  Connection(TileServer::Impl& server, tcp::socket socket, std::shared_ptr<ssl::context> tls)
+      : server_(server), tls_(std::move(tls)), stream_(openStream(std::move(socket), tls_.get())) {
     beast::error_code ec;
-    tcp::endpoint remote = stream_.socket().remote_endpoint(ec);
+    tcp::endpoint remote = tcp().socket().remote_endpoint(ec);
     peer_ = ec ? "-" : fmt::format("{}:{}", remote.address().to_string(), remote.port());
     server_.metrics.connectionOpened();
   }
@@ -152,19 +184,22 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void start() {
     {
       std::lock_guard lock(server_.registry_mutex);
-      server_.connections[this] = weak_from_this();
+      server_.connections[this] = this->weak_from_this();
     }
-    net::dispatch(stream_.get_executor(), [self = shared_from_this()] { self->waitForRequest(); });
+    net::dispatch(stream_.get_executor(), [self = this->shared_from_this()] {
+      if constexpr (kTls)
+        self->handshake();
+      else
+        self->waitForRequest();
+    });
   }
 
-  /// From any thread: closes the connection if it is waiting for a request, otherwise after
-  /// the response in progress. `force` closes it whatever it is doing.
-  void requestStop(bool force) {
-    net::post(stream_.get_executor(), [self = shared_from_this(), force] {
+  void requestStop(bool force) override {
+    net::post(stream_.get_executor(), [self = this->shared_from_this(), force] {
       self->stop_requested_ = true;
       if (force || self->idle_) {
         beast::error_code ignored;
-        self->stream_.socket().close(ignored);
+        self->tcp().socket().close(ignored);
       }
     });
   }
@@ -172,6 +207,46 @@ class Connection : public std::enable_shared_from_this<Connection> {
  private:
   using Request = detail::Request;
   const ServeOptions& options() const { return server_.options; }
+  beast::tcp_stream& tcp() { return beast::get_lowest_layer(stream_); }
+
+  static Stream openStream(tcp::socket socket, ssl::context* tls) {
+    if constexpr (kTls)
+      return Stream(std::move(socket), *tls);
+    else
+      return Stream(std::move(socket));
+  }
+
+  // The handshake runs under the header timeout: a client that connects and says nothing
+  // costs no more than one that starts a request and stops.
+  void handshake() {
+    started_ = Clock::now();
+    idle_ = true;
+    tcp().expires_after(std::chrono::milliseconds(options().header_timeout_ms));
+    stream_.async_handshake(ssl::stream_base::server,
+                            [self = this->shared_from_this()](beast::error_code ec) {
+                              self->idle_ = false;
+                              if (ec) return self->onHandshakeError(ec);
+                              self->tls_established_ = true;
+                              self->waitForRequest();
+                            });
+  }
+
+  // Plain HTTP sent to the TLS port, a broken or foreign client hello, a timeout: counted,
+  // logged (status 0, the cause as the target) and closed without a word, since there is no
+  // TLS session to answer in.
+  void onHandshakeError(beast::error_code ec) {
+    const bool timeout = ec == beast::error::timeout;
+    server_.metrics.recordError(timeout ? detail::ServeError::kTimeout : detail::ServeError::kTls);
+    if (server_.access_log.enabled()) {
+      std::string cause = timeout ? "timeout" : ec.message();
+      for (char& c : cause)
+        if (c == ' ') c = '_';
+      const int64_t micros =
+          std::chrono::duration_cast<std::chrono::microseconds>(Clock::now() - started_).count();
+      server_.access_log.write(peer_, "TLS", "handshake:" + cause, 0, 0, micros);
+    }
+    tcpLingeringClose();
+  }
 
   void waitForRequest() {
     if (stop_requested_) return close();
@@ -179,9 +254,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     // the idle timeout runs until its first byte arrives, then the header timeout.
     if (buffer_.size() > 0) return readHeader();
     idle_ = true;
-    stream_.expires_after(std::chrono::milliseconds(options().idle_timeout_ms));
+    tcp().expires_after(std::chrono::milliseconds(options().idle_timeout_ms));
     stream_.async_read_some(buffer_.prepare(4096),
-                            [self = shared_from_this()](beast::error_code ec, size_t bytes) {
+                            [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
                               self->idle_ = false;
                               if (ec) return self->onSocketError(ec);
                               self->buffer_.commit(bytes);
@@ -193,9 +268,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
     parser_.emplace();
     parser_->header_limit(options().header_limit_bytes);
     parser_->body_limit(options().body_limit_bytes);
-    stream_.expires_after(std::chrono::milliseconds(options().header_timeout_ms));
+    tcp().expires_after(std::chrono::milliseconds(options().header_timeout_ms));
     http::async_read_header(stream_, buffer_, *parser_,
-                            [self = shared_from_this()](beast::error_code ec, size_t bytes) {
+                            [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
                               self->onHeader(ec, bytes);
                             });
   }
@@ -224,9 +299,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
       return refuse(http::status::not_implemented,
                     "the only transfer coding accepted in requests is chunked");
     if (!parser_->is_done()) {
-      stream_.expires_after(std::chrono::milliseconds(options().body_timeout_ms));
+      tcp().expires_after(std::chrono::milliseconds(options().body_timeout_ms));
       http::async_read(stream_, buffer_, *parser_,
-                       [self = shared_from_this()](beast::error_code read_ec, size_t) {
+                       [self = this->shared_from_this()](beast::error_code read_ec, size_t) {
                          if (read_ec) return self->onReadError(read_ec);
                          self->handle();
                        });
@@ -276,9 +351,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // The send timeout runs per write, not per response: a large archive download to a slow but
   // live client keeps going, while a client that stops reading is closed.
   void writeSome() {
-    stream_.expires_after(std::chrono::milliseconds(options().send_timeout_ms));
+    tcp().expires_after(std::chrono::milliseconds(options().send_timeout_ms));
     http::async_write_some(stream_, *serializer_,
-                           [self = shared_from_this()](beast::error_code ec, size_t) {
+                           [self = this->shared_from_this()](beast::error_code ec, size_t) {
                              if (!ec && !self->serializer_->is_done()) return self->writeSome();
                              self->onWritten(ec);
                            });
@@ -310,7 +385,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
     if (ec == http::error::end_of_stream || ec == http::error::partial_message ||
         ec == beast::error::timeout || ec == net::error::operation_aborted ||
         ec == net::error::connection_reset || ec == net::error::eof ||
-        ec == net::error::bad_descriptor)
+        ec == net::error::bad_descriptor || ec == ssl::error::stream_truncated)
       return onSocketError(ec);
     if (ec.category() == http::make_error_code(http::error::bad_method).category())
       return refuse(http::status::bad_request, fmt::format("malformed request: {}", ec.message()));
@@ -322,7 +397,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
       server_.metrics.recordError(detail::ServeError::kTimeout);
     } else if (ec != http::error::end_of_stream && ec != net::error::eof &&
                ec != net::error::operation_aborted && ec != net::error::connection_reset &&
-               ec != net::error::bad_descriptor && ec != http::error::partial_message) {
+               ec != net::error::bad_descriptor && ec != http::error::partial_message &&
+               ec != ssl::error::stream_truncated) {
       server_.metrics.recordError(detail::ServeError::kIo);
     }
     close();
@@ -330,32 +406,53 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
   void close() {
     beast::error_code ignored;
-    stream_.socket().close(ignored);
+    tcp().socket().close(ignored);
+  }
+
+  std::chrono::milliseconds closeBound() const {
+    return std::chrono::milliseconds(
+        std::min<uint32_t>(2000, std::max<uint32_t>(100, options().header_timeout_ms)));
+  }
+
+  // A TLS session ends with close_notify both ways (bounded: a client that never answers is
+  // closed when the time runs out), then the TCP connection closes as a plain one does.
+  void lingeringClose() {
+    if constexpr (kTls) {
+      if (tls_established_) {
+        tcp().expires_after(closeBound());
+        stream_.async_shutdown(
+            [self = this->shared_from_this()](beast::error_code) { self->tcpLingeringClose(); });
+        return;
+      }
+    }
+    tcpLingeringClose();
   }
 
   // Half-closes, then reads and discards what the client still sends for a short while, so
   // that data arriving after our last response does not make the kernel reset the connection
   // before the client has read that response.
-  void lingeringClose() {
+  void tcpLingeringClose() {
     beast::error_code ignored;
-    stream_.socket().shutdown(tcp::socket::shutdown_send, ignored);
-    stream_.expires_after(std::chrono::milliseconds(
-        std::min<uint32_t>(2000, std::max<uint32_t>(100, options().header_timeout_ms))));
+    tcp().socket().shutdown(tcp::socket::shutdown_send, ignored);
+    tcp().expires_after(closeBound());
     drain();
   }
 
+  // Raw TCP reads under TLS too: after close_notify, or a failed handshake, nothing left is
+  // worth decrypting.
   void drain() {
     buffer_.consume(buffer_.size());
-    stream_.async_read_some(buffer_.prepare(4096),
-                            [self = shared_from_this()](beast::error_code ec, size_t bytes) {
-                              if (ec) return self->close();
-                              self->buffer_.commit(bytes);
-                              self->drain();
-                            });
+    tcp().async_read_some(buffer_.prepare(4096),
+                          [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
+                            if (ec) return self->close();
+                            self->buffer_.commit(bytes);
+                            self->drain();
+                          });
   }
 
   TileServer::Impl& server_;
-  beast::tcp_stream stream_;
+  std::shared_ptr<ssl::context> tls_;  // before stream_, which refers to it
+  Stream stream_;
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   detail::Response response_;
@@ -364,6 +461,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   detail::Endpoint endpoint_ = detail::Endpoint::kOther;
   Clock::time_point started_{};
   bool head_ = false;
+  bool tls_established_ = false;
   bool idle_ = false;            // waiting for the first byte of a request
   bool stop_requested_ = false;  // close after the response in progress
 };
@@ -390,7 +488,10 @@ void TileServer::Impl::accept() {
       // large one behind a delayed ACK.
       beast::error_code ignored;
       socket.set_option(tcp::no_delay(true), ignored);
-      std::make_shared<Connection>(*this, std::move(socket))->start();
+      if (std::shared_ptr<ssl::context> tls = currentTls())
+        std::make_shared<Connection<TlsStream>>(*this, std::move(socket), std::move(tls))->start();
+      else
+        std::make_shared<Connection<PlainStream>>(*this, std::move(socket), nullptr)->start();
     }
     accept();
   });
@@ -413,6 +514,10 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   impl->router = std::make_unique<detail::Router>(std::move(catalog), options, impl->metrics,
                                                   std::move(access));
   TESSERA_TRY(impl->access_log.open(options.access_log));
+  if (!options.tls_cert_file.empty() || !options.tls_key_file.empty()) {
+    TESSERA_ASSIGN_OR_RETURN(impl->tls_context, detail::makeServerTlsContext(options.tls_cert_file,
+                                                                             options.tls_key_file));
+  }
 
   beast::error_code ec;
   net::ip::address address = net::ip::make_address(options.bind_address, ec);
@@ -482,11 +587,27 @@ ServeStats TileServer::stats() const {
   stats.connections_open = m.open();
   stats.timeouts = m.errors(detail::ServeError::kTimeout);
   stats.parse_errors = m.errors(detail::ServeError::kParse);
+  stats.tls_handshake_errors = m.errors(detail::ServeError::kTls);
   stats.transcode_cache_hits = cache.hits;
   stats.transcode_cache_misses = cache.misses;
   stats.transcode_cache_bytes = cache.bytes;
   stats.transcode_cache_entries = cache.entries;
   return stats;
+}
+
+bool TileServer::tls() const {
+  return impl_->currentTls() != nullptr;
+}
+
+Result<void> TileServer::reloadTls() {
+  if (!tls()) return fail(ErrorCode::kInvalidArgument, "serve: not serving TLS, nothing to reload");
+  // Built outside the lock: loading files is slow next to an accept.
+  TESSERA_ASSIGN_OR_RETURN(
+      std::shared_ptr<ssl::context> fresh,
+      detail::makeServerTlsContext(impl_->options.tls_cert_file, impl_->options.tls_key_file));
+  std::lock_guard lock(impl_->tls_mutex);
+  impl_->tls_context = std::move(fresh);
+  return {};
 }
 
 void TileServer::stop(uint32_t grace_ms) {
@@ -500,7 +621,7 @@ void TileServer::stop(uint32_t grace_ms) {
     impl->accept_retry->cancel();
   });
   auto signalAll = [&](bool force) {
-    std::vector<std::shared_ptr<Connection>> live;
+    std::vector<std::shared_ptr<ConnectionBase>> live;
     {
       std::lock_guard lock(impl_->registry_mutex);
       for (auto& [raw, weak] : impl_->connections)

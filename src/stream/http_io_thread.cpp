@@ -104,6 +104,7 @@ void HttpSource::ioLoop() {
     {
       std::lock_guard lock(mutex_);
       stats_.in_flight = uint32_t(active.size());
+      stats_.max_in_flight = std::max(stats_.max_in_flight, stats_.in_flight);
     }
     int running = 0;
     curl_multi_perform(multi_, &running);
@@ -200,15 +201,19 @@ void HttpSource::startAttempt(Transfer& transfer) {
   curl_easy_setopt(easy, CURLOPT_CONNECTTIMEOUT_MS, long(options_.connect_timeout.count()));
   curl_easy_setopt(easy, CURLOPT_TIMEOUT_MS, long(options_.request_timeout.count()));
   const bool https = lowercase(url_.substr(0, 8)) == "https://";
-  curl_easy_setopt(easy, CURLOPT_HTTP_VERSION,
-                   long(options_.http2_prior_knowledge ? CURL_HTTP_VERSION_2_PRIOR_KNOWLEDGE
-                                                       : CURL_HTTP_VERSION_2TLS));
+  const long version = options_.http2_prior_knowledge ? CURL_HTTP_VERSION_2_PRIOR_KNOWLEDGE
+                       : options_.http2               ? CURL_HTTP_VERSION_2TLS
+                                                      : CURL_HTTP_VERSION_1_1;
+  curl_easy_setopt(easy, CURLOPT_HTTP_VERSION, version);
   // Where HTTP/2 is possible, a new request waits for the connection being set up rather
   // than opening another: it becomes a stream of that one.
-  if (https || options_.http2_prior_knowledge) curl_easy_setopt(easy, CURLOPT_PIPEWAIT, 1L);
+  if ((https && options_.http2) || options_.http2_prior_knowledge)
+    curl_easy_setopt(easy, CURLOPT_PIPEWAIT, 1L);
   if (!options_.verify_tls) {
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYPEER, 0L);
     curl_easy_setopt(easy, CURLOPT_SSL_VERIFYHOST, 0L);
+  } else if (!options_.ca_file.empty()) {
+    curl_easy_setopt(easy, CURLOPT_CAINFO, options_.ca_file.c_str());
   }
   curl_easy_setopt(easy, CURLOPT_HEADERFUNCTION, &HttpSource::onHeader);
   curl_easy_setopt(easy, CURLOPT_HEADERDATA, &transfer);
@@ -270,12 +275,23 @@ void HttpSource::signForAws(CURL* easy, Transfer& transfer) {
 
 void HttpSource::stopAttempt(Transfer& transfer) {
   if (!transfer.easy) return;
+  // A transfer that opened a connection tells which protocol that connection settled on.
+  long connects = 0, version = CURL_HTTP_VERSION_NONE;
+  curl_easy_getinfo(transfer.easy, CURLINFO_NUM_CONNECTS, &connects);
+  curl_easy_getinfo(transfer.easy, CURLINFO_HTTP_VERSION, &version);
   curl_multi_remove_handle(multi_, transfer.easy);
   idle_easy_.push_back(transfer.easy);
   transfer.easy = nullptr;
   std::lock_guard lock(mutex_);
   stats_.bytes_received += transfer.wire_bytes;
   transfer.wire_bytes = 0;
+  if (connects > 0) {
+    stats_.connections += uint64_t(connects);
+    if (version == CURL_HTTP_VERSION_2_0)
+      stats_.http2_connections += uint64_t(connects);
+    else if (version == CURL_HTTP_VERSION_1_0 || version == CURL_HTTP_VERSION_1_1)
+      stats_.http1_connections += uint64_t(connects);
+  }
 }
 
 bool HttpSource::finishAttempt(Transfer& transfer, CURLcode code, std::mt19937_64& random) {

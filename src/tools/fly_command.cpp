@@ -647,6 +647,10 @@ void addFlightLinkSummary(const Archive& archive, nlohmann::json& summary) {
                      {"cancelled", link_stats->cancelled},
                      {"prefetched_bytes", link_stats->prefetched_bytes},
                      {"prefetch_hit_bytes", link_stats->prefetch_hit_bytes},
+                     {"connections", link_stats->connections},
+                     {"http1_connections", link_stats->http1_connections},
+                     {"http2_connections", link_stats->http2_connections},
+                     {"max_in_flight", link_stats->max_in_flight},
                      {"recent_requests", link_stats->recent.size()},
                      {"recent_mib_s_p50", percentile(mib_s, 50)},
                      {"recent_first_byte_ms_p50", percentile(first_byte_ms, 50)}};

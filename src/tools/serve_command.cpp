@@ -1,4 +1,5 @@
-// `tessera serve`: serves archives over HTTP until SIGINT or SIGTERM (docs/serve.md).
+// `tessera serve`: serves archives over HTTP (or HTTPS) until SIGINT or SIGTERM; SIGHUP reloads
+// the TLS certificate (docs/serve.md).
 #include <signal.h>
 #include <sys/stat.h>
 
@@ -49,13 +50,15 @@ int runServe(const ServeOptions& options, double cache_mib, uint32_t port_number
   sigemptyset(&signals);
   sigaddset(&signals, SIGINT);
   sigaddset(&signals, SIGTERM);
+  sigaddset(&signals, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
-  resolved.on_listening = [](const std::string& address, uint16_t port) {
+  const char* scheme = resolved.tls_cert_file.empty() ? "http" : "https";
+  resolved.on_listening = [scheme](const std::string& address, uint16_t port) {
     const bool v6 = address.find(':') != std::string::npos;
     // The first line on stdout, flushed: scripts and tests read the port from it.
-    std::printf("listening on http://%s%s%s:%u\n", v6 ? "[" : "", address.c_str(), v6 ? "]" : "",
-                unsigned(port));
+    std::printf("listening on %s://%s%s%s:%u\n", scheme, v6 ? "[" : "", address.c_str(),
+                v6 ? "]" : "", unsigned(port));
     std::fflush(stdout);
   };
   Result<std::unique_ptr<TileServer>> started = TileServer::start(resolved);
@@ -66,7 +69,17 @@ int runServe(const ServeOptions& options, double cache_mib, uint32_t port_number
   std::fprintf(stderr, "\n");
 
   int received = 0;
-  sigwait(&signals, &received);
+  while (sigwait(&signals, &received) == 0 && received == SIGHUP) {
+    if (!server.tls()) {
+      std::fprintf(stderr, "tessera serve: SIGHUP ignored: not serving TLS\n");
+    } else if (Result<void> reloaded = server.reloadTls(); !reloaded) {
+      std::fprintf(stderr, "tessera serve: SIGHUP: keeping the previous certificate: %s\n",
+                   reloaded.error().message.c_str());
+    } else {
+      std::fprintf(stderr, "tessera serve: SIGHUP: reloaded %s and %s\n",
+                   resolved.tls_cert_file.c_str(), resolved.tls_key_file.c_str());
+    }
+  }
   std::fprintf(stderr, "tessera serve: %s, finishing responses in flight\n",
                received == SIGINT ? "SIGINT" : "SIGTERM");
   server.stop();
@@ -142,6 +155,13 @@ void registerServeCommand(CLI::App& app, int& exit_code) {
                   "Access file (JSON): public archives, bearer tokens, URL-signing keys, CORS "
                   "origins and rate limits (docs/serve.md, \"Access control\")")
       ->check(CLI::ExistingFile);
+  CLI::Option* tls_cert = cmd->add_option(
+      "--tls-cert", options->tls_cert_file,
+      "Serve HTTPS with this certificate chain (PEM; reloaded on SIGHUP with the key)");
+  CLI::Option* tls_key =
+      cmd->add_option("--tls-key", options->tls_key_file, "The certificate's private key (PEM)");
+  tls_cert->needs(tls_key);
+  tls_key->needs(tls_cert);
   cmd->callback([=, &exit_code] { exit_code = runServe(*options, *cache_mib, *port); });
 }
 

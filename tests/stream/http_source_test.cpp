@@ -185,6 +185,45 @@ TEST_F(NginxTest, HttpsWithHttp2MultiplexesOneConnection) {
   EXPECT_EQ(*after - *before, 1u);
 }
 
+// The HTTP/2 path for real: nginx with TLS (its certificate checked, as the CA file) and h2
+// offered by ALPN, against the same server with HTTP/1.1 only; the client reports which
+// version each connection spoke, and both give the file's bytes.
+TEST_F(NginxTest, HttpsOverHttp2AndHttp11GiveTheSameBytes) {
+  if (nginx_->httpsUrl("").empty()) GTEST_SKIP() << "no /usr/bin/openssl to make a certificate";
+  std::mt19937 random(11);
+  std::vector<std::pair<uint64_t, size_t>> ranges;
+  for (int i = 0; i < 30; ++i)
+    ranges.emplace_back(random() % (bytes_.size() - 70000), 1 + random() % 65536);
+  for (const bool http2 : {true, false}) {
+    HttpOptions options;
+    options.ca_file = nginx_->certificateFile();
+    options.http2 = http2;
+    auto source = open(nginx_->httpsUrl("data.bin"), options);
+    ASSERT_TRUE(source);
+    std::vector<std::thread> threads;
+    std::atomic<int> mismatches{0};
+    for (int t = 0; t < 3; ++t)
+      threads.emplace_back([&, t] {
+        for (size_t i = size_t(t); i < ranges.size(); i += 3)
+          if (readRange(*source, ranges[i].first, ranges[i].second) !=
+              slice(bytes_, ranges[i].first, ranges[i].second))
+            ++mismatches;
+      });
+    for (std::thread& thread : threads) thread.join();
+    EXPECT_EQ(mismatches.load(), 0) << "http2 " << http2;
+    const LinkStats stats = *source->linkStats();
+    EXPECT_GE(stats.connections, 1u);
+    EXPECT_EQ(stats.http2_connections, http2 ? stats.connections : 0u);
+    EXPECT_EQ(stats.http1_connections, http2 ? 0u : stats.connections);
+  }
+  // The tools' way: the CA file from the environment; without it the certificate is refused.
+  ::setenv("TESSERA_CA_FILE", nginx_->certificateFile().c_str(), 1);
+  Result<std::shared_ptr<ByteSource>> trusted = openByteSource(nginx_->httpsUrl("data.bin"));
+  ::unsetenv("TESSERA_CA_FILE");
+  EXPECT_TRUE(trusted) << trusted.error().message;
+  EXPECT_FALSE(openByteSource(nginx_->httpsUrl("data.bin")));
+}
+
 // h2c needs libcurl 8: 7.88 fails every request on a reused prior-knowledge connection
 // (curl/curl#10634), so the source refuses the option there instead of failing each read.
 TEST_F(NginxTest, Http2PriorKnowledgeWorksOrIsRefusedClearly) {

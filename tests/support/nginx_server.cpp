@@ -144,7 +144,7 @@ Result<std::unique_ptr<NginxServer>> NginxServer::start(const std::string& root,
   const bool tls = ::access("/usr/bin/openssl", X_OK) == 0 &&
                    runQuietly({"/usr/bin/openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes",
                                "-keyout", dir + "/key.pem", "-out", dir + "/cert.pem", "-days", "2",
-                               "-subj", "/CN=127.0.0.1"},
+                               "-subj", "/CN=127.0.0.1", "-addext", "subjectAltName=IP:127.0.0.1"},
                               dir + "/openssl.out");
   // Another process may take a port between our check and nginx's bind: try new ones.
   for (int attempt = 0; attempt < 5; ++attempt) {
@@ -201,6 +201,10 @@ std::string NginxServer::url(const std::string& path) const {
 
 std::string NginxServer::h2cUrl(const std::string& path) const {
   return fmt::format("http://127.0.0.1:{}/{}", h2c_port_, path);
+}
+
+std::string NginxServer::certificateFile() const {
+  return tls_port_ ? work_dir_ + "/cert.pem" : std::string();
 }
 
 std::string NginxServer::httpsUrl(const std::string& path) const {

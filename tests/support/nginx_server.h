@@ -36,6 +36,9 @@ class NginxServer {
   std::string h2cUrl(const std::string& path) const;
   /// The same over HTTPS ("https://127.0.0.1:PORT/<path>"), or empty without openssl.
   std::string httpsUrl(const std::string& path) const;
+  /// The HTTPS server's self-signed certificate (PEM, for 127.0.0.1): the CA file a client
+  /// that checks certificates needs. Empty without openssl.
+  std::string certificateFile() const;
   /// Connections nginx accepted so far (stub_status "accepts"), the status request included.
   [[nodiscard]] Result<uint64_t> acceptedConnections() const;
 
