@@ -81,7 +81,8 @@ struct EncodeContext {
   std::atomic<uint64_t> spool_end{0};
   EncodeOptions encode_options;
   Codec codec = Codec::kJpeg;
-  std::vector<WorkerSpool> worker_spools;  ///< indexed by WorkerState::index
+  SampleType sample_type = SampleType::kU8;  ///< of the image being encoded
+  std::vector<WorkerSpool> worker_spools;    ///< indexed by WorkerState::index
   std::atomic<uint64_t> tiles_encoded{0}, tiles_uniform{0}, tiles_empty{0};
   std::mutex error_mutex;  // guards first_error
   std::optional<Error> first_error;
@@ -135,7 +136,11 @@ void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& e
                       const uint8_t* texels, uint32_t side, uint32_t channels,
                       const std::string& what, const ParentTexels* parent) {
   uint32_t colour = 0;
-  switch (classifyTile(texels, side, channels, &colour)) {
+  // Wide samples have no uniform entries (docs/format.md, "Sample types"): every tile is coded.
+  const TileClass tile_class = context.sample_type == SampleType::kU8
+                                   ? classifyTile(texels, side, channels, &colour)
+                                   : TileClass::kMixed;
+  switch (tile_class) {
     case TileClass::kEmpty:
       entry.kind = TileKind::kEmpty;
       ++context.tiles_empty;
@@ -147,7 +152,8 @@ void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& e
       return;
     case TileClass::kMixed: break;
   }
-  ImageView view{texels, side, side, channels, size_t(side) * channels};
+  const size_t texel_bytes = size_t(channels) * sampleBytes(context.sample_type);
+  ImageView view{texels, side, side, channels, side * texel_bytes, context.sample_type};
   auto payload =
       encodeTile(context.codec, view, context.encode_options, parent, &worker.codec_scratch);
   if (!payload) {
@@ -208,6 +214,51 @@ nlohmann::json coarsestLevelStatistics(const LevelRows& rows) {
   return {{"from_level_width", rows.width_px}, {"mean", mean}, {"min", low}, {"max", high}};
 }
 
+/// coarsestLevelStatistics for u16 and f32 samples; NaN and infinities are left out (their
+/// counts are given), so the figures stay numbers JSON can hold.
+nlohmann::json wideLevelStatistics(const LevelRows& rows) {
+  const uint32_t channels = rows.channels;
+  std::vector<double> sum(channels, 0), low(channels, INFINITY), high(channels, -INFINITY);
+  std::vector<uint64_t> finite(channels, 0), non_finite(channels, 0);
+  const size_t sample_bytes = sampleBytes(rows.sample_type);
+  for (uint32_t y = 0; y < rows.height_px; ++y) {
+    const uint8_t* row = rows.row(y);
+    for (size_t i = 0; i < size_t(rows.width_px) * channels; ++i) {
+      double value;
+      if (rows.sample_type == SampleType::kU16) {
+        uint16_t sample;
+        std::memcpy(&sample, row + i * sample_bytes, 2);
+        value = sample;
+      } else {
+        float sample;
+        std::memcpy(&sample, row + i * sample_bytes, 4);
+        value = sample;
+      }
+      const uint32_t c = uint32_t(i % channels);
+      if (!std::isfinite(value)) {
+        ++non_finite[c];
+        continue;
+      }
+      ++finite[c];
+      sum[c] += value;
+      low[c] = std::min(low[c], value);
+      high[c] = std::max(high[c], value);
+    }
+  }
+  nlohmann::json mean = nlohmann::json::array(), min = nlohmann::json::array(),
+                 max = nlohmann::json::array();
+  for (uint32_t c = 0; c < channels; ++c) {
+    mean.push_back(finite[c] ? nlohmann::json(sum[c] / double(finite[c])) : nlohmann::json());
+    min.push_back(finite[c] ? nlohmann::json(low[c]) : nlohmann::json());
+    max.push_back(finite[c] ? nlohmann::json(high[c]) : nlohmann::json());
+  }
+  return {{"from_level_width", rows.width_px},
+          {"mean", mean},
+          {"min", min},
+          {"max", max},
+          {"non_finite", non_finite}};
+}
+
 class EncodingSink final : public TileSink {
  public:
   EncodingSink(const ImageInfo& info, SpooledImage& spooled, EncodeContext& context,
@@ -221,7 +272,9 @@ class EncodingSink final : public TileSink {
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
     growEntries(level, tile_row);
-    if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
+    if (level + 1 == info_.level_count)
+      statistics = info_.sample_type == SampleType::kU8 ? coarsestLevelStatistics(rows)
+                                                        : wideLevelStatistics(rows);
     if (codecNeedsParent(context_.codec)) return holdRow(level, tile_row, rows);
     const uint32_t side = info_.storedTileSidePx();
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
@@ -349,6 +402,23 @@ struct OpenedSources {
   uint64_t pixels_total = 0;       ///< level-0 pixels of every image
 };
 
+/// Wide samples need a codec that holds them and averaging in the sample type itself.
+Result<void> checkSampleTypeOptions(const ImageInfo& info, const BuildOptions& options,
+                                    const std::string& name) {
+  if (info.sample_type == SampleType::kU8) return {};
+  if (!codecSupportsSampleType(options.codec, info.sample_type))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: {} samples cannot be stored with --codec {}; use zdelta, zstd, "
+                            "lz4 or raw{}",
+                            name, sampleTypeName(info.sample_type), codecName(options.codec),
+                            info.sample_type == SampleType::kU16 ? " (or png)" : ""));
+  if (options.srgb_downsample)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: --srgb averages 8-bit samples only, the image is {}", name,
+                            sampleTypeName(info.sample_type)));
+  return {};
+}
+
 /// Opens every source first (files, then the caller's row sources): bad inputs fail before any
 /// output exists, and progress knows the total.
 Result<OpenedSources> openSources(const BuildOptions& options) {
@@ -367,6 +437,7 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
     info.width_px = source.width_px;
     info.height_px = source.height_px;
     info.channels = source.channels;
+    info.sample_type = source.sample_type;
     info.tile_size_px = options.tile_size_px;
     info.border_px = options.border_px;
     info.page_tiles_log2 = options.page_tiles_log2;
@@ -376,6 +447,7 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
                 : is_file                      ? displayName(name)
                                                : name;
     TESSERA_TRY(validateImageInfo(info, name));
+    TESSERA_TRY(checkSampleTypeOptions(info, options, name));
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
     sources.pixels_total += uint64_t(info.width_px) * info.height_px;
     sources.readers.push_back(std::move(reader));
@@ -417,10 +489,15 @@ struct EncodeStage {
 /// source-specific facts (georeference, TIFF layout, synthetic seed).
 nlohmann::json imageMetadata(const ImageInfo& info, const std::string& input,
                              const SourceInfo& source, const nlohmann::json& statistics) {
-  nlohmann::json meta = {
-      {"name", info.name},       {"source", input},          {"source_format", source.format},
-      {"width", info.width_px},  {"height", info.height_px}, {"channels", info.channels},
-      {"statistics", statistics}};
+  nlohmann::json meta = {{"name", info.name},
+                         {"source", input},
+                         {"source_format", source.format},
+                         {"width", info.width_px},
+                         {"height", info.height_px},
+                         {"channels", info.channels},
+                         {"statistics", statistics}};
+  // Only wide images say so: 8-bit archives stay byte-identical to those of 1.0 writers.
+  if (info.sample_type != SampleType::kU8) meta["sample_type"] = sampleTypeName(info.sample_type);
   for (auto& [key, value] : source.metadata.items()) meta[key] = value;
   return meta;
 }
@@ -444,7 +521,8 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::strin
   EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
   const uint32_t band_rows = bandRowsFor(info, reader.info());
-  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  const size_t row_bytes = size_t(info.width_px) * info.texelBytes();
+  stage.context.sample_type = info.sample_type;
   UninitializedBuffer band(row_bytes * band_rows);
   PoolDrain drain{stage.pool};
   for (uint32_t y = 0; y < info.height_px;) {
@@ -466,8 +544,12 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::strin
 
 /// The archive's metadata: the format, the build's options and each image's entry.
 nlohmann::json archiveMetadata(const BuildOptions& options, nlohmann::json image_metadata) {
+  // The header's version (minorVersionFor): wide samples make the archive 1.2.
+  uint16_t minor = kFormatVersionMinor;
+  for (const nlohmann::json& image : image_metadata)
+    if (image.value("sample_type", "u8") != "u8") minor = kSampleTypeMinorVersion;
   return {{"format", "tessera"},
-          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, minor)},
           {"created_by", "tessera build"},
           {"build",
            {{"tile_size", options.tile_size_px},

@@ -37,12 +37,13 @@ PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor
     level->width_px = info.levelWidthPx(l);
     level->height_px = info.levelHeightPx(l);
     level->channels = info.channels;
-    level->row_bytes = size_t(level->width_px) * info.channels;
+    level->sample_type = info.sample_type;
+    level->row_bytes = size_t(level->width_px) * info.texelBytes();
     level->ring_rows = std::min(level->height_px, info.tile_size_px + 2 * info.border_px);
     level->ring.resize(level->row_bytes * level->ring_rows);
     level->tile_rows = info.tilesY(l);
     if (l + 1 < info.level_count)
-      level->downsampled.resize(size_t(info.levelWidthPx(l + 1)) * info.channels);
+      level->downsampled.resize(size_t(info.levelWidthPx(l + 1)) * info.texelBytes());
     levels_.push_back(std::move(level));
   }
 }
@@ -70,7 +71,10 @@ Result<void> PyramidBuilder::addRow(uint32_t level_index, const uint8_t* row) {
     const bool odd_last_row = (y & 1) == 0 && y + 1 == level.height_px;
     if (pair_complete || odd_last_row) {
       const uint8_t* top = level.row(pair_complete ? y - 1 : y);
-      if (floor_average_)
+      if (info_.sample_type != SampleType::kU8)
+        downsampleRowPairWide(top, level.row(y), level.width_px, info_.channels, info_.sample_type,
+                              level.downsampled.data());
+      else if (floor_average_)
         downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels,
                                level.downsampled.data());
       else
