@@ -53,8 +53,8 @@ inline bool parseCodecFuzzInput(std::span<const uint8_t> data, CodecFuzzInput* i
   input->quadrant_x = (data[0] >> 6) & 1;
   input->quadrant_y = (data[0] >> 7) & 1;
   const uint8_t high_bits = data[0] >> 6;
-  input->sample_type = input->codec == Codec::kPtm || high_bits == 3 ? SampleType::kU8
-                                                                       : SampleType(high_bits);
+  input->sample_type =
+      input->codec == Codec::kPtm || high_bits == 3 ? SampleType::kU8 : SampleType(high_bits);
   input->width_px = (data[1] & (kCodecFuzzMaxSidePx - 1)) + 1;
   input->height_px = (data[2] & (kCodecFuzzMaxSidePx - 1)) + 1;
   input->rest = data.subspan(kCodecFuzzHeaderBytes);

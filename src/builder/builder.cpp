@@ -489,13 +489,10 @@ struct EncodeStage {
 /// source-specific facts (georeference, TIFF layout, synthetic seed).
 nlohmann::json imageMetadata(const ImageInfo& info, const std::string& input,
                              const SourceInfo& source, const nlohmann::json& statistics) {
-  nlohmann::json meta = {{"name", info.name},
-                         {"source", input},
-                         {"source_format", source.format},
-                         {"width", info.width_px},
-                         {"height", info.height_px},
-                         {"channels", info.channels},
-                         {"statistics", statistics}};
+  nlohmann::json meta = {
+      {"name", info.name},       {"source", input},          {"source_format", source.format},
+      {"width", info.width_px},  {"height", info.height_px}, {"channels", info.channels},
+      {"statistics", statistics}};
   // Only wide images say so: 8-bit archives stay byte-identical to those of 1.0 writers.
   if (info.sample_type != SampleType::kU8) meta["sample_type"] = sampleTypeName(info.sample_type);
   for (auto& [key, value] : source.metadata.items()) meta[key] = value;

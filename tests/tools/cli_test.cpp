@@ -18,6 +18,7 @@
 #include <tessera/scene.h>
 #include <tessera/stream.h>
 
+#include "builder/band_reader.h"
 #include "codecs/decode.h"
 #include "support/archive_fixture.h"
 #include "support/nginx_server.h"
@@ -169,6 +170,61 @@ TEST_F(Cli, BuildInfoVerifyCorruptVerifyExtract) {
 // known without the renderer: at 1 texel per pixel with pixel centres on texel centres each
 // pixel is its level-0 texel; at 2 texels per pixel, on level-1 texel centres, its level-1
 // texel; outside the image transparent black; a 90-degree rotation swaps the axes.
+// A float TIFF and a 16-bit TIFF through build, info and extract (docs/cli.md, "extract"):
+// samples come out as stored, and what cannot hold them is refused with exit 2.
+TEST_F(Cli, WideSamplesBuildShowAndExtractAsStored) {
+  for (const bool is_float : {true, false}) {
+    SCOPED_TRACE(is_float ? "f32" : "u16");
+    const std::vector<uint8_t> pixels = test::makeTestPixels(90, 70, 1);
+    test::TiffSpec spec{.width_px = 90,
+                        .height_px = 70,
+                        .samples = 1,
+                        .bits = uint16_t(is_float ? 32 : 16),
+                        .sample_format = uint16_t(is_float ? 3 : 1),
+                        .photometric = 1};
+    const std::string source = work_ + "wide.tif", archive_path = work_ + "wide.tess";
+    ASSERT_EQ(test::writeTiff(source, spec, pixels), "");
+    RunResult jpeg = run({"build", source, "-o", archive_path, "-q"});
+    EXPECT_EQ(jpeg.exit_code, 2) << jpeg.err;
+    EXPECT_NE(jpeg.err.find("cannot be stored with --codec jpeg; use zdelta"), std::string::npos)
+        << jpeg.err;
+    RunResult built =
+        run({"build", source, "-o", archive_path, "--codec", "zdelta", "--tile", "64", "-q"});
+    ASSERT_EQ(built.exit_code, 0) << built.err;
+    RunResult info = run({"info", archive_path, "--json"});
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    const nlohmann::json described = nlohmann::json::parse(info.out);
+    EXPECT_EQ(described["images"][0]["sample_type"], is_float ? "f32" : "u16");
+    for (const std::string name : {"rect.tif", "rect.png"}) {
+      RunResult extracted =
+          run({"extract", archive_path, "--rect", "0,0,90,70", "-o", work_ + name});
+      if (is_float && name == "rect.png") {
+        EXPECT_EQ(extracted.exit_code, 2) << extracted.err;
+        EXPECT_NE(extracted.err.find("PNG cannot hold f32 samples"), std::string::npos);
+        continue;
+      }
+      ASSERT_EQ(extracted.exit_code, 0) << extracted.err;
+      auto reader = name == "rect.tif" ? detail::openTiffReader(work_ + name)
+                                       : detail::openPngReader(work_ + name);
+      ASSERT_TRUE(reader) << reader.error().message;
+      std::string error;
+      const std::vector<uint8_t> got = test::readAllRows(**reader, 16, &error);
+      ASSERT_EQ(got.size(), pixels.size() * (is_float ? 4 : 2)) << error;
+      for (size_t i = 0; i < pixels.size(); ++i) {
+        if (is_float) {
+          float value;
+          std::memcpy(&value, got.data() + 4 * i, 4);
+          ASSERT_EQ(value, float(pixels[i]) / 255.0f) << name << " " << i;
+        } else {
+          uint16_t value;
+          std::memcpy(&value, got.data() + 2 * i, 2);
+          ASSERT_EQ(value, pixels[i] * 257) << name << " " << i;
+        }
+      }
+    }
+  }
+}
+
 TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
   const std::string archive_path = work_ + "r.tess";
   const std::string source = "synthetic:300x200:5:3";
