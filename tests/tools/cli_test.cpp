@@ -675,13 +675,15 @@ TEST_F(Cli, BadInputsFailNamingTheFileAndLeaveNoOutput) {
   std::vector<uint8_t> jpeg_bytes = test::readFileBytes(inputs + "good.jpg");
   jpeg_bytes.resize(jpeg_bytes.size() / 2);
   ASSERT_TRUE(test::writeFileBytes(inputs + "truncated.jpg", jpeg_bytes));
-  test::PngSpec png16;
-  png16.width_px = 64;
-  png16.height_px = 48;
-  png16.bit_depth = 16;
-  ASSERT_EQ(test::writePng(inputs + "deep.png", png16, pixels), "");
+  // 16-bit PNG builds (with a codec that holds it); signed samples are still refused.
+  test::TiffSpec signed16;
+  signed16.width_px = 64;
+  signed16.height_px = 48;
+  signed16.bits = 16;
+  signed16.sample_format = 2;  // SAMPLEFORMAT_INT
+  ASSERT_EQ(test::writeTiff(inputs + "signed.tif", signed16, pixels), "");
   for (const std::string name :
-       {"missing.png", "empty.png", "absurd.tif", "absurd.png", "truncated.jpg", "deep.png"}) {
+       {"missing.png", "empty.png", "absurd.tif", "absurd.png", "truncated.jpg", "signed.tif"}) {
     RunResult result = run({"build", inputs + name, "-o", work_ + "out.tess", "--threads", "2"});
     EXPECT_NE(result.exit_code, 0) << name;
     EXPECT_NE(result.exit_code, 2) << name << ": a bad input is not a usage error";
