@@ -1,8 +1,9 @@
 #pragma once
 // The input layout of codec_fuzzer, shared with the seed-corpus generator so both agree:
-//   byte 0: bits 0-2 codec (Codec value; 7 reads as kPtm), bits 3-4 channels - 1,
+//   byte 0: bits 0-2 codec (Codec value 0..7), bits 3-4 channels - 1,
 //           bit 5 mode (0: decode the payload, 1: encode the texels, decode, compare),
-//           bits 6-7 ptm: the quarter of the parent the tile refines, in x and y
+//           bits 6-7 ptm: the quarter of the parent the tile refines, in x and y; other
+//           codecs: the sample type (0 u8, 1 u16, 2 f32, 3 u8)
 //   byte 1: width - 1 (low 6 bits), byte 2: height - 1 (low 6 bits): tiles up to 64x64 keep
 //           each run fast, and the codecs' size-dependent paths are all reached below that
 //   decode mode: bytes 3.. are the payload
@@ -26,6 +27,7 @@ inline constexpr uint32_t kCodecFuzzMaxSidePx = 64;
 struct CodecFuzzInput {
   Codec codec;
   uint32_t channels;
+  SampleType sample_type;  ///< u8 for ptm
   bool round_trip;
   uint32_t width_px;
   uint32_t height_px;
@@ -45,12 +47,14 @@ inline Image fuzzParentTexels(uint32_t side, uint32_t channels) {
 
 inline bool parseCodecFuzzInput(std::span<const uint8_t> data, CodecFuzzInput* input) {
   if (data.size() < kCodecFuzzHeaderBytes) return false;
-  const uint8_t codec = data[0] & 7;
-  input->codec = Codec(std::min<uint8_t>(codec, uint8_t(Codec::kPtm)));
+  input->codec = Codec(data[0] & 7);
   input->channels = ((data[0] >> 3) & 3) + 1;
   input->round_trip = (data[0] >> 5) & 1;
   input->quadrant_x = (data[0] >> 6) & 1;
   input->quadrant_y = (data[0] >> 7) & 1;
+  const uint8_t high_bits = data[0] >> 6;
+  input->sample_type =
+      input->codec == Codec::kPtm || high_bits == 3 ? SampleType::kU8 : SampleType(high_bits);
   input->width_px = (data[1] & (kCodecFuzzMaxSidePx - 1)) + 1;
   input->height_px = (data[2] & (kCodecFuzzMaxSidePx - 1)) + 1;
   input->rest = data.subspan(kCodecFuzzHeaderBytes);

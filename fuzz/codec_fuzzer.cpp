@@ -36,7 +36,7 @@ FuzzParent fuzzParent(const CodecFuzzInput& input) {
 }
 
 void fuzzDecode(const CodecFuzzInput& input, CodecScratch& scratch) {
-  Image out(input.width_px, input.height_px, input.channels);
+  Image out(input.width_px, input.height_px, input.channels, input.sample_type);
   const size_t expected_bytes = out.texels.size();
   const FuzzParent parent = fuzzParent(input);
   auto result = detail::decodeTile(input.codec, input.rest, out, parent.get(), &scratch);
@@ -53,7 +53,7 @@ void fuzzRoundTrip(const CodecFuzzInput& input, CodecScratch& scratch) {
   options.chroma_subsampling = (input.rest[1] >> 4) & 1;
   const std::span<const uint8_t> seed = input.rest.subspan(2);
 
-  Image tile(input.width_px, input.height_px, input.channels);
+  Image tile(input.width_px, input.height_px, input.channels, input.sample_type);
   for (size_t i = 0; i < tile.texels.size(); ++i)
     tile.texels[i] = seed.empty() ? 0 : seed[i % seed.size()];
   const detail::CodecEncoder* encoder = detail::findEncoder(input.codec);
@@ -63,9 +63,14 @@ void fuzzRoundTrip(const CodecFuzzInput& input, CodecScratch& scratch) {
     if (payload) die("unimplemented codec encoded", input);
     return;
   }
+  if (!codecSupportsSampleType(input.codec, input.sample_type)) {
+    if (payload || payload.error().code != ErrorCode::kUnsupported)
+      die("a codec took samples it cannot hold", input);
+    return;
+  }
   if (!payload) die("encode failed", input, payload.error().message.c_str());
 
-  Image decoded(input.width_px, input.height_px, input.channels);
+  Image decoded(input.width_px, input.height_px, input.channels, input.sample_type);
   auto result = detail::decodeTile(input.codec, *payload, decoded, parent.get(), &scratch);
   if (!result) die("decode of a fresh payload failed", input, result.error().message.c_str());
   if (codecIsLossless(input.codec)) {

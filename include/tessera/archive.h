@@ -140,7 +140,9 @@ class Archive {
   [[nodiscard]] Result<Image> readRegionRgba(uint32_t image, uint32_t level,
                                              const PixelRect& rect) const;
 
-  /// Same, in the image's own channel count (no RGBA expansion); outside texels are zero.
+  /// Same, in the image's own channel count and sample type (no RGBA expansion); outside
+  /// texels are zero. readRegionRgba refuses u16 and f32 images (kUnsupported): their samples
+  /// need a display window to become 8-bit.
   [[nodiscard]] Result<Image> readRegion(uint32_t image, uint32_t level,
                                          const PixelRect& rect) const;
 

@@ -29,11 +29,14 @@ struct RowSource {
   std::string name;
   uint32_t width_px = 0;   ///< 1..kMaxImageSidePx
   uint32_t height_px = 0;  ///< 1..kMaxImageSidePx
-  uint32_t channels = 0;   ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA; 8 bits each
+  uint32_t channels = 0;   ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA
   uint32_t band_rows = 0;  ///< rows the source delivers most cheaply at once; 0 = any
-  /// Fills `out` with rows [first_row, first_row + rows), tightly packed (width_px * channels
-  /// bytes per row). Called on the building thread, top to bottom, each row exactly once. An
-  /// error fails the build with its message (prefixed with `name` if it does not start with it).
+  /// u8, u16 or f32 samples (host byte order); wide samples need a codec that holds them.
+  SampleType sample_type = SampleType::kU8;
+  /// Fills `out` with rows [first_row, first_row + rows), tightly packed (width_px * channels *
+  /// sampleBytes(sample_type) bytes per row). Called on the building thread, top to bottom, each
+  /// row exactly once. An error fails the build with its message (prefixed with `name` if it does
+  /// not start with it).
   std::function<Result<void>(uint32_t first_row, uint32_t rows, std::span<uint8_t> out)> read_rows;
 };
 

@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace tessera {
@@ -44,7 +45,34 @@ enum class Codec : uint8_t {
   kPng = 4,   ///< PNG, lossless
   kWebp = 5,  ///< WebP lossless
   kPtm = 6,   ///< progressive texture map coded against the parent tile (Marvie & Bouatouch)
+  /// Samples delta-coded along rows and split into byte planes, then zstd: the lossless codec
+  /// for 16-bit and float images (docs/codecs.md, "zdelta (7)").
+  kZdelta = 7,
 };
+
+/// What one sample (one channel of one texel) is. Values are stable on disk (image record
+/// byte 15, docs/format.md, "Sample types"); samples are stored little-endian.
+enum class SampleType : uint8_t {
+  kU8 = 0,   ///< 8-bit unsigned
+  kU16 = 1,  ///< 16-bit unsigned
+  kF32 = 2,  ///< 32-bit IEEE 754 float; NaN and infinities are stored as they are
+};
+
+/// Format minor version an archive needs when an image's samples are not 8-bit. Archives
+/// whose images are all 8-bit keep the minor they had (0, or 1 with a section table).
+inline constexpr uint16_t kSampleTypeMinorVersion = 2;
+
+/// Bytes of one sample: 1, 2 or 4.
+constexpr uint32_t sampleBytes(SampleType type) {
+  return type == SampleType::kF32 ? 4 : type == SampleType::kU16 ? 2 : 1;
+}
+/// Names a sample type for the CLI and JSON: "u8", "u16", "f32".
+const char* sampleTypeName(SampleType type);
+/// Parses a sample type name; returns false for an unknown name.
+bool parseSampleTypeName(std::string_view name, SampleType* type);
+/// True when `codec` can store samples of `type`: raw, zstd, lz4 and zdelta store any type,
+/// png 8- and 16-bit, jpeg, webp and ptm only 8-bit.
+bool codecSupportsSampleType(Codec codec, SampleType type);
 
 /// Names a codec for the CLI and JSON: "raw", "zstd", "lz4", "jpeg", "png", "webp", "ptm".
 const char* codecName(Codec codec);
@@ -95,7 +123,7 @@ struct TileEntry {
 struct ImageInfo {
   uint32_t width_px = 0;         ///< level 0 width, 1..kMaxImageSidePx
   uint32_t height_px = 0;        ///< level 0 height, 1..kMaxImageSidePx
-  uint32_t channels = 0;         ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA; 8 bits each
+  uint32_t channels = 0;         ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA
   uint32_t tile_size_px = 0;     ///< power of two, kMinTileSizePx..kMaxTileSizePx
   uint32_t border_px = 0;        ///< texels copied from neighbours on each side, 0..kMaxBorderPx
   uint32_t level_count = 0;      ///< levels stored, derived from size and tile size
@@ -103,6 +131,7 @@ struct ImageInfo {
   Codec default_codec = Codec::kZstd;
   bool srgb_downsample = false;  ///< levels averaged in linear light rather than sRGB codes
   std::string name;              ///< from metadata; "" when unnamed
+  SampleType sample_type = SampleType::kU8;  ///< what each channel of a texel is
 
   uint32_t levelWidthPx(uint32_t level) const;
   uint32_t levelHeightPx(uint32_t level) const;
@@ -110,23 +139,28 @@ struct ImageInfo {
   uint32_t tilesY(uint32_t level) const;
   /// Side of a stored tile including borders: tile_size_px + 2 * border_px.
   uint32_t storedTileSidePx() const { return tile_size_px + 2 * border_px; }
+  /// Bytes of one texel: channels times the sample size.
+  uint32_t texelBytes() const { return channels * sampleBytes(sample_type); }
   /// Bytes of one decoded tile including borders.
   size_t storedTileBytes() const {
-    return size_t(storedTileSidePx()) * storedTileSidePx() * channels;
+    return size_t(storedTileSidePx()) * storedTileSidePx() * texelBytes();
   }
 };
 
 /// Number of levels for a size: levels until both sides fit in one tile (at least 1).
 uint32_t levelCountFor(uint32_t width_px, uint32_t height_px, uint32_t tile_size_px);
 
-/// A read-only view of 8-bit texels, rows `stride_bytes` apart. Does not own its memory.
+/// A read-only view of texels, rows `stride_bytes` apart. Does not own its memory. Samples
+/// are `sample_type` in host (little-endian) order.
 struct ImageView {
   const uint8_t* data = nullptr;
   uint32_t width_px = 0;
   uint32_t height_px = 0;
   uint32_t channels = 0;
   size_t stride_bytes = 0;
+  SampleType sample_type = SampleType::kU8;
   const uint8_t* row(uint32_t y) const { return data + y * stride_bytes; }
+  uint32_t texelBytes() const { return channels * sampleBytes(sample_type); }
 };
 
 /// An owned image with tightly packed rows.
@@ -134,18 +168,23 @@ struct Image {
   uint32_t width_px = 0;
   uint32_t height_px = 0;
   uint32_t channels = 0;
-  std::vector<uint8_t> texels;  ///< width_px * height_px * channels bytes
+  std::vector<uint8_t> texels;  ///< width_px * height_px * texelBytes() bytes
+  SampleType sample_type = SampleType::kU8;
 
   Image() = default;
-  Image(uint32_t width, uint32_t height, uint32_t channel_count)
+  Image(uint32_t width, uint32_t height, uint32_t channel_count, SampleType type = SampleType::kU8)
       : width_px(width),
         height_px(height),
         channels(channel_count),
-        texels(size_t(width) * height * channel_count) {}
-  size_t strideBytes() const { return size_t(width_px) * channels; }
+        texels(size_t(width) * height * channel_count * sampleBytes(type)),
+        sample_type(type) {}
+  uint32_t texelBytes() const { return channels * sampleBytes(sample_type); }
+  size_t strideBytes() const { return size_t(width_px) * texelBytes(); }
   uint8_t* row(uint32_t y) { return texels.data() + y * strideBytes(); }
   const uint8_t* row(uint32_t y) const { return texels.data() + y * strideBytes(); }
-  ImageView view() const { return {texels.data(), width_px, height_px, channels, strideBytes()}; }
+  ImageView view() const {
+    return {texels.data(), width_px, height_px, channels, strideBytes(), sample_type};
+  }
 };
 
 }  // namespace tessera

@@ -1,6 +1,7 @@
 #pragma once
 /// \file
-/// Pictures and images as PNG files, written so that a failed write leaves no file behind.
+/// Pictures and images as PNG and TIFF files, written so that a failed write leaves no file
+/// behind.
 
 #include <string>
 
@@ -16,7 +17,13 @@ namespace tessera {
 /// Thread-safe.
 [[nodiscard]] Result<void> writePng(const Picture& picture, const std::string& path);
 
-/// The same for an image of 1 to 4 channels (gray, gray+alpha, RGB, RGBA).
+/// The same for an image of 1 to 4 channels (gray, gray+alpha, RGB, RGBA): an 8-bit PNG for
+/// u8 samples, a 16-bit PNG for u16; f32 images fail with kUnsupported (use writeTiff).
 [[nodiscard]] Result<void> writePng(const Image& image, const std::string& path);
+
+/// Writes an image of any sample type as an uncompressed baseline TIFF (8/16-bit unsigned or
+/// 32-bit IEEE float samples, min-is-black or RGB, alpha as an unassociated extra sample),
+/// atomically as writePng. kTooLarge past 4 GiB of texels.
+[[nodiscard]] Result<void> writeTiff(const Image& image, const std::string& path);
 
 }  // namespace tessera

@@ -70,9 +70,10 @@ class Archive:
 
     def read_region(self, level: int, x: int, y: int, w: int, h: int, image: int = 0,
                     rgba: bool = False):
-        """Texels [x, x + w) x [y, y + h) of `level` as a uint8 array of shape (h, w, channels)
-        (channels 4 with rgba=True). Outside the level texels are zero. The array owns the
-        decoded buffer (no copy)."""
+        """Texels [x, x + w) x [y, y + h) of `level` as an array of shape (h, w, channels) and
+        the image's dtype (uint8, uint16 or float32: `images[image].dtype`), bit-exact, NaN and
+        infinities included (rgba=True: uint8 RGBA, 8-bit images only). Outside the level
+        texels are zero. The array owns the decoded buffer (no copy)."""
         return self._native.read_region(level, x, y, w, h, image, rgba)
 
     def tile_info(self, level: int, x: int, y: int, image: int = 0) -> TileInfo:
@@ -81,8 +82,8 @@ class Archive:
         return self._native.tile_info(level, x, y, image)
 
     def read_tile(self, level: int, x: int, y: int, image: int = 0):
-        """A tile's decoded texels with borders: (side, side, channels) uint8, side =
-        tile_size + 2 * border."""
+        """A tile's decoded texels with borders: (side, side, channels) of the image's dtype,
+        side = tile_size + 2 * border."""
         return self._native.read_tile(level, x, y, image)
 
     def tiles(self, level: Optional[int] = None, image: int = 0,

@@ -16,7 +16,8 @@ def _info(archive: tessera.Archive, as_json: bool, levels: bool) -> None:
         images = []
         for info in archive.images:
             entry = {"name": info.name, "width": info.width, "height": info.height,
-                     "channels": info.channels, "tile_size": info.tile_size,
+                     "channels": info.channels, "sample_type": info.sample_type,
+                     "tile_size": info.tile_size,
                      "border": info.border, "level_count": info.level_count,
                      "codec": info.codec}
             if levels:
@@ -28,8 +29,8 @@ def _info(archive: tessera.Archive, as_json: bool, levels: bool) -> None:
     print(f"{archive.name}: {archive.file_bytes} bytes, {len(archive.images)} image(s)")
     for index, info in enumerate(archive.images):
         print(f"image {index} '{info.name}': {info.width} x {info.height} px, "
-              f"{info.channels} channel(s), tiles {info.tile_size} px, border {info.border}, "
-              f"{info.level_count} levels, codec {info.codec}")
+              f"{info.channels} channel(s) of {info.sample_type}, tiles {info.tile_size} px, "
+              f"border {info.border}, {info.level_count} levels, codec {info.codec}")
         if levels:
             for level in info.levels:
                 print(f"  level {level['level']}: {level['width']} x {level['height']} px, "

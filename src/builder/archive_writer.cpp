@@ -163,6 +163,7 @@ Result<uint64_t> writeHeaderRegion(const TempFile& out, HeaderRegion& region,
   std::span<uint8_t> bytes = region.bytes();
   std::memcpy(bytes.data() + kHeaderBytes, root.data(), root.size());
   FileHeader header;
+  header.version_minor = minorVersionFor(records);
   header.file_bytes = std::max<uint64_t>(end_bytes, kHeaderRegionBytes);
   header.image_count = uint32_t(records.size());
   header.root = {kHeaderBytes, root.size(), checksum64(root)};

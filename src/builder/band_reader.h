@@ -10,6 +10,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include <tessera/format.h>
 #include <tessera/result.h>
 
 namespace tessera {
@@ -22,7 +23,8 @@ namespace tessera::detail {
 struct SourceInfo {
   uint32_t width_px = 0;
   uint32_t height_px = 0;
-  uint32_t channels = 0;  ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA (8 bits each)
+  uint32_t channels = 0;                     ///< 1 gray, 2 gray+alpha, 3 RGB, 4 RGBA
+  SampleType sample_type = SampleType::kU8;  ///< what readRows delivers, host byte order
   /// Rows the reader produces most cheaply at once (a TIFF strip or tile row); the builder
   /// asks for bands of about this height. At least 1.
   uint32_t natural_band_rows = 1;

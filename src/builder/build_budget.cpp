@@ -38,7 +38,7 @@ uint64_t tileCount(const ImageInfo& info) {
 
 /// One image's rows: band, reader, one band per level, held tile rows.
 uint64_t imageRowsBytes(const ImageInfo& info, const SourceInfo& source, Codec codec) {
-  const uint64_t c = info.channels;
+  const uint64_t c = info.texelBytes();  // bytes per texel, whatever the sample type
   uint64_t bytes = uint64_t(bandRowsFor(info, source)) * info.width_px * c + source.buffer_bytes;
   const uint32_t band_rows = info.tile_size_px + 2 * info.border_px;
   for (uint32_t l = 0; l < info.level_count; ++l) {
@@ -147,7 +147,7 @@ uint64_t estimateArchiveBytes(std::span<const ImageInfo> infos, Codec codec, int
   }
   double bytes = 0;
   for (const ImageInfo& info : infos)
-    bytes += double(info.width_px) * info.height_px * info.channels * 4 / 3;
+    bytes += double(info.width_px) * info.height_px * info.texelBytes() * 4 / 3;
   return uint64_t(bytes * ratio);
 }
 

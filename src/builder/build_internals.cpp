@@ -53,6 +53,51 @@ nlohmann::json coarsestLevelStatistics(const LevelRows& rows) {
   return {{"from_level_width", rows.width_px}, {"mean", mean}, {"min", low}, {"max", high}};
 }
 
+/// coarsestLevelStatistics for u16 and f32 samples; NaN and infinities are left out (their
+/// counts are given), so the figures stay numbers JSON can hold.
+nlohmann::json wideLevelStatistics(const LevelRows& rows) {
+  const uint32_t channels = rows.channels;
+  std::vector<double> sum(channels, 0), low(channels, INFINITY), high(channels, -INFINITY);
+  std::vector<uint64_t> finite(channels, 0), non_finite(channels, 0);
+  const size_t sample_bytes = sampleBytes(rows.sample_type);
+  for (uint32_t y = 0; y < rows.height_px; ++y) {
+    const uint8_t* row = rows.row(y);
+    for (size_t i = 0; i < size_t(rows.width_px) * channels; ++i) {
+      double value;
+      if (rows.sample_type == SampleType::kU16) {
+        uint16_t sample;
+        std::memcpy(&sample, row + i * sample_bytes, 2);
+        value = sample;
+      } else {
+        float sample;
+        std::memcpy(&sample, row + i * sample_bytes, 4);
+        value = sample;
+      }
+      const uint32_t c = uint32_t(i % channels);
+      if (!std::isfinite(value)) {
+        ++non_finite[c];
+        continue;
+      }
+      ++finite[c];
+      sum[c] += value;
+      low[c] = std::min(low[c], value);
+      high[c] = std::max(high[c], value);
+    }
+  }
+  nlohmann::json mean = nlohmann::json::array(), min = nlohmann::json::array(),
+                 max = nlohmann::json::array();
+  for (uint32_t c = 0; c < channels; ++c) {
+    mean.push_back(finite[c] ? nlohmann::json(sum[c] / double(finite[c])) : nlohmann::json());
+    min.push_back(finite[c] ? nlohmann::json(low[c]) : nlohmann::json());
+    max.push_back(finite[c] ? nlohmann::json(high[c]) : nlohmann::json());
+  }
+  return {{"from_level_width", rows.width_px},
+          {"mean", mean},
+          {"min", min},
+          {"max", max},
+          {"non_finite", non_finite}};
+}
+
 std::string displayName(const std::string& input) {
   if (input.rfind("synthetic:", 0) == 0) return input;
   return std::filesystem::path(input).filename().string();
@@ -66,14 +111,20 @@ nlohmann::json imageMetadata(const ImageInfo& info, const std::string& input,
       {"name", info.name},       {"source", input},          {"source_format", source.format},
       {"width", info.width_px},  {"height", info.height_px}, {"channels", info.channels},
       {"statistics", statistics}};
+  // Only wide images say so: 8-bit archives stay byte-identical to those of 1.0 writers.
+  if (info.sample_type != SampleType::kU8) meta["sample_type"] = sampleTypeName(info.sample_type);
   for (auto& [key, value] : source.metadata.items()) meta[key] = value;
   return meta;
 }
 
 /// The archive's metadata: the format, the build's options and each image's entry.
 nlohmann::json archiveMetadata(const BuildOptions& options, nlohmann::json image_metadata) {
+  // The header's version (minorVersionFor): wide samples make the archive 1.2.
+  uint16_t minor = kFormatVersionMinor;
+  for (const nlohmann::json& image : image_metadata)
+    if (image.value("sample_type", "u8") != "u8") minor = kSampleTypeMinorVersion;
   return {{"format", "tessera"},
-          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, kFormatVersionMinor)},
+          {"format_version", fmt::format("{}.{}", kFormatVersionMajor, minor)},
           {"created_by", "tessera build"},
           {"build",
            {{"tile_size", options.tile_size_px},

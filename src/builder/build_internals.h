@@ -24,6 +24,9 @@ TileClass classifyTile(const uint8_t* texels, uint32_t side, uint32_t channels,
 
 /// Summary statistics of an image, from its coarsest level.
 nlohmann::json coarsestLevelStatistics(const LevelRows& rows);
+/// coarsestLevelStatistics for u16 and f32 samples; NaN and infinities are left out (their
+/// counts are given), so the figures stay numbers JSON can hold.
+nlohmann::json wideLevelStatistics(const LevelRows& rows);
 
 /// The name an input gets when none is given: its file name, or the synthetic spec.
 std::string displayName(const std::string& input);

@@ -21,7 +21,8 @@ struct EffortRange {
 
 EffortRange effortRange(Codec codec) {
   switch (codec) {
-    case Codec::kZstd: return {-100, 22, "the zstd level, negative for the fast levels"};
+    case Codec::kZstd:
+    case Codec::kZdelta: return {-100, 22, "the zstd level, negative for the fast levels"};
     case Codec::kPng: return {0, 9, "the zlib level"};
     case Codec::kWebp: return {0, 9, "the lossless preset"};
     case Codec::kPtm: return {0, 4, "the mode (docs/codecs.md)"};
@@ -86,6 +87,9 @@ Result<void> validateBuildOptions(const BuildOptions& options) {
     if (source.channels < 1 || source.channels > 4)
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}: {} channels out of 1..4", source.name, source.channels));
+    if (uint8_t(source.sample_type) > uint8_t(SampleType::kF32))
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: unknown sample type {}", source.name, int(source.sample_type)));
   }
   for (const std::string& input : options.inputs) {
     if (std::filesystem::path(input).lexically_normal() ==

@@ -82,7 +82,8 @@ struct EncodeContext {
   std::atomic<uint64_t> spool_end{0};
   EncodeOptions encode_options;
   Codec codec = Codec::kJpeg;
-  std::vector<WorkerSpool> worker_spools;  ///< indexed by WorkerState::index
+  SampleType sample_type = SampleType::kU8;  ///< of the image being encoded
+  std::vector<WorkerSpool> worker_spools;    ///< indexed by WorkerState::index
   std::atomic<uint64_t> tiles_encoded{0}, tiles_uniform{0}, tiles_empty{0};
   uint64_t tiles_copied = 0;  ///< imported payloads taken as stored (the building thread's)
   std::mutex error_mutex;     // guards first_error
@@ -113,7 +114,11 @@ void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& e
                       const uint8_t* texels, uint32_t side, uint32_t channels,
                       const std::string& what, const ParentTexels* parent) {
   uint32_t colour = 0;
-  switch (classifyTile(texels, side, channels, &colour)) {
+  // Wide samples have no uniform entries (docs/format.md, "Sample types"): every tile is coded.
+  const TileClass tile_class = context.sample_type == SampleType::kU8
+                                   ? classifyTile(texels, side, channels, &colour)
+                                   : TileClass::kMixed;
+  switch (tile_class) {
     case TileClass::kEmpty:
       entry.kind = TileKind::kEmpty;
       ++context.tiles_empty;
@@ -125,7 +130,8 @@ void encodeJobOrThrow(EncodeContext& context, WorkerState& worker, SpoolEntry& e
       return;
     case TileClass::kMixed: break;
   }
-  ImageView view{texels, side, side, channels, size_t(side) * channels};
+  const size_t texel_bytes = size_t(channels) * sampleBytes(context.sample_type);
+  ImageView view{texels, side, side, channels, side * texel_bytes, context.sample_type};
   auto payload =
       encodeTile(context.codec, view, context.encode_options, parent, &worker.codec_scratch);
   if (!payload) {
@@ -177,7 +183,9 @@ class EncodingSink final : public TileSink {
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
     growEntries(level, tile_row);
-    if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
+    if (level + 1 == info_.level_count)
+      statistics = info_.sample_type == SampleType::kU8 ? coarsestLevelStatistics(rows)
+                                                        : wideLevelStatistics(rows);
     if (codecNeedsParent(context_.codec)) return holdRow(level, tile_row, rows);
     const uint32_t side = info_.storedTileSidePx();
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
@@ -302,6 +310,23 @@ struct OpenedSources {
   uint64_t pixels_total = 0;       ///< level-0 pixels of every image
 };
 
+/// Wide samples need a codec that holds them and averaging in the sample type itself.
+Result<void> checkSampleTypeOptions(const ImageInfo& info, const BuildOptions& options,
+                                    const std::string& name) {
+  if (info.sample_type == SampleType::kU8) return {};
+  if (!codecSupportsSampleType(options.codec, info.sample_type))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: {} samples cannot be stored with --codec {}; use zdelta, zstd, "
+                            "lz4 or raw{}",
+                            name, sampleTypeName(info.sample_type), codecName(options.codec),
+                            info.sample_type == SampleType::kU16 ? " (or png)" : ""));
+  if (options.srgb_downsample)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: --srgb averages 8-bit samples only, the image is {}", name,
+                            sampleTypeName(info.sample_type)));
+  return {};
+}
+
 /// Opens every source first (files, then the caller's row sources): bad inputs fail before any
 /// output exists, and progress knows the total.
 Result<OpenedSources> openSources(const BuildOptions& options) {
@@ -325,6 +350,7 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
     info.width_px = source.width_px;
     info.height_px = source.height_px;
     info.channels = source.channels;
+    info.sample_type = source.sample_type;
     info.tile_size_px = options.tile_size_px;
     info.border_px = options.border_px;
     info.page_tiles_log2 = options.page_tiles_log2;
@@ -334,6 +360,7 @@ Result<OpenedSources> openSources(const BuildOptions& options) {
                 : is_file                      ? displayName(name)
                                                : name;
     TESSERA_TRY(validateImageInfo(info, name));
+    TESSERA_TRY(checkSampleTypeOptions(info, options, name));
     info.level_count = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
     sources.pixels_total += uint64_t(info.width_px) * info.height_px;
     sources.readers.push_back(std::move(reader));
@@ -383,7 +410,7 @@ struct PoolDrain {
 Result<void> streamRows(const BuildOptions& options, const ImageInfo& info, BandReader& reader,
                         PyramidBuilder& pyramid, EncodeStage& stage, bool count_progress) {
   const uint32_t band_rows = bandRowsFor(info, reader.info());
-  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  const size_t row_bytes = size_t(info.width_px) * info.texelBytes();
   // The reader decodes straight into the pyramid's level-0 band: no copy of the image's rows.
   for (uint32_t y = 0; y < info.height_px;) {
     if (stage.cancelled()) return fail(ErrorCode::kCancelled, options.output + ": build cancelled");
@@ -410,6 +437,7 @@ Result<nlohmann::json> encodeImage(const BuildOptions& options, const std::strin
     spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
   EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
   PyramidBuilder pyramid(info, sink, /*floor_average=*/options.codec == Codec::kPtm);
+  stage.context.sample_type = info.sample_type;
   PoolDrain drain{stage.pool};
   TESSERA_TRY(streamRows(options, info, reader, pyramid, stage, /*count_progress=*/true));
   for (uint32_t l = 0; l < info.level_count; ++l)

@@ -3,6 +3,8 @@
 
 #include <cstdint>
 
+#include <tessera/format.h>
+
 namespace tessera::detail {
 
 /// Averages `top` and `bottom` (the same pointer for an odd image's last row) in 2x2 blocks
@@ -25,5 +27,13 @@ void downsampleRowPairScalar(const uint8_t* top, const uint8_t* bottom, uint32_t
 /// extended by replicating its edge, which is what tiles' padding does (docs/format.md, "ptm").
 void downsampleRowPairFloor(const uint8_t* top, const uint8_t* bottom, uint32_t width,
                             uint32_t channels, uint8_t* out);
+
+/// downsampleRowPair for samples wider than a byte (docs/builder.md, "16-bit and float").
+/// u16: the rounded mean, alpha-weighted as for 8-bit (64-bit sums, no overflow). f32: each
+/// channel, alpha included and unweighted, is the mean in double of the block's samples that
+/// are not NaN, rounded once to float; a block whose four samples are all NaN gives the first
+/// one's bits; infinities propagate (+Inf with -Inf gives NaN, as IEEE addition does).
+void downsampleRowPairWide(const uint8_t* top, const uint8_t* bottom, uint32_t width,
+                           uint32_t channels, SampleType type, uint8_t* out);
 
 }  // namespace tessera::detail

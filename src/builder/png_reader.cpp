@@ -1,11 +1,10 @@
 // PNG band reader over libpng, one row per png_read_row, so memory is one row plus zlib's
 // window whatever the height.
 //
-// Accepted: 8-bit gray, gray+alpha, RGB, RGBA; palette images expanded to RGB (RGBA when a
-// tRNS chunk gives transparency); 1/2/4-bit gray expanded to 8 bits; tRNS on gray or RGB turns
-// into an alpha channel. Refused with kUnsupported:
-//  - 16-bit samples: the archive stores 8 bits per channel, and a silent down-conversion
-//    would throw away half of every sample; convert deliberately before building.
+// Accepted: 8- and 16-bit gray, gray+alpha, RGB, RGBA (16-bit samples stay 16-bit: a u16
+// image); palette images expanded to RGB (RGBA when a tRNS chunk gives transparency);
+// 1/2/4-bit gray expanded to 8 bits; tRNS on gray or RGB turns into an alpha channel. Refused
+// with kUnsupported:
 //  - interlaced (Adam7) images: their first pass already spans the whole height, so rows come
 //    out only after the whole image is decoded into memory, which is what a band reader exists
 //    to avoid. Re-save without interlacing (e.g. `convert -interlace none`).
@@ -112,6 +111,7 @@ bool PngReader::setUpTransforms(Header* header) {
     png_set_expand_gray_1_2_4_to_8(png_);
   }
   if (png_get_valid(png_, png_info_, PNG_INFO_tRNS)) png_set_tRNS_to_alpha(png_);
+  if (header->bit_depth == 16) png_set_swap(png_);  // PNG is big-endian, samples host order
   png_read_update_info(png_, png_info_);
   header->channels = png_get_channels(png_, png_info_);
   header->row_bytes = png_get_rowbytes(png_, png_info_);
@@ -121,7 +121,8 @@ bool PngReader::setUpTransforms(Header* header) {
 bool PngReader::startRows() {
   if (!setUpTransforms(&header_)) return false;
   if (header_.channels != int(info_.channels) ||
-      header_.row_bytes != size_t(header_.width) * info_.channels) {
+      header_.row_bytes !=
+          size_t(header_.width) * info_.channels * sampleBytes(info_.sample_type)) {
     std::snprintf(messages_.error, sizeof(messages_.error),
                   "unexpected PNG layout: %d channels, %zu bytes per row", header_.channels,
                   header_.row_bytes);
@@ -165,12 +166,6 @@ Result<void> PngReader::open() {
                 fmt::format("{}: truncated or corrupt PNG header ({})", path_, messages_.error));
   }
   TESSERA_TRY(checkSourceDimensions(path_, header.width, header.height));
-  if (header.bit_depth == 16) {
-    return fail(ErrorCode::kUnsupported,
-                path_ +
-                    ": 16-bit PNG is not supported (8 bits per channel only); convert it to "
-                    "8 bits first");
-  }
   if (header.interlace != PNG_INTERLACE_NONE) {
     return fail(ErrorCode::kUnsupported,
                 path_ +
@@ -194,9 +189,12 @@ Result<void> PngReader::open() {
   info_.width_px = header.width;
   info_.height_px = header.height;
   info_.channels = channels;
+  info_.sample_type = header.bit_depth == 16 ? SampleType::kU16 : SampleType::kU8;
   info_.natural_band_rows = std::min<uint32_t>(header.height, 64);
   // libpng's current and previous rows (before and after the expansions) and zlib's window.
-  info_.buffer_bytes = 4 * (uint64_t(header.width) * channels + 1) + (uint64_t(1) << 20);
+  info_.buffer_bytes =
+      4 * (uint64_t(header.width) * channels * (header.bit_depth == 16 ? 2 : 1) + 1) +
+      (uint64_t(1) << 20);
   info_.format = "png";
   static constexpr const char* kColourNames[] = {"gray",       "?", "rgb", "palette",
                                                  "gray+alpha", "?", "rgba"};

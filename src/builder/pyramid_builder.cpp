@@ -36,7 +36,8 @@ PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor
     level->width_px = info.levelWidthPx(l);
     level->height_px = info.levelHeightPx(l);
     level->channels = info.channels;
-    level->row_bytes = size_t(level->width_px) * info.channels;
+    level->sample_type = info.sample_type;
+    level->row_bytes = size_t(level->width_px) * info.texelBytes();
     level->ring_rows = std::min(level->height_px, info.tile_size_px + 2 * info.border_px);
     level->ring.resize(level->row_bytes * level->ring_rows);
     level->tile_rows = info.tilesY(l);
@@ -105,7 +106,10 @@ Result<void> PyramidBuilder::rowArrived(uint32_t level_index) {
       TESSERA_CHECK(next.received < next.height_px) << "more rows than the level has";
       uint8_t* target = next.mutableRow(next.received);
       const uint8_t* top = level.row(pair_complete ? y - 1 : y);
-      if (floor_average_)
+      if (info_.sample_type != SampleType::kU8)
+        downsampleRowPairWide(top, level.row(y), level.width_px, info_.channels, info_.sample_type,
+                              target);
+      else if (floor_average_)
         downsampleRowPairFloor(top, level.row(y), level.width_px, info_.channels, target);
       else
         downsampleRowPair(top, level.row(y), level.width_px, info_.channels, info_.srgb_downsample,

@@ -23,6 +23,7 @@ class RowSourceReader final : public BandReader {
     info_.width_px = source.width_px;
     info_.height_px = source.height_px;
     info_.channels = source.channels;
+    info_.sample_type = source.sample_type;
     info_.natural_band_rows =
         std::clamp(source.band_rows ? source.band_rows : kDefaultBandRows, 1u, source.height_px);
     info_.format = "rows";

@@ -7,7 +7,7 @@
 namespace tessera::detail {
 
 Result<void> ScanlineReader::readRows(uint32_t rows, std::span<uint8_t> out) {
-  const size_t row_bytes = size_t(info_.width_px) * info_.channels;
+  const size_t row_bytes = size_t(info_.width_px) * info_.channels * sampleBytes(info_.sample_type);
   TESSERA_CHECK(rows > 0 && rows <= info_.height_px - next_row_)
       << path_ << ": readRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
   TESSERA_CHECK(out.size() >= rows * row_bytes) << path_ << ": output span too small";

@@ -26,7 +26,7 @@ class ScanlineReader : public BandReader {
  protected:
   explicit ScanlineReader(std::string path) : path_(std::move(path)) {}
 
-  /// Decodes the next row into `row` (width_px * channels bytes). False after a decoder error.
+  /// Decodes the next row into `row` (width_px * channels samples). False after a decoder error.
   virtual bool decodeRow(uint8_t* row) = 0;
   /// Reads past the last row to the end of the image data (PNG IEND, JPEG EOI). False after a
   /// decoder error.

@@ -2,14 +2,15 @@
 // strip by strip, tiled images one row of tiles at a time, so memory stays at one band plus
 // one strip or tile whatever the image height (libvips' tiff2vips reads the same way).
 //
-// Accepted: 8-bit unsigned samples, photometric min-is-black, min-is-white (inverted to
-// min-is-black), RGB, and YCbCr when JPEG-compressed (libtiff converts to RGB through
+// Accepted: 8- and 16-bit unsigned and 32-bit IEEE float samples (libtiff returns them in
+// host byte order and undoes the floating-point predictor), photometric min-is-black, min-is-white
+// (inverted to min-is-black), RGB, and YCbCr when JPEG-compressed (libtiff converts to RGB through
 // TIFFTAG_JPEGCOLORMODE). Any compression libtiff was built with. Contiguous or separate planes.
 // Extra samples: the first one becomes alpha whatever its ExtraSamples type (GDAL writes
 // "unspecified" for alpha as often as not); further extra samples are dropped, so a 5-sample
 // RGBA + infrared image reads as RGBA. Associated (premultiplied) alpha is passed through as
-// stored. Refused with kUnsupported: other bit depths, signed or floating-point samples,
-// palette, CMYK and other photometrics.
+// stored. Refused with kUnsupported: other bit depths, signed samples, min-is-white with wide
+// samples, palette, CMYK and other photometrics.
 
 #include "builder/geotiff_tags.h"
 
@@ -191,6 +192,8 @@ class TiffReader final : public BandReader {
   Result<void> setUpStrips(const TiffFormat& format, nlohmann::json& tiff);
   // Samples of one pixel in a decoded unit: one plane's when separate, else every sample.
   uint64_t samplesPerUnitPixel() const { return separate_ ? 1 : spp_; }
+  // Bytes of one output pixel.
+  uint64_t pixelBytes() const { return uint64_t(info_.channels) * sample_bytes_; }
   Result<void> readGeoreference();
   /// Decodes the band from `first_row` into `dest`, or into band_ (then valid) when null.
   Result<void> fillBand(uint32_t first_row, uint8_t* dest = nullptr);
@@ -211,6 +214,7 @@ class TiffReader final : public BandReader {
   Layout layout_ = Layout::kStripedScanlines;
   bool separate_ = false;
   uint16_t spp_ = 0;             // samples per pixel in the file
+  uint32_t sample_bytes_ = 1;    // 1, 2 or 4: one sample in the file and in the output
   uint32_t rows_per_strip_ = 0;  // striped only, clamped to the height
   uint32_t tile_width_px_ = 0;   // tiled only
   uint32_t tile_height_px_ = 0;  // tiled only
@@ -251,6 +255,9 @@ Result<void> TiffReader::open() {
   info_.width_px = format.width_px;
   info_.height_px = format.height_px;
   info_.channels = channels;
+  info_.sample_type = sample_bytes_ == 4   ? SampleType::kF32
+                      : sample_bytes_ == 2 ? SampleType::kU16
+                                           : SampleType::kU8;
   info_.format = "tiff";
   nlohmann::json tiff = {
       {"compression", compressionName(format.compression)},
@@ -260,8 +267,12 @@ Result<void> TiffReader::open() {
       {"samples_per_pixel", spp_},
   };
   if (extra_samples > 1) tiff["dropped_extra_samples"] = extra_samples - 1;
+  if (sample_bytes_ != 1 && format.photometric == PHOTOMETRIC_MINISWHITE) {
+    return tiffFailure(ErrorCode::kUnsupported,
+                       "min-is-white is supported with 8-bit samples only");
+  }
   TESSERA_TRY(TIFFIsTiled(tif_) ? setUpTiles(format, tiff) : setUpStrips(format, tiff));
-  const uint64_t row_bytes = uint64_t(format.width_px) * channels;
+  const uint64_t row_bytes = uint64_t(format.width_px) * pixelBytes();
   if (row_bytes * info_.natural_band_rows > kMaxBandBytes) {
     return tiffFailure(ErrorCode::kTooLarge,
                        fmt::format("a band of {} rows x {} px exceeds the {} MiB limit",
@@ -315,27 +326,35 @@ Result<TiffReader::TiffFormat> TiffReader::readFormat() {
   return format;
 }
 
+// The archive stores samples as they are (docs/format.md, "Sample types"): no scaling, so
+// other depths are refused rather than converted by a rule the user did not choose.
 Result<void> TiffReader::checkSamples(const TiffFormat& format) {
   if (format.sample_format == SAMPLEFORMAT_INT) {
     return tiffFailure(ErrorCode::kUnsupported,
                        "signed integer samples are not supported "
-                       "(8-bit unsigned only)");
+                       "(8- and 16-bit unsigned and 32-bit float are)");
   }
   if (format.sample_format == SAMPLEFORMAT_IEEEFP) {
-    return tiffFailure(ErrorCode::kUnsupported, fmt::format("{}-bit floating-point samples are "
-                                                            "not supported (8-bit unsigned only)",
-                                                            format.bits));
+    if (format.bits != 32) {
+      return tiffFailure(ErrorCode::kUnsupported,
+                         fmt::format("{}-bit floating-point samples are not supported (32-bit "
+                                     "float is)",
+                                     format.bits));
+    }
+    sample_bytes_ = 4;
+    return {};
   }
   if (format.sample_format != SAMPLEFORMAT_UINT && format.sample_format != SAMPLEFORMAT_VOID) {
     return tiffFailure(ErrorCode::kUnsupported,
                        fmt::format("sample format {} is not supported", format.sample_format));
   }
-  if (format.bits != 8) {
-    // The archive stores 8 bits per channel; scaling 16-bit data down is a choice (linear?
-    // window?) the user should make with a tool like GDAL before building, not silently here.
+  if (format.bits != 8 && format.bits != 16) {
     return tiffFailure(ErrorCode::kUnsupported,
-                       fmt::format("{}-bit samples are not supported (8-bit only)", format.bits));
+                       fmt::format("{}-bit samples are not supported (8- and 16-bit unsigned and "
+                                   "32-bit float are)",
+                                   format.bits));
   }
+  sample_bytes_ = format.bits / 8;
   return {};
 }
 
@@ -382,7 +401,7 @@ Result<void> TiffReader::setUpTiles(const TiffFormat& format, nlohmann::json& ti
   if (tile_width_px_ == 0 || tile_height_px_ == 0) {
     return tiffFailure(ErrorCode::kCorrupt, "zero tile width or height");
   }
-  unit_bytes_ = uint64_t(tile_width_px_) * tile_height_px_ * samplesPerUnitPixel();
+  unit_bytes_ = uint64_t(tile_width_px_) * tile_height_px_ * samplesPerUnitPixel() * sample_bytes_;
   if (unit_bytes_ > kMaxUnitBytes) {
     return tiffFailure(ErrorCode::kTooLarge,
                        fmt::format("tiles of {}x{} px exceed the {} MiB limit per tile",
@@ -402,8 +421,8 @@ Result<void> TiffReader::setUpTiles(const TiffFormat& format, nlohmann::json& ti
 
 Result<void> TiffReader::setUpStrips(const TiffFormat& format, nlohmann::json& tiff) {
   const uint32_t width = format.width_px, height = format.height_px;
-  const uint64_t row_bytes = uint64_t(width) * info_.channels;
-  const uint64_t samples_per_unit_pixel = samplesPerUnitPixel();
+  const uint64_t row_bytes = uint64_t(width) * pixelBytes();
+  const uint64_t samples_per_unit_pixel = samplesPerUnitPixel() * sample_bytes_;  // in bytes
   uint32_t rows_per_strip = 0;
   TIFFGetFieldDefaulted(tif_, TIFFTAG_ROWSPERSTRIP, &rows_per_strip);
   rows_per_strip_ = std::clamp<uint32_t>(rows_per_strip, 1, height);
@@ -418,7 +437,7 @@ Result<void> TiffReader::setUpStrips(const TiffFormat& format, nlohmann::json& t
     // Compressed strips cannot be entered mid-way (libtiff has no random access into
     // them), and the planes of one row live in different strips, so a band is a strip.
     layout_ = Layout::kSeparateStrips;
-    unit_bytes_ = uint64_t(width) * rows_per_strip_;
+    unit_bytes_ = uint64_t(width) * rows_per_strip_ * sample_bytes_;
     if (unit_bytes_ > kMaxUnitBytes || row_bytes * rows_per_strip_ > kMaxBandBytes) {
       return tiffFailure(ErrorCode::kTooLarge,
                          fmt::format("planar strips of {} rows x {} px exceed the {} MiB limit; "
@@ -525,7 +544,15 @@ Result<void> TiffReader::readGeoreference() {
 void TiffReader::convertContiguous(const uint8_t* src, uint8_t* dst, uint32_t pixels) const {
   const uint32_t channels = info_.channels;
   if (identity_) {
-    std::memcpy(dst, src, size_t(pixels) * channels);
+    std::memcpy(dst, src, size_t(pixels) * pixelBytes());
+    return;
+  }
+  if (sample_bytes_ != 1) {  // wide samples are never inverted: only extra samples dropped
+    for (uint32_t x = 0; x < pixels; ++x) {
+      std::memcpy(dst, src, pixelBytes());
+      src += size_t(spp_) * sample_bytes_;
+      dst += pixelBytes();
+    }
     return;
   }
   for (uint32_t x = 0; x < pixels; ++x) {
@@ -538,6 +565,12 @@ void TiffReader::convertContiguous(const uint8_t* src, uint8_t* dst, uint32_t pi
 void TiffReader::convertPlane(const uint8_t* src, uint8_t* dst, uint32_t pixels,
                               uint32_t channel) const {
   const uint32_t channels = info_.channels;
+  if (sample_bytes_ != 1) {
+    const size_t bytes = sample_bytes_;
+    for (uint32_t x = 0; x < pixels; ++x)
+      std::memcpy(dst + (size_t(x) * channels + channel) * bytes, src + x * bytes, bytes);
+    return;
+  }
   const uint8_t invert = invert_[channel];
   dst += channel;
   for (uint32_t x = 0; x < pixels; ++x) dst[size_t(x) * channels] = src[x] ^ invert;
@@ -556,7 +589,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
   const uint32_t width = info_.width_px;
   const uint32_t channels = info_.channels;
   const uint32_t band_rows = std::min(info_.natural_band_rows, info_.height_px - first_row);
-  const size_t row_bytes = size_t(width) * channels;
+  const size_t row_bytes = size_t(width) * pixelBytes();
   band_rows_ = 0;  // invalid until filled, so an error leaves no half-filled band behind
   if (!dest) {
     band_.resize(row_bytes * info_.natural_band_rows);
@@ -578,7 +611,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
       const uint32_t strips_per_plane = TIFFNumberOfStrips(tif_) / spp_;
       for (uint16_t plane = 0; plane < planes; ++plane) {
         const uint32_t strip = plane * strips_per_plane + strip_in_plane;
-        const tmsize_t want = tmsize_t(band_rows) * width;
+        const tmsize_t want = tmsize_t(band_rows) * width * sample_bytes_;
         const tmsize_t got = TIFFReadEncodedStrip(tif_, strip, unit_.data(), want);
         if (got < want) {
           return tiffFailure(ErrorCode::kCorrupt,
@@ -586,7 +619,8 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
                                          plane, first_row, first_row + band_rows - 1));
         }
         for (uint32_t r = 0; r < band_rows; ++r) {
-          convertPlane(unit_.data() + size_t(r) * width, dest + r * row_bytes, width, plane);
+          convertPlane(unit_.data() + size_t(r) * width * sample_bytes_, dest + r * row_bytes,
+                       width, plane);
         }
       }
       break;
@@ -604,8 +638,9 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
                             tile_x / tile_width_px_, first_row, first_row + band_rows - 1));
           }
           for (uint32_t r = 0; r < band_rows; ++r) {
-            const uint8_t* src = unit_.data() + size_t(r) * tile_width_px_ * samples;
-            uint8_t* dst = dest + r * row_bytes + size_t(tile_x) * channels;
+            const uint8_t* src =
+                unit_.data() + size_t(r) * tile_width_px_ * samples * sample_bytes_;
+            uint8_t* dst = dest + r * row_bytes + size_t(tile_x) * pixelBytes();
             if (separate_) {
               convertPlane(src, dst, tile_cols, plane);
             } else {
@@ -625,7 +660,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
 }
 
 Result<void> TiffReader::readRows(uint32_t rows, std::span<uint8_t> out) {
-  const size_t row_bytes = size_t(info_.width_px) * info_.channels;
+  const size_t row_bytes = size_t(info_.width_px) * pixelBytes();
   TESSERA_CHECK(rows > 0 && rows <= info_.height_px - next_row_)
       << path_ << ": readRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
   TESSERA_CHECK(out.size() >= rows * row_bytes) << path_ << ": output span too small";

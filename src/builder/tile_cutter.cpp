@@ -8,7 +8,8 @@ namespace tessera::detail {
 void cutTile(const LevelRows& rows, uint32_t tile_size_px, uint32_t border_px, uint32_t x,
              uint32_t y, uint8_t* out) {
   const int64_t side = tile_size_px + 2 * border_px;
-  const int64_t channels = rows.channels;
+  // Copies whole texels, whatever their sample type.
+  const int64_t channels = int64_t(rows.channels) * sampleBytes(rows.sample_type);
   const int64_t width = rows.width_px, height = rows.height_px;
   const int64_t x0 = int64_t(x) * tile_size_px - border_px;
   const int64_t y0 = int64_t(y) * tile_size_px - border_px;

@@ -39,7 +39,7 @@ std::unique_ptr<CodecState>& ScratchRef::stateSlot(CodecScratch& scratch, Codec 
 }
 
 std::span<const uint8_t> packedTexels(const ImageView& tile, std::vector<uint8_t>& buffer) {
-  const size_t row_bytes = size_t(tile.width_px) * tile.channels;
+  const size_t row_bytes = size_t(tile.width_px) * tile.texelBytes();
   if (tile.stride_bytes == row_bytes) return {tile.data, row_bytes * tile.height_px};
   buffer.resize(row_bytes * tile.height_px);
   for (uint32_t y = 0; y < tile.height_px; ++y)

@@ -13,6 +13,7 @@
 #include "ptm/ptm.h"
 #include "raw/raw.h"
 #include "webp/webp.h"
+#include "zdelta/zdelta.h"
 #include "zstd/zstd.h"
 
 namespace tessera::detail {
@@ -21,9 +22,9 @@ namespace {
 
 // Indexed by Codec value; the static_assert below keeps index and value in step.
 constexpr CodecDecoder kDecoders[] = {
-    {Codec::kRaw, decodeRaw},   {Codec::kZstd, decodeZstd}, {Codec::kLz4, decodeLz4},
-    {Codec::kJpeg, decodeJpeg}, {Codec::kPng, decodePng},   {Codec::kWebp, decodeWebp},
-    {Codec::kPtm, decodePtm},
+    {Codec::kRaw, decodeRaw},   {Codec::kZstd, decodeZstd},     {Codec::kLz4, decodeLz4},
+    {Codec::kJpeg, decodeJpeg}, {Codec::kPng, decodePng},       {Codec::kWebp, decodeWebp},
+    {Codec::kPtm, decodePtm},   {Codec::kZdelta, decodeZdelta},
 };
 constexpr bool tableMatchesCodecValues() {
   for (size_t i = 0; i < std::size(kDecoders); ++i)
@@ -49,7 +50,11 @@ Result<void> decodeTile(Codec codec, std::span<const uint8_t> payload, Image& ou
       << "decode: empty expected geometry " << out.width_px << "x" << out.height_px;
   TESSERA_CHECK(out.channels >= 1 && out.channels <= 4)
       << "decode: " << out.channels << " channels, 1..4 supported";
-  out.texels.resize(size_t(out.width_px) * out.height_px * out.channels);
+  if (!codecSupportsSampleType(codec, out.sample_type))
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{} payload: {} samples are not supported", codecName(codec),
+                            sampleTypeName(out.sample_type)));
+  out.texels.resize(size_t(out.width_px) * out.height_px * out.texelBytes());
   return decoder->decode(payload, out, parent, scratch);
 }
 

@@ -13,6 +13,7 @@
 #include "ptm/ptm.h"
 #include "raw/raw.h"
 #include "webp/webp.h"
+#include "zdelta/zdelta.h"
 #include "zstd/zstd.h"
 
 namespace tessera::detail {
@@ -21,9 +22,9 @@ namespace {
 
 // Indexed by Codec value; the static_assert below keeps index and value in step.
 constexpr CodecEncoder kEncoders[] = {
-    {Codec::kRaw, encodeRaw},          {Codec::kZstd, encodeZstd}, {Codec::kLz4, encodeLz4},
-    {Codec::kJpeg, encodeJpeg},        {Codec::kPng, encodePng},   {Codec::kWebp, encodeWebp},
-    {Codec::kPtm, encodePtmForEffort},
+    {Codec::kRaw, encodeRaw},          {Codec::kZstd, encodeZstd},     {Codec::kLz4, encodeLz4},
+    {Codec::kJpeg, encodeJpeg},        {Codec::kPng, encodePng},       {Codec::kWebp, encodeWebp},
+    {Codec::kPtm, encodePtmForEffort}, {Codec::kZdelta, encodeZdelta},
 };
 constexpr bool tableMatchesCodecValues() {
   for (size_t i = 0; i < std::size(kEncoders); ++i)
@@ -51,8 +52,13 @@ Result<std::vector<uint8_t>> encodeTile(Codec codec, const ImageView& tile,
       << "encode: empty tile " << tile.width_px << "x" << tile.height_px;
   TESSERA_CHECK(tile.channels >= 1 && tile.channels <= 4)
       << "encode: " << tile.channels << " channels, 1..4 supported";
-  TESSERA_CHECK(tile.stride_bytes >= size_t(tile.width_px) * tile.channels)
+  TESSERA_CHECK(tile.stride_bytes >= size_t(tile.width_px) * tile.texelBytes())
       << "encode: stride " << tile.stride_bytes << " shorter than a row";
+  if (!codecSupportsSampleType(codec, tile.sample_type))
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("codec {} cannot store {} samples (raw, zstd, lz4 and zdelta can{})",
+                            codecName(codec), sampleTypeName(tile.sample_type),
+                            tile.sample_type == SampleType::kU16 ? ", and png" : ""));
   return encoder->encode(tile, options, parent, scratch);
 }
 

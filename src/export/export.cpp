@@ -56,6 +56,12 @@ Result<ExportReport> exportArchive(const Archive& archive, const std::string& ou
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}: no image {} (the archive has {})", archive.name(), options.image,
                             archive.images().size()));
+  // Every target here stores 8-bit tiles; wide samples would need a window chosen by the user.
+  if (const SampleType type = archive.images()[options.image].sample_type; type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: image {} has {} samples; export writes 8-bit tiles only (read "
+                            "the samples with `tessera extract` or Python instead)",
+                            archive.name(), options.image, sampleTypeName(type)));
   switch (options.format) {
     case ExportFormat::kDeepZoom: return exportDeepZoom(archive, out_path, options);
     case ExportFormat::kPmtiles: return exportPmtiles(archive, out_path, options);

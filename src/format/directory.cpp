@@ -119,6 +119,11 @@ Result<std::vector<TileEntry>> decodeTileEntries(std::span<const uint8_t> bytes,
         entry.kind = TileKind::kEmpty;
         break;
       case uint8_t(TileKind::kUniform): {
+        // Eight bytes cannot hold four float samples, so wider samples have no uniform tiles.
+        if (info.sample_type != SampleType::kU8)
+          return fail(ErrorCode::kCorrupt,
+                      fmt::format("{}: uniform entry {} in an image of {} samples", what, i,
+                                  sampleTypeName(info.sample_type)));
         entry.kind = TileKind::kUniform;
         entry.uniform_rgba = loadU32(p);
         // Channels the image does not have must be zero so a colour has one encoding.
@@ -132,10 +137,14 @@ Result<std::vector<TileEntry>> decodeTileEntries(std::span<const uint8_t> bytes,
       case uint8_t(TileKind::kEncoded): {
         entry.kind = TileKind::kEncoded;
         entry.offset_bytes = loadU64(p);
-        if (codec > uint8_t(Codec::kPtm))
+        if (codec > uint8_t(Codec::kZdelta))
           return fail(ErrorCode::kCorrupt,
                       fmt::format("{}: entry {} has unknown codec {}", what, i, codec));
         entry.codec = Codec(codec);
+        if (!codecSupportsSampleType(entry.codec, info.sample_type))
+          return fail(ErrorCode::kCorrupt,
+                      fmt::format("{}: entry {} codec {} cannot hold {} samples", what, i,
+                                  codecName(entry.codec), sampleTypeName(info.sample_type)));
         if (entry.length_bytes == 0 || entry.length_bytes > max_payload)
           return fail(ErrorCode::kCorrupt,
                       fmt::format("{}: entry {} payload length {} out of 1..{}", what, i,

@@ -20,7 +20,7 @@ constexpr CodecSpec kCodecSpecs[] = {
     {Codec::kRaw, "raw", false, true}, {Codec::kZstd, "zstd", false, true},
     {Codec::kLz4, "lz4", false, true}, {Codec::kJpeg, "jpeg", false, false},
     {Codec::kPng, "png", false, true}, {Codec::kWebp, "webp", false, true},
-    {Codec::kPtm, "ptm", true, true},
+    {Codec::kPtm, "ptm", true, true},  {Codec::kZdelta, "zdelta", false, true},
 };
 
 const CodecSpec* findSpec(Codec codec) {
@@ -56,6 +56,40 @@ bool parseCodecName(std::string_view name, Codec* codec) {
       *codec = entry.codec;
       return true;
     }
+  }
+  return false;
+}
+
+const char* sampleTypeName(SampleType type) {
+  switch (type) {
+    case SampleType::kU8: return "u8";
+    case SampleType::kU16: return "u16";
+    case SampleType::kF32: return "f32";
+  }
+  return "unknown";
+}
+
+bool parseSampleTypeName(std::string_view name, SampleType* type) {
+  for (SampleType candidate : {SampleType::kU8, SampleType::kU16, SampleType::kF32}) {
+    if (name == sampleTypeName(candidate)) {
+      *type = candidate;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool codecSupportsSampleType(Codec codec, SampleType type) {
+  switch (codec) {
+    case Codec::kRaw:
+    case Codec::kZstd:
+    case Codec::kLz4:
+    case Codec::kZdelta: return true;
+    // PNG has 16-bit channels but no float; the others are 8-bit by construction.
+    case Codec::kPng: return type != SampleType::kF32;
+    case Codec::kJpeg:
+    case Codec::kWebp:
+    case Codec::kPtm: return type == SampleType::kU8;
   }
   return false;
 }

@@ -154,6 +154,24 @@ Result<void> validateImageInfo(const ImageInfo& info, const std::string& what) {
   return {};
 }
 
+uint16_t minorVersionFor(std::span<const ImageRecord> images) {
+  for (const ImageRecord& image : images)
+    if (image.info.sample_type != SampleType::kU8) return kSampleTypeMinorVersion;
+  return kFormatVersionMinor;
+}
+
+Result<SampleType> decodeSampleType(uint8_t value, const FileHeader& header,
+                                    const std::string& what) {
+  // Byte 15 is reserved before minor 2: files of minor 1 are read as 8-bit whatever it holds
+  // (the reserved-field rule); minor 0 rejected it above.
+  if (header.version_minor < kSampleTypeMinorVersion) return SampleType::kU8;
+  if (value > uint8_t(SampleType::kF32))
+    return fail(
+        ErrorCode::kUnsupported,
+        fmt::format("{}: sample type {} is not supported (0 u8, 1 u16, 2 f32 are)", what, value));
+  return SampleType(value);
+}
+
 std::vector<uint8_t> encodeRootDirectory(const std::vector<ImageRecord>& images) {
   size_t total = 0;
   for (const auto& image : images)
@@ -171,6 +189,7 @@ std::vector<uint8_t> encodeRootDirectory(const std::vector<ImageRecord>& images)
     p[12] = uint8_t(info.default_codec);
     p[13] = uint8_t(info.page_tiles_log2);
     p[14] = info.srgb_downsample ? 1 : 0;
+    p[15] = uint8_t(info.sample_type);
     p += kImageRecordBytes;
     for (const auto& level : image.levels) {
       storeBlockRef(p, level.page_index);
@@ -209,6 +228,7 @@ Result<std::vector<ImageRecord>> decodeRootDirectory(std::span<const uint8_t> by
     info.srgb_downsample = flags & 1;
     if (known_minor && ((flags & ~1u) || p[15] || !allZero(p + 16, 16)))
       return fail(ErrorCode::kCorrupt, what + ": reserved image-record fields are not zero");
+    TESSERA_ASSIGN_OR_RETURN(info.sample_type, decodeSampleType(p[15], header, what));
     TESSERA_TRY(validateImageInfo(info, what));
     uint32_t expected_levels = levelCountFor(info.width_px, info.height_px, info.tile_size_px);
     if (level_count != expected_levels)

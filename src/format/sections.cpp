@@ -1,5 +1,7 @@
 #include "format/sections.h"
 
+#include <algorithm>
+
 #include <fmt/format.h>
 
 #include "format/byte_io.h"
@@ -76,7 +78,8 @@ BlockRef findSection(std::span<const SectionEntry> entries, SectionKind kind) {
 void stampSectionTableRef(std::span<uint8_t> header_bytes, const BlockRef& table) {
   TESSERA_CHECK(header_bytes.size() >= kHeaderBytes) << "a header is 128 bytes";
   uint8_t* p = header_bytes.data();
-  storeU16(p + 10, kSectionsVersionMinor);
+  // A file already of a later minor (16-bit or float images) keeps it.
+  storeU16(p + 10, std::max(loadU16(p + 10), kSectionsVersionMinor));
   storeBlockRef(p + kSectionTableRefOffset, table);
   storeU64(p + kHeaderChecksumOffset, checksum64({p, kHeaderChecksumOffset}));
 }

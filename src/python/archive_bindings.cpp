@@ -21,9 +21,9 @@ namespace py = pybind11;
 namespace tessera::python {
 namespace {
 
-/// An (height, width, channels) uint8 array over `image`'s texels, which it takes over: the
-/// buffer moves into a capsule the array keeps alive, so no byte is copied.
-py::array_t<uint8_t> toArray(Image image) {
+/// An (height, width, channels) array of the image's dtype over `image`'s texels, which it takes
+/// over: the buffer moves into a capsule the array keeps alive, so no byte is copied.
+py::array toArray(Image image) {
   auto* owned = new Image(std::move(image));
   py::capsule owner(owned, [](void* p) { delete static_cast<Image*>(p); });
   return arrayOver(*owned, std::move(owner));
@@ -37,8 +37,8 @@ const ImageInfo& imageAt(const Archive& archive, uint32_t image) {
   return archive.images()[image];
 }
 
-py::array_t<uint8_t> readRegion(const Archive& archive, uint32_t level, int64_t x, int64_t y,
-                                uint32_t width, uint32_t height, uint32_t image, bool rgba) {
+py::array readRegion(const Archive& archive, uint32_t level, int64_t x, int64_t y, uint32_t width,
+                     uint32_t height, uint32_t image, bool rgba) {
   const ImageInfo& info = imageAt(archive, image);
   if (level >= info.level_count)
     throw LibraryError{{ErrorCode::kInvalidArgument, archive.name() + ": level " +
@@ -70,8 +70,7 @@ TileInfo tileInfo(const Archive& archive, uint32_t level, uint32_t x, uint32_t y
   return {id, valueOrThrow(std::move(entry))};
 }
 
-py::array_t<uint8_t> readTile(const Archive& archive, uint32_t level, uint32_t x, uint32_t y,
-                              uint32_t image) {
+py::array readTile(const Archive& archive, uint32_t level, uint32_t x, uint32_t y, uint32_t image) {
   Result<Image> tile = Image();
   {
     py::gil_scoped_release release;
@@ -120,6 +119,10 @@ void registerImageInfo(py::module_& module) {
       .def_readonly("width", &ImageInfo::width_px)
       .def_readonly("height", &ImageInfo::height_px)
       .def_readonly("channels", &ImageInfo::channels)
+      .def_property_readonly("sample_type",
+                             [](const ImageInfo& info) { return sampleTypeName(info.sample_type); })
+      .def_property_readonly("dtype",
+                             [](const ImageInfo& info) { return dtypeOf(info.sample_type); })
       .def_readonly("tile_size", &ImageInfo::tile_size_px)
       .def_readonly("border", &ImageInfo::border_px)
       .def_readonly("level_count", &ImageInfo::level_count)

@@ -30,12 +30,22 @@ inline void throwIfError(const Result<void>& result) {
   if (!result) throw LibraryError{result.error()};
 }
 
-/// An (height, width, channels) uint8 array over `image`'s texels without a copy; `owner`
-/// keeps them alive as long as the array lives.
-inline pybind11::array_t<uint8_t> arrayOver(const Image& image, pybind11::object owner) {
+/// The NumPy dtype of a sample type: uint8, uint16 or float32 (samples are host order).
+inline pybind11::dtype dtypeOf(SampleType type) {
+  switch (type) {
+    case SampleType::kU16: return pybind11::dtype::of<uint16_t>();
+    case SampleType::kF32: return pybind11::dtype::of<float>();
+    default: return pybind11::dtype::of<uint8_t>();
+  }
+}
+
+/// An (height, width, channels) array of the image's sample type over its texels without a
+/// copy; `owner` keeps them alive as long as the array lives.
+inline pybind11::array arrayOver(const Image& image, pybind11::object owner) {
   const pybind11::ssize_t h = image.height_px, w = image.width_px, c = image.channels;
-  return pybind11::array_t<uint8_t>({h, w, c}, {w * c, c, pybind11::ssize_t(1)},
-                                    image.texels.data(), std::move(owner));
+  const pybind11::ssize_t s = sampleBytes(image.sample_type);
+  return pybind11::array(dtypeOf(image.sample_type), {h, w, c}, {w * c * s, c * s, s},
+                         image.texels.data(), std::move(owner));
 }
 
 void registerArchive(pybind11::module_& module);

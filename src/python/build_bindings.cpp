@@ -37,8 +37,9 @@ struct CallbackState {
 Codec parseCodec(const std::string& name) {
   Codec codec;
   if (!parseCodecName(name, &codec))
-    throw LibraryError{{ErrorCode::kInvalidArgument,
-                        "unknown codec '" + name + "' (raw, zstd, lz4, jpeg, png, webp, ptm)"}};
+    throw LibraryError{
+        {ErrorCode::kInvalidArgument,
+         "unknown codec '" + name + "' (raw, zstd, lz4, jpeg, png, webp, ptm, zdelta)"}};
   return codec;
 }
 
@@ -59,15 +60,23 @@ RowSource rowSource(const py::object& filler, CallbackState& state) {
   source.height_px = filler.attr("height").cast<uint32_t>();
   source.channels = filler.attr("channels").cast<uint32_t>();
   source.band_rows = filler.attr("band_rows").cast<uint32_t>();
+  const std::string sample_type = filler.attr("sample_type").cast<std::string>();
+  if (!parseSampleTypeName(sample_type, &source.sample_type))
+    throw LibraryError{
+        {ErrorCode::kInvalidArgument, source.name + ": unknown sample type '" + sample_type + "'"}};
   const uint32_t width = source.width_px, channels = source.channels;
-  source.read_rows = [filler, &state, width, channels](uint32_t first_row, uint32_t rows,
-                                                       std::span<uint8_t> out) -> Result<void> {
+  const SampleType type = source.sample_type;
+  source.read_rows = [filler, &state, width, channels, type](
+                         uint32_t first_row, uint32_t rows,
+                         std::span<uint8_t> out) -> Result<void> {
     py::gil_scoped_acquire acquire;
     try {
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
       // A view of the builder's band, valid during this call only (fill must not keep it).
-      py::array_t<uint8_t> band({py::ssize_t(rows), py::ssize_t(width), py::ssize_t(channels)},
-                                out.data(), py::capsule(out.data(), [](void*) {}));
+      const py::ssize_t s = sampleBytes(type);
+      py::array band(dtypeOf(type), {py::ssize_t(rows), py::ssize_t(width), py::ssize_t(channels)},
+                     {py::ssize_t(width) * channels * s, py::ssize_t(channels) * s, s}, out.data(),
+                     py::capsule(out.data(), [](void*) {}));
       filler.attr("fill")(first_row, band);
       return {};
     } catch (...) {

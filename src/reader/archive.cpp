@@ -314,7 +314,8 @@ Result<void> Archive::decodeWithParent(const TileId& tile, const TileEntry& entr
   image.width_px = side;
   image.height_px = side;
   image.channels = info.channels;
-  image.texels.resize(size_t(side) * side * info.channels);
+  image.sample_type = info.sample_type;
+  image.texels.resize(info.storedTileBytes());
   switch (entry.kind) {
     case TileKind::kEmpty: std::fill(image.texels.begin(), image.texels.end(), uint8_t{0}); break;
     case TileKind::kUniform: {

@@ -29,14 +29,15 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
     return fail(ErrorCode::kTooLarge,
                 fmt::format("{}: region {}x{} exceeds {} px per side", impl_->name, rect.width,
                             rect.height, kMaxRegionSidePx));
-  Image out(rect.width, rect.height, info.channels);
+  Image out(rect.width, rect.height, info.channels, info.sample_type);
   int64_t level_w = info.levelWidthPx(level), level_h = info.levelHeightPx(level);
   int64_t x0 = std::max<int64_t>(rect.x, 0), y0 = std::max<int64_t>(rect.y, 0);
   int64_t x1 = std::min<int64_t>(rect.x + rect.width, level_w);
   int64_t y1 = std::min<int64_t>(rect.y + rect.height, level_h);
   if (x0 >= x1 || y0 >= y1) return out;
   int64_t t = info.tile_size_px;
-  uint32_t b = info.border_px, channels = info.channels;
+  // `texel` is in bytes, so one copy serves every sample type.
+  uint32_t b = info.border_px, texel = info.texelBytes();
   CodecScratch scratch;
   for (int64_t ty = y0 / t; ty <= (y1 - 1) / t; ++ty) {
     for (int64_t tx = x0 / t; tx <= (x1 - 1) / t; ++tx) {
@@ -44,10 +45,10 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
                                readTile({image, level, uint32_t(tx), uint32_t(ty)}, &scratch));
       int64_t cx0 = std::max(x0, tx * t), cx1 = std::min(x1, (tx + 1) * t);
       int64_t cy0 = std::max(y0, ty * t), cy1 = std::min(y1, (ty + 1) * t);
-      size_t row_bytes = size_t(cx1 - cx0) * channels;
+      size_t row_bytes = size_t(cx1 - cx0) * texel;
       for (int64_t y = cy0; y < cy1; ++y) {
-        const uint8_t* src = tile.row(uint32_t(y - ty * t + b)) + (cx0 - tx * t + b) * channels;
-        uint8_t* dst = out.row(uint32_t(y - rect.y)) + (cx0 - rect.x) * channels;
+        const uint8_t* src = tile.row(uint32_t(y - ty * t + b)) + (cx0 - tx * t + b) * texel;
+        uint8_t* dst = out.row(uint32_t(y - rect.y)) + (cx0 - rect.x) * texel;
         std::memcpy(dst, src, row_bytes);
       }
     }
@@ -56,6 +57,11 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
 }
 
 Result<Image> Archive::readRegionRgba(uint32_t image, uint32_t level, const PixelRect& rect) const {
+  if (image < impl_->infos.size() && impl_->infos[image].sample_type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: image {} has {} samples; read them with readRegion, or map them "
+                            "to 8 bits with a display window first",
+                            impl_->name, image, sampleTypeName(impl_->infos[image].sample_type)));
   TESSERA_ASSIGN_OR_RETURN(Image native, readRegion(image, level, rect));
   if (native.channels == 4) return native;
   Image rgba(native.width_px, native.height_px, 4);

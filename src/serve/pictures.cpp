@@ -95,6 +95,11 @@ bool browserReady(const ImageInfo& info, Codec codec, PictureFormat format) {
 Result<void> checkImage(const Archive& archive, uint32_t image) {
   if (image >= archive.images().size())
     return fail(ErrorCode::kNotFound, fmt::format("{}: no image {}", archive.name(), image));
+  // Pictures are 8-bit; a wide image's samples need a display window the request cannot give.
+  if (const SampleType type = archive.images()[image].sample_type; type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: image {} has {} samples; pictures are made of 8-bit images only",
+                            archive.name(), image, sampleTypeName(type)));
   return {};
 }
 
@@ -244,6 +249,7 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
 
 Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
                                     PictureFormat format, int jpeg_quality) {
+  TESSERA_TRY(checkImage(archive, tile.image));
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
   if (entry.hasPayload()) {

@@ -1,5 +1,6 @@
 // `tessera extract`: a tile or a rectangle of a level to PNG.
 #include <algorithm>
+#include <cctype>
 #include <cstdio>
 #include <cstring>
 
@@ -61,11 +62,12 @@ Result<Image> extractTile(const Archive& archive, const ExtractArgs& args) {
   // The stored tile's texel (0, 0) is level texel (tx t - b, ty t - b).
   const int64_t origin_x = int64_t(args.tile[0]) * info.tile_size_px - info.border_px;
   const int64_t origin_y = int64_t(args.tile[1]) * info.tile_size_px - info.border_px;
-  Image out(uint32_t(window.x1 - window.x0), uint32_t(window.y1 - window.y0), info.channels);
+  Image out(uint32_t(window.x1 - window.x0), uint32_t(window.y1 - window.y0), info.channels,
+            info.sample_type);
   for (uint32_t y = 0; y < out.height_px; ++y)
     std::memcpy(
         out.row(y),
-        stored.row(uint32_t(window.y0 - origin_y + y)) + (window.x0 - origin_x) * info.channels,
+        stored.row(uint32_t(window.y0 - origin_y + y)) + (window.x0 - origin_x) * info.texelBytes(),
         out.strideBytes());
   return out;
 }
@@ -90,6 +92,24 @@ Result<Image> extractRect(const Archive& archive, const ExtractArgs& args) {
       {args.rect[0], args.rect[1], uint32_t(args.rect[2]), uint32_t(args.rect[3])});
 }
 
+bool endsWithTiff(const std::string& path) {
+  std::string lower = path;
+  std::transform(lower.begin(), lower.end(), lower.begin(),
+                 [](unsigned char c) { return char(std::tolower(c)); });
+  return lower.ends_with(".tif") || lower.ends_with(".tiff");
+}
+
+// The output's extension picks the format; samples are written as stored, never scaled.
+Result<void> writeExtract(const Image& image, const std::string& path) {
+  if (endsWithTiff(path)) return writeTiff(image, path);
+  if (image.sample_type == SampleType::kF32)
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: PNG cannot hold f32 samples; name a .tif output to get them "
+                            "as float TIFF",
+                            path));
+  return writePng(image, path);
+}
+
 int runExtract(const ExtractArgs& args) {
   if (args.tile.empty() == args.rect.empty())
     return reportError(
@@ -110,10 +130,10 @@ int runExtract(const ExtractArgs& args) {
                      args.image, archive.images()[args.image].level_count - 1)});
   Result<Image> image = args.tile.empty() ? extractRect(archive, args) : extractTile(archive, args);
   if (!image) return reportError(image.error());
-  if (Result<void> written = writePng(*image, args.output); !written)
+  if (Result<void> written = writeExtract(*image, args.output); !written)
     return reportError(written.error());
-  std::printf("%s: %ux%u, %u channel(s)\n", args.output.c_str(), image->width_px, image->height_px,
-              image->channels);
+  std::printf("%s: %ux%u, %u channel(s), %s\n", args.output.c_str(), image->width_px,
+              image->height_px, image->channels, sampleTypeName(image->sample_type));
   return kExitOk;
 }
 
@@ -121,9 +141,12 @@ int runExtract(const ExtractArgs& args) {
 
 void registerExtractCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<ExtractArgs>();
-  CLI::App* cmd = app.add_subcommand("extract", "Write a tile or a rectangle of a level to PNG");
+  CLI::App* cmd = app.add_subcommand(
+      "extract", "Write a tile or a rectangle of a level to PNG, or TIFF (-o NAME.tif)");
   cmd->add_option("archive", args->archive, kArchiveArgumentHelp)->required();
-  cmd->add_option("-o,--output", args->output, "PNG to write")->required();
+  cmd->add_option("-o,--output", args->output,
+                  "PNG or, ending .tif/.tiff, TIFF to write (16-bit: either; float: TIFF)")
+      ->required();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
   cmd->add_option("--level", args->level, "Level (0 = full resolution)")->capture_default_str();
   cmd->add_option("--tile", args->tile, "Tile column,row")->delimiter(',')->expected(2);

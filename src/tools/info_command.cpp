@@ -62,6 +62,7 @@ int runInfo(const std::string& path, bool json, bool levels) {
                             {"width", info.width_px},
                             {"height", info.height_px},
                             {"channels", info.channels},
+                            {"sample_type", sampleTypeName(info.sample_type)},
                             {"tile_size", info.tile_size_px},
                             {"border", info.border_px},
                             {"levels", info.level_count},
@@ -71,11 +72,12 @@ int runInfo(const std::string& path, bool json, bool levels) {
       image["georeference"] = meta_images[i]["georeference"];
     if (!json)
       std::printf(
-          "image %u \"%s\": %ux%u px (%.1f MP), %u channel(s), %u px tiles, border %u, %u "
-          "levels, codec %s\n",
+          "image %u \"%s\": %ux%u px (%.1f MP), %u channel(s) of %s, %u px tiles, border %u, "
+          "%u levels, codec %s\n",
           i, info.name.c_str(), info.width_px, info.height_px,
-          double(info.width_px) * info.height_px / 1e6, info.channels, info.tile_size_px,
-          info.border_px, info.level_count, codecName(info.default_codec));
+          double(info.width_px) * info.height_px / 1e6, info.channels,
+          sampleTypeName(info.sample_type), info.tile_size_px, info.border_px, info.level_count,
+          codecName(info.default_codec));
     if (levels) {
       nlohmann::json level_list = nlohmann::json::array();
       if (!json)

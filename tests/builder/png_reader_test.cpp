@@ -1,3 +1,5 @@
+#include <cstring>
+
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
@@ -119,13 +121,21 @@ TEST(PngReader, TurnsRgbTransparencyIntoAlpha) {
   EXPECT_EQ(got, (std::vector<uint8_t>{10, 20, 30, 0, 1, 2, 3, 255, 10, 20, 30, 0, 4, 5, 6, 255}));
 }
 
-TEST(PngReader, RejectsSixteenBitPng) {
-  const std::string path = writeFixture({.width_px = 4, .height_px = 4, .bit_depth = 16},
-                                        "deep.png", test::makeTestPixels(4, 4, 3));
-  auto reader = openPngReader(path);
-  ASSERT_FALSE(reader.has_value());
-  EXPECT_EQ(reader.error().code, ErrorCode::kUnsupported);
-  EXPECT_THAT(reader.error().message, HasSubstr("deep.png: 16-bit PNG"));
+// The fixture writes 8-bit value v as the 16-bit sample v * 257 (both bytes v).
+TEST(PngReader, ReadsSixteenBitPngAsSixteenBitSamples) {
+  const std::vector<uint8_t> pixels = test::makeTestPixels(5, 4, 3);
+  const std::string path =
+      writeFixture({.width_px = 5, .height_px = 4, .bit_depth = 16}, "deep.png", pixels);
+  SourceInfo info;
+  const std::vector<uint8_t> got = readWhole(path, &info);
+  EXPECT_EQ(info.sample_type, SampleType::kU16);
+  ASSERT_EQ(info.channels, 3u);
+  ASSERT_EQ(got.size(), pixels.size() * 2);
+  for (size_t i = 0; i < pixels.size(); ++i) {
+    uint16_t value;
+    std::memcpy(&value, got.data() + 2 * i, 2);
+    ASSERT_EQ(value, pixels[i] * 257) << i;
+  }
 }
 
 TEST(PngReader, RejectsInterlacedPng) {

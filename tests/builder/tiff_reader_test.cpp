@@ -1,4 +1,5 @@
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 
 #include <gmock/gmock.h>
@@ -269,16 +270,28 @@ TEST_P(TiffRejectTest, RejectsUnsupportedSamples) {
 INSTANTIATE_TEST_SUITE_P(
     Unsupported, TiffRejectTest,
     ::testing::Values(
-        RejectCase{
-            "SixteenBit", {.width_px = 8, .height_px = 8, .samples = 3, .bits = 16}, "16-bit"},
-        RejectCase{"Float",
+        RejectCase{"ThirtyTwoBitUnsigned",
                    {.width_px = 8,
                     .height_px = 8,
                     .samples = 1,
                     .bits = 32,
+                    .photometric = PHOTOMETRIC_MINISBLACK},
+                   "32-bit samples are not supported"},
+        RejectCase{"Float64",
+                   {.width_px = 8,
+                    .height_px = 8,
+                    .samples = 1,
+                    .bits = 64,
                     .sample_format = SAMPLEFORMAT_IEEEFP,
                     .photometric = PHOTOMETRIC_MINISBLACK},
-                   "floating-point"},
+                   "64-bit floating-point"},
+        RejectCase{"WideMinIsWhite",
+                   {.width_px = 8,
+                    .height_px = 8,
+                    .samples = 1,
+                    .bits = 16,
+                    .photometric = PHOTOMETRIC_MINISWHITE},
+                   "min-is-white"},
         RejectCase{"Signed",
                    {.width_px = 8,
                     .height_px = 8,
@@ -301,17 +314,66 @@ INSTANTIATE_TEST_SUITE_P(
       return std::string(param.param.name);
     });
 
-TEST(TiffReader, RejectsSixteenBitTiff) {
-  const std::string path = writeFixture(TiffSpec{.width_px = 4,
-                                                 .height_px = 4,
-                                                 .samples = 1,
-                                                 .bits = 16,
-                                                 .photometric = PHOTOMETRIC_MINISBLACK},
-                                        "gray16.tif");
-  auto reader = openTiffReader(path);
-  ASSERT_FALSE(reader.has_value());
-  EXPECT_EQ(reader.error().code, ErrorCode::kUnsupported);
-  EXPECT_THAT(reader.error().message, HasSubstr("gray16.tif: 16-bit samples"));
+// Wide samples come through unscaled: the fixture widens 8-bit value v to v * 257 (u16) and
+// v / 255 (f32), and the reader must return exactly those, in every layout.
+TEST(TiffReader, ReadsSixteenBitAndFloatSamplesAsTheyAre) {
+  struct WideCase {
+    const char* name;
+    TiffSpec spec;
+  };
+  const WideCase cases[] = {
+      {"u16-strips.tif", {.width_px = 19, .height_px = 11, .samples = 3, .bits = 16}},
+      {"u16-tiles-alpha.tif",
+       {.width_px = 19, .height_px = 21, .samples = 4, .bits = 16, .tiled = true}},
+      {"u16-planar-deflate.tif",
+       {.width_px = 19,
+        .height_px = 11,
+        .samples = 3,
+        .bits = 16,
+        .compression = COMPRESSION_ADOBE_DEFLATE,
+        .planar = PLANARCONFIG_SEPARATE,
+        .predictor = PREDICTOR_HORIZONTAL}},
+      {"f32-gray.tif",
+       {.width_px = 19,
+        .height_px = 11,
+        .samples = 1,
+        .bits = 32,
+        .sample_format = SAMPLEFORMAT_IEEEFP,
+        .photometric = PHOTOMETRIC_MINISBLACK,
+        .compression = COMPRESSION_ADOBE_DEFLATE}},
+      {"f32-tiles-extra.tif",
+       {.width_px = 19,
+        .height_px = 21,
+        .samples = 3,
+        .bits = 32,
+        .sample_format = SAMPLEFORMAT_IEEEFP,
+        .photometric = PHOTOMETRIC_MINISBLACK,
+        .tiled = true}},
+  };
+  for (const WideCase& c : cases) {
+    SCOPED_TRACE(c.name);
+    std::vector<uint8_t> pixels;
+    const std::string path = writeFixture(c.spec, c.name, &pixels);
+    SourceInfo info;
+    const std::vector<uint8_t> got = readWhole(path, 5, &info);
+    const bool is_float = c.spec.sample_format == SAMPLEFORMAT_IEEEFP;
+    EXPECT_EQ(info.sample_type, is_float ? SampleType::kF32 : SampleType::kU16);
+    const uint32_t channels = info.channels;
+    EXPECT_EQ(channels, std::min<uint32_t>(c.spec.samples, is_float ? 2 : 4));
+    const std::vector<uint8_t> expected8 = keepChannels(pixels, c.spec.samples, channels);
+    ASSERT_EQ(got.size(), expected8.size() * (is_float ? 4 : 2));
+    for (size_t i = 0; i < expected8.size(); ++i) {
+      if (is_float) {
+        float value;
+        std::memcpy(&value, got.data() + 4 * i, 4);
+        ASSERT_EQ(value, float(expected8[i]) / 255.0f) << i;
+      } else {
+        uint16_t value;
+        std::memcpy(&value, got.data() + 2 * i, 2);
+        ASSERT_EQ(value, expected8[i] * 257) << i;
+      }
+    }
+  }
 }
 
 TEST(TiffReader, MissingFileIsNotFound) {

@@ -17,10 +17,10 @@ namespace {
 
 // ptm without a parent codes the tile on its own (the coarsest level's mode), so every generic
 // test below covers that mode; codec_ptm_test.cpp covers coding against a parent.
-constexpr Codec kLosslessCodecs[] = {Codec::kRaw, Codec::kZstd, Codec::kLz4,
-                                     Codec::kPng, Codec::kWebp, Codec::kPtm};
+constexpr Codec kLosslessCodecs[] = {Codec::kRaw,  Codec::kZstd, Codec::kLz4,   Codec::kPng,
+                                     Codec::kWebp, Codec::kPtm,  Codec::kZdelta};
 constexpr Codec kAllCodecs[] = {Codec::kRaw, Codec::kZstd, Codec::kLz4, Codec::kJpeg,
-                                Codec::kPng, Codec::kWebp, Codec::kPtm};
+                                Codec::kPng, Codec::kWebp, Codec::kPtm, Codec::kZdelta};
 
 struct Size {
   uint32_t width_px;

@@ -78,7 +78,7 @@ TEST(TileEntries, DecodeOfGoldenBytesGivesEveryField) {
 
 TEST(TileEntries, DecodeInvertsEncodeForEveryCodecAndKind) {
   std::vector<TileEntry> entries;
-  for (uint8_t codec = 0; codec <= uint8_t(Codec::kPtm); ++codec) {
+  for (uint8_t codec = 0; codec <= uint8_t(Codec::kZdelta); ++codec) {
     TileEntry entry;
     entry.kind = TileKind::kEncoded;
     entry.codec = Codec(codec);
@@ -126,7 +126,7 @@ TEST(TileEntries, DecodeRejectsEveryFieldOutOfBounds) {
       {"unknown kind", 0, 12, 4},
       {"kind 255", 0, 12, 255},
       {"procedural kind", 0, 12, 3, ErrorCode::kUnsupported},
-      {"unknown codec", 0, 13, 7},
+      {"unknown codec", 0, 13, 8},
       {"reserved low byte", 0, 14, 1},
       {"reserved high byte", 0, 15, 1},
       {"payload inside the header region", 0, 1, 0x3F},
@@ -182,6 +182,48 @@ TEST(TileEntries, UniformColourMayUseEveryChannelOfAnRgbaImage) {
   // A gray image may use only the first byte.
   bytes[kTileEntryBytes + 3] = 0;
   EXPECT_FALSE(decodeTileEntries(bytes, pagedInfo(1), pageHeader(), "p"));
+}
+
+ImageInfo wideInfo(SampleType type) {
+  ImageInfo info = pagedInfo(3);
+  info.sample_type = type;
+  return info;
+}
+
+TEST(TileEntries, WideImagesHaveNoUniformEntries) {
+  // Golden entry 1 is uniform: fine for u8, corrupt for u16 and f32.
+  for (SampleType type : {SampleType::kU16, SampleType::kF32}) {
+    auto decoded = decodeTileEntries(goldenEntryBytes(), wideInfo(type), pageHeader(), "w.tess");
+    ASSERT_FALSE(decoded) << sampleTypeName(type);
+    EXPECT_EQ(decoded.error().code, ErrorCode::kCorrupt);
+    EXPECT_NE(decoded.error().message.find("uniform entry 1"), std::string::npos)
+        << decoded.error().message;
+  }
+}
+
+TEST(TileEntries, EntriesMustNameACodecThatHoldsTheSampleType) {
+  struct Case {
+    SampleType type;
+    Codec codec;
+    bool accepted;
+  };
+  const Case cases[] = {
+      {SampleType::kU16, Codec::kZdelta, true}, {SampleType::kU16, Codec::kPng, true},
+      {SampleType::kU16, Codec::kJpeg, false},  {SampleType::kU16, Codec::kPtm, false},
+      {SampleType::kF32, Codec::kZstd, true},   {SampleType::kF32, Codec::kPng, false},
+      {SampleType::kF32, Codec::kWebp, false},  {SampleType::kU8, Codec::kZdelta, true},
+  };
+  for (const Case& c : cases) {
+    std::vector<uint8_t> bytes = goldenEntryBytes();
+    bytes.resize(kTileEntryBytes);  // the encoded entry alone
+    bytes[13] = uint8_t(c.codec);
+    auto decoded = decodeTileEntries(bytes, wideInfo(c.type), pageHeader(), "w.tess");
+    EXPECT_EQ(decoded.has_value(), c.accepted)
+        << codecName(c.codec) << " " << sampleTypeName(c.type);
+    if (!decoded) {
+      EXPECT_NE(decoded.error().message.find("cannot hold"), std::string::npos);
+    }
+  }
 }
 
 // ---- Page index ------------------------------------------------------------------------------

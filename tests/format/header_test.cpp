@@ -324,6 +324,7 @@ void expectSameRecords(const std::vector<ImageRecord>& a, const std::vector<Imag
     EXPECT_EQ(a[i].info.default_codec, b[i].info.default_codec);
     EXPECT_EQ(a[i].info.page_tiles_log2, b[i].info.page_tiles_log2);
     EXPECT_EQ(a[i].info.srgb_downsample, b[i].info.srgb_downsample);
+    EXPECT_EQ(a[i].info.sample_type, b[i].info.sample_type);
     EXPECT_EQ(a[i].levels, b[i].levels);
   }
 }
@@ -407,6 +408,56 @@ TEST(RootDirectory, DecodeRejectsFieldsOutOfBounds) {
       EXPECT_NE(decoded.error().message.find("x.tess: image 0"), std::string::npos);
     }
   }
+}
+
+// Sample types (docs/format.md, "Sample types"): byte 15 of the image record, from minor 2.
+TEST(RootDirectory, SampleTypeIsByteFifteenOfAMinorTwoFile) {
+  for (SampleType type : {SampleType::kU8, SampleType::kU16, SampleType::kF32}) {
+    ImageRecord record = goldenImageRecord();
+    record.info.sample_type = type;
+    std::vector<uint8_t> expected = goldenRootBytes();
+    expected[15] = uint8_t(type);
+    const std::vector<uint8_t> bytes = encodeRootDirectory({record});
+    EXPECT_EQ(bytes, expected) << sampleTypeName(type);
+    FileHeader header = rootHeader(1);
+    header.version_minor = kSampleTypeMinorVersion;
+    auto decoded = decodeRootDirectory(bytes, header, "x.tess");
+    ASSERT_TRUE(decoded) << decoded.error().message;
+    EXPECT_EQ((*decoded)[0].info.sample_type, type);
+    EXPECT_EQ((*decoded)[0].info.storedTileBytes(), size_t(68 * 68 * 4 * sampleBytes(type)));
+  }
+}
+
+TEST(RootDirectory, UnknownSampleTypeIsUnsupportedAndNamed) {
+  std::vector<uint8_t> bytes = goldenRootBytes();
+  bytes[15] = 3;
+  FileHeader header = rootHeader(1);
+  header.version_minor = kSampleTypeMinorVersion;
+  auto decoded = decodeRootDirectory(bytes, header, "x.tess");
+  ASSERT_FALSE(decoded);
+  EXPECT_EQ(decoded.error().code, ErrorCode::kUnsupported);
+  EXPECT_NE(decoded.error().message.find("x.tess: image 0: sample type 3"), std::string::npos)
+      << decoded.error().message;
+}
+
+TEST(RootDirectory, ByteFifteenIsReservedBeforeMinorTwo) {
+  std::vector<uint8_t> bytes = goldenRootBytes();
+  bytes[15] = uint8_t(SampleType::kF32);
+  // Minor 0: a reserved field set, rejected (DecodeRejectsFieldsOutOfBounds covers it too).
+  EXPECT_FALSE(decodeRootDirectory(bytes, rootHeader(1), "x.tess"));
+  // Minor 1: a reserved field of an older minor's reader is ignored; the image is 8-bit.
+  FileHeader header = rootHeader(1);
+  header.version_minor = 1;
+  auto decoded = decodeRootDirectory(bytes, header, "x.tess");
+  ASSERT_TRUE(decoded) << decoded.error().message;
+  EXPECT_EQ((*decoded)[0].info.sample_type, SampleType::kU8);
+}
+
+TEST(RootDirectory, OnlyWideImagesRaiseTheMinorVersion) {
+  std::vector<ImageRecord> records = {goldenImageRecord(), goldenImageRecord()};
+  EXPECT_EQ(minorVersionFor(records), kFormatVersionMinor);
+  records[1].info.sample_type = SampleType::kU16;
+  EXPECT_EQ(minorVersionFor(records), kSampleTypeMinorVersion);
 }
 
 TEST(RootDirectory, DecodeRejectsAWidthOverTheLimitAsTooLarge) {

@@ -115,7 +115,7 @@ bool writeFileBytes(const std::string& path, const std::vector<uint8_t>& bytes);
 template <typename Reader>
 std::vector<uint8_t> readAllRows(Reader& reader, uint32_t band_rows, std::string* error) {
   const auto& info = reader.info();
-  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  const size_t row_bytes = size_t(info.width_px) * info.channels * sampleBytes(info.sample_type);
   std::vector<uint8_t> out(row_bytes * info.height_px);
   for (uint32_t y = 0; y < info.height_px; y += band_rows) {
     const uint32_t rows = std::min(band_rows, info.height_px - y);

@@ -18,6 +18,7 @@
 #include <tessera/scene.h>
 #include <tessera/stream.h>
 
+#include "builder/band_reader.h"
 #include "codecs/decode.h"
 #include "support/archive_fixture.h"
 #include "support/nginx_server.h"
@@ -197,6 +198,61 @@ TEST_F(Cli, SplitBuildMergesIntoTheSingleBuild) {
   ASSERT_EQ(merged.exit_code, 0) << merged.err;
   EXPECT_TRUE(test::readFileBytes(work_ + "single.tess") ==
               test::readFileBytes(work_ + "merged.tess"));
+}
+
+// A float TIFF and a 16-bit TIFF through build, info and extract (docs/cli.md, "extract"):
+// samples come out as stored, and what cannot hold them is refused with exit 2.
+TEST_F(Cli, WideSamplesBuildShowAndExtractAsStored) {
+  for (const bool is_float : {true, false}) {
+    SCOPED_TRACE(is_float ? "f32" : "u16");
+    const std::vector<uint8_t> pixels = test::makeTestPixels(90, 70, 1);
+    test::TiffSpec spec{.width_px = 90,
+                        .height_px = 70,
+                        .samples = 1,
+                        .bits = uint16_t(is_float ? 32 : 16),
+                        .sample_format = uint16_t(is_float ? 3 : 1),
+                        .photometric = 1};
+    const std::string source = work_ + "wide.tif", archive_path = work_ + "wide.tess";
+    ASSERT_EQ(test::writeTiff(source, spec, pixels), "");
+    RunResult jpeg = run({"build", source, "-o", archive_path, "-q"});
+    EXPECT_EQ(jpeg.exit_code, 2) << jpeg.err;
+    EXPECT_NE(jpeg.err.find("cannot be stored with --codec jpeg; use zdelta"), std::string::npos)
+        << jpeg.err;
+    RunResult built =
+        run({"build", source, "-o", archive_path, "--codec", "zdelta", "--tile", "64", "-q"});
+    ASSERT_EQ(built.exit_code, 0) << built.err;
+    RunResult info = run({"info", archive_path, "--json"});
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    const nlohmann::json described = nlohmann::json::parse(info.out);
+    EXPECT_EQ(described["images"][0]["sample_type"], is_float ? "f32" : "u16");
+    for (const std::string name : {"rect.tif", "rect.png"}) {
+      RunResult extracted =
+          run({"extract", archive_path, "--rect", "0,0,90,70", "-o", work_ + name});
+      if (is_float && name == "rect.png") {
+        EXPECT_EQ(extracted.exit_code, 2) << extracted.err;
+        EXPECT_NE(extracted.err.find("PNG cannot hold f32 samples"), std::string::npos);
+        continue;
+      }
+      ASSERT_EQ(extracted.exit_code, 0) << extracted.err;
+      auto reader = name == "rect.tif" ? detail::openTiffReader(work_ + name)
+                                       : detail::openPngReader(work_ + name);
+      ASSERT_TRUE(reader) << reader.error().message;
+      std::string error;
+      const std::vector<uint8_t> got = test::readAllRows(**reader, 16, &error);
+      ASSERT_EQ(got.size(), pixels.size() * (is_float ? 4 : 2)) << error;
+      for (size_t i = 0; i < pixels.size(); ++i) {
+        if (is_float) {
+          float value;
+          std::memcpy(&value, got.data() + 4 * i, 4);
+          ASSERT_EQ(value, float(pixels[i]) / 255.0f) << name << " " << i;
+        } else {
+          uint16_t value;
+          std::memcpy(&value, got.data() + 2 * i, 2);
+          ASSERT_EQ(value, pixels[i] * 257) << name << " " << i;
+        }
+      }
+    }
+  }
 }
 
 TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
@@ -660,13 +716,15 @@ TEST_F(Cli, BadInputsFailNamingTheFileAndLeaveNoOutput) {
   std::vector<uint8_t> jpeg_bytes = test::readFileBytes(inputs + "good.jpg");
   jpeg_bytes.resize(jpeg_bytes.size() / 2);
   ASSERT_TRUE(test::writeFileBytes(inputs + "truncated.jpg", jpeg_bytes));
-  test::PngSpec png16;
-  png16.width_px = 64;
-  png16.height_px = 48;
-  png16.bit_depth = 16;
-  ASSERT_EQ(test::writePng(inputs + "deep.png", png16, pixels), "");
+  // 16-bit PNG builds (with a codec that holds it); signed samples are still refused.
+  test::TiffSpec signed16;
+  signed16.width_px = 64;
+  signed16.height_px = 48;
+  signed16.bits = 16;
+  signed16.sample_format = 2;  // SAMPLEFORMAT_INT
+  ASSERT_EQ(test::writeTiff(inputs + "signed.tif", signed16, pixels), "");
   for (const std::string name :
-       {"missing.png", "empty.png", "absurd.tif", "absurd.png", "truncated.jpg", "deep.png"}) {
+       {"missing.png", "empty.png", "absurd.tif", "absurd.png", "truncated.jpg", "signed.tif"}) {
     RunResult result = run({"build", inputs + name, "-o", work_ + "out.tess", "--threads", "2"});
     EXPECT_NE(result.exit_code, 0) << name;
     EXPECT_NE(result.exit_code, 2) << name << ": a bad input is not a usage error";

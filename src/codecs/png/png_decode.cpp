@@ -29,6 +29,11 @@ void readFromPayload(png_structp png, png_bytep data, size_t bytes) {
   context->input_pos += bytes;
 }
 
+// 16-bit images are stored as 16-bit PNG, 8-bit ones as 8-bit; nothing else is accepted.
+int expectedBitDepth(const Image& out) {
+  return out.sample_type == SampleType::kU16 ? 16 : 8;
+}
+
 enum class ReadOutcome { kOk, kLibpngError, kWrongGeometry };
 
 struct PngHeader {
@@ -67,15 +72,16 @@ ReadOutcome readPng(PngContext* context, Image* out, PngHeader* header) {
   png_get_IHDR(png, info, &header->width, &header->height, &header->bit_depth, &header->colour_type,
                nullptr, nullptr, nullptr);
   if (header->width != out->width_px || header->height != out->height_px ||
-      header->bit_depth != 8 || header->colour_type != colourType(out->channels)) {
+      header->bit_depth != expectedBitDepth(*out) ||
+      header->colour_type != colourType(out->channels)) {
     png_destroy_read_struct(&png, &info, nullptr);
     return ReadOutcome::kWrongGeometry;
   }
   // Adam7 payloads are valid PNGs; libpng combines the passes into the rows we give it.
   const int passes = png_set_interlace_handling(png);
+  if (header->bit_depth == 16) png_set_swap(png);  // PNG is big-endian, samples are not
   png_read_update_info(png, info);
-  if (png_get_rowbytes(png, info) != size_t(out->width_px) * out->channels)
-    png_error(png, "unexpected PNG row size");
+  if (png_get_rowbytes(png, info) != out->strideBytes()) png_error(png, "unexpected PNG row size");
   for (int pass = 0; pass < passes; ++pass)
     for (uint32_t y = 0; y < out->height_px; ++y) png_read_row(png, out->row(y), nullptr);
   png_read_end(png, nullptr);  // reads and CRC-checks every chunk up to IEND
@@ -116,8 +122,8 @@ Result<void> decodePng(std::span<const uint8_t> payload, Image& out, const Paren
   header.height = readBe32(payload.data() + 20);
   header.bit_depth = payload[24];
   header.colour_type = payload[25];
-  if (header.width != out.width_px || header.height != out.height_px || header.bit_depth != 8 ||
-      header.colour_type != colourType(out.channels))
+  if (header.width != out.width_px || header.height != out.height_px ||
+      header.bit_depth != expectedBitDepth(out) || header.colour_type != colourType(out.channels))
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: {} expected, stream is {}x{} {}-bit {}", kWhat,
                             geometryText(out.width_px, out.height_px, out.channels), header.width,

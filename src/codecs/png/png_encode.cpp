@@ -47,9 +47,11 @@ bool writePng(PngContext* context, const ImageView& tile, int zlib_level, int fi
   png_set_write_fn(png, context, writeToVector, flushNothing);
   png_set_compression_level(png, zlib_level);
   png_set_filter(png, PNG_FILTER_TYPE_BASE, filters);
-  png_set_IHDR(png, info, tile.width_px, tile.height_px, 8, colourType(tile.channels),
+  const bool wide = tile.sample_type == SampleType::kU16;
+  png_set_IHDR(png, info, tile.width_px, tile.height_px, wide ? 16 : 8, colourType(tile.channels),
                PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_BASE, PNG_FILTER_TYPE_BASE);
   png_write_info(png, info);
+  if (wide) png_set_swap(png);  // PNG is big-endian, samples are not
   for (uint32_t y = 0; y < tile.height_px; ++y)
     png_write_row(png, const_cast<png_bytep>(tile.row(y)));
   png_write_end(png, nullptr);
@@ -66,7 +68,7 @@ Result<std::vector<uint8_t>> encodePng(const ImageView& tile, const EncodeOption
   const int effort = std::clamp(options.effort != 0 ? options.effort : kDefaultPngEffort, 1, 9);
   const int filters = effort <= 3 ? (PNG_FILTER_SUB | PNG_FILTER_UP) : PNG_ALL_FILTERS;
   std::vector<uint8_t> payload;
-  payload.reserve(size_t(tile.width_px) * tile.height_px * tile.channels / 2 + 1024);
+  payload.reserve(size_t(tile.width_px) * tile.height_px * tile.texelBytes() / 2 + 1024);
   PngContext context;
   context.output = &payload;
   if (!writePng(&context, tile, effort, filters))

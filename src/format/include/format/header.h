@@ -72,6 +72,13 @@ std::vector<uint8_t> encodeHeader(const FileHeader& header);
 Result<FileHeader> decodeHeader(std::span<const uint8_t> bytes, const std::string& name);
 
 std::vector<uint8_t> encodeRootDirectory(const std::vector<ImageRecord>& images);
+/// The minor version a file holding `images` is written as: kSampleTypeMinorVersion when an
+/// image's samples are not 8-bit, so that 8-bit archives stay byte-identical.
+uint16_t minorVersionFor(std::span<const ImageRecord> images);
+/// Image-record byte 15 (docs/format.md, "Sample types"): u8 in files before minor 2; an
+/// unknown value is kUnsupported naming `what`.
+Result<SampleType> decodeSampleType(uint8_t value, const FileHeader& header,
+                                    const std::string& what);
 /// Decodes `image_count` image records; checks every field's bounds, that the level count
 /// matches the geometry and that page-index lengths match the tile grid. Block offsets are
 /// checked against `file_bytes` and `header_region_bytes`.
