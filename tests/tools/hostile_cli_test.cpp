@@ -339,8 +339,8 @@ TEST_F(HostileCli, AMisspeltSubcommandGetsTheNearestOne) {
   EXPECT_EQ(result.exit_code, 2);
   // The list grows with the subcommands: checked by its start, its members and one line.
   EXPECT_EQ(result.err.rfind("tessera: unknown subcommand 'biuld' (did you mean 'build'?); it "
-                             "must be one of build, info, verify, extract, fly, demo, view, "
-                             "render, serve",
+                             "must be one of build, info, verify, merge, extract, fly, demo, "
+                             "view, render, serve",
                              0),
             0u)
       << result.err;
@@ -367,7 +367,8 @@ TEST_F(HostileCli, CommonSpellingsAreAcceptedAndUnknownValuesListTheChoices) {
   EXPECT_EQ(center.exit_code, 0) << center.err;
 
   const std::vector<std::pair<std::vector<std::string>, std::string>> unknown = {
-      {{"--codec", "gif"}, "--codec 'gif' is not one of raw, zstd, lz4, jpeg, png, webp or ptm"},
+      {{"--codec", "gif"},
+       "--codec 'gif' is not one of raw, zstd, lz4, jpeg, png, webp, ptm or zdelta"},
       {{"--codec", "zsdt"}, "(did you mean 'zstd'?)"},
       {{"--order", "spiral"}, "--order 'spiral' is not one of hilbert, quadtree or row-major"},
       {{"--chroma", "411"}, "--chroma '411' is not one of 420 or 444"},
