@@ -82,7 +82,8 @@ Result<void> ArchiveTail::sync() {
 
 Result<void> ArchiveTail::load() {
   struct stat status {};
-  ::fstat(fd_, &status);
+  if (::fstat(fd_, &status) != 0)
+    return fail(ErrorCode::kIo, fmt::format("{}: cannot stat: {}", path_, strerror(errno)));
   const uint64_t size = uint64_t(status.st_size);
   if (size < kHeaderBytes) return fail(ErrorCode::kCorrupt, path_ + ": not a Tessera archive");
   std::vector<uint8_t> header_bytes(kHeaderBytes);

@@ -23,6 +23,11 @@ Result<UpdateReport> appendImage(const std::string& path, BuildOptions options) 
                 fmt::format("{}: append takes one image, {} given", path, options.inputs.size()));
   options.output = path;  // the build rules ask for one; nothing is written there but the append
   TESSERA_TRY(validateBuildOptions(options));
+  if (codecNeedsParent(options.codec))
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: append encodes with {}, whose tiles depend on their parents; "
+                            "choose another codec with --codec",
+                            path, codecName(options.codec)));
   TESSERA_ASSIGN_OR_RETURN(ArchiveTail tail, ArchiveTail::open(path));
   if (tail.header().image_count >= kMaxImages)
     return fail(ErrorCode::kTooLarge, fmt::format("{}: already holds {} images", path, kMaxImages));
