@@ -159,6 +159,8 @@ Result<void> checkPatch(ArchiveTail& tail, uint32_t image, uint32_t x, uint32_t 
                 fmt::format("{}: no image {} (the archive holds {}, numbered from 0)", path, image,
                             tail.header().image_count));
   const ImageInfo& info = tail.records()[image].info;
+  if (patch.width_px == 0 || patch.height_px == 0)
+    return fail(ErrorCode::kInvalidArgument, patch_name + ": an empty patch changes nothing");
   if (patch.channels != info.channels)
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}: {} channels, image {} of {} has {}", patch_name, patch.channels,

@@ -183,6 +183,7 @@ TEST(Update, MalformedRequestsFailNamingTheProblemAndLeaveTheFileAlone) {
   EXPECT_NE(message(1, 0, 0, makeImage(5, 5, 3, 1)).find("no image 1"), std::string::npos);
   EXPECT_NE(message(0, 0, 0, makeImage(5, 5, 4, 1)).find("patch.png: 4 channels"),
             std::string::npos);
+  EXPECT_NE(message(0, 0, 0, Image(0, 0, 3)).find("empty patch"), std::string::npos);
   EXPECT_EQ(test::readFileBytes(path), original);
   buildFrom({&base}, optionsFor(dir + "p.tess", Codec::kPtm, 64, 0));
   Result<UpdateReport> ptm =
