@@ -146,6 +146,27 @@ Archive::Impl::PageResult Archive::Impl::page(uint32_t image, uint32_t level, ui
   return result;
 }
 
+namespace {
+
+// The header at offset 0, or, when a torn write left it invalid, the copy an update syncs as
+// the file's last 128 bytes before it rewrites offset 0 (docs/format.md, "Appended
+// versions"). The copy counts only where it describes exactly this file.
+Result<detail::FileHeader> readCommittedHeader(const ByteSource& source,
+                                               std::span<const uint8_t> header_region,
+                                               uint64_t size) {
+  Result<detail::FileHeader> header = detail::decodeHeader(header_region, source.name());
+  if (header || header.error().code != ErrorCode::kCorrupt || size < 2 * detail::kHeaderBytes)
+    return header;
+  std::vector<uint8_t> copy_bytes(detail::kHeaderBytes);
+  if (!source.read(size - detail::kHeaderBytes, copy_bytes)) return header;
+  Result<detail::FileHeader> copy =
+      detail::decodeHeader(copy_bytes, source.name() + ": header copy");
+  if (!copy || copy->file_bytes != size) return header;
+  return copy;
+}
+
+}  // namespace
+
 Archive::Archive(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
 Archive::~Archive() = default;
 
@@ -158,13 +179,14 @@ Result<std::shared_ptr<Archive>> Archive::open(std::shared_ptr<ByteSource> sourc
   if (size == 0) return fail(ErrorCode::kCorrupt, name + ": empty file, not a Tessera archive");
   impl->header_region.resize(std::min<uint64_t>(size, detail::kHeaderRegionBytes));
   TESSERA_TRY(source->read(0, impl->header_region));
-  TESSERA_ASSIGN_OR_RETURN(impl->header, detail::decodeHeader(impl->header_region, name));
+  TESSERA_ASSIGN_OR_RETURN(impl->header, readCommittedHeader(*source, impl->header_region, size));
   const detail::FileHeader& header = impl->header;
-  if (header.file_bytes != size)
+  // Bytes past file_bytes are the uncommitted tail of an interrupted update (docs/format.md,
+  // "Appended versions"): never referenced, so ignored.
+  if (header.file_bytes > size)
     return fail(ErrorCode::kCorrupt,
-                fmt::format("{}: header records {} bytes but the file has {} (truncated or "
-                            "appended to)",
-                            name, header.file_bytes, size));
+                fmt::format("{}: header records {} bytes but the file has {} (truncated)", name,
+                            header.file_bytes, size));
   if (header.header_region_bytes > impl->header_region.size()) {
     // A writer may use a larger header region; read the rest once so its blocks are free too.
     size_t old_size = impl->header_region.size();

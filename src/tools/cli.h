@@ -87,5 +87,7 @@ void registerRenderCommand(CLI::App& app, int& exit_code);
 void registerServeCommand(CLI::App& app, int& exit_code);
 void registerSignCommand(CLI::App& app, int& exit_code);
 void registerExportCommand(CLI::App& app, int& exit_code);
+/// `update`, `append` and `compact` (docs/update.md).
+void registerUpdateCommands(CLI::App& app, int& exit_code);
 
 }  // namespace tessera::cli

@@ -54,6 +54,14 @@ int runInfo(const std::string& path, bool json, bool levels) {
     std::printf("%s: Tessera archive %s, %s, %zu image(s)\n", path.c_str(),
                 metadata.value("format_version", "1.0").c_str(),
                 formatBytes(archive.fileBytes()).c_str(), archive.images().size());
+  // Versions appended in place (docs/update.md): recorded by `tessera update` and `append`.
+  const nlohmann::json update = metadata.value("update", nlohmann::json::object());
+  out["version"] = update.value("version", uint64_t(1));
+  out["dead_bytes"] = update.value("dead_bytes", uint64_t(0));
+  if (!json && update.contains("version"))
+    std::printf("version %llu (updated in place), %s dead (tessera compact drops them)\n",
+                (unsigned long long)out["version"].get<uint64_t>(),
+                formatBytes(out["dead_bytes"].get<uint64_t>()).c_str());
   const nlohmann::json meta_images =
       metadata.contains("images") ? metadata["images"] : nlohmann::json::array();
   for (uint32_t i = 0; i < archive.images().size(); ++i) {

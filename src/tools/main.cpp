@@ -183,6 +183,7 @@ int main(int argc, char** argv) {
   registerSignCommand(app, exit_code);
   registerBrushesCommand(app, exit_code);
   registerExportCommand(app, exit_code);
+  registerUpdateCommands(app, exit_code);
   if (reportUnknownSubcommand(app, argc, argv)) return kExitUsage;
   // The subcommands run inside parse: whatever escapes them (an allocation the estimates did
   // not foresee, a library's exception) ends here as one line and exit 1, never an abort.
