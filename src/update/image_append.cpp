@@ -33,6 +33,11 @@ Result<UpdateReport> appendImage(const std::string& path, BuildOptions options) 
     return fail(ErrorCode::kTooLarge, fmt::format("{}: already holds {} images", path, kMaxImages));
   const std::string& input = options.inputs[0];
   TESSERA_ASSIGN_OR_RETURN(Image image, readImageFile(input, kMaxAppendSidePx));
+  if (image.sample_type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: {} has {} samples; append adds 8-bit images (build wider ones "
+                            "into an archive of their own)",
+                            path, input, sampleTypeName(image.sample_type)));
   ImageInfo info;
   info.width_px = image.width_px;
   info.height_px = image.height_px;

@@ -171,6 +171,13 @@ Result<void> checkPatch(ArchiveTail& tail, uint32_t image, uint32_t x, uint32_t 
                 fmt::format("{}: a {}x{} patch at {},{} reaches outside image {} of {} ({}x{})",
                             patch_name, patch.width_px, patch.height_px, x, y, image, path,
                             info.width_px, info.height_px));
+  // The updater averages and cuts 8-bit texels only (builder/downsample.h's byte rules).
+  if (info.sample_type != SampleType::kU8 || patch.sample_type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: image {} has {} samples and {} {}; update supports 8-bit images "
+                            "and patches (rebuild wider ones)",
+                            path, image, sampleTypeName(info.sample_type), patch_name,
+                            sampleTypeName(patch.sample_type)));
   if (codecNeedsParent(info.default_codec))
     return fail(ErrorCode::kUnsupported,
                 fmt::format("{}: image {} is coded with {}, whose tiles depend on their parents; "
