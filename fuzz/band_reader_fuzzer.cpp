@@ -41,7 +41,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       info.natural_band_rows == 0)
     fuzz::die("band_reader_fuzzer", "opened an image outside the reader's contract");
   if (uint64_t(info.width_px) * info.height_px > kMaxPixels) return 0;
-  const size_t row_bytes = size_t(info.width_px) * info.channels;
+  // 16-bit and float sources hand over their samples as they are: 2 or 4 bytes each.
+  const size_t row_bytes = size_t(info.width_px) * info.channels * sampleBytes(info.sample_type);
   const uint32_t band = std::min<uint32_t>(info.natural_band_rows, 64);
   std::vector<uint8_t> out;
   for (uint32_t y = 0; y < info.height_px; y += band) {
