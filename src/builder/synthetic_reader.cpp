@@ -279,6 +279,8 @@ int32_t SyntheticGenerator::footprintNoise(uint32_t t, uint32_t side, uint32_t s
 // region looks like a slightly rotated, ragged scan or satellite swath.
 uint32_t SyntheticGenerator::footprintDepth(uint32_t t, uint32_t side, uint32_t margin,
                                             uint32_t seed, bool slant_up) const {
+  // A cell's far corner can lie past the edge; it takes the edge's last depth.
+  t = std::min(t, side - 1);
   const uint64_t noise = uint64_t(footprintNoise(t, side, seed) + 4096);
   const uint64_t slant = uint64_t(margin) * (slant_up ? side - 1 - t : t) / side;
   return uint32_t(((margin * noise) >> 13) + slant);

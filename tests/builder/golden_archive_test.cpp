@@ -3,7 +3,8 @@
 // bytes it built to before the module restructuring. The expected hashes are the XXH3-64 of
 // the archives that Tessera 1750ecb's `tessera build INPUT -o OUT OPTIONS --threads 1` wrote
 // (the CLI and buildArchive share their defaults); a change to any byte of the format, a
-// codec's payload or the metadata fails here, naming the case.
+// codec's payload or the metadata fails here, naming the case. texture_set's hash is newer: the
+// synthetic source's ragged no-data edge at a row's last, partial cell was fixed after 1750ecb.
 #include <tessera/build.h>
 
 #include <cstdlib>
@@ -75,7 +76,7 @@ std::vector<GoldenCase> goldenCases() {
   add("ptm_effort2", {"synthetic:700x500:7:4"}, o, 0x186337eb239c86c9, 442504);
   o = options(Codec::kZstd);
   o.image_names = {"a", "b"};
-  add("texture_set", {"synthetic:300x200:1:3", "graya.png"}, o, 0xa0ec157919b118aa, 220324);
+  add("texture_set", {"synthetic:300x200:1:3", "graya.png"}, o, 0x649dadc90df19380, 220333);
   return cases;
 }
 
