@@ -81,7 +81,7 @@ Result<Image> readImageFile(const std::string& path, uint32_t max_side_px) {
     return fail(ErrorCode::kTooLarge,
                 fmt::format("{}: {}x{} texture exceeds the {} px limit per side", path,
                             source.width_px, source.height_px, max_side_px));
-  Image image(source.width_px, source.height_px, source.channels);
+  Image image(source.width_px, source.height_px, source.channels, source.sample_type);
   const size_t row_bytes = image.strideBytes();
   const uint32_t band = std::max(1u, std::min(source.natural_band_rows, 256u));
   for (uint32_t y = 0; y < image.height_px;) {
@@ -90,6 +90,28 @@ Result<Image> readImageFile(const std::string& path, uint32_t max_side_px) {
     y += rows;
   }
   return image;
+}
+
+Image toEightBit(Image image) {
+  if (image.sample_type == SampleType::kU8) return image;
+  Image narrow(image.width_px, image.height_px, image.channels);
+  const size_t samples = narrow.texels.size();
+  if (image.sample_type == SampleType::kU16) {
+    for (size_t i = 0; i < samples; ++i) {
+      uint16_t v;
+      std::memcpy(&v, image.texels.data() + 2 * i, 2);
+      narrow.texels[i] = uint8_t((uint32_t(v) * 255 + 32767) / 65535);
+    }
+  } else {
+    for (size_t i = 0; i < samples; ++i) {
+      float v;
+      std::memcpy(&v, image.texels.data() + 4 * i, 4);
+      // NaN fails both comparisons and lands on 0, like a value below the range.
+      const float clamped = v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f;
+      narrow.texels[i] = uint8_t(clamped * 255.0f + 0.5f);
+    }
+  }
+  return narrow;
 }
 
 Result<EncodedPyramid> encodePyramid(const Image& image, ImageInfo info, Codec codec,

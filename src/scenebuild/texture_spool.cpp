@@ -70,7 +70,8 @@ Result<std::shared_ptr<const Image>> cropSource(SpoolState& state, int32_t index
     return fail(ErrorCode::kInternal, "crop source out of range");
   TESSERA_ASSIGN_OR_RETURN(
       Image image, readImageFile(state.scene.crop_sources[index], state.options.max_side_px));
-  auto shared = std::make_shared<const Image>(std::move(image));
+  // Scene textures are drawn as 8-bit texels; wider files (16-bit PNGs) are narrowed.
+  auto shared = std::make_shared<const Image>(toEightBit(std::move(image)));
   state.sources.emplace(index, shared);
   return shared;
 }
@@ -96,7 +97,8 @@ Result<Image> loadTexture(SpoolState& state, uint32_t index) {
                            textureFile(t, state.scene.source, state.temp.path(), index));
   Result<Image> image = readImageFile(file, state.options.max_side_px);
   if (!t.bytes.empty()) std::remove(file.c_str());
-  return image;
+  if (!image) return image;
+  return toEightBit(std::move(*image));
 }
 
 Result<SpooledTexture> encodeOne(SpoolState& state, uint32_t index, CodecScratch& scratch) {

@@ -102,11 +102,14 @@ Result<void> ArchiveTail::load() {
   }
   if (!header) return Unexpected(header.error());
   header_ = *header;
-  if (header_.version_minor != 0)
+  if (header_.version_minor != 0) {
+    const char* why = header_.version_minor == 2 ? "an image with u16 or f32 samples"
+                                                 : "scene or procedural sections";
     return fail(ErrorCode::kUnsupported,
-                fmt::format("{}: format {}.{} archive (scene or procedural sections): only 1.0 "
-                            "archives of images can be updated",
-                            path_, header_.version_major, header_.version_minor));
+                fmt::format("{}: format {}.{} archive ({}): only 1.0 archives of 8-bit images "
+                            "can be updated",
+                            path_, header_.version_major, header_.version_minor, why));
+  }
   if (header_.file_bytes > size)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: header records {} bytes, the file has {}",
                                                  path_, header_.file_bytes, size));

@@ -86,6 +86,33 @@ TEST(GltfImporter, BuildsAGlbWithEmbeddedImages) {
   EXPECT_EQ(report->summary.objects, 6u);
 }
 
+// glTF allows 16-bit PNGs; scene textures are drawn as 8-bit texels, so the build narrows them
+// (rounding) instead of refusing or misreading them.
+TEST(GltfImporter, SixteenBitPngTexturesAreNarrowedToEightBits) {
+  ScratchDir dir;
+  test::PngSpec spec;
+  spec.width_px = 70;
+  spec.height_px = 50;
+  spec.colour = test::PngColour::kGray;
+  spec.bit_depth = 16;
+  // test::writePng widens each byte b to 16 bits as b * 257; 0xC8C8 narrows back to 0xC8.
+  ASSERT_EQ(test::writePng(dir.file("deep.png"), spec, std::vector<uint8_t>(70 * 50, 0xC8)), "");
+  GltfBuilder g;
+  g.setRoots({g.addNode(g.addQuadMesh(g.addMaterial(g.addTexture(g.addImageUri("deep.png")))),
+                        0, 0)});
+  const std::string path = g.writeGltf(dir, "deep");
+  Result<SceneBuildReport> report = build(path, dir.file("deep.tess"));
+  ASSERT_TRUE(report.has_value()) << report.error().message;
+  auto scene = SceneArchive::openFile(dir.file("deep.tess"));
+  ASSERT_TRUE(scene.has_value()) << scene.error().message;
+  auto textures = (*scene)->textures(0, 1);
+  ASSERT_TRUE(textures.has_value() && textures->size() == 1);
+  EXPECT_EQ((*textures)[0].info.sample_type, SampleType::kU8);
+  Result<Image> coarsest = (*scene)->readCoarsest((*textures)[0]);
+  ASSERT_TRUE(coarsest.has_value()) << coarsest.error().message;
+  for (uint8_t texel : coarsest->texels) ASSERT_EQ(texel, 0xC8);
+}
+
 TEST(GltfImporter, MissingTextureFileNamesFileAndImage) {
   ScratchDir dir;
   GltfBuilder g = cityBlock(dir, 4, 2, false);

@@ -49,16 +49,6 @@ void writeTestPng(const std::string& path, uint32_t width, uint32_t height, uint
   TESSERA_CHECK(writePng(image, path).has_value()) << "writePng " << path;
 }
 
-std::vector<uint8_t> readFileBytes(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
-
-void writeFileBytes(const std::string& path, const std::vector<uint8_t>& bytes) {
-  std::ofstream out(path, std::ios::binary);
-  out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
-}
-
 GltfBuilder::GltfBuilder() {
   doc = {{"asset", {{"version", "2.0"}}},
          {"buffers", nlohmann::json::array()},

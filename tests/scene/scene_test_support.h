@@ -17,6 +17,8 @@
 #include <tessera/scene_build.h>
 #include <tessera/view.h>
 
+#include "support/test_images.h"  // readFileBytes, writeFileBytes, writePng of any depth
+
 namespace tessera::test {
 
 /// A fresh folder under the system temp folder, removed with its contents.
@@ -49,8 +51,6 @@ PerspectiveView cameraAbove(const SceneSummary& summary, double height, double f
 /// Writes a w x h RGB PNG with a pattern that depends on `seed`.
 void writeTestPng(const std::string& path, uint32_t width, uint32_t height, uint32_t seed);
 /// Reads a file whole.
-std::vector<uint8_t> readFileBytes(const std::string& path);
-void writeFileBytes(const std::string& path, const std::vector<uint8_t>& bytes);
 
 /// A glTF 2.0 document being assembled: one binary buffer, meshes, nodes, materials, images.
 struct GltfBuilder {

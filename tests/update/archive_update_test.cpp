@@ -2,6 +2,7 @@
 // update must equal, texel for texel, a build from the patched source (lossless codecs).
 #include "update/archive_update.h"
 
+#include <cstring>
 #include <filesystem>
 
 #include <gtest/gtest.h>
@@ -192,6 +193,53 @@ TEST(Update, MalformedRequestsFailNamingTheProblemAndLeaveTheFileAlone) {
   EXPECT_EQ(ptm.error().code, ErrorCode::kUnsupported);
   test::writeFileBytes(dir + "junk.tess", std::vector<uint8_t>(5000, 7));
   EXPECT_FALSE(detail::updateRegion(dir + "junk.tess", 0, 0, 0, makeImage(5, 5, 3, 1), "x"));
+}
+
+// The updater averages and cuts 8-bit texels only: wider images and patches are refused by
+// name, and the archive is left byte for byte as it was.
+TEST(Update, WideImagesAndPatchesAreRefusedNamingTheSampleType) {
+  const std::string dir = test::testTempDir();
+  std::vector<uint16_t> wide(size_t(120) * 80);
+  for (size_t i = 0; i < wide.size(); ++i) wide[i] = uint16_t(i * 37);
+  BuildOptions options = optionsFor(dir + "wide.tess", Codec::kZstd, 64, 0);
+  RowSource source;
+  source.name = "memory16";
+  source.width_px = 120;
+  source.height_px = 80;
+  source.channels = 1;
+  source.sample_type = SampleType::kU16;
+  source.read_rows = [&wide](uint32_t first, uint32_t rows, std::span<uint8_t> out) {
+    std::memcpy(out.data(), wide.data() + size_t(first) * 120, size_t(rows) * 120 * 2);
+    return Result<void>{};
+  };
+  options.row_sources.push_back(std::move(source));
+  ASSERT_TRUE(buildArchive(options));
+  const std::vector<uint8_t> original = test::readFileBytes(dir + "wide.tess");
+  Result<UpdateReport> update =
+      detail::updateRegion(dir + "wide.tess", 0, 0, 0, makeImage(5, 5, 1, 1), "patch.png");
+  ASSERT_FALSE(update);
+  EXPECT_EQ(update.error().code, ErrorCode::kUnsupported);
+  EXPECT_NE(update.error().message.find("u16 or f32 samples"), std::string::npos)
+      << update.error().message;
+  EXPECT_EQ(test::readFileBytes(dir + "wide.tess"), original);
+
+  Image narrow = makeImage(100, 60, 1, 4);
+  buildFrom({&narrow}, optionsFor(dir + "a.tess", Codec::kZstd, 64, 0));
+  const std::vector<uint8_t> narrow_bytes = test::readFileBytes(dir + "a.tess");
+  test::PngSpec spec;
+  spec.width_px = 30;
+  spec.height_px = 20;
+  spec.colour = test::PngColour::kGray;
+  spec.bit_depth = 16;
+  ASSERT_EQ(test::writePng(dir + "wide.png", spec, std::vector<uint8_t>(600, 9)), "");
+  BuildOptions append = optionsFor("", Codec::kZstd, 64, 0);
+  append.inputs = {dir + "wide.png"};
+  Result<UpdateReport> appended = detail::appendImage(dir + "a.tess", append);
+  ASSERT_FALSE(appended);
+  EXPECT_EQ(appended.error().code, ErrorCode::kUnsupported);
+  EXPECT_NE(appended.error().message.find("wide.png has u16 samples"), std::string::npos)
+      << appended.error().message;
+  EXPECT_EQ(test::readFileBytes(dir + "a.tess"), narrow_bytes);
 }
 
 TEST(Append, TheAddedImageEqualsABuildOfItAndTheOthersAreUntouched) {

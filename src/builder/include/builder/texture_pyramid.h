@@ -24,9 +24,13 @@ struct EncodedPyramid {
 };
 
 /// Reads a whole image file (TIFF, PNG or JPEG, chosen by content) through the builder's band
-/// readers. Fails naming the path: missing, unreadable, unsupported, truncated, or a side over
-/// `max_side_px` (kTooLarge).
+/// readers, in the file's sample type (u8, u16 or f32). Fails naming the path: missing,
+/// unreadable, unsupported, truncated, or a side over `max_side_px` (kTooLarge).
 [[nodiscard]] Result<Image> readImageFile(const std::string& path, uint32_t max_side_px);
+
+/// `image` with 8-bit samples: u16 rounded from 0..65535 to 0..255, f32 clamped to [0, 1] then
+/// scaled (NaN becomes 0). An 8-bit image is returned as is.
+[[nodiscard]] Image toEightBit(Image image);
 
 /// Builds and encodes the pyramid of `image` with `info`'s tile size, border, page size and
 /// sRGB flag (its size and channels must match the image; level_count is filled in). Tiles
