@@ -98,8 +98,8 @@ TEST(GltfImporter, SixteenBitPngTexturesAreNarrowedToEightBits) {
   // test::writePng widens each byte b to 16 bits as b * 257; 0xC8C8 narrows back to 0xC8.
   ASSERT_EQ(test::writePng(dir.file("deep.png"), spec, std::vector<uint8_t>(70 * 50, 0xC8)), "");
   GltfBuilder g;
-  g.setRoots({g.addNode(g.addQuadMesh(g.addMaterial(g.addTexture(g.addImageUri("deep.png")))),
-                        0, 0)});
+  g.setRoots(
+      {g.addNode(g.addQuadMesh(g.addMaterial(g.addTexture(g.addImageUri("deep.png")))), 0, 0)});
   const std::string path = g.writeGltf(dir, "deep");
   Result<SceneBuildReport> report = build(path, dir.file("deep.tess"));
   ASSERT_TRUE(report.has_value()) << report.error().message;
