@@ -24,6 +24,16 @@ constexpr uint64_t kMaxDescriptorBytes = 1 << 16;
 constexpr uint64_t kMaxTileFileBytes = uint64_t(64) << 20;
 constexpr uint32_t kMaxDeepZoomTilePx = 8192;
 
+// Deep Zoom tiles are JPEG or PNG for browsers; a 16-bit PNG among them is refused by name
+// rather than read into an 8-bit band.
+Result<void> requireEightBit(const SourceInfo& info, const std::string& path) {
+  if (info.sample_type == SampleType::kU8) return {};
+  return fail(
+      ErrorCode::kUnsupported,
+      fmt::format("{}: a Deep Zoom tile with {} samples; Deep Zoom import reads 8-bit tiles", path,
+                  sampleTypeName(info.sample_type)));
+}
+
 Result<std::vector<uint8_t>> readWholeFile(const std::string& path, uint64_t limit) {
   TESSERA_ASSIGN_OR_RETURN(const uint64_t size, checkSourceFile(path));
   if (size > limit)
@@ -140,6 +150,7 @@ class DeepZoomLevelReader final : public BandReader {
       const uint32_t left = x > 0 ? layout_.overlap_px : 0;
       const uint32_t top = tile_row > 0 ? layout_.overlap_px : 0;
       const uint32_t width = std::min(ts, info_.width_px - x * ts);
+      TESSERA_TRY(requireEightBit(tile_info, path));
       if (tile_info.channels != info_.channels || tile_info.width_px < left + width ||
           tile_info.height_px < top + band_rows_)
         return fail(ErrorCode::kCorrupt,
@@ -185,6 +196,7 @@ class DeepZoomPyramid final : public PyramidSource {
     // The first tile says what the image's channels are.
     TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> first,
                              openBandReader(layout_.tilePath(0, 0, 0)));
+    TESSERA_TRY(requireEightBit(first->info(), layout_.tilePath(0, 0, 0)));
     channels_ = first->info().channels;
     TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> base, openLevel(0));
     info_ = base->info();
@@ -206,6 +218,7 @@ class DeepZoomPyramid final : public PyramidSource {
     }
     // Edge tiles are cropped to the image: decoded here, padded and encoded by the builder.
     TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(path));
+    TESSERA_TRY(requireEightBit(reader->info(), path));
     if (reader->info().width_px != width || reader->info().height_px != height ||
         reader->info().channels != channels_)
       return fail(ErrorCode::kCorrupt,

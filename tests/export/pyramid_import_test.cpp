@@ -221,6 +221,32 @@ TEST_F(PyramidImport, DeepZoomWithAMissingTileNamesTheTile) {
   EXPECT_FALSE(fs::exists(dir_ + "dz.tess"));
 }
 
+TEST_F(PyramidImport, DeepZoomWithASixteenBitTileNamesTheTile) {
+  if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
+  run(fmt::format("vips dzsave {0}flat.tif {0}dz --overlap 0 --tile-size 256 --suffix .png", dir_));
+  for (const char* name : {"10/0_0.png", "10/3_2.png"}) {
+    SCOPED_TRACE(name);
+    const std::string tile = dir_ + "dz_files/" + name;
+    const std::vector<uint8_t> original = test::readFileBytes(tile);
+    auto reader = openBandReader(tile);
+    ASSERT_TRUE(reader) << reader.error().message;
+    test::PngSpec spec;
+    spec.width_px = (*reader)->info().width_px;
+    spec.height_px = (*reader)->info().height_px;
+    spec.bit_depth = 16;
+    ASSERT_EQ(test::writePng(tile, spec,
+                             std::vector<uint8_t>(size_t(spec.width_px) * spec.height_px * 3, 40)),
+              "");
+    Result<BuildReport> report = build(dir_ + "dz.dzi", "dz.tess");
+    ASSERT_FALSE(report);
+    EXPECT_NE(report.error().message.find(tile + ": a Deep Zoom tile with u16 samples"),
+              std::string::npos)
+        << report.error().message;
+    EXPECT_FALSE(fs::exists(dir_ + "dz.tess"));
+    test::writeFileBytes(tile, original);
+  }
+}
+
 // Two directories whose reduced level has another aspect: a label image, not a level.
 TEST_F(PyramidImport, PyramidWhoseLevelsDisagreeIsRefused) {
   const std::string path = dir_ + "disagree.tif";
