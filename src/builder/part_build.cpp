@@ -216,6 +216,11 @@ Result<BuildReport> buildArchivePart(const BuildOptions& options, PartSpec part,
   TESSERA_TRY(validateBuildOptions(options));
   TESSERA_TRY(checkOutputPath(options.output));
   TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<BandReader> reader, openBandReader(options.inputs[0]));
+  // The parts' rows and the merge's coarse levels are averaged as 8-bit texels.
+  if (reader->info().sample_type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: {} samples; --part splits 8-bit images (build wider ones whole)",
+                            options.inputs[0], sampleTypeName(reader->info().sample_type)));
   TESSERA_ASSIGN_OR_RETURN(ImageInfo info, imageInfoFor(options, reader->info()));
   TESSERA_ASSIGN_OR_RETURN(nlohmann::json identity,
                            inputIdentity(options.inputs[0], reader->info()));

@@ -140,6 +140,22 @@ TEST(SplitMerge, RefusesWhatItCannotSplit) {
   EXPECT_FALSE(buildArchivePart(options, {1, 2}));
   EXPECT_FALSE(buildArchivePart(options, {3, 2}));
   EXPECT_FALSE(std::filesystem::exists(options.output));
+  // A 16-bit source: every part is refused by name, none aborts on an 8-bit row buffer.
+  test::PngSpec spec;
+  spec.width_px = 40;
+  spec.height_px = 300;
+  spec.colour = test::PngColour::kGray;
+  spec.bit_depth = 16;
+  ASSERT_EQ(test::writePng(dir + "/wide.png", spec, std::vector<uint8_t>(40 * 300, 9)), "");
+  options.inputs = {dir + "/wide.png"};
+  options.codec = Codec::kZstd;
+  for (uint32_t index : {1u, 2u}) {
+    Result<BuildReport> wide = buildArchivePart(options, {index, 2});
+    ASSERT_FALSE(wide);
+    EXPECT_NE(wide.error().message.find("wide.png: u16 samples"), std::string::npos)
+        << wide.error().message;
+  }
+  EXPECT_FALSE(std::filesystem::exists(options.output));
 }
 
 }  // namespace
