@@ -64,6 +64,9 @@ class BandReader {
 struct TiffImageRef {
   uint32_t directory = 0;
   uint64_t subifd_offset = 0;
+  /// SampleFormat for a directory without the tag (0: TIFF's default, unsigned). A pyramid's
+  /// reduced levels inherit the base's: vips writes float pyramids whose overviews omit it.
+  uint16_t missing_sample_format = 0;
 };
 
 /// Readers by format, used by openBandReader and tests.

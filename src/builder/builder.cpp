@@ -549,6 +549,7 @@ Result<nlohmann::json> importImage(const BuildOptions& options, const std::strin
     spooled.entries[l].reserve(size_t(info.tilesX(l)) * info.tilesY(l));
   const ImportPlan plan = planImport(info, source.levels(), !codecNeedsParent(options.codec));
   EncodingSink sink(info, spooled, stage.context, stage.pool, stage.buffers, source_name);
+  stage.context.sample_type = info.sample_type;
   PoolDrain drain{stage.pool};
   WorkerSpool copy_spool;
   nlohmann::json copied = nlohmann::json::array();
@@ -569,14 +570,17 @@ Result<nlohmann::json> importImage(const BuildOptions& options, const std::strin
     pass_info.width_px = info.levelWidthPx(pass.first_level);
     pass_info.height_px = info.levelHeightPx(pass.first_level);
     pass_info.level_count = pass.last_level - pass.first_level + 1;
-    if (reader.info().width_px != pass_info.width_px ||
-        reader.info().height_px != pass_info.height_px || reader.info().channels != info.channels)
-      return fail(ErrorCode::kCorrupt,
-                  fmt::format("{}: pyramid level {} decodes as {}x{} px with {} channel(s), not "
-                              "{}x{} with {}",
-                              source_name, pass.source_level, reader.info().width_px,
-                              reader.info().height_px, reader.info().channels, pass_info.width_px,
-                              pass_info.height_px, info.channels));
+    const SourceInfo& level_info = reader.info();
+    if (level_info.width_px != pass_info.width_px || level_info.height_px != pass_info.height_px ||
+        level_info.channels != info.channels || level_info.sample_type != info.sample_type)
+      return fail(
+          ErrorCode::kCorrupt,
+          fmt::format("{}: pyramid level {} decodes as {}x{} px with {} channel(s) of {}, "
+                      "not {}x{} with {} of {}",
+                      source_name, pass.source_level, level_info.width_px, level_info.height_px,
+                      level_info.channels, sampleTypeName(level_info.sample_type),
+                      pass_info.width_px, pass_info.height_px, info.channels,
+                      sampleTypeName(info.sample_type)));
     LevelShiftSink shifted(sink, pass.first_level, plan.copied_from);
     PyramidBuilder pyramid(pass_info, shifted, /*floor_average=*/options.codec == Codec::kPtm);
     const bool counts = pass.source_level == 0 && plan.copied_from[0] < 0;

@@ -129,6 +129,8 @@ Result<bool> TiffPyramid::open() {
   TIFFOpenOptionsFree(options);
   if (!tif_) return failure("not a readable TIFF");
   tiff_levels_.push_back(describeDirectory({}));
+  uint16_t base_sample_format = 0;
+  TIFFGetField(tif_, TIFFTAG_SAMPLEFORMAT, &base_sample_format);
   // SubIFDs of the first directory, then the main chain's reduced-resolution directories.
   uint16_t subifd_count = 0;
   uint64_t* subifd_offsets = nullptr;
@@ -138,7 +140,7 @@ Result<bool> TiffPyramid::open() {
   for (uint64_t offset : subifds) {
     if (!TIFFSetSubDirectory(tif_, offset))
       return failure(fmt::format("cannot read the SubIFD at offset {}", offset));
-    tiff_levels_.push_back(describeDirectory({0, offset}));
+    tiff_levels_.push_back(describeDirectory({0, offset, base_sample_format}));
   }
   if (subifds.empty()) {
     // TIFFSetDirectory walks the chain from the start: the cap keeps a hostile chain of
@@ -148,7 +150,7 @@ Result<bool> TiffPyramid::open() {
       uint32_t subfile = 0;
       TIFFGetField(tif_, TIFFTAG_SUBFILETYPE, &subfile);
       if ((subfile & FILETYPE_REDUCEDIMAGE) && !(subfile & FILETYPE_MASK))
-        tiff_levels_.push_back(describeDirectory({index, 0}));
+        tiff_levels_.push_back(describeDirectory({index, 0, base_sample_format}));
     }
   }
   libtiff_error_.clear();

@@ -317,7 +317,9 @@ Result<TiffReader::TiffFormat> TiffReader::readFormat() {
   TESSERA_TRY(checkSourceDimensions(path_, format.width_px, format.height_px));
   TIFFGetFieldDefaulted(tif_, TIFFTAG_BITSPERSAMPLE, &format.bits);
   TIFFGetFieldDefaulted(tif_, TIFFTAG_SAMPLESPERPIXEL, &spp_);
-  TIFFGetFieldDefaulted(tif_, TIFFTAG_SAMPLEFORMAT, &format.sample_format);
+  if (!TIFFGetField(tif_, TIFFTAG_SAMPLEFORMAT, &format.sample_format))
+    format.sample_format =
+        image_.missing_sample_format ? image_.missing_sample_format : uint16_t(SAMPLEFORMAT_UINT);
   TIFFGetFieldDefaulted(tif_, TIFFTAG_PLANARCONFIG, &format.planar);
   TIFFGetFieldDefaulted(tif_, TIFFTAG_COMPRESSION, &format.compression);
   if (!TIFFGetField(tif_, TIFFTAG_PHOTOMETRIC, &format.photometric)) {

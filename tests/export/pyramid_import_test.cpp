@@ -154,6 +154,50 @@ TEST_F(PyramidImport, VipsSubIfdPyramidIsImported) {
   expectTiffImportMatches(dir_ + "subifd.tif", true);
 }
 
+// Wide pyramids: vips writes float pyramids whose overviews lack SampleFormat (they inherit the
+// base's), and no level of a u16 or f32 image may become a uniform entry. The base level must
+// come through bit-exact, as from the same image stored flat.
+TEST_F(PyramidImport, WidePyramidsKeepTheirSamplesExactly) {
+  if (!onPath("vips")) GTEST_SKIP() << "vips not installed (Debian: libvips-tools)";
+  run(fmt::format("vips gaussnoise {0}noise.v 600 500", dir_));
+  run(fmt::format("vips black {0}black.v 600 500", dir_));
+  for (const char* type : {"float", "ushort"}) {
+    for (const char* content : {"noise", "black"}) {
+      SCOPED_TRACE(fmt::format("{} {}", type, content));
+      run(fmt::format("vips cast {0}{1}.v {0}cast.v {2}", dir_, content, type));
+      run(
+          fmt::format("vips tiffsave {0}cast.v {0}pyr.tif --tile --pyramid --tile-width 256 "
+                      "--tile-height 256 --compression deflate",
+                      dir_));
+      run(fmt::format("vips tiffsave {0}cast.v {0}flat16.tif", dir_));
+      BuildOptions options;
+      options.codec = Codec::kZstd;
+      options.threads = 2;
+      options.tile_size_px = 256;
+      for (const char* name : {"pyr", "flat16"}) {
+        options.inputs = {dir_ + name + ".tif"};
+        options.output = dir_ + name + ".tess";
+        Result<BuildReport> report = buildArchive(options);
+        ASSERT_TRUE(report) << report.error().message;
+      }
+      auto imported = Archive::openFile(dir_ + "pyr.tess");
+      auto flat = Archive::openFile(dir_ + "flat16.tess");
+      ASSERT_TRUE(imported && flat);
+      EXPECT_TRUE((*imported)->verify(/*decode=*/true).ok());
+      const ImageInfo& info = (*imported)->images()[0];
+      EXPECT_EQ(info.sample_type,
+                type == std::string("float") ? SampleType::kF32 : SampleType::kU16);
+      for (uint32_t y = 0; y < info.tilesY(0); ++y)
+        for (uint32_t x = 0; x < info.tilesX(0); ++x) {
+          auto a = (*imported)->readTile({0, 0, x, y});
+          auto b = (*flat)->readTile({0, 0, x, y});
+          ASSERT_TRUE(a && b) << "tile " << x << "," << y;
+          EXPECT_EQ(a->texels, b->texels) << "tile " << x << "," << y;
+        }
+    }
+  }
+}
+
 TEST_F(PyramidImport, CogFromGdalCopiesMatchingTiles) {
   if (!onPath("gdal_translate")) GTEST_SKIP() << "gdal_translate not installed (Debian: gdal-bin)";
   run(
