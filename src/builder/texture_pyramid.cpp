@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include "band_reader.h"
+#include "build_internals.h"
 #include "format/checksum.h"
 #include "format/header.h"
 #include "pyramid_builder.h"
@@ -90,6 +91,20 @@ Result<Image> readImageFile(const std::string& path, uint32_t max_side_px) {
     y += rows;
   }
   return image;
+}
+
+nlohmann::json levelStatistics(const Image& level) {
+  struct ImageRows final : LevelRows {
+    const Image* image = nullptr;
+    const uint8_t* row(uint32_t y) const override { return image->row(y); }
+  } rows;
+  rows.image = &level;
+  rows.width_px = level.width_px;
+  rows.height_px = level.height_px;
+  rows.channels = level.channels;
+  rows.sample_type = level.sample_type;
+  return level.sample_type == SampleType::kU8 ? coarsestLevelStatistics(rows)
+                                              : wideLevelStatistics(rows);
 }
 
 Image toEightBit(Image image) {

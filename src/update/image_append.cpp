@@ -50,6 +50,8 @@ Result<UpdateReport> appendImage(const std::string& path, BuildOptions options) 
   CodecScratch scratch;
   TESSERA_ASSIGN_OR_RETURN(EncodedPyramid pyramid,
                            encodePyramid(image, info, options.codec, encode, &scratch, input));
+  // From the whole image (in memory anyway): from_level_width says which level it describes.
+  const nlohmann::json statistics = levelStatistics(image);
   image = Image();
   const uint32_t index = tail.header().image_count;
   const ImageInfo& built = pyramid.info;
@@ -78,7 +80,8 @@ Result<UpdateReport> appendImage(const std::string& path, BuildOptions options) 
                     {"width", built.width_px},
                     {"height", built.height_px},
                     {"channels", built.channels},
-                    {"codec", codecName(options.codec)}});
+                    {"codec", codecName(options.codec)},
+                    {"statistics", statistics}});
   TESSERA_ASSIGN_OR_RETURN(UpdateReport report, tail.commit());
   report.tiles_rewritten = tiles;
   return report;

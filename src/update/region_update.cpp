@@ -9,6 +9,7 @@
 
 #include "archive_tail.h"
 #include "builder/downsample.h"
+#include "builder/texture_pyramid.h"
 #include "codecs/encode.h"
 #include "level_pages.h"
 #include "update/archive_update.h"
@@ -186,6 +187,16 @@ Result<void> checkPatch(ArchiveTail& tail, uint32_t image, uint32_t x, uint32_t 
   return {};
 }
 
+// The coarsest level is one tile, so its window is the whole level with the patch pasted:
+// the statistics a build of the patched image records.
+void refreshStatistics(nlohmann::json& metadata, uint32_t image, const LevelWindow& coarsest) {
+  nlohmann::json* images = metadata.contains("images") ? &metadata["images"] : nullptr;
+  if (!images || !images->is_array() || image >= images->size()) return;
+  nlohmann::json& entry = (*images)[image];
+  if (!entry.is_object() || !entry.contains("statistics")) return;
+  entry["statistics"] = levelStatistics(coarsest.texels);
+}
+
 }  // namespace
 
 Result<UpdateReport> updateRegion(const std::string& path, uint32_t image, uint32_t x, uint32_t y,
@@ -218,6 +229,8 @@ Result<UpdateReport> updateRegion(const std::string& path, uint32_t image, uint3
     TESSERA_TRY(rewriteLevel(tail, image, level, changes));
     if (level + 1 < info.level_count)
       changed = downsampleChanged(window, info, level, changed.rect);
+    else
+      refreshStatistics(tail.metadata(), image, window);
   }
   TESSERA_ASSIGN_OR_RETURN(UpdateReport report, tail.commit());
   report.tiles_rewritten = tiles_rewritten;

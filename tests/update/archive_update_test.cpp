@@ -6,6 +6,7 @@
 #include <filesystem>
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
 #include <tessera/build.h>
@@ -105,6 +106,12 @@ TEST_P(UpdateEqualsRebuild, EveryTileOfEveryLevel) {
   std::shared_ptr<Archive> rebuilt = openOrDie(dir + "b.tess");
   EXPECT_TRUE(updated->verify().ok());
   expectSameTiles(*updated, *rebuilt, 0, 0);
+  // The statistics describe the patched image, as the rebuild's do.
+  const auto statistics = [](const Archive& archive) {
+    return nlohmann::json::parse(archive.metadataJson())["images"][0]["statistics"];
+  };
+  EXPECT_FALSE(statistics(*rebuilt).is_null());
+  EXPECT_EQ(statistics(*updated), statistics(*rebuilt));
   // Tiles far from the patch keep their stored payloads (nothing re-encoded there), and the
   // coarsest tile, an ancestor of every tile, was recomputed.
   const ImageInfo& info = updated->images()[0];

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include <tessera/format.h>
 #include <tessera/result.h>
 
@@ -27,6 +29,10 @@ struct EncodedPyramid {
 /// readers, in the file's sample type (u8, u16 or f32). Fails naming the path: missing,
 /// unreadable, unsupported, truncated, or a side over `max_side_px` (kTooLarge).
 [[nodiscard]] Result<Image> readImageFile(const std::string& path, uint32_t max_side_px);
+
+/// The metadata `statistics` of an image (mean, min and max per channel; the counts of NaN and
+/// infinities for f32) computed from `level`, one of its levels (builders use the coarsest).
+[[nodiscard]] nlohmann::json levelStatistics(const Image& level);
 
 /// `image` with 8-bit samples: u16 rounded from 0..65535 to 0..255, f32 clamped to [0, 1] then
 /// scaled (NaN becomes 0). An 8-bit image is returned as is.
