@@ -182,5 +182,55 @@ TEST(KillLoop, SigkillAnywhereInAnUpdateOrAppendLeavesTheOldOrTheNewVersion) {
   EXPECT_GT(old_kept + new_written, 0);
 }
 
+// issue 32: `tessera merge` killed at random points leaves at its output the archive that was
+// there before or the complete merged one (the builder's writer: a temporary renamed last),
+// and no temporary beside it.
+TEST(KillLoop, SigkillAnywhereInAMergeLeavesTheOldOrTheMergedArchive) {
+  const std::string dir = test::testTempDir();
+  const std::string input = "synthetic:1536x1536:4:3", output = dir + "out.tess";
+  std::vector<std::string> merge_args = {"merge"};
+  for (int part = 1; part <= 4; ++part) {
+    const std::string path = dir + "part-" + std::to_string(part) + ".tess";
+    ASSERT_EQ(
+        WEXITSTATUS(waitExit(startTessera({"build", input, "--part", std::to_string(part) + "/4",
+                                           "-o", path, "--codec", "png", "--quiet"}))),
+        0);
+    merge_args.push_back(path);
+  }
+  merge_args.insert(merge_args.end(), {"-o", output});
+  ASSERT_EQ(WEXITSTATUS(waitExit(startBuild("synthetic:300x200:1:3", dir + "old.tess"))), 0);
+  const uint64_t old_bytes = std::filesystem::file_size(dir + "old.tess");
+  double merge_s = 0;
+  for (int i = 0; i < 2; ++i) {  // the longer of two runs, as for the build above
+    const auto started = std::chrono::steady_clock::now();
+    ASSERT_EQ(WEXITSTATUS(waitExit(startTessera(merge_args))), 0);
+    merge_s = std::max(
+        merge_s, std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count());
+  }
+  const uint64_t merged_bytes = std::filesystem::file_size(output);
+  ASSERT_NE(merged_bytes, old_bytes);
+  std::mt19937 random(34);
+  std::uniform_real_distribution<double> point(0.0, merge_s * 1.6);
+  int old_kept = 0, merged = 0;
+  for (uint32_t round = 0; round < killPoints(); ++round) {
+    std::filesystem::copy_file(dir + "old.tess", output,
+                               std::filesystem::copy_options::overwrite_existing);
+    const pid_t pid = startTessera(merge_args);
+    ASSERT_GT(pid, 0);
+    std::this_thread::sleep_for(std::chrono::duration<double>(point(random)));
+    kill(pid, SIGKILL);
+    waitExit(pid);
+    ASSERT_EQ(verdict(output), "") << "round " << round << ": " << output << " does not verify";
+    const uint64_t bytes = std::filesystem::file_size(output);
+    ASSERT_TRUE(bytes == old_bytes || bytes == merged_bytes) << "round " << round;
+    (bytes == old_bytes ? old_kept : merged) += 1;
+  }
+  EXPECT_GT(old_kept + merged, 0);
+  size_t leftovers = 0;
+  for (const auto& entry : std::filesystem::directory_iterator(dir))
+    if (entry.path().filename().string().find(".tmp-") != std::string::npos) ++leftovers;
+  EXPECT_EQ(leftovers, 0u);
+}
+
 }  // namespace
 }  // namespace tessera
