@@ -2,7 +2,11 @@
 #include <tessera/archive.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cstring>
+#include <mutex>
+#include <thread>
+#include <vector>
 
 #include <fmt/format.h>
 
@@ -13,6 +17,7 @@ namespace tessera {
 namespace {
 
 constexpr uint32_t kMaxRegionSidePx = 16384;
+constexpr size_t kTilesPerThread = 8;
 
 }  // namespace
 
@@ -35,24 +40,61 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
   int64_t x1 = std::min<int64_t>(rect.x + rect.width, level_w);
   int64_t y1 = std::min<int64_t>(rect.y + rect.height, level_h);
   if (x0 >= x1 || y0 >= y1) return out;
-  int64_t t = info.tile_size_px;
+  const int64_t t = info.tile_size_px;
+  const int64_t tx0 = x0 / t, ty0 = y0 / t, tiles_x = (x1 - 1) / t - tx0 + 1;
+  const size_t tiles = size_t(tiles_x) * size_t((y1 - 1) / t - ty0 + 1);
   // `texel` is in bytes, so one copy serves every sample type.
-  uint32_t b = info.border_px, texel = info.texelBytes();
-  CodecScratch scratch;
-  for (int64_t ty = y0 / t; ty <= (y1 - 1) / t; ++ty) {
-    for (int64_t tx = x0 / t; tx <= (x1 - 1) / t; ++tx) {
-      TESSERA_ASSIGN_OR_RETURN(Image tile,
-                               readTile({image, level, uint32_t(tx), uint32_t(ty)}, &scratch));
-      int64_t cx0 = std::max(x0, tx * t), cx1 = std::min(x1, (tx + 1) * t);
-      int64_t cy0 = std::max(y0, ty * t), cy1 = std::min(y1, (ty + 1) * t);
-      size_t row_bytes = size_t(cx1 - cx0) * texel;
-      for (int64_t y = cy0; y < cy1; ++y) {
-        const uint8_t* src = tile.row(uint32_t(y - ty * t + b)) + (cx0 - tx * t + b) * texel;
-        uint8_t* dst = out.row(uint32_t(y - rect.y)) + (cx0 - rect.x) * texel;
-        std::memcpy(dst, src, row_bytes);
+  const uint32_t b = info.border_px, texel = info.texelBytes();
+  // Tile i (row-major over the covered tiles) into its part of `out`: tiles cover disjoint
+  // texels of the region, so threads need no lock to write them.
+  auto readOne = [&](size_t i, CodecScratch* scratch) -> Result<void> {
+    const int64_t tx = tx0 + int64_t(i % size_t(tiles_x)), ty = ty0 + int64_t(i / size_t(tiles_x));
+    TESSERA_ASSIGN_OR_RETURN(Image tile,
+                             readTile({image, level, uint32_t(tx), uint32_t(ty)}, scratch));
+    const int64_t cx0 = std::max(x0, tx * t), cx1 = std::min(x1, (tx + 1) * t);
+    const int64_t cy0 = std::max(y0, ty * t), cy1 = std::min(y1, (ty + 1) * t);
+    const size_t row_bytes = size_t(cx1 - cx0) * texel;
+    for (int64_t y = cy0; y < cy1; ++y) {
+      const uint8_t* src = tile.row(uint32_t(y - ty * t + b)) + (cx0 - tx * t + b) * texel;
+      uint8_t* dst = out.row(uint32_t(y - rect.y)) + (cx0 - rect.x) * texel;
+      std::memcpy(dst, src, row_bytes);
+    }
+    return {};
+  };
+  // Decoding dominates a large region (a 4096^2 window is 256 JPEG tiles), so the tiles are
+  // shared out to a thread per core; a few tiles are not worth starting threads for.
+  const size_t threads =
+      std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()), tiles / kTilesPerThread);
+  if (threads <= 1) {
+    CodecScratch scratch;
+    for (size_t i = 0; i < tiles; ++i) TESSERA_TRY(readOne(i, &scratch));
+    return out;
+  }
+  std::atomic<size_t> next{0};
+  std::atomic<bool> failed{false};
+  std::mutex error_mutex;
+  size_t error_tile = SIZE_MAX;
+  Error error;
+  auto work = [&] {
+    CodecScratch scratch;
+    for (size_t i = next++; i < tiles && !failed; i = next++) {
+      Result<void> done = readOne(i, &scratch);
+      if (done) continue;
+      failed = true;
+      // The first failing tile in row-major order is the one reported, as a serial read would.
+      std::lock_guard lock(error_mutex);
+      if (i < error_tile) {
+        error_tile = i;
+        error = done.error();
       }
     }
+  };
+  {
+    std::vector<std::jthread> helpers;
+    for (size_t k = 1; k < threads; ++k) helpers.emplace_back(work);
+    work();
   }
+  if (error_tile != SIZE_MAX) return Unexpected(std::move(error));
   return out;
 }
 

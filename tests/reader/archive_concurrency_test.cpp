@@ -65,6 +65,45 @@ TEST(ArchiveConcurrency, ManyThreadsReadEveryTileConsistently) {
   for (int t = 0; t < kThreads; ++t) EXPECT_EQ(mismatches[t], 0) << "thread " << t;
 }
 
+// A region of many tiles is decoded by a thread per core: it must equal the tiles assembled
+// one by one, and with damaged tiles report the first in row-major order, as one thread would.
+TEST(ArchiveConcurrency, RegionsReadInParallelEqualTheirTilesAndReportTheFirstFault) {
+  BuildOptions options;
+  options.tile_size_px = 64;
+  options.border_px = 1;
+  options.codec = Codec::kZstd;
+  options.threads = 2;
+  const Image source = test::makePatternImage(1100, 700, 3, 5);
+  test::BuiltArchive built = test::buildFromImage(source, options, test::testTempDir());
+  auto opened = Archive::openFile(built.path);
+  ASSERT_TRUE(opened) << opened.error().message;
+  const PixelRect rect{37, 21, 1000, 650};  // about 16 x 11 tiles, unaligned on every side
+  auto region = (*opened)->readRegion(0, 0, rect);
+  ASSERT_TRUE(region) << region.error().message;
+  for (uint32_t y = 0; y < rect.height; ++y)
+    ASSERT_TRUE(std::equal(region->row(y), region->row(y) + region->strideBytes(),
+                           source.row(uint32_t(rect.y) + y) + size_t(rect.x) * 3))
+        << "row " << y;
+
+  // Damage two tiles inside the region; the one earlier in row-major order is reported.
+  const TileId first{0, 0, 5, 3}, later{0, 0, 2, 7};
+  std::vector<uint8_t> bytes = test::readFileBytes(built.path);
+  for (const TileId& tile : {first, later}) {
+    const TileEntry entry = *(*opened)->tileEntry(tile);
+    ASSERT_EQ(entry.kind, TileKind::kEncoded);
+    bytes[entry.offset_bytes + entry.length_bytes / 2] ^= 0x5a;
+  }
+  test::writeFileBytes(built.path + ".damaged", bytes);
+  auto damaged = Archive::openFile(built.path + ".damaged");
+  ASSERT_TRUE(damaged) << damaged.error().message;
+  for (int run = 0; run < 4; ++run) {
+    auto failed = (*damaged)->readRegion(0, 0, rect);
+    ASSERT_FALSE(failed);
+    EXPECT_NE(failed.error().message.find("tile (0,5,3)"), std::string::npos)
+        << failed.error().message;
+  }
+}
+
 TEST(ArchiveConcurrency, ConcurrentVerifyAndReadsAgree) {
   BuildOptions options;
   options.tile_size_px = 64;
