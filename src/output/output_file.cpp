@@ -1,12 +1,15 @@
 #include "output/output_file.h"
 
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <sys/statvfs.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <cerrno>
+#include <cstdlib>
+#include <ctime>
 #include <cstring>
 #include <filesystem>
 
@@ -48,6 +51,28 @@ Result<void> checkDirectory(const std::string& dir, const std::string& what, con
 }
 
 std::atomic<uint32_t> g_temp_counter{0};
+
+// A writer killed between naming its finished file and renaming it over the target (a window
+// of two system calls) leaves `TARGET.tmp-PID-N`, a complete file. The next writer of the
+// target removes such names when PID is not a live process here and the name is older than
+// ten minutes: a writer on another machine sharing the directory is inside that window for
+// microseconds, never minutes.
+void removeStaleTemporaries(const std::string& final_path) {
+  namespace fs = std::filesystem;
+  const fs::path target(final_path);
+  const std::string prefix = target.filename().string() + ".tmp-";
+  std::error_code error;
+  const fs::path dir = target.has_parent_path() ? target.parent_path() : fs::path(".");
+  for (fs::directory_iterator it(dir, error), end; !error && it != end; it.increment(error)) {
+    const std::string name = it->path().filename().string();
+    if (name.size() <= prefix.size() || name.compare(0, prefix.size(), prefix) != 0) continue;
+    const long pid = std::strtol(name.c_str() + prefix.size(), nullptr, 10);
+    struct stat info;
+    if (pid <= 0 || ::lstat(it->path().c_str(), &info) != 0 || !S_ISREG(info.st_mode)) continue;
+    const bool alive = ::kill(pid_t(pid), 0) == 0 || errno == EPERM;
+    if (!alive && ::time(nullptr) - info.st_mtime > 600) ::unlink(it->path().c_str());
+  }
+}
 
 }  // namespace
 
@@ -96,6 +121,7 @@ Result<TempFile> TempFile::create(const std::string& final_path) {
   TESSERA_TRY(checkDirectory(dir, final_path, "output directory"));
   // Before anything is written: a build to /dev/null should fail at once, not after an hour.
   TESSERA_TRY(checkOutputPath(final_path));
+  removeStaleTemporaries(final_path);
   return openIn(dir, final_path,
                 fmt::format("{}.tmp-{}-{}", final_path, ::getpid(), g_temp_counter++));
 }

@@ -47,10 +47,22 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
   const uint32_t b = info.border_px, texel = info.texelBytes();
   // Tile i (row-major over the covered tiles) into its part of `out`: tiles cover disjoint
   // texels of the region, so threads need no lock to write them.
-  auto readOne = [&](size_t i, CodecScratch* scratch) -> Result<void> {
+  // Each thread decodes into one reused tile: a fresh 200 KiB tile per decode is an mmap, its
+  // page faults and an munmap, a quarter of the time of a large read.
+  struct Worker {
+    CodecScratch scratch;
+    Image tile;
+  };
+  auto readOne = [&](size_t i, Worker& worker) -> Result<void> {
     const int64_t tx = tx0 + int64_t(i % size_t(tiles_x)), ty = ty0 + int64_t(i / size_t(tiles_x));
-    TESSERA_ASSIGN_OR_RETURN(Image tile,
-                             readTile({image, level, uint32_t(tx), uint32_t(ty)}, scratch));
+    const TileId id{image, level, uint32_t(tx), uint32_t(ty)};
+    TESSERA_ASSIGN_OR_RETURN(const TileEntry entry, tileEntry(id));
+    std::vector<uint8_t> payload;
+    if (entry.hasPayload()) {
+      TESSERA_ASSIGN_OR_RETURN(payload, readPayload(id, entry));
+    }
+    TESSERA_TRY(decodeTileInto(id, entry, payload, worker.tile, &worker.scratch));
+    const Image& tile = worker.tile;
     const int64_t cx0 = std::max(x0, tx * t), cx1 = std::min(x1, (tx + 1) * t);
     const int64_t cy0 = std::max(y0, ty * t), cy1 = std::min(y1, (ty + 1) * t);
     const size_t row_bytes = size_t(cx1 - cx0) * texel;
@@ -66,8 +78,8 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
   const size_t threads =
       std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()), tiles / kTilesPerThread);
   if (threads <= 1) {
-    CodecScratch scratch;
-    for (size_t i = 0; i < tiles; ++i) TESSERA_TRY(readOne(i, &scratch));
+    Worker worker;
+    for (size_t i = 0; i < tiles; ++i) TESSERA_TRY(readOne(i, worker));
     return out;
   }
   std::atomic<size_t> next{0};
@@ -76,9 +88,9 @@ Result<Image> Archive::readRegion(uint32_t image, uint32_t level, const PixelRec
   size_t error_tile = SIZE_MAX;
   Error error;
   auto work = [&] {
-    CodecScratch scratch;
+    Worker worker;
     for (size_t i = next++; i < tiles && !failed; i = next++) {
-      Result<void> done = readOne(i, &scratch);
+      Result<void> done = readOne(i, worker);
       if (done) continue;
       failed = true;
       // The first failing tile in row-major order is the one reported, as a serial read would.

@@ -6,12 +6,16 @@
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 
+#include <fcntl.h>
+
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include "support/test_images.h"
@@ -70,6 +74,37 @@ TEST(TempFile, CommitReplacesAPreviousFileWhole) {
   std::vector<uint8_t> bytes = test::readFileBytes(path);
   EXPECT_EQ(std::string(bytes.begin(), bytes.end()), "new");
   EXPECT_EQ(listDir(dir), std::vector<std::string>{"out.tess"});
+}
+
+// A writer killed between naming and renaming its finished file leaves OUT.tmp-PID-N; the next
+// writer removes it once the process is gone and the file is ten minutes old, and keeps
+// names of live processes, fresh names and other files.
+TEST(TempFile, StaleTemporariesOfDeadWritersAreRemovedByTheNextWriter) {
+  std::string dir = test::testTempDir();
+  const pid_t dead = fork();
+  if (dead == 0) _exit(0);
+  ASSERT_GT(dead, 0);
+  waitpid(dead, nullptr, 0);  // reaped: the pid names no process now
+  const auto make = [&](const std::string& name, bool old) {
+    ASSERT_TRUE(test::writeFileBytes(dir + name, std::vector<uint8_t>(10, 'x')));
+    if (!old) return;
+    const timespec times[2] = {{::time(nullptr) - 3600, 0}, {::time(nullptr) - 3600, 0}};
+    ASSERT_EQ(utimensat(AT_FDCWD, (dir + name).c_str(), times, 0), 0);
+  };
+  const std::string stale = fmt::format("out.tess.tmp-{}-3", dead);
+  const std::string fresh = fmt::format("out.tess.tmp-{}-4", dead);
+  const std::string live = fmt::format("out.tess.tmp-{}-5", getpid());
+  const std::string other = fmt::format("other.tess.tmp-{}-6", dead);
+  make(stale, true);
+  make(fresh, false);
+  make(live, true);
+  make(other, true);
+  auto file = TempFile::create(dir + "out.tess");
+  ASSERT_TRUE(file) << file.error().message;
+  ASSERT_TRUE(file->commit());
+  std::vector<std::string> expected = {fresh, live, other, "out.tess"};
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(listDir(dir), expected);
 }
 
 TEST(TempFile, ADiscardedFileLeavesAPreviousFileUntouched) {
