@@ -2,6 +2,7 @@
 // nothing behind, and commit replaces a previous file whole.
 #include "output/output_file.h"
 
+#include <fcntl.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
@@ -12,8 +13,6 @@
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
-
-#include <fcntl.h>
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
