@@ -8,6 +8,7 @@
 
 #include <fmt/format.h>
 
+#include "file_reader.h"
 #include "pyramid_source.h"
 
 namespace tessera::detail {
@@ -16,6 +17,8 @@ namespace {
 constexpr std::string_view kOpenSlidePrefix = "openslide:";
 
 bool hasTiffMagic(const std::string& path) {
+  // Not a regular file (a FIFO would block the open): not a pyramid; the band readers refuse it.
+  if (!checkSourceFile(path)) return false;
   std::FILE* file = std::fopen(path.c_str(), "rb");
   if (!file) return false;
   std::array<unsigned char, 4> magic{};

@@ -67,7 +67,9 @@ class FileSource final : public ByteSource {
 }  // namespace
 
 Result<std::shared_ptr<ByteSource>> openFileSource(const std::string& path) {
-  int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  // O_NONBLOCK: opening a FIFO for reading would otherwise wait for a writer; it is refused
+  // below as not a regular file (for which the flag changes nothing).
+  int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) {
     int error = errno;
     return fail(error == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,

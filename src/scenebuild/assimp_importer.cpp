@@ -165,9 +165,7 @@ Result<void> walkNodes(ModelContext& ctx, ModelTemplate& out) {
 
 Result<ModelTemplate> loadAssimpModel(const std::string& path, ImportedScene& scene,
                                       TextureIndex& textures) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    return fail(ErrorCode::kNotFound, path + ": no such file");
+  TESSERA_TRY(requireRegularFile(path));
   Assimp::Importer importer;
   importer.SetPropertyInteger(AI_CONFIG_PP_SBP_REMOVE,
                               aiPrimitiveType_POINT | aiPrimitiveType_LINE);

@@ -322,10 +322,17 @@ Result<void> importNodes(GltfContext& ctx) {
 
 }  // namespace
 
-Result<ImportedScene> importGltf(const std::string& path) {
+Result<void> requireRegularFile(const std::string& path) {
   std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    return fail(ErrorCode::kNotFound, path + ": no such file");
+  const std::filesystem::file_status status = std::filesystem::status(path, ec);
+  if (!std::filesystem::exists(status)) return fail(ErrorCode::kNotFound, path + ": no such file");
+  if (!std::filesystem::is_regular_file(status))
+    return fail(ErrorCode::kIo, path + ": not a regular file");
+  return {};
+}
+
+Result<ImportedScene> importGltf(const std::string& path) {
+  TESSERA_TRY(requireRegularFile(path));
   tinygltf::TinyGLTF loader;
   loader.SetImageLoader(keepImageBytes, nullptr);
   tinygltf::Model model;

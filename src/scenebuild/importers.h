@@ -18,6 +18,10 @@ inline constexpr uint32_t kMaxNodeGraphDepth = 256;
 /// Object instances an importer may create (a DAG can multiply them).
 inline constexpr uint64_t kMaxImportedObjects = uint64_t(1) << 26;
 
+/// Fails naming `path` unless it is an existing regular file: a FIFO or device would block
+/// or never end the read that follows.
+[[nodiscard]] Result<void> requireRegularFile(const std::string& path);
+
 /// glTF 2.0, .gltf (external or data-URI buffers and images) or .glb, through tinygltf.
 [[nodiscard]] Result<ImportedScene> importGltf(const std::string& path);
 /// OBJ, COLLADA, AC3D and the other formats Assimp reads.

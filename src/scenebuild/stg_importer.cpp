@@ -39,6 +39,7 @@ std::string resolveModel(const std::filesystem::path& stg_dir, const std::string
 }
 
 Result<std::vector<Placement>> parseStg(const std::string& path) {
+  TESSERA_TRY(requireRegularFile(path));
   std::ifstream in(path);
   if (!in) return fail(ErrorCode::kNotFound, path + ": cannot open");
   const std::filesystem::path dir = std::filesystem::path(path).parent_path();

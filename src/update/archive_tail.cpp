@@ -46,7 +46,7 @@ Result<void> pwriteAll(int fd, uint64_t offset, std::span<const uint8_t> bytes,
 }  // namespace
 
 Result<ArchiveTail> ArchiveTail::open(const std::string& path) {
-  int fd = ::open(path.c_str(), O_RDWR | O_CLOEXEC);
+  int fd = ::open(path.c_str(), O_RDWR | O_NONBLOCK | O_CLOEXEC);  // a FIFO must not block
   if (fd < 0)
     return fail(ErrorCode::kIo,
                 fmt::format("{}: cannot open for update: {}", path, strerror(errno)));

@@ -332,6 +332,39 @@ TEST_F(HostileCli, FifosAndDeviceNodesAtTheOutputAreRefusedAndKept) {
   EXPECT_EQ(left, expected);
 }
 
+// Opening a FIFO for reading waits for a writer: every command that reads a file must refuse
+// one (and a scene or placement list naming one) instead of hanging. A regression shows as
+// this test timing out.
+TEST_F(HostileCli, FifosAsInputsAreRefusedWithoutWaitingForAWriter) {
+  const std::string archive = smallArchive();
+  for (const char* name : {"in", "in.tif", "in.stg", "in.gltf", "in.dzi"})
+    ASSERT_EQ(::mkfifo((dir_ + name).c_str(), 0644), 0);
+  const std::string fifo = dir_ + "in";
+  const std::vector<std::vector<std::string>> commands = {
+      {"info", fifo},
+      {"verify", fifo},
+      {"build", fifo, "-o", dir_ + "a.tess"},
+      {"build", dir_ + "in.tif", "-o", dir_ + "a.tess"},
+      {"build", dir_ + "in.stg", "-o", dir_ + "a.tess"},
+      {"build", dir_ + "in.gltf", "-o", dir_ + "a.tess"},
+      {"build", dir_ + "in.dzi", "-o", dir_ + "a.tess"},
+      {"merge", fifo, "-o", dir_ + "a.tess"},
+      {"export", fifo, "--to", "pmtiles", dir_ + "a.pmtiles"},
+      {"extract", fifo, "--tile", "0,0", "-o", dir_ + "a.png"},
+      {"append", fifo, "synthetic:50x50"},
+      {"update", archive, fifo, "--at", "0,0"},
+      {"compact", fifo},
+  };
+  for (const auto& args : commands) {
+    Outcome result = run(args);
+    ASSERT_TRUE(result.exited) << args[0] << " " << args[1];
+    EXPECT_NE(result.exit_code, 0) << args[0] << " " << args[1];
+    EXPECT_NE(result.err.find("not a regular file"), std::string::npos)
+        << args[0] << " " << args[1] << ": " << result.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir_ + "a.tess"));
+}
+
 // ---- Names: suggestions, spellings, lists --------------------------------------------------
 
 TEST_F(HostileCli, AMisspeltSubcommandGetsTheNearestOne) {
