@@ -1,5 +1,7 @@
 #include "access.h"
 
+#include <sys/stat.h>
+
 #include <openssl/crypto.h>
 #include <openssl/evp.h>
 #include <openssl/hmac.h>
@@ -24,6 +26,7 @@ namespace {
 // least the hash's output length).
 constexpr size_t kMinTokenBytes = 16;
 constexpr size_t kMinSecretBytes = 32;
+constexpr off_t kMaxAccessFileBytes = off_t(16) << 20;  // thousands of rules fit in far less
 constexpr std::string_view kSignaturePrefix = "tessera-url-v1";
 
 std::string sha256(std::string_view bytes) {
@@ -189,6 +192,16 @@ std::string signedQuery(std::string_view key_id, std::string_view secret, std::s
 }
 
 Result<std::shared_ptr<const AccessRules>> AccessRules::load(const std::string& path) {
+  // A FIFO would block the read (and the SIGHUP reload with it); a device or a huge file is
+  // not a set of rules.
+  struct stat status {};
+  if (::stat(path.c_str(), &status) != 0)
+    return fail(ErrorCode::kNotFound, fmt::format("{}: cannot read the access file", path));
+  if (!S_ISREG(status.st_mode))
+    return fail(ErrorCode::kIo, fmt::format("{}: the access file is not a regular file", path));
+  if (status.st_size > kMaxAccessFileBytes)
+    return fail(ErrorCode::kTooLarge, fmt::format("{}: access file of {} bytes, over {}", path,
+                                                  status.st_size, kMaxAccessFileBytes));
   std::ifstream in(path, std::ios::binary);
   if (!in) return fail(ErrorCode::kNotFound, fmt::format("{}: cannot read the access file", path));
   std::stringstream text;

@@ -2,6 +2,7 @@
 
 #include <openssl/err.h>
 #include <openssl/ssl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -33,6 +34,10 @@ Result<void> checkReadable(const std::string& path, const char* what) {
   if (::access(path.c_str(), R_OK) != 0)
     return fail(errno == ENOENT ? ErrorCode::kNotFound : ErrorCode::kIo,
                 fmt::format("{}: cannot read the TLS {}: {}", path, what, std::strerror(errno)));
+  // OpenSSL's read of a FIFO would wait for a writer, stalling a start or a SIGHUP reload.
+  struct stat status {};
+  if (::stat(path.c_str(), &status) != 0 || !S_ISREG(status.st_mode))
+    return fail(ErrorCode::kIo, fmt::format("{}: the TLS {} is not a regular file", path, what));
   return {};
 }
 

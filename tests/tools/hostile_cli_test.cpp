@@ -354,6 +354,8 @@ TEST_F(HostileCli, FifosAsInputsAreRefusedWithoutWaitingForAWriter) {
       {"append", fifo, "synthetic:50x50"},
       {"update", archive, fifo, "--at", "0,0"},
       {"compact", fifo},
+      {"serve", archive, "--access", fifo, "--port", "0"},
+      {"serve", archive, "--tls-cert", fifo, "--tls-key", archive, "--port", "0"},
   };
   for (const auto& args : commands) {
     Outcome result = run(args);
