@@ -46,6 +46,13 @@ int waitExit(pid_t pid) {
   return status;
 }
 
+// Kill points per loop: TESSERA_KILL_POINTS when set (CI's sanitizer stage runs fewer), else
+// `fallback`.
+uint32_t killPoints(uint32_t fallback = 20) {
+  const char* env = std::getenv("TESSERA_KILL_POINTS");
+  return env ? uint32_t(std::max(2, std::atoi(env))) : fallback;
+}
+
 // The archive at `path`: "" when it verifies, else what is wrong.
 std::string verdict(const std::string& path) {
   Result<std::shared_ptr<Archive>> archive = Archive::openFile(path);
@@ -88,7 +95,7 @@ TEST(KillLoop, SigkillAnywhereInABuildLeavesTheOldOrTheNewArchive) {
   std::mt19937 random(27);
   std::uniform_real_distribution<double> point(0.0, build_s * 1.6);
   int old_kept = 0, new_written = 0;
-  for (int round = 0; round < 100; ++round) {
+  for (uint32_t round = 0; round < killPoints(100); ++round) {
     ASSERT_EQ(WEXITSTATUS(waitExit(startBuild(old_input, output))), 0) << "round " << round;
     const pid_t pid = startBuild(new_input, output);
     ASSERT_GT(pid, 0);
@@ -129,10 +136,6 @@ VersionView viewOf(const std::string& path, uint32_t image, const PixelRect& rec
   return view;
 }
 
-uint32_t killPoints() {
-  const char* env = std::getenv("TESSERA_KILL_POINTS");
-  return env ? uint32_t(std::max(2, std::atoi(env))) : 20;
-}
 
 // issue 32: `tessera update` and `tessera append` killed at random points leave the archive in
 // place, verifying, and showing exactly the previous or the next version: the new header is
