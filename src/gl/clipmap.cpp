@@ -56,9 +56,11 @@ vec4 heldBilinear(int k) {
   return textureLod(u_texels, vec3((u_held_torus[k] + local) / u_held_side, u_held_layer[k]), 0.0);
 }
 void main() {
-  vec4 colour = heldBilinear(0);
-  if (u_held_weight > 0.0) colour = mix(colour, heldBilinear(1), u_held_weight);
-  o_colour = colour;
+#if HELD_VIEW == 1
+  o_colour = heldBilinear(0);  // the view sits on a level: lambda - level is 0
+#else
+  o_colour = mix(heldBilinear(0), heldBilinear(1), u_held_weight);
+#endif
 }
 #else
 uniform usampler2DArray u_owner;   // layer = level, n x n slots: owning tile + 1, 0 = empty
@@ -124,14 +126,16 @@ class ClipmapRenderer final : public RendererBase {
     if (info_.level_count > kMaxShaderLevels)
       return fail(ErrorCode::kUnsupported, fmt::format("clipmap renderer: {} levels, at most {}",
                                                        info_.level_count, kMaxShaderLevels));
-    // Two programs: a software rasteriser runs both sides of a branch on every fragment, so
-    // the owner-checked filtering would cost the held view's frames as much as before.
-    // The held one is linked first: the base class keeps u_view_projection of the last.
-    TESSERA_TRY(
-        linkRendererProgram("clipmap (held view)", kVertexShader,
-                            (std::string("#define HELD_VIEW 1\n") + kFragmentShader).c_str()));
-    held_program_ = std::move(program_);
-    findHeldUniforms();
+    // Three programs: a software rasteriser runs both sides of a branch on every fragment, so
+    // the owner-checked filtering would cost a held view's frames as much as before. The
+    // held ones (one fetch on a level, two between levels) are linked first: the base class
+    // keeps u_view_projection of the last.
+    for (int variant : {1, 2}) {
+      TESSERA_TRY(linkRendererProgram(
+          "clipmap (held view)", kVertexShader,
+          (fmt::format("#define HELD_VIEW {}\n", variant) + kFragmentShader).c_str()));
+      held_[variant - 1] = heldProgram(std::move(program_));
+    }
     TESSERA_TRY(
         linkRendererProgram("clipmap", kVertexShader,
                             (std::string("#define HELD_VIEW 0\n") + kFragmentShader).c_str()));
@@ -178,9 +182,10 @@ class ClipmapRenderer final : public RendererBase {
       stats_.draw_cpu_ms = 0;
       return;
     }
-    const bool held = view.kind == View::Kind::kOrtho && setHeldUniforms(view, transform);
-    const GLuint p = held ? held_program_.get() : program_.get();
-    glProgramUniform4f(p, held ? held_.rect : rect_uniform_, float(-transform.anchor_x),
+    const HeldProgram* held =
+        view.kind == View::Kind::kOrtho ? setHeldUniforms(view, transform) : nullptr;
+    const GLuint p = held ? held->program.get() : program_.get();
+    glProgramUniform4f(p, held ? held->rect : rect_uniform_, float(-transform.anchor_x),
                        float(-transform.anchor_y), float(info_.width_px - transform.anchor_x),
                        float(info_.height_px - transform.anchor_y));
     stats_.tiles_drawn = uint32_t(slot_of_.size());
@@ -233,26 +238,36 @@ class ClipmapRenderer final : public RendererBase {
     glProgramUniform2fv(p, anchor_frac_uniform_, GLsizei(info_.level_count), anchor_frac.data());
   }
 
-  void findHeldUniforms() {
-    const GLuint p = held_program_.get();
+  /// A held-view program and its uniform locations (-1 where a variant lacks one).
+  struct HeldProgram {
+    Program program;
+    GLint view_projection = -1, rect = -1, frac = -1, torus = -1, bounds = -1, scale = -1,
+          layer = -1, weight = -1, side = -1;
+  };
+
+  static HeldProgram heldProgram(Program program) {
+    HeldProgram held;
+    const GLuint p = program.get();
     glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
-    held_.view_projection = glGetUniformLocation(p, "u_view_projection");
-    held_.rect = glGetUniformLocation(p, "u_rect");
-    held_.frac = glGetUniformLocation(p, "u_held_frac");
-    held_.torus = glGetUniformLocation(p, "u_held_torus");
-    held_.bounds = glGetUniformLocation(p, "u_held_bounds");
-    held_.scale = glGetUniformLocation(p, "u_held_scale");
-    held_.layer = glGetUniformLocation(p, "u_held_layer");
-    held_.weight = glGetUniformLocation(p, "u_held_weight");
-    held_.side = glGetUniformLocation(p, "u_held_side");
+    held.view_projection = glGetUniformLocation(p, "u_view_projection");
+    held.rect = glGetUniformLocation(p, "u_rect");
+    held.frac = glGetUniformLocation(p, "u_held_frac");
+    held.torus = glGetUniformLocation(p, "u_held_torus");
+    held.bounds = glGetUniformLocation(p, "u_held_bounds");
+    held.scale = glGetUniformLocation(p, "u_held_scale");
+    held.layer = glGetUniformLocation(p, "u_held_layer");
+    held.weight = glGetUniformLocation(p, "u_held_weight");
+    held.side = glGetUniformLocation(p, "u_held_side");
+    held.program = std::move(program);
+    return held;
   }
 
   /// For an orthographic view: when every tile its footprint (widened by a texel for the
   /// bilinear footprints at its edges) meets is held at the level the view wants, and at the
-  /// next coarser level where it blends with it, sets the held program's uniforms and returns
-  /// true. The picture is then what the owner-checked program draws: that program falls back
-  /// to a coarser level only where a texel is not held.
-  bool setHeldUniforms(const View& view, const ViewProjection& transform) {
+  /// next coarser level where it blends with it, sets the uniforms of the held program that
+  /// draws it and returns that program; null otherwise. The picture is then what the owner-checked
+  /// program draws: that program falls back to a coarser level only where a texel is not held.
+  const HeldProgram* setHeldUniforms(const View& view, const ViewProjection& transform) {
     const double texels_per_pixel = texelsPerPixelOf(view.ortho);
     const uint32_t level = desiredLevelFor(texels_per_pixel, info_.level_count);
     const bool coarsest = level + 1 >= info_.level_count;
@@ -261,7 +276,7 @@ class ClipmapRenderer final : public RendererBase {
     const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
     if (!footprintHeld(footprint, view.image, level) ||
         (weight > 0 && !footprintHeld(footprint, view.image, level + 1)))
-      return false;
+      return nullptr;
     const double side = double(slots_) * info_.tile_size_px;
     GLfloat frac[4], torus[4], bounds[8], scale[2], layer[2];
     for (uint32_t k = 0; k < 2; ++k) {
@@ -279,16 +294,17 @@ class ClipmapRenderer final : public RendererBase {
       scale[k] = GLfloat(std::ldexp(1.0, -int(at)));
       layer[k] = GLfloat(at);
     }
-    const GLuint p = held_program_.get();
-    glProgramUniformMatrix4fv(p, held_.view_projection, 1, GL_FALSE, transform.matrix);
-    glProgramUniform2fv(p, held_.frac, 2, frac);
-    glProgramUniform2fv(p, held_.torus, 2, torus);
-    glProgramUniform4fv(p, held_.bounds, 2, bounds);
-    glProgramUniform1fv(p, held_.scale, 2, scale);
-    glProgramUniform1fv(p, held_.layer, 2, layer);
-    glProgramUniform1f(p, held_.weight, GLfloat(weight));
-    glProgramUniform1f(p, held_.side, GLfloat(side));
-    return true;
+    const HeldProgram& held = held_[weight > 0 ? 1 : 0];
+    const GLuint p = held.program.get();
+    glProgramUniformMatrix4fv(p, held.view_projection, 1, GL_FALSE, transform.matrix);
+    glProgramUniform2fv(p, held.frac, 2, frac);
+    glProgramUniform2fv(p, held.torus, 2, torus);
+    glProgramUniform4fv(p, held.bounds, 2, bounds);
+    glProgramUniform1fv(p, held.scale, 2, scale);
+    glProgramUniform1fv(p, held.layer, 2, layer);
+    glProgramUniform1f(p, held.weight, GLfloat(weight));
+    glProgramUniform1f(p, held.side, GLfloat(side));
+    return &held;
   }
 
   /// True when every tile of `level` that the footprint, widened by one texel of that level
@@ -409,14 +425,7 @@ class ClipmapRenderer final : public RendererBase {
     stats_.gpu_bytes = uint64_t(side) * side * levels * info_.channels;
   }
 
-  /// Uniform locations of the held-view program.
-  struct HeldUniforms {
-    GLint view_projection = -1, rect = -1, frac = -1, torus = -1, bounds = -1, scale = -1,
-          layer = -1, weight = -1, side = -1;
-  };
-
-  Program held_program_;
-  HeldUniforms held_;
+  HeldProgram held_[2];  ///< on a level; blending with the next coarser
   GLint rect_uniform_ = -1, anchor_int_uniform_ = -1, anchor_frac_uniform_ = -1,
         slots_uniform_ = -1;
   Texture texels_, owner_;
