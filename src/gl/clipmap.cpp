@@ -42,18 +42,18 @@ out vec4 o_colour;
 // coarser one where it blends): one level of detail everywhere, chosen on the CPU, and no
 // owner checks. The layer wraps (GL_REPEAT), so the hardware's bilinear fetch reads the
 // toroidal neighbours; clamping the coordinate to half a texel inside the level's image is
-// the clamp of the texel indices. Index 0: the wanted level, 1: the next coarser.
-uniform vec2 u_held_frac[2];     // the anchor in level texels, fraction
-uniform vec2 u_held_torus[2];    // and integer part modulo N
-uniform vec4 u_held_bounds[2];   // texel centres of the image's edges, relative to the anchor
-uniform float u_held_scale[2];   // 2^-level
+// the clamp of the texel indices. Coordinates are in layer widths (texels / N), from one
+// multiply-add per fragment: a software rasteriser pays for every operation. Index 0: the
+// wanted level, 1: the next coarser.
+uniform float u_held_scale[2];   // 2^-level / N
+uniform vec2 u_held_offset[2];   // where the anchor lies in the layer, / N
+uniform vec4 u_held_bounds[2];   // the texel centres of the image's edges, same units
 uniform float u_held_layer[2];
 uniform float u_held_weight;     // lambda - level: the coarser level's share
-uniform float u_held_side;       // N
 vec4 heldBilinear(int k) {
-  vec2 local = clamp(u_held_frac[k] + v_world * u_held_scale[k], u_held_bounds[k].xy,
-                     u_held_bounds[k].zw);
-  return textureLod(u_texels, vec3((u_held_torus[k] + local) / u_held_side, u_held_layer[k]), 0.0);
+  vec2 at = clamp(v_world * u_held_scale[k] + u_held_offset[k], u_held_bounds[k].xy,
+                  u_held_bounds[k].zw);
+  return textureLod(u_texels, vec3(at, u_held_layer[k]), 0.0);
 }
 void main() {
 #if HELD_VIEW == 1
@@ -241,8 +241,8 @@ class ClipmapRenderer final : public RendererBase {
   /// A held-view program and its uniform locations (-1 where a variant lacks one).
   struct HeldProgram {
     Program program;
-    GLint view_projection = -1, rect = -1, frac = -1, torus = -1, bounds = -1, scale = -1,
-          layer = -1, weight = -1, side = -1;
+    GLint view_projection = -1, rect = -1, scale = -1, offset = -1, bounds = -1, layer = -1,
+          weight = -1;
   };
 
   static HeldProgram heldProgram(Program program) {
@@ -251,13 +251,11 @@ class ClipmapRenderer final : public RendererBase {
     glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
     held.view_projection = glGetUniformLocation(p, "u_view_projection");
     held.rect = glGetUniformLocation(p, "u_rect");
-    held.frac = glGetUniformLocation(p, "u_held_frac");
-    held.torus = glGetUniformLocation(p, "u_held_torus");
-    held.bounds = glGetUniformLocation(p, "u_held_bounds");
     held.scale = glGetUniformLocation(p, "u_held_scale");
+    held.offset = glGetUniformLocation(p, "u_held_offset");
+    held.bounds = glGetUniformLocation(p, "u_held_bounds");
     held.layer = glGetUniformLocation(p, "u_held_layer");
     held.weight = glGetUniformLocation(p, "u_held_weight");
-    held.side = glGetUniformLocation(p, "u_held_side");
     held.program = std::move(program);
     return held;
   }
@@ -278,32 +276,31 @@ class ClipmapRenderer final : public RendererBase {
         (weight > 0 && !footprintHeld(footprint, view.image, level + 1)))
       return nullptr;
     const double side = double(slots_) * info_.tile_size_px;
-    GLfloat frac[4], torus[4], bounds[8], scale[2], layer[2];
+    GLfloat scale[2], offset[4], bounds[8], layer[2];
     for (uint32_t k = 0; k < 2; ++k) {
       const uint32_t at = std::min(level + k, info_.level_count - 1);
       const double size[2] = {double(info_.levelWidthPx(at)), double(info_.levelHeightPx(at))};
       const double anchor[2] = {transform.anchor_x, transform.anchor_y};
       for (int axis = 0; axis < 2; ++axis) {
         const double scaled = std::ldexp(anchor[axis], -int(at));
-        const double whole = std::floor(scaled);
-        frac[k * 2 + axis] = GLfloat(scaled - whole);
-        torus[k * 2 + axis] = GLfloat(whole - side * std::floor(whole / side));
-        bounds[k * 4 + axis] = GLfloat(0.5 - whole);
-        bounds[k * 4 + 2 + axis] = GLfloat(size[axis] - 0.5 - whole);
+        // The anchor's place on the torus, kept small: the coordinates stay exact on images
+        // of any size.
+        const double torus = scaled - side * std::floor(scaled / side);
+        offset[k * 2 + axis] = GLfloat(torus / side);
+        bounds[k * 4 + axis] = GLfloat((torus - scaled + 0.5) / side);
+        bounds[k * 4 + 2 + axis] = GLfloat((torus - scaled + size[axis] - 0.5) / side);
       }
-      scale[k] = GLfloat(std::ldexp(1.0, -int(at)));
+      scale[k] = GLfloat(std::ldexp(1.0, -int(at)) / side);
       layer[k] = GLfloat(at);
     }
     const HeldProgram& held = held_[weight > 0 ? 1 : 0];
     const GLuint p = held.program.get();
     glProgramUniformMatrix4fv(p, held.view_projection, 1, GL_FALSE, transform.matrix);
-    glProgramUniform2fv(p, held.frac, 2, frac);
-    glProgramUniform2fv(p, held.torus, 2, torus);
-    glProgramUniform4fv(p, held.bounds, 2, bounds);
     glProgramUniform1fv(p, held.scale, 2, scale);
+    glProgramUniform2fv(p, held.offset, 2, offset);
+    glProgramUniform4fv(p, held.bounds, 2, bounds);
     glProgramUniform1fv(p, held.layer, 2, layer);
     glProgramUniform1f(p, held.weight, GLfloat(weight));
-    glProgramUniform1f(p, held.side, GLfloat(side));
     return &held;
   }
 
