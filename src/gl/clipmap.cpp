@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <optional>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -15,6 +16,7 @@
 
 #include "renderer_base.h"
 #include "renderers.h"
+#include "stream/footprint.h"
 
 namespace tessera::gl {
 
@@ -34,13 +36,39 @@ void main() {
 const char* const kFragmentShader = R"(
 in vec2 v_world;
 uniform sampler2DArray u_texels;   // layer = level, N x N texels, toroidal
+out vec4 o_colour;
+#if HELD_VIEW
+// An orthographic view whose footprint is held at the level it wants (and at the next
+// coarser one where it blends): one level of detail everywhere, chosen on the CPU, and no
+// owner checks. The layer wraps (GL_REPEAT), so the hardware's bilinear fetch reads the
+// toroidal neighbours; clamping the coordinate to half a texel inside the level's image is
+// the clamp of the texel indices. Coordinates are in layer widths (texels / N), from one
+// multiply-add per fragment: a software rasteriser pays for every operation. Index 0: the
+// wanted level, 1: the next coarser.
+uniform float u_held_scale[2];   // 2^-level / N
+uniform vec2 u_held_offset[2];   // where the anchor lies in the layer, / N
+uniform vec4 u_held_bounds[2];   // the texel centres of the image's edges, same units
+uniform float u_held_layer[2];
+uniform float u_held_weight;     // lambda - level: the coarser level's share
+vec4 heldBilinear(int k) {
+  vec2 at = clamp(v_world * u_held_scale[k] + u_held_offset[k], u_held_bounds[k].xy,
+                  u_held_bounds[k].zw);
+  return textureLod(u_texels, vec3(at, u_held_layer[k]), 0.0);
+}
+void main() {
+#if HELD_VIEW == 1
+  o_colour = heldBilinear(0);  // the view sits on a level: lambda - level is 0
+#else
+  o_colour = mix(heldBilinear(0), heldBilinear(1), u_held_weight);
+#endif
+}
+#else
 uniform usampler2DArray u_owner;   // layer = level, n x n slots: owning tile + 1, 0 = empty
 uniform ivec2 u_anchor_int[MAX_LEVELS];   // the anchor in level texels, integer part
 uniform vec2 u_anchor_frac[MAX_LEVELS];   // and fraction
 uniform int u_coarsest;
 uniform int u_tile;    // t
 uniform int u_slots;   // n
-out vec4 o_colour;
 
 bool heldAt(int level, ivec2 texel) {
   ivec2 tile = texel / u_tile;
@@ -86,6 +114,7 @@ void main() {
   }
   o_colour = vec4(0.0);
 }
+#endif
 )";
 
 class ClipmapRenderer final : public RendererBase {
@@ -97,7 +126,19 @@ class ClipmapRenderer final : public RendererBase {
     if (info_.level_count > kMaxShaderLevels)
       return fail(ErrorCode::kUnsupported, fmt::format("clipmap renderer: {} levels, at most {}",
                                                        info_.level_count, kMaxShaderLevels));
-    TESSERA_TRY(linkRendererProgram("clipmap", kVertexShader, kFragmentShader));
+    // Three programs: a software rasteriser runs both sides of a branch on every fragment, so
+    // the owner-checked filtering would cost a held view's frames as much as before. The
+    // held ones (one fetch on a level, two between levels) are linked first: the base class
+    // keeps u_view_projection of the last.
+    for (int variant : {1, 2}) {
+      TESSERA_TRY(linkRendererProgram(
+          "clipmap (held view)", kVertexShader,
+          (fmt::format("#define HELD_VIEW {}\n", variant) + kFragmentShader).c_str()));
+      held_[variant - 1] = heldProgram(std::move(program_));
+    }
+    TESSERA_TRY(
+        linkRendererProgram("clipmap", kVertexShader,
+                            (std::string("#define HELD_VIEW 0\n") + kFragmentShader).c_str()));
     const GLuint p = program_.get();
     glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
     glProgramUniform1i(p, glGetUniformLocation(p, "u_owner"), 1);
@@ -141,32 +182,20 @@ class ClipmapRenderer final : public RendererBase {
       stats_.draw_cpu_ms = 0;
       return;
     }
-    const GLuint p = program_.get();
-    glProgramUniform4f(p, rect_uniform_, float(-transform.anchor_x), float(-transform.anchor_y),
-                       float(info_.width_px - transform.anchor_x),
+    const HeldProgram* held =
+        view.kind == View::Kind::kOrtho ? setHeldUniforms(view, transform) : nullptr;
+    const GLuint p = held ? held->program.get() : program_.get();
+    glProgramUniform4f(p, held ? held->rect : rect_uniform_, float(-transform.anchor_x),
+                       float(-transform.anchor_y), float(info_.width_px - transform.anchor_x),
                        float(info_.height_px - transform.anchor_y));
-    glProgramUniform1i(p, slots_uniform_, GLint(slots_));
-    // The anchor in each level's texels, split so the shader adds small floats to exact
-    // integers: texel addresses stay exact on images of any size.
-    std::vector<GLint> anchor_int;
-    std::vector<GLfloat> anchor_frac;
-    for (uint32_t level = 0; level < info_.level_count; ++level) {
-      for (double a : {transform.anchor_x, transform.anchor_y}) {
-        const double scaled = std::ldexp(a, -int(level));
-        const double whole = std::floor(scaled);
-        anchor_int.push_back(GLint(whole));
-        anchor_frac.push_back(GLfloat(scaled - whole));
-      }
-    }
-    glProgramUniform2iv(p, anchor_int_uniform_, GLsizei(info_.level_count), anchor_int.data());
-    glProgramUniform2fv(p, anchor_frac_uniform_, GLsizei(info_.level_count), anchor_frac.data());
+    stats_.tiles_drawn = uint32_t(slot_of_.size());
+    if (!held) setOwnerCheckedUniforms(transform);
     glUseProgram(p);
     glBindTextureUnit(0, texels_.get());
     glBindTextureUnit(1, owner_.get());
     glBindVertexArray(vertex_array_.get());
     glDrawArrays(GL_TRIANGLE_STRIP, 0, 4);
     glBindVertexArray(0);
-    stats_.tiles_drawn = uint32_t(slot_of_.size());
     stats_.draw_cpu_ms = msSince(started);
   }
 
@@ -189,6 +218,113 @@ class ClipmapRenderer final : public RendererBase {
   }
 
  private:
+  /// The per-level uniforms of the owner-checked program: the anchor in each level's texels.
+  void setOwnerCheckedUniforms(const ViewProjection& transform) {
+    const GLuint p = program_.get();
+    glProgramUniform1i(p, slots_uniform_, GLint(slots_));
+    // The anchor in each level's texels, split so the shader adds small floats to exact
+    // integers: texel addresses stay exact on images of any size.
+    std::vector<GLint> anchor_int;
+    std::vector<GLfloat> anchor_frac;
+    for (uint32_t level = 0; level < info_.level_count; ++level) {
+      for (double a : {transform.anchor_x, transform.anchor_y}) {
+        const double scaled = std::ldexp(a, -int(level));
+        const double whole = std::floor(scaled);
+        anchor_int.push_back(GLint(whole));
+        anchor_frac.push_back(GLfloat(scaled - whole));
+      }
+    }
+    glProgramUniform2iv(p, anchor_int_uniform_, GLsizei(info_.level_count), anchor_int.data());
+    glProgramUniform2fv(p, anchor_frac_uniform_, GLsizei(info_.level_count), anchor_frac.data());
+  }
+
+  /// A held-view program and its uniform locations (-1 where a variant lacks one).
+  struct HeldProgram {
+    Program program;
+    GLint view_projection = -1, rect = -1, scale = -1, offset = -1, bounds = -1, layer = -1,
+          weight = -1;
+  };
+
+  static HeldProgram heldProgram(Program program) {
+    HeldProgram held;
+    const GLuint p = program.get();
+    glProgramUniform1i(p, glGetUniformLocation(p, "u_texels"), 0);
+    held.view_projection = glGetUniformLocation(p, "u_view_projection");
+    held.rect = glGetUniformLocation(p, "u_rect");
+    held.scale = glGetUniformLocation(p, "u_held_scale");
+    held.offset = glGetUniformLocation(p, "u_held_offset");
+    held.bounds = glGetUniformLocation(p, "u_held_bounds");
+    held.layer = glGetUniformLocation(p, "u_held_layer");
+    held.weight = glGetUniformLocation(p, "u_held_weight");
+    held.program = std::move(program);
+    return held;
+  }
+
+  /// For an orthographic view: when every tile its footprint (widened by a texel for the
+  /// bilinear footprints at its edges) meets is held at the level the view wants, and at the
+  /// next coarser level where it blends with it, sets the uniforms of the held program that
+  /// draws it and returns that program; null otherwise. The picture is then what the owner-checked
+  /// program draws: that program falls back to a coarser level only where a texel is not held.
+  const HeldProgram* setHeldUniforms(const View& view, const ViewProjection& transform) {
+    const double texels_per_pixel = texelsPerPixelOf(view.ortho);
+    const uint32_t level = desiredLevelFor(texels_per_pixel, info_.level_count);
+    const bool coarsest = level + 1 >= info_.level_count;
+    const double weight =
+        coarsest ? 0.0 : std::clamp(std::log2(texels_per_pixel) - double(level), 0.0, 1.0);
+    const tessera::detail::Footprint footprint = tessera::detail::footprintOf(view, info_);
+    if (!footprintHeld(footprint, view.image, level) ||
+        (weight > 0 && !footprintHeld(footprint, view.image, level + 1)))
+      return nullptr;
+    const double side = double(slots_) * info_.tile_size_px;
+    GLfloat scale[2], offset[4], bounds[8], layer[2];
+    for (uint32_t k = 0; k < 2; ++k) {
+      const uint32_t at = std::min(level + k, info_.level_count - 1);
+      const double size[2] = {double(info_.levelWidthPx(at)), double(info_.levelHeightPx(at))};
+      const double anchor[2] = {transform.anchor_x, transform.anchor_y};
+      for (int axis = 0; axis < 2; ++axis) {
+        const double scaled = std::ldexp(anchor[axis], -int(at));
+        // The anchor's place on the torus, kept small: the coordinates stay exact on images
+        // of any size.
+        const double torus = scaled - side * std::floor(scaled / side);
+        offset[k * 2 + axis] = GLfloat(torus / side);
+        bounds[k * 4 + axis] = GLfloat((torus - scaled + 0.5) / side);
+        bounds[k * 4 + 2 + axis] = GLfloat((torus - scaled + size[axis] - 0.5) / side);
+      }
+      scale[k] = GLfloat(std::ldexp(1.0, -int(at)) / side);
+      layer[k] = GLfloat(at);
+    }
+    const HeldProgram& held = held_[weight > 0 ? 1 : 0];
+    const GLuint p = held.program.get();
+    glProgramUniformMatrix4fv(p, held.view_projection, 1, GL_FALSE, transform.matrix);
+    glProgramUniform1fv(p, held.scale, 2, scale);
+    glProgramUniform2fv(p, held.offset, 2, offset);
+    glProgramUniform4fv(p, held.bounds, 2, bounds);
+    glProgramUniform1fv(p, held.layer, 2, layer);
+    glProgramUniform1f(p, held.weight, GLfloat(weight));
+    return &held;
+  }
+
+  /// True when every tile of `level` that the footprint, widened by one texel of that level
+  /// on each side, meets is held; false also when they are more than a layer holds.
+  bool footprintHeld(const tessera::detail::Footprint& footprint, uint32_t image,
+                     uint32_t level) const {
+    const double texel = std::ldexp(1.0, int(level));
+    const double span = texel * info_.tile_size_px;
+    const double x0 = std::max(footprint.x0 - texel, 0.0);
+    const double y0 = std::max(footprint.y0 - texel, 0.0);
+    const double x1 = std::min(footprint.x1 + texel, double(info_.width_px));
+    const double y1 = std::min(footprint.y1 + texel, double(info_.height_px));
+    if (!(x1 > x0 && y1 > y0)) return false;
+    const uint32_t tx0 = uint32_t(x0 / span), ty0 = uint32_t(y0 / span);
+    const uint32_t tx1 = std::min(uint32_t(std::ceil(x1 / span)), info_.tilesX(level));
+    const uint32_t ty1 = std::min(uint32_t(std::ceil(y1 / span)), info_.tilesY(level));
+    if (tx1 - tx0 > slots_ || ty1 - ty0 > slots_) return false;
+    for (uint32_t y = ty0; y < ty1; ++y)
+      for (uint32_t x = tx0; x < tx1; ++x)
+        if (!slot_of_.count({image, level, x, y})) return false;
+    return true;
+  }
+
   uint32_t slotOf(const TileId& id) const { return (id.y % slots_) * slots_ + (id.x % slots_); }
 
   bool inRegion(const TileId& id) const {
@@ -271,6 +407,9 @@ class ClipmapRenderer final : public RendererBase {
     const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
     const GLsizei levels = GLsizei(info_.level_count);
     texels_ = createTileArray(info_.channels, side, levels);
+    // The held-view program's bilinear fetches wrap around the torus.
+    glTextureParameteri(texels_.get(), GL_TEXTURE_WRAP_S, GL_REPEAT);
+    glTextureParameteri(texels_.get(), GL_TEXTURE_WRAP_T, GL_REPEAT);
     owner_ = createTexture(GL_TEXTURE_2D_ARRAY);
     glTextureStorage3D(owner_.get(), 1, GL_RG32UI, GLsizei(slots_), GLsizei(slots_), levels);
     // An integer texture with a linear filter is incomplete, and fetches from it return 0.
@@ -283,6 +422,7 @@ class ClipmapRenderer final : public RendererBase {
     stats_.gpu_bytes = uint64_t(side) * side * levels * info_.channels;
   }
 
+  HeldProgram held_[2];  ///< on a level; blending with the next coarser
   GLint rect_uniform_ = -1, anchor_int_uniform_ = -1, anchor_frac_uniform_ = -1,
         slots_uniform_ = -1;
   Texture texels_, owner_;

@@ -91,26 +91,40 @@ vec4 sampleBorderless(vec2 world, vec2 origin, int level, ivec2 tile, int table)
   return mix(mix(texels[0], texels[1], f.x), mix(texels[2], texels[3], f.x), f.y);
 }
 #endif
+#if BORDERLESS
+vec4 own() { return sampleBorderless(v_world, v_origins.xy, v_info.x, v_tile, 0); }
+vec4 parent() { return sampleBorderless(v_world, v_origins.zw, v_info.x + 1, v_tile / 2, 9); }
+#else
+vec4 own() { return sampleTile(v_world, v_origins.xy, v_info.x, v_info.y); }
+vec4 parent() { return sampleTile(v_world, v_origins.zw, v_info.x + 1, v_info.z); }
+#endif
+#if ORTHO_LOD == 0
+// The level of detail per fragment (perspective views).
 void main() {
   float lambda = levelOfDetail(v_world);
   int level = v_info.x;
   bool coarsest = v_info.w != 0;
   if (!coarsest && lambda >= float(level + 1)) discard;  // a coarser tile beneath draws here
-#if BORDERLESS
-  vec4 colour = sampleBorderless(v_world, v_origins.xy, level, v_tile, 0);
-#else
-  vec4 colour = sampleTile(v_world, v_origins.xy, level, v_info.y);
-#endif
-  if (lambda > float(level) && v_info.z >= 0) {
-#if BORDERLESS
-    vec4 parent = sampleBorderless(v_world, v_origins.zw, level + 1, v_tile / 2, 9);
-#else
-    vec4 parent = sampleTile(v_world, v_origins.zw, level + 1, v_info.z);
-#endif
-    colour = mix(colour, parent, clamp(lambda - float(level), 0.0, 1.0));
-  }
+  vec4 colour = own();
+  if (lambda > float(level) && v_info.z >= 0)
+    colour = mix(colour, parent(), clamp(lambda - float(level), 0.0, 1.0));
   o_colour = colour;
 }
+#else
+// An orthographic view: one level of detail for the whole view (u_lambda, from the CPU),
+// which drew no tile finer than its level. ORTHO_LOD 1: the view sits on a level (lambda
+// - level is 0), one fetch per fragment. 2: the view's level blends with its parent; a
+// coarser tile showing where finer ones are missing gets weight 0.
+uniform float u_lambda;
+void main() {
+#if ORTHO_LOD == 1
+  o_colour = own();
+#else
+  float weight = v_info.z >= 0 ? clamp(u_lambda - float(v_info.x), 0.0, 1.0) : 0.0;
+  o_colour = mix(own(), parent(), weight);
+#endif
+}
+#endif
 )";
 
 struct Instance {
@@ -129,15 +143,27 @@ class TileQuadsRenderer final : public RendererBase {
     // One program per way of filtering across tile edges, chosen here: a software renderer
     // runs both sides of a branch on every fragment, and the borderless fetches cost a
     // bordered archive's frames several times the bilinear sample it needs.
-    const std::string fragment = std::string("#define BORDERLESS ") +
-                                 (info_.border_px == 0 ? "1\n" : "0\n") + kFragmentShader;
-    TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, fragment.c_str()));
-    const GLuint p = program_.get();
-    glProgramUniform1i(p, glGetUniformLocation(p, "u_tiles"), 0);
-    glProgramUniform1f(p, glGetUniformLocation(p, "u_tile_size"), float(info_.tile_size_px));
-    glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(info_.border_px));
-    glProgramUniform1f(p, glGetUniformLocation(p, "u_stored_side"),
-                       float(info_.storedTileSidePx()));
+    // Likewise one program per way of choosing the level of detail: orthographic views have
+    // one for the whole view, so their fragments need no derivatives, no discard and, on a
+    // level, no second fetch. The orthographic ones are linked first: the base class keeps
+    // u_view_projection of the last program linked, the perspective one.
+    for (int mode : {1, 2, 0}) {
+      const std::string fragment = fmt::format("#define BORDERLESS {}\n#define ORTHO_LOD {}\n",
+                                               info_.border_px == 0 ? 1 : 0, mode) +
+                                   kFragmentShader;
+      TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, fragment.c_str()));
+      const GLuint p = program_.get();
+      glProgramUniform1i(p, glGetUniformLocation(p, "u_tiles"), 0);
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_tile_size"), float(info_.tile_size_px));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(info_.border_px));
+      glProgramUniform1f(p, glGetUniformLocation(p, "u_stored_side"),
+                         float(info_.storedTileSidePx()));
+      if (mode == 0) break;
+      OrthoProgram& ortho = ortho_programs_[mode - 1];
+      ortho.view_projection = glGetUniformLocation(p, "u_view_projection");
+      ortho.lambda = glGetUniformLocation(p, "u_lambda");
+      ortho.program = std::move(program_);
+    }
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers_);
     TESSERA_TRY(growLayers(std::max<uint32_t>(1, options_.initial_layers)));
 
@@ -212,7 +238,7 @@ class TileQuadsRenderer final : public RendererBase {
       glNamedBufferData(instances_buffer_.get(), GLsizeiptr(instances_.size() * sizeof(Instance)),
                         instances_.data(), GL_STREAM_DRAW);
       if (info_.border_px == 0) bindNeighbours(view.image);
-      glUseProgram(program_.get());
+      glUseProgram(programFor(view, transform));
       glBindTextureUnit(0, tiles_.get());
       glBindVertexArray(vertex_array_.get());
       glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));
@@ -225,6 +251,29 @@ class TileQuadsRenderer final : public RendererBase {
   RendererKind kind() const override { return RendererKind::kTileQuads; }
 
  private:
+  /// A program for orthographic views and its own uniforms.
+  struct OrthoProgram {
+    Program program;
+    GLint view_projection = -1;
+    GLint lambda = -1;
+  };
+
+  /// The program that draws `view`, its uniforms set: for an orthographic view the one on a
+  /// level (lambda - level is 0) or the one that blends with the parent, else the per-fragment
+  /// one.
+  GLuint programFor(const View& view, const ViewProjection& transform) {
+    if (view.kind != View::Kind::kOrtho) return program_.get();
+    const double texels_per_pixel = texelsPerPixelOf(view.ortho);
+    const uint32_t level = desiredLevelFor(texels_per_pixel, info_.level_count);
+    const double lambda = std::log2(texels_per_pixel);
+    const bool blends = level + 1 < info_.level_count && lambda > double(level);
+    const OrthoProgram& ortho = ortho_programs_[blends ? 1 : 0];
+    const GLuint p = ortho.program.get();
+    glProgramUniformMatrix4fv(p, ortho.view_projection, 1, GL_FALSE, transform.matrix);
+    glProgramUniform1f(p, ortho.lambda, GLfloat(lambda));
+    return p;
+  }
+
   /// The quads of this frame: every resident tile that meets the view's footprint (the
   /// runtime's, for field-of-view culling), coarse levels first so that finer tiles draw
   /// over them where they apply.
@@ -367,6 +416,7 @@ class TileQuadsRenderer final : public RendererBase {
     layers_.erase(it);
   }
 
+  OrthoProgram ortho_programs_[2];  ///< on a level; blending with the parent
   Texture tiles_;
   bool sized_from_bound_ = false;  ///< the first apply sized the array from the streamer
   GLint max_layers_ = 0;
