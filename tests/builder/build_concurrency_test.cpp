@@ -1,6 +1,7 @@
 // Whole builds under ThreadSanitizer in CI (label "concurrency"): the encoders cut their tiles
 // out of the pyramid's bands while the building thread reads on into them.
 #include <string>
+#include <utility>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -30,13 +31,12 @@ std::vector<uint8_t> buildBytes(const std::string& path, Codec codec, uint32_t t
 // More encoders than cores and one: the same bytes, whichever encoder cut which tile when.
 TEST(BuildConcurrency, EncodersCuttingFromTheBandsGiveTheSameArchiveAsOne) {
   const std::string dir = test::testTempDir();
-  for (Codec codec : {Codec::kJpeg, Codec::kZstd}) {
-    for (uint32_t border : {0u, 2u}) {
-      const std::vector<uint8_t> one = buildBytes(dir + "one.tess", codec, 1, border);
-      ASSERT_FALSE(one.empty());
-      EXPECT_EQ(buildBytes(dir + "many.tess", codec, 6, border), one)
-          << codecName(codec) << " border " << border;
-    }
+  const std::pair<Codec, uint32_t> cases[] = {{Codec::kJpeg, 0}, {Codec::kZstd, 2}};
+  for (const auto& [codec, border] : cases) {
+    const std::vector<uint8_t> one = buildBytes(dir + "one.tess", codec, 1, border);
+    ASSERT_FALSE(one.empty());
+    EXPECT_EQ(buildBytes(dir + "many.tess", codec, 6, border), one)
+        << codecName(codec) << " border " << border;
   }
 }
 
