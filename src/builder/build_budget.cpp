@@ -93,10 +93,11 @@ MemoryEstimate estimateBuildMemory(std::span<const ImageInfo> infos,
         tileCount(infos[i]) * (sizeof(SpoolEntry) + sizeof(TileEntry) + 2 * sizeof(TileId));
   }
   const uint64_t t = std::max(1u, threads);
-  // 3T + 2 recycled tile buffers; per encoder a spool chunk (its capacity can double past the
-  // chunk size), the payload being appended, the codec's scratch of a few tiles and its state.
+  // 3T + 2 recycled tile buffers (an import's padded tiles); per encoder the tile it cuts, a
+  // spool chunk (its capacity can double past the chunk size), the payload being appended, the
+  // codec's scratch of a few tiles and its state.
   estimate.tiles_bytes = (3 * t + 2) * max_tile_bytes +
-                         t * (2 * kSpoolChunkBytes + 10 * max_tile_bytes + kCodecStateBytes);
+                         t * (2 * kSpoolChunkBytes + 11 * max_tile_bytes + kCodecStateBytes);
   estimate.fixed_bytes = kFixedBytes + t * kPerThreadBytes + kLayoutBufferBytes;
   return estimate;
 }

@@ -30,8 +30,8 @@ struct MemoryEstimate {
   /// The costliest image's rows: its input band, its reader's buffers, one band per level
   /// and, for a codec that codes against the parent level, the tile rows held for it.
   uint64_t rows_bytes = 0;
-  /// Tiles between the cutter and the encoders, and per encoder its spool chunk (which can
-  /// grow to twice kSpoolChunkBytes) and codec scratch.
+  /// Tiles in flight: per encoder the tile it cuts, its spool chunk (which can grow to twice
+  /// kSpoolChunkBytes) and codec scratch, and an import's padded tiles.
   uint64_t tiles_bytes = 0;
   /// One entry per tile of every image, kept until the layout pass, and that pass's copies
   /// and tile order.

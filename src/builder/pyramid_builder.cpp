@@ -12,8 +12,10 @@ namespace tessera::detail {
 
 // One level's band: a ring of rows. When tile row r is announced the ring holds rows
 // [r*t - b, (r+1)*t + b), and the next announcement needs rows from (r+1)*t - b on, so
-// t + 2b slots never overwrite a row still needed (a row y replaces y - t - 2b). The ring is
-// not written ahead of its rows, so its memory arrives with them.
+// t + 2b slots never overwrite a row still needed (a row y replaces y - t - 2b). With a sink
+// that cuts later, the first row after tile row r's announcement replaces a row r needs, so
+// the builder waits there until r is cut: for the last few queued tiles, while the encoders
+// are busy. The ring is not written ahead of its rows, so its memory arrives with them.
 struct PyramidBuilder::Level final : LevelRows {
   UninitializedBuffer ring;
   uint32_t ring_rows = 0;
@@ -29,7 +31,7 @@ struct PyramidBuilder::Level final : LevelRows {
 };
 
 PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average)
-    : info_(info), sink_(sink), floor_average_(floor_average) {
+    : info_(info), sink_(sink), floor_average_(floor_average), cuts_later_(sink.cutsLater()) {
   TESSERA_CHECK(!floor_average || !info.srgb_downsample) << "floor average is in sRGB codes only";
   for (uint32_t l = 0; l < info.level_count; ++l) {
     auto level = std::make_unique<Level>();
@@ -45,7 +47,21 @@ PyramidBuilder::PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor
   }
 }
 
-PyramidBuilder::~PyramidBuilder() = default;
+PyramidBuilder::~PyramidBuilder() {
+  if (!cuts_later_) return;
+  for (uint32_t l = 0; l < levels_.size(); ++l)
+    if (levels_[l]->next_tile_row > 0) sink_.awaitCut(l, levels_[l]->next_tile_row - 1);
+}
+
+void PyramidBuilder::reuseSlots(uint32_t level_index, uint32_t first_row, uint32_t count) {
+  const Level& level = *levels_[level_index];
+  const uint64_t last_row = uint64_t(first_row) + count - 1;
+  if (!cuts_later_ || count == 0 || last_row < level.ring_rows || level.next_tile_row == 0) return;
+  // The rows replaced end at last_row - ring_rows; tile row r needs rows from r * t - b on.
+  const uint64_t replaced = last_row - level.ring_rows;
+  const uint64_t needing = (replaced + info_.border_px) / info_.tile_size_px;
+  sink_.awaitCut(level_index, uint32_t(std::min<uint64_t>(needing, level.next_tile_row - 1)));
+}
 
 uint32_t PyramidBuilder::rowsReceived() const {
   return levels_[0]->received;
@@ -72,6 +88,7 @@ std::span<uint8_t> PyramidBuilder::rowsToFill(uint32_t max_rows) {
     rows = uint32_t(std::min<uint64_t>(rows, std::max<uint64_t>(last_needed, y + 1) - y));
   }
   if ((y & 1) == 1) rows = std::min(rows, std::max(1u, level.ring_rows - 1));
+  reuseSlots(0, y, rows);
   offered_rows_ = rows;
   return {level.mutableRow(y), size_t(rows) * level.row_bytes};
 }
@@ -87,6 +104,7 @@ Result<void> PyramidBuilder::commitRows(uint32_t count) {
 Result<void> PyramidBuilder::addRow(uint32_t level_index, const uint8_t* row) {
   Level& level = *levels_[level_index];
   TESSERA_CHECK(level.received < level.height_px) << "more rows than the level has";
+  reuseSlots(level_index, level.received, 1);
   std::memcpy(level.mutableRow(level.received), row, level.row_bytes);
   return rowArrived(level_index);
 }
@@ -104,6 +122,7 @@ Result<void> PyramidBuilder::rowArrived(uint32_t level_index) {
       // there, exactly as when a row is copied in.
       Level& next = *levels_[level_index + 1];
       TESSERA_CHECK(next.received < next.height_px) << "more rows than the level has";
+      reuseSlots(level_index + 1, next.received, 1);
       uint8_t* target = next.mutableRow(next.received);
       const uint8_t* top = level.row(pair_complete ? y - 1 : y);
       if (info_.sample_type != SampleType::kU8)

@@ -18,12 +18,22 @@
 namespace tessera::detail {
 
 /// Receives tile rows. Called on the pyramid builder's thread; `rows` is valid only during
-/// the call (cut what you need with cutTile before returning).
+/// the call (cut what you need with cutTile before returning), unless cutsLater() is true.
 class TileSink {
  public:
   virtual ~TileSink() = default;
   [[nodiscard]] virtual Result<void> tileRowReady(uint32_t level, uint32_t tile_row,
                                                   const LevelRows& rows) = 0;
+  /// True when the sink cuts a tile row's tiles after tileRowReady returns (on other threads,
+  /// through `rows`, which lives as long as the builder). The builder then calls awaitCut
+  /// before it overwrites a row an announced tile row needs.
+  virtual bool cutsLater() const { return false; }
+  /// Blocks until every tile row of `level` up to `tile_row` (all announced) is cut: their band
+  /// rows may be overwritten afterwards. Called on the builder's thread, only if cutsLater().
+  virtual void awaitCut(uint32_t level, uint32_t tile_row) {
+    (void)level;
+    (void)tile_row;
+  }
 };
 
 /// Owned by one thread.
@@ -33,6 +43,8 @@ class PyramidBuilder {
   /// `floor_average` levels are the unweighted floor average of downsampleRowPairFloor (the
   /// ptm codec's pyramid) and the sRGB flag must be off.
   PyramidBuilder(const ImageInfo& info, TileSink& sink, bool floor_average = false);
+  /// Waits for the sink to cut every announced tile row (cutsLater), so no cut outlives the
+  /// bands, whether the build finished or failed.
   ~PyramidBuilder();
 
   /// Adds `count` level-0 rows (tightly packed). Fails if the sink fails.
@@ -57,10 +69,14 @@ class PyramidBuilder {
   /// Takes the row already written at the level's next slot: averages it into the next level
   /// when it completes a pair, and announces the tile rows it completes.
   Result<void> rowArrived(uint32_t level);
+  /// Before `count` rows from `first_row` are written into the level's ring: waits until the
+  /// tile rows needing the rows they replace are cut (a sink that cuts later).
+  void reuseSlots(uint32_t level, uint32_t first_row, uint32_t count);
 
   ImageInfo info_;
   TileSink& sink_;
   bool floor_average_;
+  bool cuts_later_;  ///< the sink's cutsLater(), asked once
   std::vector<std::unique_ptr<Level>> levels_;
   uint32_t offered_rows_ = 0;  ///< rows the last rowsToFill offered, until committed
 };

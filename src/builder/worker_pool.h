@@ -23,6 +23,9 @@ namespace tessera::detail {
 struct WorkerState {
   uint32_t index = 0;
   CodecScratch codec_scratch;
+  /// The stored tile a job cuts out of a band before encoding it; sized by the pool's owner
+  /// while idle, so jobs never allocate it.
+  std::vector<uint8_t> tile_texels;
 };
 
 /// Thread-safe for submit/waitIdle from one producer thread.

@@ -1,9 +1,10 @@
 // The streaming pyramid: fed rows in bands of any height, it announces every tile row of every
 // level exactly once, in order, each time with the rows it needs, and the tiles cut from them
-// equal the reference pyramid.
+// equal the reference pyramid, also when the sink cuts them only when the builder says it must.
 #include "builder/pyramid_builder.h"
 
 #include <cstring>
+#include <deque>
 #include <map>
 
 #include <gtest/gtest.h>
@@ -24,6 +25,34 @@ class CollectingSink final : public TileSink {
     next = tile_row + 1;
     EXPECT_EQ(rows.width_px, info_.levelWidthPx(level));
     EXPECT_EQ(rows.height_px, info_.levelHeightPx(level));
+    if (cut_later)
+      uncut_[level].push_back({tile_row, &rows});
+    else
+      cutRow(level, tile_row, rows);
+    if (fail_at_level == int(level)) return fail(ErrorCode::kIo, "sink full");
+    return {};
+  }
+
+  // As late as the builder allows: a row overwritten too early shows as a tile that differs
+  // from the reference, one never awaited as a tile never cut.
+  bool cutsLater() const override { return cut_later; }
+  void awaitCut(uint32_t level, uint32_t tile_row) override {
+    EXPECT_LT(tile_row, next_row_[level]) << "level " << level << " awaits an unannounced row";
+    std::deque<std::pair<uint32_t, const LevelRows*>>& uncut = uncut_[level];
+    while (!uncut.empty() && uncut.front().first <= tile_row) {
+      cutRow(level, uncut.front().first, *uncut.front().second);
+      uncut.pop_front();
+    }
+  }
+
+  uint32_t rowsAnnounced(uint32_t level) { return next_row_[level]; }
+  int tiles = 0;
+  int mismatches = 0;
+  int fail_at_level = -1;
+  bool cut_later = false;
+
+ private:
+  void cutRow(uint32_t level, uint32_t tile_row, const LevelRows& rows) {
     std::vector<uint8_t> tile(info_.storedTileBytes());
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
       cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile.data());
@@ -36,16 +65,9 @@ class CollectingSink final : public TileSink {
           ADD_FAILURE() << "tile (" << level << "," << x << "," << tile_row << ") differs";
       }
     }
-    if (fail_at_level == int(level)) return fail(ErrorCode::kIo, "sink full");
-    return {};
   }
 
-  uint32_t rowsAnnounced(uint32_t level) { return next_row_[level]; }
-  int tiles = 0;
-  int mismatches = 0;
-  int fail_at_level = -1;
-
- private:
+  std::map<uint32_t, std::deque<std::pair<uint32_t, const LevelRows*>>> uncut_;
   const ImageInfo& info_;
   const test::ReferencePyramid& reference_;
   std::map<uint32_t, uint32_t> next_row_;
@@ -113,14 +135,18 @@ void feedInPlace(const Case& c, const Image& image, PyramidBuilder& pyramid) {
   EXPECT_TRUE(pyramid.rowsToFill(c.band_rows).empty());
 }
 
-void buildAndCompare(const Case& c, void (*feed)(const Case&, const Image&, PyramidBuilder&)) {
+void buildAndCompare(const Case& c, void (*feed)(const Case&, const Image&, PyramidBuilder&),
+                     bool cut_later = false) {
   Image image = test::makePatternImage(c.width, c.height, c.channels, c.width ^ c.height);
   test::ReferencePyramid reference(image);
   ImageInfo info = makeInfo(image, c.tile, c.border);
   CollectingSink sink(info, reference);
-  PyramidBuilder pyramid(info, sink);
-  feed(c, image, pyramid);
-  ASSERT_TRUE(pyramid.finish());
+  sink.cut_later = cut_later;
+  {
+    PyramidBuilder pyramid(info, sink);
+    feed(c, image, pyramid);
+    ASSERT_TRUE(pyramid.finish());
+  }  // the builder awaits the last tile rows' cuts as it goes
   expectEveryTileOnce(info, sink);
 }
 
@@ -132,6 +158,13 @@ TEST_P(PyramidBuilderTest, EmitsEveryTileOnceAndEqualToTheReference) {
 // announcement or a 2x2 pair still needed.
 TEST_P(PyramidBuilderTest, InPlaceRowsGiveTheSameTiles) {
   buildAndCompare(GetParam(), feedInPlace);
+}
+
+// A sink that cuts later (the builder's encoders) gets every tile intact: the builder waits for
+// a tile row's cuts before it overwrites its rows, and for the last ones before it goes.
+TEST_P(PyramidBuilderTest, TilesCutLaterEqualTheReference) {
+  buildAndCompare(GetParam(), feedCopies, /*cut_later=*/true);
+  buildAndCompare(GetParam(), feedInPlace, /*cut_later=*/true);
 }
 
 INSTANTIATE_TEST_SUITE_P(
