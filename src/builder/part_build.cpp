@@ -173,13 +173,10 @@ Result<BuildReport> buildWindow(const BuildOptions& options, BandReader& reader,
   row_source.band_rows = source.natural_band_rows;
   row_source.read_rows = [&](uint32_t first, uint32_t count,
                              std::span<uint8_t> out) -> Result<void> {
-    // Rows above the window are read and dropped: the readers stream top to bottom.
-    std::vector<uint8_t> skipped;
-    while (next_row < rows.window_first) {
-      const uint32_t n = std::min(rows.window_first - next_row, 64u);
-      skipped.resize(row_bytes * n);
-      TESSERA_TRY(reader.readRows(n, skipped));
-      next_row += n;
+    // Readers that seek (tiled and striped TIFF) read nothing above the window.
+    if (next_row < rows.window_first) {
+      TESSERA_TRY(reader.skipRows(rows.window_first - next_row));
+      next_row = rows.window_first;
     }
     TESSERA_TRY(reader.readRows(count, out));
     next_row += count;
@@ -259,6 +256,7 @@ Result<BuildReport> buildArchivePart(const BuildOptions& options, PartSpec part,
       {"input", identity},
       {"image", info.name},
       {"page_tiles_log2", info.page_tiles_log2},
+      {"stored_bytes_read", reader->storedBytesRead()},
       {"archive_metadata", archiveMetadata(options, nlohmann::json::array({image_meta}))}};
   TESSERA_ASSIGN_OR_RETURN(uint64_t bytes, writePartArchive(layout, window.get(), levels.rows,
                                                             part_meta, options.output));
