@@ -16,6 +16,7 @@
 #include "downsample.h"
 #include "format/checksum.h"
 #include "format/header.h"
+#include "grid_reader.h"
 #include "output/output_file.h"
 #include "part_build.h"
 #include "part_plan.h"
@@ -89,13 +90,27 @@ Result<nlohmann::json> inputIdentity(const std::string& input, const SourceInfo&
                              {"height", source.height_px},
                              {"channels", source.channels}};
   if (input.rfind("synthetic:", 0) == 0) return identity;
-  std::error_code error;
-  const uint64_t bytes = std::filesystem::file_size(input, error);
-  const auto mtime = std::filesystem::last_write_time(input, error);
-  if (error) return fail(ErrorCode::kIo, fmt::format("{}: {}", input, error.message()));
+  std::vector<std::string> files = {input};
+  if (input.starts_with(kGridPrefix)) {  // every file of the grid, summed
+    TESSERA_ASSIGN_OR_RETURN(GridSpec grid, parseGridSpec(input));
+    files.clear();
+    for (uint32_t row = 0; row < grid.rows; ++row)
+      for (uint32_t column = 0; column < grid.columns; ++column)
+        files.push_back(grid.path(column, row));
+  }
+  uint64_t bytes = 0;
+  int64_t latest_ns = 0;
+  for (const std::string& file : files) {
+    std::error_code error;
+    bytes += std::filesystem::file_size(file, error);
+    const auto mtime = std::filesystem::last_write_time(file, error);
+    if (error) return fail(ErrorCode::kIo, fmt::format("{}: {}", file, error.message()));
+    latest_ns = std::max<int64_t>(
+        latest_ns,
+        std::chrono::duration_cast<std::chrono::nanoseconds>(mtime.time_since_epoch()).count());
+  }
   identity["bytes"] = bytes;
-  identity["mtime_ns"] = int64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(mtime.time_since_epoch()).count());
+  identity["mtime_ns"] = latest_ns;
   return identity;
 }
 
