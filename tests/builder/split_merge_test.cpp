@@ -121,19 +121,21 @@ TEST(SplitMerge, ReadsEachStretchOfAPartInOneCall) {
   }
 }
 
-// A part of a tiled TIFF (classic and BigTIFF) reads the tiles of its own rows, not those above
-// them, and the parts still merge into the single build.
-TEST(SplitMerge, PartsOfATiledTiffReadTheirOwnTiles) {
+// A part of a tiled TIFF (classic and BigTIFF) or a striped one reads the tiles or strips of
+// its own rows, not those above them, and the parts still merge into the single build.
+TEST(SplitMerge, PartsOfATiffReadOnlyTheirRows) {
   const std::string dir = test::testTempDir();
   const uint32_t width = 512, height = 1024;
   std::vector<uint8_t> pixels(size_t(width) * height * 3);
   for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t((i * 7 + i / 1531) & 0xff);
-  for (bool bigtiff : {false, true}) {
+  for (int layout : {0, 1, 2}) {  // tiled, tiled BigTIFF, striped
+    const bool bigtiff = layout == 1;
     test::TiffSpec spec;
     spec.width_px = width;
     spec.height_px = height;
-    spec.tiled = true;
+    spec.tiled = layout < 2;
     spec.tile_width_px = spec.tile_height_px = 32;
+    spec.rows_per_strip = 16;
     spec.bigtiff = bigtiff;
     const std::string tiff = dir + "/tiled.tif";
     ASSERT_EQ(test::writeTiff(tiff, spec, pixels), "");
@@ -157,7 +159,7 @@ TEST(SplitMerge, PartsOfATiledTiffReadTheirOwnTiles) {
     }
     // Each part reads its share plus at most a band above it; reading from the top would
     // make this 2.5 times the file.
-    EXPECT_LT(read_by_all, stored_bytes * 3 / 2) << "bigtiff " << bigtiff;
+    EXPECT_LT(read_by_all, stored_bytes * 3 / 2) << "layout " << layout;
     ASSERT_TRUE(mergeArchiveParts(paths, dir + "/merged.tess"));
     EXPECT_TRUE(test::readFileBytes(dir + "/single.tess") ==
                 test::readFileBytes(dir + "/merged.tess"));
