@@ -42,6 +42,9 @@ struct MergeReport {
   uint64_t output_bytes = 0;
   uint64_t payload_bytes_copied = 0;  ///< payloads copied from the parts, unchanged
   uint64_t tiles_copied = 0;
+  /// Reads of the parts that fetched those payloads: one per stretch of the output stored
+  /// together in a part, cut at 1 MiB, so far fewer than the tiles.
+  uint64_t part_reads = 0;
   uint64_t tiles_computed = 0;  ///< tiles of the coarse levels, computed by the merge
   double elapsed_s = 0;
 };

@@ -83,14 +83,33 @@ std::vector<std::vector<TileEntry>> entriesOf(const SpooledImage& image) {
   return levels;
 }
 
-/// Copies the payloads from the spool to the output in the clustering order. The entries are
-/// copies, so the caller's spool offsets stay intact.
-Result<CopiedPayloads> copyPayloads(const PayloadFetcher& fetch,
+/// Copies the payloads to the output in the clustering order, in runs of up to
+/// kPayloadRunBytes that `fetch` fills in place. The entries are copies, so the caller's
+/// spool offsets stay intact.
+Result<CopiedPayloads> copyPayloads(const PayloadRunFetcher& fetch,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     FileAppender& appender) {
-  std::vector<uint8_t> payload;
   CopiedPayloads copied;
   copied.entries.resize(images.size());
+  std::vector<RunTile> run;
+  std::vector<TileEntry*> placed;  // run[k]'s stored entry
+  size_t run_bytes = 0;
+  auto flush_run = [&]() -> Result<void> {
+    if (run.empty()) return {};
+    TESSERA_ASSIGN_OR_RETURN(uint64_t offset,
+                             appender.appendFilled(run_bytes, [&](std::span<uint8_t> bytes) {
+                               return fetch(run, bytes);
+                             }));
+    for (size_t k = 0; k < run.size(); ++k) {
+      placed[k]->offset_bytes = offset;
+      offset += run[k].entry->length_bytes;
+    }
+    copied.payload_bytes += run_bytes;
+    run.clear();
+    placed.clear();
+    run_bytes = 0;
+    return {};
+  };
   for (uint32_t i = 0; i < images.size(); ++i) {
     const SpooledImage& image = images[i];
     auto& levels = copied.entries[i];
@@ -99,12 +118,13 @@ Result<CopiedPayloads> copyPayloads(const PayloadFetcher& fetch,
       size_t slot = size_t(tile.y) * image.info.tilesX(tile.level) + tile.x;
       const SpoolEntry& spooled = image.entries[tile.level][slot];
       if (spooled.kind != TileKind::kEncoded) continue;
-      payload.resize(spooled.length_bytes);
-      TESSERA_TRY(fetch(tile, spooled, payload));
-      TESSERA_ASSIGN_OR_RETURN(levels[tile.level][slot].offset_bytes, appender.append(payload));
-      copied.payload_bytes += spooled.length_bytes;
+      if (run_bytes + spooled.length_bytes > kPayloadRunBytes) TESSERA_TRY(flush_run());
+      run.push_back({tile, &spooled});
+      placed.push_back(&levels[tile.level][slot]);
+      run_bytes += spooled.length_bytes;
     }
   }
+  TESSERA_TRY(flush_run());
   return copied;
 }
 
@@ -181,19 +201,35 @@ Result<WrittenArchive> writeArchive(const TempFile& spool, uint64_t spool_bytes,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     const nlohmann::json& metadata, const TempFile& out) {
   // pread, not a mapping: mapped spool pages count in the process's resident set, which would
-  // then grow with the archive.
-  auto from_spool = [&](const TileId&, const SpoolEntry& spooled,
-                        std::span<uint8_t> payload) -> Result<void> {
-    TESSERA_CHECK(spooled.spool_offset + spooled.length_bytes <= spool_bytes)
-        << "spool entry past the spool end";
-    return spool.pread(spooled.spool_offset, payload);
+  // then grow with the archive. Payloads the encoders spooled one after another are read in
+  // one call.
+  auto from_spool = [&](std::span<const RunTile> run, std::span<uint8_t> bytes) -> Result<void> {
+    return forEachStoredRange(
+        run, [&](size_t, size_t, uint64_t offset, size_t at, size_t length) -> Result<void> {
+          TESSERA_CHECK(offset + length <= spool_bytes) << "spool entry past the spool end";
+          return spool.pread(offset, bytes.subspan(at, length));
+        });
   };
-  return writeArchive(from_spool, images, order, metadata, out);
+  return writeArchiveRuns(from_spool, images, order, metadata, out);
 }
 
 Result<WrittenArchive> writeArchive(const PayloadFetcher& fetch,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     const nlohmann::json& metadata, const TempFile& out) {
+  auto each_tile = [&](std::span<const RunTile> run, std::span<uint8_t> bytes) -> Result<void> {
+    size_t at = 0;
+    for (const RunTile& tile : run) {
+      TESSERA_TRY(fetch(tile.tile, *tile.entry, bytes.subspan(at, tile.entry->length_bytes)));
+      at += tile.entry->length_bytes;
+    }
+    return {};
+  };
+  return writeArchiveRuns(each_tile, images, order, metadata, out);
+}
+
+Result<WrittenArchive> writeArchiveRuns(const PayloadRunFetcher& fetch,
+                                        std::span<const SpooledImage> images, TileOrder order,
+                                        const nlohmann::json& metadata, const TempFile& out) {
   const std::string& name = out.finalPath();
   FileAppender appender(out, kHeaderRegionBytes);
   TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads, copyPayloads(fetch, images, order, appender));

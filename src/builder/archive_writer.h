@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <functional>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -57,5 +58,55 @@ using PayloadFetcher = std::function<Result<void>(const TileId& tile, const Spoo
                                                   std::span<const SpooledImage> images,
                                                   TileOrder order, const nlohmann::json& metadata,
                                                   const TempFile& out);
+
+/// An encoded tile of a run of consecutive payloads in the clustering order.
+struct RunTile {
+  TileId tile;
+  const SpoolEntry* entry = nullptr;
+};
+
+/// Fills `bytes` with the payloads of `run`, back to back in order (each its entry's length):
+/// `bytes` lies in the writer's buffer, so a fetcher that reads a run of payloads stored
+/// together in one call moves each byte once on the way in.
+using PayloadRunFetcher =
+    std::function<Result<void>(std::span<const RunTile> run, std::span<uint8_t> bytes)>;
+
+/// A run handed to a PayloadRunFetcher holds at most this many bytes (or one larger payload).
+inline constexpr size_t kPayloadRunBytes = 1u << 20;
+
+/// Calls `read(first, end, offset, at, length)` for each stretch run[first, end) of the run
+/// whose payloads lie back to back in their store (spool_offset of each the end of the
+/// previous): `length` bytes from `offset` there, at byte `at` of the run's bytes. A run's
+/// payloads from several stores (parts) are split with `same_store(a, b)`.
+template <typename Read, typename SameStore>
+Result<void> forEachStoredRange(std::span<const RunTile> run, Read&& read, SameStore&& same_store) {
+  size_t at = 0;
+  for (size_t first = 0; first < run.size();) {
+    const uint64_t offset = run[first].entry->spool_offset;
+    size_t length = run[first].entry->length_bytes;
+    size_t end = first + 1;
+    while (end < run.size() && run[end].entry->spool_offset == offset + length &&
+           same_store(run[end - 1], run[end]))
+      length += run[end++].entry->length_bytes;
+    TESSERA_TRY(read(first, end, offset, at, length));
+    at += length;
+    first = end;
+  }
+  return {};
+}
+
+template <typename Read>
+Result<void> forEachStoredRange(std::span<const RunTile> run, Read&& read) {
+  return forEachStoredRange(run, std::forward<Read>(read),
+                            [](const RunTile&, const RunTile&) { return true; });
+}
+
+/// writeArchive with payloads from `fetch`, called for runs of encoded tiles in the
+/// clustering order.
+[[nodiscard]] Result<WrittenArchive> writeArchiveRuns(const PayloadRunFetcher& fetch,
+                                                      std::span<const SpooledImage> images,
+                                                      TileOrder order,
+                                                      const nlohmann::json& metadata,
+                                                      const TempFile& out);
 
 }  // namespace tessera::detail

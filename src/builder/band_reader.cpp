@@ -11,6 +11,7 @@
 #include <tessera/format.h>
 
 #include "file_reader.h"
+#include "grid_reader.h"
 
 namespace tessera::detail {
 namespace {
@@ -72,6 +73,7 @@ Result<std::unique_ptr<BandReader>> openBandReader(const std::string& source) {
   if (source.starts_with(kSyntheticPrefix)) {
     return openSyntheticReader(source.substr(kSyntheticPrefix.size()));
   }
+  if (source.starts_with(kGridPrefix)) return openGridReader(source);
   TESSERA_TRY(checkSourceFile(source));
   std::FILE* file = std::fopen(source.c_str(), "rb");
   if (!file) {

@@ -3,10 +3,12 @@
 // image top to bottom in bands and never holds the whole image (Backes et al., section 4;
 // libvips dzsave's strip-at-a-time design).
 
+#include <algorithm>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -51,6 +53,24 @@ class BandReader {
   /// Requires rows > 0 and not past the image's end. A decoding error (truncated or corrupt
   /// data) names the file and the row.
   [[nodiscard]] virtual Result<void> readRows(uint32_t rows, std::span<uint8_t> out) = 0;
+  /// Moves past the next `rows` rows without delivering them (a part of a split build starts
+  /// below the top). Readers that seek (TIFF strips and tiles) read nothing wholly above the
+  /// new position; the others read the rows and drop them.
+  [[nodiscard]] virtual Result<void> skipRows(uint32_t rows) {
+    const size_t row_bytes =
+        size_t(info().width_px) * info().channels * sampleBytes(info().sample_type);
+    std::vector<uint8_t> dropped;
+    for (uint32_t done = 0; done < rows;) {
+      const uint32_t n = std::min(rows - done, 64u);
+      dropped.resize(row_bytes * n);
+      TESSERA_TRY(readRows(n, dropped));
+      done += n;
+    }
+    return {};
+  }
+  /// Bytes of stored (compressed) strips or tiles read so far, for readers that count them
+  /// (TIFF); 0 for the others.
+  virtual uint64_t storedBytesRead() const { return 0; }
 };
 
 /// Opens a source by name: "synthetic:WxH[:seed]" or a path whose content (not extension)

@@ -99,7 +99,7 @@ nlohmann::json wideLevelStatistics(const LevelRows& rows) {
 }
 
 std::string displayName(const std::string& input) {
-  if (input.rfind("synthetic:", 0) == 0) return input;
+  if (input.rfind("synthetic:", 0) == 0 || input.rfind("grid:", 0) == 0) return input;
   return std::filesystem::path(input).filename().string();
 }
 

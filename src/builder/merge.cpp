@@ -219,12 +219,6 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   return {};
 }
 
-TileOrder orderNamed(const std::string& name) {
-  return name == "hilbert"    ? TileOrder::kHilbert
-         : name == "quadtree" ? TileOrder::kQuadtree
-                              : TileOrder::kRowMajor;
-}
-
 }  // namespace
 
 Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
@@ -259,27 +253,48 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
   if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
 
   MergeReport report;
-  auto fetch = [&](const TileId& tile, const SpoolEntry& entry,
-                   std::span<uint8_t> payload) -> Result<void> {
-    if (tile.level >= plan.merge_level) {
-      std::memcpy(payload.data(), sink.payloads[entry.spool_offset].data(), payload.size());
-      return {};
-    }
+  // A run's payloads from one part lie back to back there (the part is written in the
+  // output's order), so each stretch is one read straight into the writer's buffer, its
+  // checksums verified while the bytes are still in cache.
+  auto part_of = [&](const RunTile& tile) -> int64_t {
+    if (tile.tile.level >= plan.merge_level) return -1;  // computed by the merge
+    return owner[tile.tile.level][tile.tile.y];
+  };
+  auto same_part = [&](const RunTile& a, const RunTile& b) {
+    return part_of(a) >= 0 && part_of(a) == part_of(b);
+  };
+  auto fetch = [&](std::span<const RunTile> run, std::span<uint8_t> bytes) -> Result<void> {
     if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
-    const OpenedPart& part = parts[owner[tile.level][tile.y]];
-    TESSERA_TRY(part.archive->source().read(entry.spool_offset, payload));
-    if (checksum64(payload) != entry.checksum)
-      return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
-                                                   part.path, tile.level, tile.x, tile.y));
-    report.payload_bytes_copied += payload.size();
-    ++report.tiles_copied;
-    return {};
+    auto read = [&](size_t first, size_t end, uint64_t offset, size_t at,
+                    size_t length) -> Result<void> {
+      const int64_t owner_part = part_of(run[first]);
+      if (owner_part < 0) {
+        std::memcpy(bytes.data() + at, sink.payloads[run[first].entry->spool_offset].data(),
+                    length);
+        return {};
+      }
+      const OpenedPart& part = parts[size_t(owner_part)];
+      TESSERA_TRY(part.archive->source().read(offset, bytes.subspan(at, length)));
+      for (size_t k = first; k < end; ++k) {
+        const uint32_t size = run[k].entry->length_bytes;
+        if (checksum64(bytes.subspan(at, size)) != run[k].entry->checksum) {
+          const TileId& tile = run[k].tile;
+          return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
+                                                       part.path, tile.level, tile.x, tile.y));
+        }
+        at += size;
+      }
+      report.payload_bytes_copied += length;
+      report.tiles_copied += end - first;
+      ++report.part_reads;
+      return {};
+    };
+    return forEachStoredRange(run, read, same_part);
   };
   TESSERA_ASSIGN_OR_RETURN(TempFile file, TempFile::create(output));
-  TESSERA_ASSIGN_OR_RETURN(
-      WrittenArchive written,
-      writeArchive(fetch, std::span<const SpooledImage>(&out, 1),
-                   orderNamed(metadata["build"]["order"].get<std::string>()), metadata, file));
+  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
+                           writeArchiveRuns(fetch, std::span<const SpooledImage>(&out, 1),
+                                            buildOrderOf(metadata), metadata, file));
   TESSERA_TRY(file.commit());
   report.output_bytes = written.file_bytes;
   report.tiles_computed = sink.payloads.size();

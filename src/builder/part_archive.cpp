@@ -55,6 +55,13 @@ SpoolEntry spoolEntryOf(const TileEntry& entry) {
   return spooled;
 }
 
+TileOrder buildOrderOf(const nlohmann::json& archive_metadata) {
+  const std::string name = archive_metadata["build"]["order"].get<std::string>();
+  return name == "hilbert"    ? TileOrder::kHilbert
+         : name == "quadtree" ? TileOrder::kQuadtree
+                              : TileOrder::kRowMajor;
+}
+
 ImageInfo partRowsInfo(const ImageInfo& info, uint32_t merge_level, uint32_t rows) {
   ImageInfo level;
   level.width_px = info.levelWidthPx(merge_level);
@@ -144,8 +151,9 @@ Result<uint64_t> writePartArchive(const PartLayout& layout, const Archive* windo
       {"images", image_names},
       {"split_part", part}};
   TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(output));
-  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
-                           writeArchive(fetch, images, TileOrder::kRowMajor, metadata, out));
+  TESSERA_ASSIGN_OR_RETURN(
+      WrittenArchive written,
+      writeArchive(fetch, images, buildOrderOf(part["archive_metadata"]), metadata, out));
   TESSERA_TRY(out.commit());
   return written.file_bytes;
 }

@@ -16,6 +16,7 @@
 #include "downsample.h"
 #include "format/checksum.h"
 #include "format/header.h"
+#include "grid_reader.h"
 #include "output/output_file.h"
 #include "part_build.h"
 #include "part_plan.h"
@@ -89,13 +90,27 @@ Result<nlohmann::json> inputIdentity(const std::string& input, const SourceInfo&
                              {"height", source.height_px},
                              {"channels", source.channels}};
   if (input.rfind("synthetic:", 0) == 0) return identity;
-  std::error_code error;
-  const uint64_t bytes = std::filesystem::file_size(input, error);
-  const auto mtime = std::filesystem::last_write_time(input, error);
-  if (error) return fail(ErrorCode::kIo, fmt::format("{}: {}", input, error.message()));
+  std::vector<std::string> files = {input};
+  if (input.starts_with(kGridPrefix)) {  // every file of the grid, summed
+    TESSERA_ASSIGN_OR_RETURN(GridSpec grid, parseGridSpec(input));
+    files.clear();
+    for (uint32_t row = 0; row < grid.rows; ++row)
+      for (uint32_t column = 0; column < grid.columns; ++column)
+        files.push_back(grid.path(column, row));
+  }
+  uint64_t bytes = 0;
+  int64_t latest_ns = 0;
+  for (const std::string& file : files) {
+    std::error_code error;
+    bytes += std::filesystem::file_size(file, error);
+    const auto mtime = std::filesystem::last_write_time(file, error);
+    if (error) return fail(ErrorCode::kIo, fmt::format("{}: {}", file, error.message()));
+    latest_ns = std::max<int64_t>(
+        latest_ns,
+        std::chrono::duration_cast<std::chrono::nanoseconds>(mtime.time_since_epoch()).count());
+  }
   identity["bytes"] = bytes;
-  identity["mtime_ns"] = int64_t(
-      std::chrono::duration_cast<std::chrono::nanoseconds>(mtime.time_since_epoch()).count());
+  identity["mtime_ns"] = latest_ns;
   return identity;
 }
 
@@ -173,13 +188,10 @@ Result<BuildReport> buildWindow(const BuildOptions& options, BandReader& reader,
   row_source.band_rows = source.natural_band_rows;
   row_source.read_rows = [&](uint32_t first, uint32_t count,
                              std::span<uint8_t> out) -> Result<void> {
-    // Rows above the window are read and dropped: the readers stream top to bottom.
-    std::vector<uint8_t> skipped;
-    while (next_row < rows.window_first) {
-      const uint32_t n = std::min(rows.window_first - next_row, 64u);
-      skipped.resize(row_bytes * n);
-      TESSERA_TRY(reader.readRows(n, skipped));
-      next_row += n;
+    // Readers that seek (tiled and striped TIFF) read nothing above the window.
+    if (next_row < rows.window_first) {
+      TESSERA_TRY(reader.skipRows(rows.window_first - next_row));
+      next_row = rows.window_first;
     }
     TESSERA_TRY(reader.readRows(count, out));
     next_row += count;
@@ -259,6 +271,7 @@ Result<BuildReport> buildArchivePart(const BuildOptions& options, PartSpec part,
       {"input", identity},
       {"image", info.name},
       {"page_tiles_log2", info.page_tiles_log2},
+      {"stored_bytes_read", reader->storedBytesRead()},
       {"archive_metadata", archiveMetadata(options, nlohmann::json::array({image_meta}))}};
   TESSERA_ASSIGN_OR_RETURN(uint64_t bytes, writePartArchive(layout, window.get(), levels.rows,
                                                             part_meta, options.output));

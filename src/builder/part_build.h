@@ -34,6 +34,10 @@ struct PartLayout {
 /// the part's file.
 SpoolEntry spoolEntryOf(const TileEntry& entry);
 
+/// The clustering order `archive_metadata` (a build's metadata) records. A part stores its
+/// tiles in that order too, so each of its stretches of the output is one run in its file.
+TileOrder buildOrderOf(const nlohmann::json& archive_metadata);
+
 /// The image holding `rows` exact rows of level `plan.merge_level` of `info`.
 ImageInfo partRowsInfo(const ImageInfo& info, uint32_t merge_level, uint32_t rows);
 

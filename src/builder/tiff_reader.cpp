@@ -167,8 +167,19 @@ class TiffReader final : public BandReader {
   Result<void> open();
   const SourceInfo& info() const override { return info_; }
   Result<void> readRows(uint32_t rows, std::span<uint8_t> out) override;
+  // Strips and tiles are addressed by row: a skip moves the position, and the next read
+  // decodes only the units from there (libtiff seeks to a later strip's start itself).
+  Result<void> skipRows(uint32_t rows) override {
+    TESSERA_CHECK(rows <= info_.height_px - next_row_)
+        << path_ << ": skipRows(" << rows << ") at row " << next_row_ << " of " << info_.height_px;
+    next_row_ += rows;
+    return {};
+  }
+  uint64_t storedBytesRead() const override { return stored_bytes_read_; }
 
  private:
+  // Counts the stored bytes of strip or tile `strile` as read.
+  void countStrile(uint32_t strile) { stored_bytes_read_ += TIFFGetStrileByteCount(tif_, strile); }
   // An error naming the file, what failed, and what libtiff said about it.
   Unexpected tiffFailure(ErrorCode code, const std::string& what);
   // The file's tags open() decides on.
@@ -229,6 +240,8 @@ class TiffReader final : public BandReader {
   uint32_t band_first_row_ = 0;
   uint32_t band_rows_ = 0;
   UninitializedBuffer unit_;  // one scanline, strip plane or tile as decoded
+  uint64_t stored_bytes_read_ = 0;
+  uint32_t scanline_strip_ = UINT32_MAX;  // the strip TIFFReadScanline last read from
 };
 
 Unexpected TiffReader::tiffFailure(ErrorCode code, const std::string& what) {
@@ -579,6 +592,9 @@ void TiffReader::convertPlane(const uint8_t* src, uint8_t* dst, uint32_t pixels,
 }
 
 Result<void> TiffReader::readScanline(uint32_t row, uint16_t plane) {
+  const uint32_t strip = TIFFComputeStrip(tif_, row, plane);
+  if (strip != scanline_strip_) countStrile(strip);
+  scanline_strip_ = strip;
   if (TIFFReadScanline(tif_, unit_.data(), row, plane) < 0) {
     return tiffFailure(ErrorCode::kCorrupt,
                        separate_ ? fmt::format("row {} plane {}: cannot decode", row, plane)
@@ -615,6 +631,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
         const uint32_t strip = plane * strips_per_plane + strip_in_plane;
         const tmsize_t want = tmsize_t(band_rows) * width * sample_bytes_;
         const tmsize_t got = TIFFReadEncodedStrip(tif_, strip, unit_.data(), want);
+        countStrile(strip);
         if (got < want) {
           return tiffFailure(ErrorCode::kCorrupt,
                              fmt::format("strip {} (plane {}, rows {}..{}): cannot decode", strip,
@@ -633,6 +650,7 @@ Result<void> TiffReader::fillBand(uint32_t first_row, uint8_t* dest) {
         const uint32_t tile_cols = std::min(tile_width_px_, width - tile_x);
         for (uint16_t plane = 0; plane < planes; ++plane) {
           const uint32_t tile = TIFFComputeTile(tif_, tile_x, first_row, 0, plane);
+          countStrile(tile);
           if (TIFFReadEncodedTile(tif_, tile, unit_.data(), tmsize_t(unit_bytes_)) < 0) {
             return tiffFailure(
                 ErrorCode::kCorrupt,

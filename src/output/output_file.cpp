@@ -179,6 +179,11 @@ Result<void> TempFile::pread(uint64_t offset_bytes, std::span<uint8_t> out) cons
   return {};
 }
 
+void TempFile::startWriteback(uint64_t offset_bytes, uint64_t bytes) const {
+  if (scratch_) return;  // never kept: writing it to the disk would be wasted
+  (void)::sync_file_range(fd_, off_t(offset_bytes), off_t(bytes), SYNC_FILE_RANGE_WRITE);
+}
+
 Result<void> TempFile::commit() {
   TESSERA_CHECK(!scratch_) << final_path_ << ": a scratch file is never committed";
   if (::fsync(fd_) != 0)

@@ -174,7 +174,8 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<BuildArgs>();
   CLI::App* cmd = app.add_subcommand("build",
                                      "Build an archive from TIFF/BigTIFF, PNG, JPEG, "
-                                     "synthetic:WxH[:seed[:channels]], or a pyramid to import "
+                                     "synthetic:WxH[:seed[:channels]], grid:COLSxROWS:PATTERN "
+                                     "(files with {col} and {row}), or a pyramid to import "
                                      "(pyramidal TIFF/COG, NAME.dzi, a whole-slide image, "
                                      "openslide:PATH)");
   cmd->add_option("inputs", args->options.inputs, "Source image(s); several make a texture set");

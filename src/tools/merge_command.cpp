@@ -25,6 +25,7 @@ int runMerge(const MergeArgs& args) {
                                         {"output_bytes", report->output_bytes},
                                         {"payload_bytes_copied", report->payload_bytes_copied},
                                         {"tiles_copied", report->tiles_copied},
+                                        {"part_reads", report->part_reads},
                                         {"tiles_computed", report->tiles_computed},
                                         {"elapsed_s", report->elapsed_s}})
                             .dump(2)

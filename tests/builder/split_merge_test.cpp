@@ -7,10 +7,12 @@
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
 #include <tessera/split_build.h>
 
+#include "format/tile_order.h"
 #include "support/test_images.h"
 
 namespace tessera {
@@ -71,6 +73,96 @@ TEST(SplitMerge, MergeEqualsTheSingleBuild) {
     ASSERT_TRUE(archive) << archive.error().message;
     EXPECT_TRUE((*archive)->verify(/*decode=*/false).ok());
     for (const std::string& path : paths) std::filesystem::remove(path);
+  }
+}
+
+// The merge reads each stretch of the output that one part holds in one call (the part stores
+// its tiles in the output's order), runs of the writer's 1 MiB aside.
+TEST(SplitMerge, ReadsEachStretchOfAPartInOneCall) {
+  const std::string dir = test::testTempDir();
+  for (TileOrder order : {TileOrder::kHilbert, TileOrder::kQuadtree, TileOrder::kRowMajor}) {
+    BuildOptions options = syntheticOptions("synthetic:1200x1000:4:3", dir + "/unused.tess");
+    options.codec = Codec::kZstd;
+    options.order = order;
+    const std::vector<std::string> paths = buildParts(options, 3, dir);
+    Result<MergeReport> merged = mergeArchiveParts(paths, dir + "/merged.tess");
+    ASSERT_TRUE(merged) << merged.error().message;
+
+    std::vector<std::shared_ptr<Archive>> parts;
+    for (const std::string& path : paths) {
+      auto part = Archive::openFile(path);
+      ASSERT_TRUE(part) << part.error().message;
+      parts.push_back(*part);
+    }
+    const ImageInfo info = parts[0]->images()[0];
+    uint64_t stretches = 0, tiles = 0, payload_bytes = 0;
+    int previous = -1;
+    for (const TileId& tile : detail::tileOrder(info, 0, order)) {
+      int owner = -1;  // computed by the merge
+      for (size_t p = 0; p < parts.size(); ++p) {
+        Result<TileEntry> entry = parts[p]->tileEntry(tile);
+        ASSERT_TRUE(entry);
+        if (entry->kind != TileKind::kEncoded) continue;
+        owner = int(p);
+        ++tiles;
+        payload_bytes += entry->length_bytes;
+      }
+      if (owner >= 0 && owner != previous) ++stretches;
+      previous = owner;
+    }
+    SCOPED_TRACE(fmt::format("order {}", int(order)));
+    EXPECT_EQ(merged->tiles_copied, tiles);
+    // A run of the writer ends before a payload that would take it past 1 MiB.
+    const uint64_t runs = 2 * payload_bytes / (1u << 20) + 1;
+    EXPECT_GT(stretches, 0u);
+    EXPECT_LE(merged->part_reads, stretches + runs);
+    EXPECT_LT(merged->part_reads * 4, tiles);
+    for (const std::string& path : paths) std::filesystem::remove(path);
+  }
+}
+
+// A part of a tiled TIFF (classic and BigTIFF) or a striped one reads the tiles or strips of
+// its own rows, not those above them, and the parts still merge into the single build.
+TEST(SplitMerge, PartsOfATiffReadOnlyTheirRows) {
+  const std::string dir = test::testTempDir();
+  const uint32_t width = 512, height = 1024;
+  std::vector<uint8_t> pixels(size_t(width) * height * 3);
+  for (size_t i = 0; i < pixels.size(); ++i) pixels[i] = uint8_t((i * 7 + i / 1531) & 0xff);
+  for (int layout : {0, 1, 2}) {  // tiled, tiled BigTIFF, striped
+    const bool bigtiff = layout == 1;
+    test::TiffSpec spec;
+    spec.width_px = width;
+    spec.height_px = height;
+    spec.tiled = layout < 2;
+    spec.tile_width_px = spec.tile_height_px = 32;
+    spec.rows_per_strip = 16;
+    spec.bigtiff = bigtiff;
+    const std::string tiff = dir + "/tiled.tif";
+    ASSERT_EQ(test::writeTiff(tiff, spec, pixels), "");
+    const uint64_t stored_bytes = uint64_t(width) * height * 3;  // uncompressed tiles
+    BuildOptions options = syntheticOptions(tiff, dir + "/single.tess");
+    options.codec = Codec::kZstd;
+    ASSERT_TRUE(buildArchive(options));
+    const std::vector<std::string> paths = buildParts(options, 4, dir);
+    uint64_t read_by_all = 0;
+    for (const std::string& path : paths) {
+      auto part = Archive::openFile(path);
+      ASSERT_TRUE(part) << part.error().message;
+      const auto meta = nlohmann::json::parse((*part)->metadataJson())["split_part"];
+      const uint64_t read = meta["stored_bytes_read"].get<uint64_t>();
+      const uint64_t first = meta["rows"][0].get<uint64_t>();
+      // Without seeking, the last part would read every tile above its rows too.
+      if (path == paths.back()) {
+        EXPECT_LE(read, stored_bytes * (height - first + 64) / height);
+      }
+      read_by_all += read;
+    }
+    // Each part reads its share plus at most a band above it; reading from the top would
+    // make this 2.5 times the file.
+    EXPECT_LT(read_by_all, stored_bytes * 3 / 2) << "layout " << layout;
+    ASSERT_TRUE(mergeArchiveParts(paths, dir + "/merged.tess"));
+    EXPECT_TRUE(test::readFileBytes(dir + "/single.tess") ==
+                test::readFileBytes(dir + "/merged.tess"));
   }
 }
 

@@ -3,8 +3,10 @@
 // of tile payloads or scene nodes cost a few large writes.
 
 #include <cstdint>
+#include <cstdlib>
+#include <functional>
+#include <memory>
 #include <span>
-#include <vector>
 
 #include <tessera/result.h>
 
@@ -17,12 +19,17 @@ namespace tessera::detail {
 class FileAppender {
  public:
   /// Bytes held before a write; a larger block is written directly.
-  static constexpr size_t kBufferBytes = 8u << 20;
+  static constexpr size_t kBufferBytes = 1u << 20;
 
   FileAppender(const TempFile& out, uint64_t start);
 
   /// Appends `bytes`; returns the offset they start at.
   [[nodiscard]] Result<uint64_t> append(std::span<const uint8_t> bytes);
+  /// Appends `size` bytes that `fill` writes straight into the buffer (a copy saved when the
+  /// bytes come from a read); returns the offset they start at. Nothing is appended when
+  /// `fill` fails. A block larger than the buffer is filled in its own allocation.
+  [[nodiscard]] Result<uint64_t> appendFilled(
+      size_t size, const std::function<Result<void>(std::span<uint8_t>)>& fill);
   /// Leaves a hole of `bytes` (filled later with TempFile::pwrite, e.g. a head known only
   /// after its body); returns the offset it starts at.
   [[nodiscard]] Result<uint64_t> skip(uint64_t bytes);
@@ -35,7 +42,9 @@ class FileAppender {
   const TempFile& out_;
   uint64_t end_;
   uint64_t flushed_;
-  std::vector<uint8_t> buffer_;
+  // Page-aligned and never zero-filled: every byte is written before it is flushed.
+  std::unique_ptr<uint8_t, decltype(&std::free)> buffer_{nullptr, &std::free};
+  size_t buffered_ = 0;
 };
 
 }  // namespace tessera::detail

@@ -50,6 +50,10 @@ class TempFile {
 
   [[nodiscard]] Result<void> pwrite(uint64_t offset_bytes, std::span<const uint8_t> bytes) const;
   [[nodiscard]] Result<void> pread(uint64_t offset_bytes, std::span<uint8_t> out) const;
+  /// Asks the kernel to start writing `[offset_bytes, +bytes)` to the disk now, without
+  /// waiting (sync_file_range), so that commit's fsync finds less left to write. A hint:
+  /// where the kernel refuses, the fsync writes it all as before.
+  void startWriteback(uint64_t offset_bytes, uint64_t bytes) const;
   /// fsyncs, then gives the file its final name atomically (replacing any regular file there;
   /// checkOutputPath is asked again first, for a node created while the file was written) and
   /// fsyncs the directory. After success the object no longer owns a temporary. Not for a
