@@ -11,6 +11,7 @@
 #include <tessera/build.h>
 
 #include "archive_writer.h"
+#include "output/file_appender.h"
 #include "output/output_file.h"
 
 namespace tessera::detail {
@@ -23,7 +24,7 @@ constexpr uint64_t kFixedBytes = uint64_t(48) << 20;
 /// Per encoder thread beyond the above: its stack as touched, its malloc arena's slack.
 constexpr uint64_t kPerThreadBytes = uint64_t(1) << 20;
 /// The layout pass's write buffer (archive_writer.cpp).
-constexpr uint64_t kLayoutBufferBytes = uint64_t(8) << 20;
+constexpr uint64_t kLayoutBufferBytes = FileAppender::kBufferBytes;
 /// A codec's per-thread state (zstd contexts, TurboJPEG handles, packing buffers) beyond the
 /// tiles it works on.
 constexpr uint64_t kCodecStateBytes = uint64_t(2) << 20;
