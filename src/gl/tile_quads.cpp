@@ -109,7 +109,7 @@ void main() {
 #endif
     colour = mix(colour, parent, clamp(lambda - float(level), 0.0, 1.0));
   }
-  o_colour = colour;
+  o_colour = displayColour(colour);
 }
 )";
 
@@ -197,7 +197,7 @@ class TileQuadsRenderer final : public RendererBase {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
     uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
       glTextureSubImage3D(tiles_.get(), 0, 0, 0, GLint(layer), side, side, 1,
-                          tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                          texel_format_.pixel_format, texel_format_.pixel_type,
                           reinterpret_cast<const void*>(offset));
     });
     return endApply(started, layers_.size());
@@ -332,7 +332,7 @@ class TileQuadsRenderer final : public RendererBase {
   /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
   Result<void> growLayers(uint32_t layers) {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
-    Texture grown = createTileArray(info_.channels, side, GLsizei(layers));
+    Texture grown = createTileArray(info_.channels, info_.sample_type, side, GLsizei(layers));
     if (!grown)
       return fail(
           ErrorCode::kTooLarge,
