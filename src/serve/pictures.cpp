@@ -248,15 +248,18 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
 }
 
 Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
-                                    PictureFormat format, int jpeg_quality) {
-  TESSERA_TRY(checkImage(archive, tile.image));
+                                    PictureFormat format, int jpeg_quality,
+                                    const DisplayWindow& window) {
+  if (tile.image >= archive.images().size())
+    return fail(ErrorCode::kNotFound, fmt::format("{}: no image {}", archive.name(), tile.image));
+  const bool wide = archive.images()[tile.image].sample_type != SampleType::kU8;
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
   if (entry.hasPayload()) {
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
   }
   TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));
-  return encode(stored, format, jpeg_quality);
+  return encode(wide ? windowToRgba8(stored, window) : stored, format, jpeg_quality);
 }
 
 }  // namespace tessera::detail

@@ -129,7 +129,8 @@ struct Router::Target {
   std::vector<std::string> segments;
   std::string format;  // ?format=
   bool has_format = false;
-  std::string problem;  // non-empty: malformed (400)
+  std::optional<std::string> window, gamma;  // ?window=, ?gamma= (wide images' pictures)
+  std::string problem;                       // non-empty: malformed (400)
 };
 
 namespace {
@@ -189,6 +190,10 @@ Router::Target parseTarget(std::string_view raw) {
     if (pair.starts_with("format=")) {
       target.has_format = true;
       target.format = std::string(pair.substr(7));
+    } else if (pair.starts_with("window=")) {
+      target.window = std::string(pair.substr(7));
+    } else if (pair.starts_with("gamma=")) {
+      target.gamma = std::string(pair.substr(6));
     }
     if (amp == std::string_view::npos) break;
     query.remove_prefix(amp + 1);
@@ -249,6 +254,7 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
                               {"width", info.width_px},
                               {"height", info.height_px},
                               {"channels", info.channels},
+                              {"sample_type", sampleTypeName(info.sample_type)},
                               {"tile_size", info.tile_size_px},
                               {"border", info.border_px},
                               {"codec", codecName(info.default_codec)},
@@ -524,6 +530,29 @@ Response Router::dziDescriptor(const Request& request, const ServedArchive& serv
                        derivedEtag(served, fmt::format("dzi/{}", image)), kRevalidate);
 }
 
+namespace {
+
+// The display window of a wide image's picture: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
+// default) and ?gamma= (default 1). The error names the parameter: the answer is a 400.
+Result<DisplayWindow> pictureWindow(const Archive& archive, uint32_t image,
+                                    const Router::Target& target) {
+  DisplayWindowRequest request;
+  if (target.window) {
+    if (Result<void> parsed = parseDisplayWindow(*target.window, request); !parsed)
+      return fail(ErrorCode::kInvalidArgument, "query parameter window: " + parsed.error().message);
+  }
+  if (target.gamma) {
+    Result<double> gamma = parseGamma(*target.gamma);
+    if (!gamma)
+      return fail(ErrorCode::kInvalidArgument, "query parameter gamma: " + gamma.error().message);
+    request.gamma = *gamma;
+  }
+  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
+  return resolveDisplayWindow(archive, image, request);
+}
+
+}  // namespace
+
 Response Router::tile(const Request& request, const ServedArchive& served, const Target& target) {
   const std::vector<std::string>& seg = target.segments;
   const unsigned version = request.version();
@@ -544,13 +573,16 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   if (target.has_format) {
     std::optional<PictureFormat> format = parsePictureFormat(target.format);
     if (!format) return errorResponse(version, http::status::bad_request, "format is png or jpeg");
-    const std::string key =
-        fmt::format("tile/{}/{}/{}/{}/{}", *image, *level, *x, *y, int(*format));
+    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    if (!window) return errorResponse(version, http::status::bad_request, window.error().message);
+    const std::string key = fmt::format("tile/{}/{}/{}/{}/{}/{:a},{:a},{:a}", *image, *level, *x,
+                                        *y, int(*format), window->low, window->high, window->gamma);
     Response response = picture(
         request, served, key,
         [&]() -> Result<std::string> {
           TESSERA_ASSIGN_OR_RETURN(
-              Picture out, transcodeStoredTile(archive, id, *format, options_.jpeg_quality));
+              Picture out,
+              transcodeStoredTile(archive, id, *format, options_.jpeg_quality, *window));
           return std::move(out.bytes);
         },
         pictureContentType(*format));

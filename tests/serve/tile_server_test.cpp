@@ -2,6 +2,7 @@
 // tiles, the archive file with byte ranges, info documents, Deep Zoom, XYZ, transcoding,
 // metrics, the viewer, CORS and the access log.
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -11,6 +12,7 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/display_window.h>
 #include <tessera/serve.h>
 
 #include "codecs/decode.h"
@@ -671,6 +673,72 @@ TEST(TileServer, FolderServesEveryArchiveInside) {
   std::vector<std::string> names = server->archiveNames();
   EXPECT_NE(std::find(names.begin(), names.end(), "pngb1"), names.end());
   EXPECT_EQ(httpRequest(server->port(), "/pngb1/info.json").status, 200u);
+}
+
+// A u16 archive's stored tile as an 8-bit picture: each texel is the window formula of its
+// sample; the NaN-free u16 case keeps every pixel opaque. Bad window and gamma values are
+// 400s naming the parameter.
+TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
+  RowSource source;
+  source.name = "ramp";
+  source.width_px = 64;
+  source.height_px = 64;
+  source.channels = 1;
+  source.sample_type = SampleType::kU16;
+  auto sampleAt = [](uint32_t x, uint32_t y) { return uint16_t(x * 1000 + y * 7); };
+  source.read_rows = [&](uint32_t first, uint32_t rows, std::span<uint8_t> out) {
+    for (uint32_t y = first; y < first + rows; ++y)
+      for (uint32_t x = 0; x < 64; ++x) {
+        const uint16_t v = sampleAt(x, y);
+        std::memcpy(out.data() + (size_t(y - first) * 64 + x) * 2, &v, 2);
+      }
+    return Result<void>{};
+  };
+  BuildOptions options;
+  options.row_sources = {source};
+  options.output = testTempDir() + "wide16.tess";
+  options.tile_size_px = 64;
+  options.codec = Codec::kZstd;
+  ASSERT_TRUE(buildArchive(options));
+  auto server = startServer({options.output});
+  ASSERT_TRUE(server);
+  const uint16_t port = server->port();
+
+  HttpReply info = httpRequest(port, "/wide16/info.json");
+  ASSERT_EQ(info.status, 200u);
+  EXPECT_EQ(nlohmann::json::parse(info.body)["images"][0]["sample_type"], "u16");
+  // The native tile: the stored zstd payload.
+  EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0").header("x-tessera-codec"), "zstd");
+
+  const DisplayWindow window{5000, 40000, 0.5};
+  HttpReply reply = httpRequest(port, "/wide16/0/0/0/0?format=png&window=5000,40000&gamma=0.5");
+  ASSERT_EQ(reply.status, 200u) << reply.body;
+  Image got = decodePicture(Codec::kPng, reply.body, 64, 64, 4);
+  uint32_t wrong = 0;
+  for (uint32_t y = 0; y < 64; ++y)
+    for (uint32_t x = 0; x < 64; ++x) {
+      const uint8_t* p = got.texels.data() + (size_t(y) * 64 + x) * 4;
+      const uint8_t want = windowSample(sampleAt(x, y), window);
+      wrong += p[0] != want || p[1] != want || p[2] != want || p[3] != 255;
+    }
+  EXPECT_EQ(wrong, 0u);
+  // Another window is another picture.
+  HttpReply other = httpRequest(port, "/wide16/0/0/0/0?format=png&window=0,1000");
+  ASSERT_EQ(other.status, 200u);
+  EXPECT_NE(other.body, reply.body);
+  // The default window comes from the statistics: a picture, not an error.
+  EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0?format=png").status, 200u);
+
+  for (const char* bad : {"window=5", "window=9,2", "window=a,b", "window=p1,200"}) {
+    HttpReply refused = httpRequest(port, std::string("/wide16/0/0/0/0?format=png&") + bad);
+    EXPECT_EQ(refused.status, 400u) << bad;
+    EXPECT_NE(refused.body.find("window"), std::string::npos) << refused.body;
+  }
+  for (const char* bad : {"gamma=0", "gamma=-1", "gamma=x", "gamma=nan"}) {
+    HttpReply refused = httpRequest(port, std::string("/wide16/0/0/0/0?format=png&") + bad);
+    EXPECT_EQ(refused.status, 400u) << bad;
+    EXPECT_NE(refused.body.find("gamma"), std::string::npos) << refused.body;
+  }
 }
 
 }  // namespace

@@ -7,6 +7,7 @@
 #include <string>
 
 #include <tessera/archive.h>
+#include <tessera/display_window.h>
 #include <tessera/result.h>
 
 namespace tessera::detail {
@@ -60,8 +61,10 @@ struct Picture {
                                             int jpeg_quality);
 
 /// A stored tile (borders included, the stored geometry) decoded and re-encoded: for codecs
-/// browsers cannot decode and for empty/uniform tiles, which have no payload.
+/// browsers cannot decode and for empty/uniform tiles, which have no payload. A u16 or f32
+/// tile is mapped to RGBA8 by `window` (windowToRgba8: NaN transparent); u8 tiles ignore it.
 [[nodiscard]] Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
-                                                  PictureFormat format, int jpeg_quality);
+                                                  PictureFormat format, int jpeg_quality,
+                                                  const DisplayWindow& window = {});
 
 }  // namespace tessera::detail
