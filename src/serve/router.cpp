@@ -380,6 +380,34 @@ RoutedResponse Router::handle(const Request& request, std::string_view client) {
   return routed;
 }
 
+namespace {
+
+// The display window of a wide image's picture: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
+// default) and ?gamma= (default 1). The error names the parameter: the answer is a 400.
+Result<DisplayWindow> pictureWindow(const Archive& archive, uint32_t image,
+                                    const Router::Target& target) {
+  DisplayWindowRequest request;
+  if (target.window) {
+    if (Result<void> parsed = parseDisplayWindow(*target.window, request); !parsed)
+      return fail(ErrorCode::kInvalidArgument, "query parameter window: " + parsed.error().message);
+  }
+  if (target.gamma) {
+    Result<double> gamma = parseGamma(*target.gamma);
+    if (!gamma)
+      return fail(ErrorCode::kInvalidArgument, "query parameter gamma: " + gamma.error().message);
+    request.gamma = *gamma;
+  }
+  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
+  return resolveDisplayWindow(archive, image, request);
+}
+
+// What a picture's cache key and ETag add for its window (exact: hexadecimal floats).
+std::string windowKey(const DisplayWindow& window) {
+  return fmt::format("/{:a},{:a},{:a}", window.low, window.high, window.gamma);
+}
+
+}  // namespace
+
 RoutedResponse Router::route(const Request& request, const Target& target) {
   const std::vector<std::string>& seg = target.segments;
   const unsigned version = request.version();
@@ -448,14 +476,18 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
       return badRequest(Endpoint::kDziTile, "a Deep Zoom index is not a number");
     if (!format) return notFound(Endpoint::kDziTile, "Deep Zoom tiles are .jpg or .png");
     if (*image >= archive.images().size()) return notFound(Endpoint::kDziTile, "no such image");
+    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    if (!window) return badRequest(Endpoint::kDziTile, window.error().message);
     const std::string key =
-        fmt::format("dzi/{}/{}/{}/{}/{}", *image, *level, *col, *row, int(*format));
+        fmt::format("dzi/{}/{}/{}/{}/{}", *image, *level, *col, *row, int(*format)) +
+        windowKey(*window);
     return {Endpoint::kDziTile, picture(
                                     request, served, key,
                                     [&]() -> Result<std::string> {
                                       TESSERA_ASSIGN_OR_RETURN(
-                                          Picture out, renderDziTile(archive, *image, *level, *col,
-                                                                     *row, *format, quality));
+                                          Picture out,
+                                          renderDziTile(archive, *image, *level, *col, *row,
+                                                        *format, quality, *window));
                                       return std::move(out.bytes);
                                     },
                                     pictureContentType(*format))};
@@ -472,13 +504,16 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
     if (!image || !z || !x || !y) return badRequest(Endpoint::kXyz, "an XYZ index is not a number");
     if (!format) return notFound(Endpoint::kXyz, "XYZ tiles are .png or .jpg");
     if (*image >= archive.images().size()) return notFound(Endpoint::kXyz, "no such image");
-    const std::string key = fmt::format("xyz/{}/{}/{}/{}/{}", *image, *z, *x, *y, int(*format));
+    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    if (!window) return badRequest(Endpoint::kXyz, window.error().message);
+    const std::string key =
+        fmt::format("xyz/{}/{}/{}/{}/{}", *image, *z, *x, *y, int(*format)) + windowKey(*window);
     return {Endpoint::kXyz, picture(
                                 request, served, key,
                                 [&]() -> Result<std::string> {
                                   TESSERA_ASSIGN_OR_RETURN(
-                                      Picture out,
-                                      renderXyzTile(archive, *image, *z, *x, *y, *format, quality));
+                                      Picture out, renderXyzTile(archive, *image, *z, *x, *y,
+                                                                 *format, quality, *window));
                                   return std::move(out.bytes);
                                 },
                                 pictureContentType(*format))};
@@ -529,29 +564,6 @@ Response Router::dziDescriptor(const Request& request, const ServedArchive& serv
   return bytesResponse(request, shared(std::move(xml)), "application/xml",
                        derivedEtag(served, fmt::format("dzi/{}", image)), kRevalidate);
 }
-
-namespace {
-
-// The display window of a wide image's picture: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
-// default) and ?gamma= (default 1). The error names the parameter: the answer is a 400.
-Result<DisplayWindow> pictureWindow(const Archive& archive, uint32_t image,
-                                    const Router::Target& target) {
-  DisplayWindowRequest request;
-  if (target.window) {
-    if (Result<void> parsed = parseDisplayWindow(*target.window, request); !parsed)
-      return fail(ErrorCode::kInvalidArgument, "query parameter window: " + parsed.error().message);
-  }
-  if (target.gamma) {
-    Result<double> gamma = parseGamma(*target.gamma);
-    if (!gamma)
-      return fail(ErrorCode::kInvalidArgument, "query parameter gamma: " + gamma.error().message);
-    request.gamma = *gamma;
-  }
-  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
-  return resolveDisplayWindow(archive, image, request);
-}
-
-}  // namespace
 
 Response Router::tile(const Request& request, const ServedArchive& served, const Target& target) {
   const std::vector<std::string>& seg = target.segments;

@@ -712,16 +712,24 @@ TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
 
   const DisplayWindow window{5000, 40000, 0.5};
   HttpReply reply = httpRequest(port, "/wide16/0/0/0/0?format=png&window=5000,40000&gamma=0.5");
-  ASSERT_EQ(reply.status, 200u) << reply.body;
-  Image got = decodePicture(Codec::kPng, reply.body, 64, 64, 4);
-  uint32_t wrong = 0;
-  for (uint32_t y = 0; y < 64; ++y)
-    for (uint32_t x = 0; x < 64; ++x) {
-      const uint8_t* p = got.texels.data() + (size_t(y) * 64 + x) * 4;
-      const uint8_t want = windowSample(sampleAt(x, y), window);
-      wrong += p[0] != want || p[1] != want || p[2] != want || p[3] != 255;
-    }
-  EXPECT_EQ(wrong, 0u);
+  // The stored tile, the Deep Zoom tile of the full-size level and the XYZ tile of the deepest
+  // zoom hold the same 64 x 64 texels.
+  const std::string query = "?window=5000,40000&gamma=0.5";
+  HttpReply dzi = httpRequest(port, "/wide16/0_files/6/0_0.png" + query);
+  HttpReply xyz = httpRequest(port, "/wide16/0/xyz/0/0/0.png" + query);
+  for (const auto& [picture, side] :
+       {std::pair{&reply, 64u}, std::pair{&dzi, 64u}, std::pair{&xyz, 256u}}) {
+    ASSERT_EQ(picture->status, 200u) << picture->body;
+    Image got = decodePicture(Codec::kPng, picture->body, side, side, 4);
+    uint32_t wrong = 0;
+    for (uint32_t y = 0; y < 64; ++y)
+      for (uint32_t x = 0; x < 64; ++x) {
+        const uint8_t* p = got.texels.data() + (size_t(y) * side + x) * 4;
+        const uint8_t want = windowSample(sampleAt(x, y), window);
+        wrong += p[0] != want || p[1] != want || p[2] != want || p[3] != 255;
+      }
+    EXPECT_EQ(wrong, 0u) << side;
+  }
   // Another window is another picture.
   HttpReply other = httpRequest(port, "/wide16/0/0/0/0?format=png&window=0,1000");
   ASSERT_EQ(other.status, 200u);
@@ -729,11 +737,13 @@ TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
   // The default window comes from the statistics: a picture, not an error.
   EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0?format=png").status, 200u);
 
-  for (const char* bad : {"window=5", "window=9,2", "window=a,b", "window=p1,200"}) {
-    HttpReply refused = httpRequest(port, std::string("/wide16/0/0/0/0?format=png&") + bad);
-    EXPECT_EQ(refused.status, 400u) << bad;
-    EXPECT_NE(refused.body.find("window"), std::string::npos) << refused.body;
-  }
+  for (const char* bad : {"window=5", "window=9,2", "window=a,b", "window=p1,200"})
+    for (const std::string path : {"/wide16/0/0/0/0?format=png&", "/wide16/0_files/6/0_0.png?",
+                                   "/wide16/0/xyz/0/0/0.png?"}) {
+      HttpReply refused = httpRequest(port, path + bad);
+      EXPECT_EQ(refused.status, 400u) << path << bad;
+      EXPECT_NE(refused.body.find("window"), std::string::npos) << refused.body;
+    }
   for (const char* bad : {"gamma=0", "gamma=-1", "gamma=x", "gamma=nan"}) {
     HttpReply refused = httpRequest(port, std::string("/wide16/0/0/0/0?format=png&") + bad);
     EXPECT_EQ(refused.status, 400u) << bad;
