@@ -267,6 +267,10 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
                               {"xyz_max_zoom", xyzMaxZoom(info)}};
       if (const std::string geo = imageGeoreferenceJson(*served->archive, i); !geo.empty())
         image["georeference"] = nlohmann::json::parse(geo);
+      // What pictures of a wide image use without ?window=: the viewer starts from it.
+      if (info.sample_type != SampleType::kU8)
+        if (Result<DisplayWindow> window = resolveDisplayWindow(*served->archive, i, {}); window)
+          image["display_window"] = {{"low", window->low}, {"high", window->high}};
       images.push_back(std::move(image));
     }
     nlohmann::json info = {{"name", name},
