@@ -45,8 +45,12 @@ RendererBase::RendererBase(const ImageInfo& info, const RendererOptions& options
       window_(fullRangeWindow(info.sample_type)) {}
 
 void RendererBase::setDisplayWindow(const DisplayWindow& window) {
+  // The viewer sets it every frame: unchanged, it costs no GL call.
+  const bool unchanged = window_uploaded_ && window.low == window_.low &&
+                         window.high == window_.high && window.gamma == window_.gamma;
   window_ = window;
-  if (!program_) return;  // set when the program is linked
+  if (!program_ || unchanged) return;  // set when the program is linked
+  window_uploaded_ = true;
   // The texture returns u8 and u16 samples divided by their largest value; f32 as stored.
   const double unit = info_.sample_type == SampleType::kU16  ? 65535.0
                       : info_.sample_type == SampleType::kU8 ? 255.0

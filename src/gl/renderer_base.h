@@ -90,6 +90,7 @@ class RendererBase : public Renderer {
   std::optional<UploadRing> staging_;  ///< made at first use, with the context current
   GLint view_projection_uniform_ = -1;
   DisplayWindow window_;
+  bool window_uploaded_ = false;  ///< window_ is in the program's uniforms
   ApplyResult result_;
   std::vector<std::pair<const uint8_t*, size_t>> sources_;  ///< scratch of uploadStaged
 };

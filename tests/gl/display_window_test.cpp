@@ -1,12 +1,10 @@
 // 16-bit and float archives drawn by both GL renderers through a display window: each pixel is
 // the window formula of its texel, and NaN samples are transparent.
 #include <cmath>
-#include <cstring>
 #include <memory>
 
 #include <gtest/gtest.h>
 
-#include <tessera/build.h>
 #include <tessera/display_window.h>
 #include <tessera/gl.h>
 #include <tessera/renderer.h>
@@ -15,6 +13,7 @@
 #include "gl_test_context.h"
 #include "support/synthetic_archive.h"
 #include "support/test_images.h"
+#include "support/wide_archive.h"
 
 namespace tessera {
 namespace {
@@ -34,40 +33,11 @@ double sampleOf(SampleType type, uint32_t x, uint32_t y, uint32_t c) {
 }
 
 std::shared_ptr<Archive> buildWide(SampleType type, uint32_t channels) {
-  RowSource source;
-  source.name = "wide";
-  source.width_px = kWidth;
-  source.height_px = kHeight;
-  source.channels = channels;
-  source.sample_type = type;
-  source.read_rows = [type, channels](uint32_t first, uint32_t rows, std::span<uint8_t> out) {
-    size_t i = 0;
-    for (uint32_t y = first; y < first + rows; ++y)
-      for (uint32_t x = 0; x < kWidth; ++x)
-        for (uint32_t c = 0; c < channels; ++c, ++i) {
-          const double v = sampleOf(type, x, y, c);
-          if (type == SampleType::kU16) {
-            const uint16_t s = uint16_t(v);
-            std::memcpy(out.data() + i * 2, &s, 2);
-          } else {
-            const float s = float(v);
-            std::memcpy(out.data() + i * 4, &s, 4);
-          }
-        }
-    return Result<void>{};
-  };
-  BuildOptions options;
-  options.row_sources = {source};
-  options.output = test::testTempDir() + "wide-" + sampleTypeName(type) + "-" +
-                   std::to_string(channels) + ".tess";
-  options.tile_size_px = 64;
-  options.codec = Codec::kZstd;
-  auto report = buildArchive(options);
-  EXPECT_TRUE(report) << report.error().message;
-  if (!report) return nullptr;
-  auto archive = Archive::openFile(options.output);
-  EXPECT_TRUE(archive) << archive.error().message;
-  return archive ? *archive : nullptr;
+  return test::buildWideArchive(
+      test::testTempDir() + "wide-" + sampleTypeName(type) + "-" + std::to_string(channels) +
+          ".tess",
+      kWidth, kHeight, channels, type,
+      [type](uint32_t x, uint32_t y, uint32_t c) { return sampleOf(type, x, y, c); });
 }
 
 struct Case {

@@ -11,6 +11,7 @@
 #include <tessera/display_window.h>
 
 #include "support/test_images.h"
+#include "support/wide_archive.h"
 
 namespace tessera {
 namespace {
@@ -63,36 +64,11 @@ TEST(DisplayWindowMapping, FollowsTheFormulaAndShowsNanAsNoData) {
 
 // A u16 and an f32 image; the f32 one has NaN in its top-left corner.
 std::shared_ptr<Archive> buildRamp(SampleType type) {
-  RowSource source;
-  source.name = "ramp";
-  source.width_px = 200;
-  source.height_px = 120;
-  source.channels = 1;
-  source.sample_type = type;
-  source.read_rows = [type](uint32_t first, uint32_t rows, std::span<uint8_t> out) {
-    for (uint32_t y = first; y < first + rows; ++y)
-      for (uint32_t x = 0; x < 200; ++x) {
-        const size_t i = size_t(y - first) * 200 + x;
-        if (type == SampleType::kU16) {
-          const uint16_t v = uint16_t(1000 + x * 200 + y);
-          std::memcpy(out.data() + i * 2, &v, 2);
-        } else {
-          const float v = x < 8 && y < 8 ? NAN : float(x) * 0.5f - 20.0f;
-          std::memcpy(out.data() + i * 4, &v, 4);
-        }
-      }
-    return Result<void>{};
-  };
-  BuildOptions options;
-  options.row_sources = {source};
-  options.output = test::testTempDir() + "window-" + sampleTypeName(type) + ".tess";
-  options.tile_size_px = 64;
-  options.codec = Codec::kZstd;
-  auto built = buildArchive(options);
-  EXPECT_TRUE(built) << built.error().message;
-  auto archive = Archive::openFile(options.output);
-  EXPECT_TRUE(archive) << archive.error().message;
-  return archive ? *archive : nullptr;
+  return test::buildWideArchive(test::testTempDir() + "window-" + sampleTypeName(type) + ".tess",
+                                200, 120, 1, type, [type](uint32_t x, uint32_t y, uint32_t) {
+                                  if (type == SampleType::kU16) return 1000.0 + x * 200 + y;
+                                  return x < 8 && y < 8 ? double(NAN) : double(x) * 0.5 - 20.0;
+                                });
 }
 
 // The finite samples of the finest level of at most 512 x 512 texels: here level 0.

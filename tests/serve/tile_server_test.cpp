@@ -18,6 +18,7 @@
 #include "codecs/decode.h"
 #include "serve/serve_fixture.h"
 #include "support/test_images.h"
+#include "support/wide_archive.h"
 
 namespace tessera::test {
 namespace {
@@ -679,28 +680,11 @@ TEST(TileServer, FolderServesEveryArchiveInside) {
 // sample; the NaN-free u16 case keeps every pixel opaque. Bad window and gamma values are
 // 400s naming the parameter.
 TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
-  RowSource source;
-  source.name = "ramp";
-  source.width_px = 64;
-  source.height_px = 64;
-  source.channels = 1;
-  source.sample_type = SampleType::kU16;
   auto sampleAt = [](uint32_t x, uint32_t y) { return uint16_t(x * 1000 + y * 7); };
-  source.read_rows = [&](uint32_t first, uint32_t rows, std::span<uint8_t> out) {
-    for (uint32_t y = first; y < first + rows; ++y)
-      for (uint32_t x = 0; x < 64; ++x) {
-        const uint16_t v = sampleAt(x, y);
-        std::memcpy(out.data() + (size_t(y - first) * 64 + x) * 2, &v, 2);
-      }
-    return Result<void>{};
-  };
-  BuildOptions options;
-  options.row_sources = {source};
-  options.output = testTempDir() + "wide16.tess";
-  options.tile_size_px = 64;
-  options.codec = Codec::kZstd;
-  ASSERT_TRUE(buildArchive(options));
-  auto server = startServer({options.output});
+  const std::string archive_path = testTempDir() + "wide16.tess";
+  ASSERT_TRUE(buildWideArchive(archive_path, 64, 64, 1, SampleType::kU16,
+                               [&](uint32_t x, uint32_t y, uint32_t) { return sampleAt(x, y); }));
+  auto server = startServer({archive_path});
   ASSERT_TRUE(server);
   const uint16_t port = server->port();
 
