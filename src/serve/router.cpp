@@ -386,10 +386,9 @@ RoutedResponse Router::handle(const Request& request, std::string_view client) {
 
 namespace {
 
-// The display window of a wide image's picture: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
+// The display window a picture's query asks for: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
 // default) and ?gamma= (default 1). The error names the parameter: the answer is a 400.
-Result<DisplayWindow> pictureWindow(const Archive& archive, uint32_t image,
-                                    const Router::Target& target) {
+Result<DisplayWindowRequest> pictureWindowRequest(const Router::Target& target) {
   DisplayWindowRequest request;
   if (target.window) {
     if (Result<void> parsed = parseDisplayWindow(*target.window, request); !parsed)
@@ -401,8 +400,7 @@ Result<DisplayWindow> pictureWindow(const Archive& archive, uint32_t image,
       return fail(ErrorCode::kInvalidArgument, "query parameter gamma: " + gamma.error().message);
     request.gamma = *gamma;
   }
-  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
-  return resolveDisplayWindow(archive, image, request);
+  return request;
 }
 
 // What a picture's cache key and ETag add for its window (exact: hexadecimal floats).
@@ -411,6 +409,32 @@ std::string windowKey(const DisplayWindow& window) {
 }
 
 }  // namespace
+
+Result<DisplayWindow> Router::pictureWindow(const ServedArchive& served, uint32_t image,
+                                            const Target& target) {
+  TESSERA_ASSIGN_OR_RETURN(DisplayWindowRequest request, pictureWindowRequest(target));
+  const Archive& archive = *served.archive;
+  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
+  if (request.kind == DisplayWindowRequest::Kind::kValues)
+    return resolveDisplayWindow(archive, image, request);
+  // auto and percentiles read the metadata or a coarse level: once per archive, image and
+  // request, not once per tile. Clients choose the percentiles, so the map is bounded.
+  const std::string key = fmt::format("{}/{}/{}/{:a}/{:a}", served.name, image, int(request.kind),
+                                      request.first, request.second);
+  {
+    std::lock_guard lock(windows_mutex_);
+    if (auto it = windows_.find(key); it != windows_.end()) {
+      DisplayWindow window = it->second;
+      window.gamma = request.gamma;
+      return window;
+    }
+  }
+  TESSERA_ASSIGN_OR_RETURN(DisplayWindow window, resolveDisplayWindow(archive, image, request));
+  std::lock_guard lock(windows_mutex_);
+  if (windows_.size() >= kMaxResolvedWindows) windows_.clear();
+  windows_[key] = window;
+  return window;
+}
 
 RoutedResponse Router::route(const Request& request, const Target& target) {
   const std::vector<std::string>& seg = target.segments;
@@ -480,7 +504,7 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
       return badRequest(Endpoint::kDziTile, "a Deep Zoom index is not a number");
     if (!format) return notFound(Endpoint::kDziTile, "Deep Zoom tiles are .jpg or .png");
     if (*image >= archive.images().size()) return notFound(Endpoint::kDziTile, "no such image");
-    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
     if (!window) return badRequest(Endpoint::kDziTile, window.error().message);
     const std::string key =
         fmt::format("dzi/{}/{}/{}/{}/{}", *image, *level, *col, *row, int(*format)) +
@@ -508,7 +532,7 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
     if (!image || !z || !x || !y) return badRequest(Endpoint::kXyz, "an XYZ index is not a number");
     if (!format) return notFound(Endpoint::kXyz, "XYZ tiles are .png or .jpg");
     if (*image >= archive.images().size()) return notFound(Endpoint::kXyz, "no such image");
-    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
     if (!window) return badRequest(Endpoint::kXyz, window.error().message);
     const std::string key =
         fmt::format("xyz/{}/{}/{}/{}/{}", *image, *z, *x, *y, int(*format)) + windowKey(*window);
@@ -589,7 +613,7 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   if (target.has_format) {
     std::optional<PictureFormat> format = parsePictureFormat(target.format);
     if (!format) return errorResponse(version, http::status::bad_request, "format is png or jpeg");
-    Result<DisplayWindow> window = pictureWindow(archive, *image, target);
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
     if (!window) return errorResponse(version, http::status::bad_request, window.error().message);
     const std::string key = fmt::format("tile/{}/{}/{}/{}/{}/{:a},{:a},{:a}", *image, *level, *x,
                                         *y, int(*format), window->low, window->high, window->gamma);

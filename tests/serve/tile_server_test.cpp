@@ -722,6 +722,13 @@ TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
   EXPECT_NE(other.body, reply.body);
   // The default window comes from the statistics: a picture, not an error.
   EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0?format=png").status, 200u);
+  // Percentiles resolved once serve every route after: the same window, the same picture.
+  HttpReply first = httpRequest(port, "/wide16/0/0/0/0?format=png&window=p0,p100");
+  HttpReply again = httpRequest(port, "/wide16/0_files/6/0_0.png?window=p0,p100");
+  ASSERT_EQ(first.status, 200u);
+  ASSERT_EQ(again.status, 200u);
+  EXPECT_EQ(decodePicture(Codec::kPng, first.body, 64, 64, 4).texels,
+            decodePicture(Codec::kPng, again.body, 64, 64, 4).texels);
 
   for (const char* bad : {"window=5", "window=9,2", "window=a,b", "window=p1,200"})
     for (const std::string path : {"/wide16/0/0/0/0?format=png&", "/wide16/0_files/6/0_0.png?",
