@@ -44,8 +44,9 @@ struct ReferenceOptions {
 
 /// Draws `view` on the CPU from the archive's tiles by the sampling rules above. Reads and
 /// decodes the tiles it needs (each once per call). Fails naming the archive and the tile when
-/// one cannot be read or decoded; kInvalidArgument for an image the archive lacks. Level
-/// L + 1 of a trilinear blend is sampled whether or not `available` lists its tile (the
+/// one cannot be read or decoded; kInvalidArgument for an image the archive lacks;
+/// kUnsupported for a u16 or f32 image (the GL renderers draw those through a display window).
+/// Level L + 1 of a trilinear blend is sampled whether or not `available` lists its tile (the
 /// streamer keeps parents of resident tiles resident). Runs on the calling thread, which may
 /// be any: the archive is thread-safe and `available` is called only from this call.
 [[nodiscard]] Result<Picture> renderReference(const Archive& archive, const View& view,

@@ -20,6 +20,7 @@
 #include <optional>
 #include <string_view>
 
+#include <tessera/display_window.h>
 #include <tessera/format.h>
 #include <tessera/render.h>
 #include <tessera/result.h>
@@ -95,9 +96,15 @@ class Renderer {
   virtual bool resident(const TileId& tile) const = 0;
   virtual const RenderStats& stats() const = 0;
   virtual RendererKind kind() const = 0;
+  /// Sets the window/level the next draws map samples with (tessera/display_window.h); a
+  /// renderer starts with `fullRangeWindow` of the image's sample type, which draws 8-bit
+  /// images as stored. Cheap: uniforms only, no tile is uploaded again.
+  virtual void setDisplayWindow(const DisplayWindow& window) = 0;
+  virtual const DisplayWindow& displayWindow() const = 0;
 };
 
-/// Creates the renderer of row `kind` for image `info` (1-4 channels, any border), for
+/// Creates the renderer of row `kind` for image `info` (1-4 channels of u8, u16 or f32, any
+/// border; wide samples are uploaded as they are and windowed in the shader), for
 /// views of that image only. The GL rows need a current `GlContext`, and are defined by
 /// tessera::gl, which holds the table. Fails (kInvalidArgument) for a kind outside the table
 /// or an image no renderer can hold, or with the backend's error (kUnsupported: no OpenGL

@@ -57,9 +57,9 @@ vec4 heldBilinear(int k) {
 }
 void main() {
 #if HELD_VIEW == 1
-  o_colour = heldBilinear(0);  // the view sits on a level: lambda - level is 0
+  o_colour = displayColour(heldBilinear(0));  // the view sits on a level: lambda - level is 0
 #else
-  o_colour = mix(heldBilinear(0), heldBilinear(1), u_held_weight);
+  o_colour = displayColour(mix(heldBilinear(0), heldBilinear(1), u_held_weight));
 #endif
 }
 #else
@@ -109,7 +109,7 @@ void main() {
       if (bilinear(level + 1, v_world, coarser))
         colour = mix(colour, coarser, clamp(lambda - float(level), 0.0, 1.0));
     }
-    o_colour = colour;
+    o_colour = displayColour(colour);
     return;
   }
   o_colour = vec4(0.0);
@@ -208,12 +208,13 @@ class ClipmapRenderer final : public RendererBase {
     ClipmapLayer layer;
     layer.slots = slots_;
     layer.side = slots_ * info_.tile_size_px;
-    layer.texels.resize(size_t(layer.side) * layer.side * info_.channels);
+    layer.texels.resize(size_t(layer.side) * layer.side * info_.texelBytes());
     layer.owners = owners_[level];
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glGetTextureSubImage(texels_.get(), 0, 0, 0, GLint(level), GLsizei(layer.side),
-                         GLsizei(layer.side), 1, tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
-                         GLsizei(layer.texels.size()), layer.texels.data());
+                         GLsizei(layer.side), 1, texel_format_.pixel_format,
+                         texel_format_.pixel_type, GLsizei(layer.texels.size()),
+                         layer.texels.data());
     return layer;
   }
 
@@ -391,7 +392,7 @@ class ClipmapRenderer final : public RendererBase {
     uploadStaged(pending_, [&](const DecodedTile& tile, uint32_t slot, size_t offset) {
       const GLint sx = GLint(slot % slots_) * t, sy = GLint(slot / slots_) * t;
       glTextureSubImage3D(texels_.get(), 0, sx, sy, GLint(tile.id.level), t, t, 1,
-                          tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                          texel_format_.pixel_format, texel_format_.pixel_type,
                           reinterpret_cast<const void*>(offset));
     });
     glPixelStorei(GL_UNPACK_ROW_LENGTH, 0);
@@ -406,7 +407,7 @@ class ClipmapRenderer final : public RendererBase {
     slots_ = slots;
     const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
     const GLsizei levels = GLsizei(info_.level_count);
-    texels_ = createTileArray(info_.channels, side, levels);
+    texels_ = createTileArray(info_.channels, info_.sample_type, side, levels);
     // The held-view program's bilinear fetches wrap around the torus.
     glTextureParameteri(texels_.get(), GL_TEXTURE_WRAP_S, GL_REPEAT);
     glTextureParameteri(texels_.get(), GL_TEXTURE_WRAP_T, GL_REPEAT);
@@ -419,7 +420,7 @@ class ClipmapRenderer final : public RendererBase {
     glTextureSubImage3D(owner_.get(), 0, 0, 0, 0, GLsizei(slots_), GLsizei(slots_), levels,
                         GL_RG_INTEGER, GL_UNSIGNED_INT, zeros.data());
     owners_.assign(info_.level_count, std::vector<std::optional<TileId>>(size_t(slots_) * slots_));
-    stats_.gpu_bytes = uint64_t(side) * side * levels * info_.channels;
+    stats_.gpu_bytes = uint64_t(side) * side * levels * info_.texelBytes();
   }
 
   HeldProgram held_[2];  ///< on a level; blending with the next coarser

@@ -107,11 +107,23 @@ void setChannelSwizzle(const Texture& texture, uint32_t channels) {
                        kSwizzles[std::clamp<uint32_t>(channels, 1, 4) - 1]);
 }
 
-Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers) {
+TileTexelFormat tileTexelFormat(uint32_t channels, SampleType type) {
+  static const GLenum kU16[] = {GL_R16, GL_RG16, GL_RGB16, GL_RGBA16};
+  static const GLenum kF32[] = {GL_R32F, GL_RG32F, GL_RGB32F, GL_RGBA32F};
+  const uint32_t index = std::clamp<uint32_t>(channels, 1, 4) - 1;
+  switch (type) {
+    case SampleType::kU16: return {kU16[index], tilePixelFormat(channels), GL_UNSIGNED_SHORT};
+    case SampleType::kF32: return {kF32[index], tilePixelFormat(channels), GL_FLOAT};
+    default: return {tileInternalFormat(channels), tilePixelFormat(channels), GL_UNSIGNED_BYTE};
+  }
+}
+
+Texture createTileArray(uint32_t channels, SampleType type, GLsizei side, GLsizei layers) {
   Texture texture = createTexture(GL_TEXTURE_2D_ARRAY);
   while (glGetError() != GL_NO_ERROR) {
   }
-  glTextureStorage3D(texture.get(), 1, tileInternalFormat(channels), side, side, layers);
+  glTextureStorage3D(texture.get(), 1, tileTexelFormat(channels, type).internal_format, side, side,
+                     layers);
   if (glGetError() != GL_NO_ERROR) return Texture();
   glTextureParameteri(texture.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
   glTextureParameteri(texture.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);

@@ -19,6 +19,19 @@ uniform ivec2 u_level_size[MAX_LEVELS];  // each level's width and height in tex
 float levelOfDetail(vec2 world) {
   return log2(max(length(dFdx(world)), length(dFdy(world))));
 }
+// The display window (tessera/display_window.h) on a filtered texel, in the units the texture
+// returns (u16 as v / 65535): colour = clamp((c - low) * scale, 0, 1) ^ gamma. A NaN sample
+// anywhere in the filter's footprint is no data.
+uniform float u_window_low;
+uniform float u_window_scale;
+uniform float u_window_gamma;
+uniform bool u_alpha_clamp;  // float alpha: clamped to [0, 1]
+vec4 displayColour(vec4 texel) {
+  if (any(isnan(texel))) return vec4(0.0);
+  vec3 colour = clamp((texel.rgb - u_window_low) * u_window_scale, 0.0, 1.0);
+  if (u_window_gamma != 1.0) colour = pow(colour, vec3(u_window_gamma));
+  return vec4(colour, u_alpha_clamp ? clamp(texel.a, 0.0, 1.0) : texel.a);
+}
 )";
 
 static_assert(kMaxShaderLevels == 32, "MAX_LEVELS in kFragmentPreludeGlsl");
@@ -26,7 +39,32 @@ static_assert(kMaxShaderLevels == 32, "MAX_LEVELS in kFragmentPreludeGlsl");
 }  // namespace
 
 RendererBase::RendererBase(const ImageInfo& info, const RendererOptions& options)
-    : info_(info), options_(options) {}
+    : info_(info),
+      options_(options),
+      texel_format_(tileTexelFormat(info.channels, info.sample_type)),
+      window_(fullRangeWindow(info.sample_type)) {}
+
+void RendererBase::setDisplayWindow(const DisplayWindow& window) {
+  // The viewer sets it every frame: unchanged, it costs no GL call.
+  const bool unchanged =
+      window.low == window_.low && window.high == window_.high && window.gamma == window_.gamma;
+  window_ = window;
+  if (unchanged) return;
+  for (GLuint program : window_programs_) uploadWindow(program);
+}
+
+void RendererBase::uploadWindow(GLuint p) const {
+  // The texture returns u8 and u16 samples divided by their largest value; f32 as stored.
+  const double unit = info_.sample_type == SampleType::kU16  ? 65535.0
+                      : info_.sample_type == SampleType::kU8 ? 255.0
+                                                             : 1.0;
+  glProgramUniform1f(p, glGetUniformLocation(p, "u_window_low"), float(window_.low / unit));
+  glProgramUniform1f(p, glGetUniformLocation(p, "u_window_scale"),
+                     float(unit / (window_.high - window_.low)));
+  glProgramUniform1f(p, glGetUniformLocation(p, "u_window_gamma"), float(window_.gamma));
+  glProgramUniform1i(p, glGetUniformLocation(p, "u_alpha_clamp"),
+                     info_.sample_type == SampleType::kF32 ? 1 : 0);
+}
 
 Picture RendererBase::readPixels() {
   Picture picture;
@@ -56,6 +94,10 @@ Result<void> RendererBase::linkRendererProgram(const char* name, const char* ver
   }
   glProgramUniform2iv(p, glGetUniformLocation(p, "u_level_size"), GLsizei(sizes.size() / 2),
                       sizes.data());
+  // A renderer may keep several programs (moving program_ aside before linking the next):
+  // each gets the window now and at every change.
+  window_programs_.push_back(p);
+  uploadWindow(p);
   return {};
 }
 
@@ -70,7 +112,7 @@ void RendererBase::beginApply() {
 }
 
 bool RendererBase::holds(const DecodedTile& tile) const {
-  return tile.texels.channels == info_.channels &&
+  return tile.texels.channels == info_.channels && tile.texels.sample_type == info_.sample_type &&
          tile.texels.width_px == info_.storedTileSidePx() &&
          tile.texels.height_px == info_.storedTileSidePx() && tile.id.level < info_.level_count;
 }

@@ -32,6 +32,8 @@ class RendererBase : public Renderer {
   Picture readPixels() override;
   void present(uint32_t window_width, uint32_t window_height) override;
   const RenderStats& stats() const override { return stats_; }
+  void setDisplayWindow(const DisplayWindow& window) override;
+  const DisplayWindow& displayWindow() const override { return window_; }
 
  protected:
   using Clock = std::chrono::steady_clock;
@@ -42,14 +44,16 @@ class RendererBase : public Renderer {
   /// shader starts with the shared GLSL: MAX_LEVELS, `uniform ivec2 u_level_size[MAX_LEVELS]`
   /// (each level's width and height in texels, set here) and `float levelOfDetail(vec2
   /// world)`. The vertex shader declares `uniform mat4 u_view_projection`, which beginDraw
-  /// sets. The error carries the driver's log.
+  /// sets. The fragment shader also has `vec4 displayColour(vec4 texel)`, the display window
+  /// (tessera/display_window.h) applied to a filtered texel: each renderer's last step.
+  /// The error carries the driver's log.
   [[nodiscard]] Result<void> linkRendererProgram(const char* name, const char* vertex_body,
                                                  const char* fragment_body);
 
   /// Starts an apply: forgets the last one's result and figures.
   void beginApply();
-  /// True when this renderer can hold `tile`: this image's channels, stored tile size and
-  /// levels. Any other tile is declined: never drawn, never a wrong tile.
+  /// True when this renderer can hold `tile`: this image's channels, sample type, stored tile
+  /// size and levels. Any other tile is declined: never drawn, never a wrong tile.
   bool holds(const DecodedTile& tile) const;
   /// Records a tile of this frame's uploads as declined.
   void decline(const TileId& id);
@@ -76,6 +80,7 @@ class RendererBase : public Renderer {
 
   ImageInfo info_;
   RendererOptions options_;
+  TileTexelFormat texel_format_;  ///< how this image's tiles are uploaded and held
   Program program_;
   VertexArray vertex_array_;
   RenderStats stats_;
@@ -84,6 +89,11 @@ class RendererBase : public Renderer {
   ColourTarget target_;
   std::optional<UploadRing> staging_;  ///< made at first use, with the context current
   GLint view_projection_uniform_ = -1;
+  /// Sets the window's uniforms of program `p` from window_.
+  void uploadWindow(GLuint p) const;
+
+  DisplayWindow window_;
+  std::vector<GLuint> window_programs_;  ///< every program linked, kept alive by the renderer
   ApplyResult result_;
   std::vector<std::pair<const uint8_t*, size_t>> sources_;  ///< scratch of uploadStaged
 };

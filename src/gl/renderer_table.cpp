@@ -57,12 +57,6 @@ Result<std::unique_ptr<Renderer>> createRenderer(RendererKind kind, const ImageI
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{} renderer: image with {} channels and {} px tiles",
                             kBackends[size_t(kind)].name, info.channels, info.tile_size_px));
-  // The renderers upload 8-bit textures; 16-bit and float images need a display window first.
-  if (info.sample_type != SampleType::kU8)
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("{} renderer: the image has {} samples; the renderers draw 8-bit "
-                            "images only (read wide samples with extract or Python)",
-                            kBackends[size_t(kind)].name, sampleTypeName(info.sample_type)));
   return kBackends[size_t(kind)].create(info, options);
 }
 

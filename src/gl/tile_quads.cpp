@@ -108,7 +108,7 @@ void main() {
   vec4 colour = own();
   if (lambda > float(level) && v_info.z >= 0)
     colour = mix(colour, parent(), clamp(lambda - float(level), 0.0, 1.0));
-  o_colour = colour;
+  o_colour = displayColour(colour);
 }
 #else
 // An orthographic view: one level of detail for the whole view (u_lambda, from the CPU),
@@ -118,10 +118,10 @@ void main() {
 uniform float u_lambda;
 void main() {
 #if ORTHO_LOD == 1
-  o_colour = own();
+  o_colour = displayColour(own());
 #else
   float weight = v_info.z >= 0 ? clamp(u_lambda - float(v_info.x), 0.0, 1.0) : 0.0;
-  o_colour = mix(own(), parent(), weight);
+  o_colour = displayColour(mix(own(), parent(), weight));
 #endif
 }
 #endif
@@ -223,7 +223,7 @@ class TileQuadsRenderer final : public RendererBase {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
     uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
       glTextureSubImage3D(tiles_.get(), 0, 0, 0, GLint(layer), side, side, 1,
-                          tilePixelFormat(info_.channels), GL_UNSIGNED_BYTE,
+                          texel_format_.pixel_format, texel_format_.pixel_type,
                           reinterpret_cast<const void*>(offset));
     });
     return endApply(started, layers_.size());
@@ -381,7 +381,7 @@ class TileQuadsRenderer final : public RendererBase {
   /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
   Result<void> growLayers(uint32_t layers) {
     const GLsizei side = GLsizei(info_.storedTileSidePx());
-    Texture grown = createTileArray(info_.channels, side, GLsizei(layers));
+    Texture grown = createTileArray(info_.channels, info_.sample_type, side, GLsizei(layers));
     if (!grown)
       return fail(
           ErrorCode::kTooLarge,

@@ -244,6 +244,12 @@ Result<Picture> renderReference(const Archive& archive, const View& view,
                 fmt::format("{}: no image {} (archive has {})", archive.name(), view.image,
                             archive.images().size()));
   const ImageInfo& info = archive.images()[view.image];
+  // Its texel cache holds 8-bit RGBA; a wide image would need the display window there too.
+  if (info.sample_type != SampleType::kU8)
+    return fail(ErrorCode::kUnsupported,
+                fmt::format("{}: image {} has {} samples; the reference renderer draws 8-bit "
+                            "images only",
+                            archive.name(), view.image, sampleTypeName(info.sample_type)));
   ReferenceRenderer renderer(archive, info, view.image, options);
   return renderer.render(view);
 }

@@ -50,16 +50,27 @@ Image boxDownsample(const Image& source, uint32_t k, uint32_t width, uint32_t he
   return out;
 }
 
+// Texels of a u16 or f32 image mapped to RGBA8 by the request's window; u8 texels as they are.
+Image eightBit(Image texels, const DisplayWindow& window) {
+  if (texels.sample_type == SampleType::kU8) return texels;
+  return windowToRgba8(texels, window);
+}
+
 // `rect` (inside the scaled image) of the image scaled down by 2^scale_log2: a region of that
-// archive level, or of the coarsest level box-filtered further.
+// archive level, or of the coarsest level box-filtered further (wide images windowed first,
+// so the filter averages 8-bit codes there).
 Result<Image> readScaled(const Archive& archive, uint32_t image, uint32_t scale_log2,
-                         const PixelRect& rect) {
+                         const PixelRect& rect, const DisplayWindow& window) {
   const ImageInfo& info = archive.images()[image];
-  if (scale_log2 < info.level_count) return archive.readRegion(image, scale_log2, rect);
+  if (scale_log2 < info.level_count) {
+    TESSERA_ASSIGN_OR_RETURN(Image region, archive.readRegion(image, scale_log2, rect));
+    return eightBit(std::move(region), window);
+  }
   const uint32_t coarsest = info.level_count - 1;
-  TESSERA_ASSIGN_OR_RETURN(Image whole, archive.readRegion(image, coarsest,
+  TESSERA_ASSIGN_OR_RETURN(Image level, archive.readRegion(image, coarsest,
                                                            {0, 0, info.levelWidthPx(coarsest),
                                                             info.levelHeightPx(coarsest)}));
+  const Image whole = eightBit(std::move(level), window);
   Image scaled = boxDownsample(whole, scale_log2 - coarsest, scaledSide(info.width_px, scale_log2),
                                scaledSide(info.height_px, scale_log2));
   return crop(scaled, uint32_t(rect.x), uint32_t(rect.y), rect.width, rect.height);
@@ -95,11 +106,6 @@ bool browserReady(const ImageInfo& info, Codec codec, PictureFormat format) {
 Result<void> checkImage(const Archive& archive, uint32_t image) {
   if (image >= archive.images().size())
     return fail(ErrorCode::kNotFound, fmt::format("{}: no image {}", archive.name(), image));
-  // Pictures are 8-bit; a wide image's samples need a display window the request cannot give.
-  if (const SampleType type = archive.images()[image].sample_type; type != SampleType::kU8)
-    return fail(ErrorCode::kUnsupported,
-                fmt::format("{}: image {} has {} samples; pictures are made of 8-bit images only",
-                            archive.name(), image, sampleTypeName(type)));
   return {};
 }
 
@@ -151,7 +157,8 @@ uint32_t scaledHeightPx(const ImageInfo& info, uint32_t scale_log2) {
 }
 
 Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t dz_level,
-                              uint32_t col, uint32_t row, PictureFormat format, int jpeg_quality) {
+                              uint32_t col, uint32_t row, PictureFormat format, int jpeg_quality,
+                              const DisplayWindow& window) {
   TESSERA_TRY(checkImage(archive, image));
   const ImageInfo& info = archive.images()[image];
   const uint32_t max_level = dziMaxLevel(info);
@@ -187,7 +194,8 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
     if (entry.hasPayload()) {
       TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(id, entry));
     }
-    TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(id, entry, payload));
+    TESSERA_ASSIGN_OR_RETURN(Image decoded, archive.decodeTile(id, entry, payload));
+    const Image stored = eightBit(std::move(decoded), window);
     const uint64_t origin_x = uint64_t(col) * tile - info.border_px;
     const uint64_t origin_y = uint64_t(row) * tile - info.border_px;
     // Unsigned wrap-around cancels: x0 >= col * tile - border whenever overlap == border.
@@ -195,12 +203,13 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
         crop(stored, uint32_t(x0 - origin_x), uint32_t(y0 - origin_y), rect.width, rect.height),
         format, jpeg_quality);
   }
-  TESSERA_ASSIGN_OR_RETURN(Image region, readScaled(archive, image, scale, rect));
+  TESSERA_ASSIGN_OR_RETURN(Image region, readScaled(archive, image, scale, rect, window));
   return encode(region, format, jpeg_quality);
 }
 
 Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z, uint32_t x,
-                              uint32_t y, PictureFormat format, int jpeg_quality) {
+                              uint32_t y, PictureFormat format, int jpeg_quality,
+                              const DisplayWindow& window) {
   TESSERA_TRY(checkImage(archive, image));
   const ImageInfo& info = archive.images()[image];
   const uint32_t max_zoom = xyzMaxZoom(info);
@@ -228,7 +237,7 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
   }
   TESSERA_ASSIGN_OR_RETURN(
       Image region,
-      readScaled(archive, image, scale, {int64_t(x0), int64_t(y0), inside_w, inside_h}));
+      readScaled(archive, image, scale, {int64_t(x0), int64_t(y0), inside_w, inside_h}, window));
   // Leaflet expects whole tiles: paste into a transparent 256 x 256 RGBA tile.
   Image tile(kXyzTileSizePx, kXyzTileSizePx, 4);
   for (uint32_t row = 0; row < inside_h; ++row) {
@@ -248,7 +257,8 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
 }
 
 Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
-                                    PictureFormat format, int jpeg_quality) {
+                                    PictureFormat format, int jpeg_quality,
+                                    const DisplayWindow& window) {
   TESSERA_TRY(checkImage(archive, tile.image));
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
@@ -256,7 +266,7 @@ Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
   }
   TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));
-  return encode(stored, format, jpeg_quality);
+  return encode(eightBit(std::move(stored), window), format, jpeg_quality);
 }
 
 }  // namespace tessera::detail

@@ -129,7 +129,8 @@ struct Router::Target {
   std::vector<std::string> segments;
   std::string format;  // ?format=
   bool has_format = false;
-  std::string problem;  // non-empty: malformed (400)
+  std::optional<std::string> window, gamma;  // ?window=, ?gamma= (wide images' pictures)
+  std::string problem;                       // non-empty: malformed (400)
 };
 
 namespace {
@@ -189,6 +190,10 @@ Router::Target parseTarget(std::string_view raw) {
     if (pair.starts_with("format=")) {
       target.has_format = true;
       target.format = std::string(pair.substr(7));
+    } else if (pair.starts_with("window=")) {
+      target.window = std::string(pair.substr(7));
+    } else if (pair.starts_with("gamma=")) {
+      target.gamma = std::string(pair.substr(6));
     }
     if (amp == std::string_view::npos) break;
     query.remove_prefix(amp + 1);
@@ -249,6 +254,7 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
                               {"width", info.width_px},
                               {"height", info.height_px},
                               {"channels", info.channels},
+                              {"sample_type", sampleTypeName(info.sample_type)},
                               {"tile_size", info.tile_size_px},
                               {"border", info.border_px},
                               {"codec", codecName(info.default_codec)},
@@ -261,6 +267,10 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
                               {"xyz_max_zoom", xyzMaxZoom(info)}};
       if (const std::string geo = imageGeoreferenceJson(*served->archive, i); !geo.empty())
         image["georeference"] = nlohmann::json::parse(geo);
+      // What pictures of a wide image use without ?window=: the viewer starts from it.
+      if (info.sample_type != SampleType::kU8)
+        if (Result<DisplayWindow> window = resolveDisplayWindow(*served->archive, i, {}); window)
+          image["display_window"] = {{"low", window->low}, {"high", window->high}};
       images.push_back(std::move(image));
     }
     nlohmann::json info = {{"name", name},
@@ -374,6 +384,58 @@ RoutedResponse Router::handle(const Request& request, std::string_view client) {
   return routed;
 }
 
+namespace {
+
+// The display window a picture's query asks for: ?window= (MIN,MAX, pLOW,pHIGH or auto, the
+// default) and ?gamma= (default 1). The error names the parameter: the answer is a 400.
+Result<DisplayWindowRequest> pictureWindowRequest(const Router::Target& target) {
+  DisplayWindowRequest request;
+  if (target.window) {
+    if (Result<void> parsed = parseDisplayWindow(*target.window, request); !parsed)
+      return fail(ErrorCode::kInvalidArgument, "query parameter window: " + parsed.error().message);
+  }
+  if (target.gamma) {
+    Result<double> gamma = parseGamma(*target.gamma);
+    if (!gamma)
+      return fail(ErrorCode::kInvalidArgument, "query parameter gamma: " + gamma.error().message);
+    request.gamma = *gamma;
+  }
+  return request;
+}
+
+// What a picture's cache key and ETag add for its window (exact: hexadecimal floats).
+std::string windowKey(const DisplayWindow& window) {
+  return fmt::format("/{:a},{:a},{:a}", window.low, window.high, window.gamma);
+}
+
+}  // namespace
+
+Result<DisplayWindow> Router::pictureWindow(const ServedArchive& served, uint32_t image,
+                                            const Target& target) {
+  TESSERA_ASSIGN_OR_RETURN(DisplayWindowRequest request, pictureWindowRequest(target));
+  const Archive& archive = *served.archive;
+  if (archive.images()[image].sample_type == SampleType::kU8) return DisplayWindow{};
+  if (request.kind == DisplayWindowRequest::Kind::kValues)
+    return resolveDisplayWindow(archive, image, request);
+  // auto and percentiles read the metadata or a coarse level: once per archive, image and
+  // request, not once per tile. Clients choose the percentiles, so the map is bounded.
+  const std::string key = fmt::format("{}/{}/{}/{:a}/{:a}", served.name, image, int(request.kind),
+                                      request.first, request.second);
+  {
+    std::lock_guard lock(windows_mutex_);
+    if (auto it = windows_.find(key); it != windows_.end()) {
+      DisplayWindow window = it->second;
+      window.gamma = request.gamma;
+      return window;
+    }
+  }
+  TESSERA_ASSIGN_OR_RETURN(DisplayWindow window, resolveDisplayWindow(archive, image, request));
+  std::lock_guard lock(windows_mutex_);
+  if (windows_.size() >= kMaxResolvedWindows) windows_.clear();
+  windows_[key] = window;
+  return window;
+}
+
 RoutedResponse Router::route(const Request& request, const Target& target) {
   const std::vector<std::string>& seg = target.segments;
   const unsigned version = request.version();
@@ -442,14 +504,18 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
       return badRequest(Endpoint::kDziTile, "a Deep Zoom index is not a number");
     if (!format) return notFound(Endpoint::kDziTile, "Deep Zoom tiles are .jpg or .png");
     if (*image >= archive.images().size()) return notFound(Endpoint::kDziTile, "no such image");
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
+    if (!window) return badRequest(Endpoint::kDziTile, window.error().message);
     const std::string key =
-        fmt::format("dzi/{}/{}/{}/{}/{}", *image, *level, *col, *row, int(*format));
+        fmt::format("dzi/{}/{}/{}/{}/{}", *image, *level, *col, *row, int(*format)) +
+        windowKey(*window);
     return {Endpoint::kDziTile, picture(
                                     request, served, key,
                                     [&]() -> Result<std::string> {
                                       TESSERA_ASSIGN_OR_RETURN(
-                                          Picture out, renderDziTile(archive, *image, *level, *col,
-                                                                     *row, *format, quality));
+                                          Picture out,
+                                          renderDziTile(archive, *image, *level, *col, *row,
+                                                        *format, quality, *window));
                                       return std::move(out.bytes);
                                     },
                                     pictureContentType(*format))};
@@ -466,13 +532,16 @@ RoutedResponse Router::route(const Request& request, const Target& target) {
     if (!image || !z || !x || !y) return badRequest(Endpoint::kXyz, "an XYZ index is not a number");
     if (!format) return notFound(Endpoint::kXyz, "XYZ tiles are .png or .jpg");
     if (*image >= archive.images().size()) return notFound(Endpoint::kXyz, "no such image");
-    const std::string key = fmt::format("xyz/{}/{}/{}/{}/{}", *image, *z, *x, *y, int(*format));
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
+    if (!window) return badRequest(Endpoint::kXyz, window.error().message);
+    const std::string key =
+        fmt::format("xyz/{}/{}/{}/{}/{}", *image, *z, *x, *y, int(*format)) + windowKey(*window);
     return {Endpoint::kXyz, picture(
                                 request, served, key,
                                 [&]() -> Result<std::string> {
                                   TESSERA_ASSIGN_OR_RETURN(
-                                      Picture out,
-                                      renderXyzTile(archive, *image, *z, *x, *y, *format, quality));
+                                      Picture out, renderXyzTile(archive, *image, *z, *x, *y,
+                                                                 *format, quality, *window));
                                   return std::move(out.bytes);
                                 },
                                 pictureContentType(*format))};
@@ -544,13 +613,16 @@ Response Router::tile(const Request& request, const ServedArchive& served, const
   if (target.has_format) {
     std::optional<PictureFormat> format = parsePictureFormat(target.format);
     if (!format) return errorResponse(version, http::status::bad_request, "format is png or jpeg");
-    const std::string key =
-        fmt::format("tile/{}/{}/{}/{}/{}", *image, *level, *x, *y, int(*format));
+    Result<DisplayWindow> window = pictureWindow(served, *image, target);
+    if (!window) return errorResponse(version, http::status::bad_request, window.error().message);
+    const std::string key = fmt::format("tile/{}/{}/{}/{}/{}/{:a},{:a},{:a}", *image, *level, *x,
+                                        *y, int(*format), window->low, window->high, window->gamma);
     Response response = picture(
         request, served, key,
         [&]() -> Result<std::string> {
           TESSERA_ASSIGN_OR_RETURN(
-              Picture out, transcodeStoredTile(archive, id, *format, options_.jpeg_quality));
+              Picture out,
+              transcodeStoredTile(archive, id, *format, options_.jpeg_quality, *window));
           return std::move(out.bytes);
         },
         pictureContentType(*format));

@@ -6,6 +6,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string_view>
 #include <vector>
@@ -14,6 +15,7 @@
 #include <boost/beast/http/message.hpp>
 #include <boost/beast/http/string_body.hpp>
 
+#include <tessera/display_window.h>
 #include <tessera/serve.h>
 
 #include "access.h"
@@ -69,6 +71,10 @@ class Router {
   Response changedOnDisk(unsigned version, const ServedArchive& served) const;
   Response tile(const Request& request, const ServedArchive& served, const Target& target);
   Response dziDescriptor(const Request& request, const ServedArchive& served, uint32_t image);
+  /// The display window of a picture of `image` (?window=, ?gamma=; docs/serve.md); the
+  /// error names the parameter. Resolved auto and percentile windows are kept (windows_).
+  Result<DisplayWindow> pictureWindow(const ServedArchive& served, uint32_t image,
+                                      const Target& target);
   Response picture(const Request& request, const ServedArchive& served, const std::string& key,
                    const std::function<Result<std::string>()>& render, const char* content_type);
   Response viewerFile(const Request& request, std::string_view path);
@@ -95,6 +101,9 @@ class Router {
   std::unique_ptr<RateLimiter> limiter_;
   std::shared_ptr<const std::string> archives_json_;
   std::map<std::string, std::shared_ptr<const std::string>> info_json_;  // by archive name
+  static constexpr size_t kMaxResolvedWindows = 256;
+  std::mutex windows_mutex_;
+  std::map<std::string, DisplayWindow> windows_;  ///< resolved windows by archive/image/request
 };
 
 }  // namespace tessera::detail

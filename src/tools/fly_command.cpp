@@ -25,6 +25,7 @@
 #include <tessera/stream.h>
 
 #include <tessera/codec_scratch.h>
+#include "display_window_option.h"
 #include "camera_path.h"
 #include "fly_command.h"
 #include "fly_render.h"
@@ -362,6 +363,9 @@ Result<void> captureFlightPictures(const FlyArgs& args, const FlightSetup& setup
   if (next_t <= setup.path.durationS() && !setup.path.jumpsBetween(t_s, next_t)) return {};
   const size_t index = log.jumps.size() - 1;
   Picture picture = gpu.renderer().readPixels();
+  if (setup.info.sample_type != SampleType::kU8)  // the reference draws 8-bit images only
+    return saveFlightPicture(args, log, picture, fmt::format("rest-{}.png", index),
+                             "At rest (a wide image: no CPU reference to compare with)");
   ReferenceOptions reference_options;
   reference_options.available = [&](const TileId& id) { return gpu.renderer().resident(id); };
   Result<Picture> reference = renderReference(*setup.archive, view, reference_options);
@@ -761,9 +765,13 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     if (!kind)
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("--render {}: no such renderer", args.render));
+    Result<DisplayWindow> display =
+        displayWindowFromOptions(*setup.archive, args.image, args.window, args.gamma);
+    if (!display) return forwardError(display);
     Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(*kind, setup.info);
     if (!created) return forwardError(created);
     gpu = std::move(*created);
+    gpu->renderer().setDisplayWindow(*display);
   }
   TESSERA_TRY(startFramesCsv(args));
   FlightLog log;
@@ -880,6 +888,8 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
                   "Payload bytes at the head of the loader's queue fetched ahead (0 = off)")
       ->capture_default_str();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
+  cmd->add_option("--window", args->window, kWindowOptionHelp)->capture_default_str();
+  cmd->add_option("--gamma", args->gamma, kGammaOptionHelp)->capture_default_str();
   cmd->add_option("-o,--out", args->out_dir, "Folder for frames.csv and summary.json")
       ->capture_default_str();
   cmd->add_flag("--json", args->json, "Print the summary as JSON");

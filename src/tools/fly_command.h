@@ -37,6 +37,9 @@ struct FlyArgs {
   std::optional<uint64_t> max_read_kib;   ///< unset: likewise
   std::string loader_priority = "auto";   ///< auto, idle or nice: LoaderPriority
   uint32_t image = 0;
+  /// With --render: the display window of 16-bit and float images (display_window_option.h).
+  std::string window = "auto";
+  std::string gamma = "1";
   std::string out_dir = "fly-out";
   bool json = false;
   bool quiet = false;

@@ -27,6 +27,7 @@
 #include <tessera/stream.h>
 
 #include "cli.h"
+#include "display_window_option.h"
 #include "gl/window.h"
 #include "view_camera.h"
 #include "scene_fly_command.h"
@@ -51,6 +52,8 @@ struct Viewer {
   GLFWwindow* window = nullptr;
   ImageInfo info;
   View view;
+  DisplayWindow display;          ///< the window/level drawn with (keys change it)
+  DisplayWindow initial_display;  ///< what 0 returns to
   OverlayOptions overlays;
   bool show_panel = true;
   bool screenshot_requested = false;
@@ -155,6 +158,25 @@ void onCursor(GLFWwindow* window, double, double) {
   }
 }
 
+// The window/level keys: [ ] move the window down and up by a tenth of its width, , . narrow
+// and widen it by a fifth, ; ' lower and raise the gamma by 10 %, 0 returns to the start.
+void adjustDisplayWindow(Viewer& v, int key) {
+  DisplayWindow& w = v.display;
+  const double width = w.high - w.low, centre = (w.high + w.low) / 2;
+  double new_width = width, new_centre = centre;
+  switch (key) {
+    case GLFW_KEY_LEFT_BRACKET: new_centre -= width / 10; break;
+    case GLFW_KEY_RIGHT_BRACKET: new_centre += width / 10; break;
+    case GLFW_KEY_COMMA: new_width /= 1.2; break;
+    case GLFW_KEY_PERIOD: new_width *= 1.2; break;
+    case GLFW_KEY_SEMICOLON: w.gamma /= 1.1; break;
+    case GLFW_KEY_APOSTROPHE: w.gamma *= 1.1; break;
+    default: w = v.initial_display; return;
+  }
+  w.low = new_centre - new_width / 2;
+  w.high = new_centre + new_width / 2;
+}
+
 void onKey(GLFWwindow* window, int key, int, int action, int mods) {
   if (action != GLFW_PRESS || ImGui::GetIO().WantCaptureKeyboard) return;
   Viewer& v = viewerOf(window);
@@ -170,6 +192,13 @@ void onKey(GLFWwindow* window, int key, int, int action, int mods) {
     case GLFW_KEY_G: v.overlays.grid = !v.overlays.grid; break;
     case GLFW_KEY_F1: v.show_panel = !v.show_panel; break;
     case GLFW_KEY_F12: v.screenshot_requested = true; break;
+    case GLFW_KEY_LEFT_BRACKET:
+    case GLFW_KEY_RIGHT_BRACKET:
+    case GLFW_KEY_COMMA:
+    case GLFW_KEY_PERIOD:
+    case GLFW_KEY_SEMICOLON:
+    case GLFW_KEY_APOSTROPHE:
+    case GLFW_KEY_0: adjustDisplayWindow(v, key); break;
     // Plain S pans down (WASD); Ctrl+S is the screenshot.
     case GLFW_KEY_S:
       if (mods & GLFW_MOD_CONTROL) v.screenshot_requested = true;
@@ -430,7 +459,8 @@ RendererKind drawPanel(Viewer& v, const std::string& archive_name, const FrameUp
       ImGui::TextDisabled(
           "drag: pan | wheel: zoom | arrows/WASD: pan | +/-: zoom | Home: fit | P: fly-over | "
           "fly-over: WASD move, drag look, wheel or +/- altitude | F/F11: fullscreen | F1: "
-          "panel | L C G: overlays | F12, Ctrl+S: screenshot | Q/Esc: quit");
+          "panel | L C G: overlays | F12, Ctrl+S: screenshot | Q/Esc: quit | window/level: [ ] "
+          "move, , . narrow/widen, ; ' gamma, 0 reset");
       ImGui::EndTabItem();
     }
     ImGui::EndTabBar();
@@ -514,6 +544,7 @@ const FrameUpdate& streamAndDraw(ViewerLoop& loop, Clock::time_point now) {
   std::erase_if(loop.resident, [&](const TileId& id) { return !loop.renderer->resident(id); });
   loop.figures.streaming_ms = update.report.update_ms + loop.renderer->stats().apply_cpu_ms;
   loop.figures.read_rate.add(now, update.report.bytes_read_total);
+  loop.renderer->setDisplayWindow(v.display);  // uniforms only; keys may have changed it
   loop.renderer->draw(v.view);
   loop.overlay.draw(v.view, v.info, v.overlays, update, loop.resident, *loop.renderer);
   return update;
@@ -627,6 +658,9 @@ int runView(const ViewArgs& args) {
         {ErrorCode::kInvalidArgument, fmt::format("{}: no image {} (it has {})", args.archive,
                                                   args.image, (*archive)->images().size())});
   const ImageInfo info = (*archive)->images()[args.image];
+  Result<DisplayWindow> display =
+      displayWindowFromOptions(**archive, args.image, args.window, args.gamma);
+  if (!display) return reportError(display.error());
 
   // The window first: without a display nothing else is worth starting.
   Result<std::unique_ptr<GlContext>> context =
@@ -652,6 +686,7 @@ int runView(const ViewArgs& args) {
   Viewer v;
   v.window = window;
   v.info = info;
+  v.display = v.initial_display = *display;
   startViewer(v, args);
   ImGuiSession imgui(window);
   ViewerLoop loop{args, v, **streamer, std::move(*renderer), **overlay};
@@ -668,6 +703,8 @@ void registerViewCommand(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"tile-quads", "clipmap"}))
       ->capture_default_str();
   cmd->add_option("--image", args->image, "Image index")->capture_default_str();
+  cmd->add_option("--window", args->window, kWindowOptionHelp)->capture_default_str();
+  cmd->add_option("--gamma", args->gamma, kGammaOptionHelp)->capture_default_str();
   cmd->add_option("--size", args->size, "Window size WxH")->capture_default_str();
   cmd->add_option("--cache-mib", args->cache_mib, "Tile cache budget in MiB")
       ->capture_default_str();

@@ -24,6 +24,9 @@ struct ViewArgs {
   std::string adaptive = "auto";
   /// What adaptive scheduling fetches beyond the view (parseEgressBudget).
   std::string egress = "default";
+  /// Display window of 16-bit and float images (display_window_option.h).
+  std::string window = "auto";
+  std::string gamma = "1";
   uint64_t frames = 0;  ///< hidden, for tests: quit after this many frames (0 = run)
 };
 

@@ -216,7 +216,10 @@ TEST_F(AccessServerTest, NoRouteOfAProtectedArchiveAnswersWithoutACredential) {
     for (const std::string& target :
          {"/" + name + ".tess", "/" + name + "/info.json", "/" + name + "/0.dzi",
           "/" + name + "/0_files/0/0_0.png", "/" + name + "/0/xyz/0/0/0.png",
-          "/" + name + "/0/0/0/0", "/" + name + "/0/0/0/0?format=png"}) {
+          "/" + name + "/0/0/0/0", "/" + name + "/0/0/0/0?format=png",
+          // The display window's parameters: checked after the credential, never before.
+          "/" + name + "/0/0/0/0?format=png&window=0,100&gamma=2",
+          "/" + name + "/0/0/0/0?format=png&window=bad"}) {
       for (const char* method : {"GET", "HEAD"}) {
         test::HttpReply reply = test::httpRequest(port, target, {}, method);
         EXPECT_EQ(reply.status, 401u) << method << " " << target;

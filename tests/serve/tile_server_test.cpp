@@ -2,6 +2,7 @@
 // tiles, the archive file with byte ranges, info documents, Deep Zoom, XYZ, transcoding,
 // metrics, the viewer, CORS and the access log.
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -11,11 +12,13 @@
 #include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
+#include <tessera/display_window.h>
 #include <tessera/serve.h>
 
 #include "codecs/decode.h"
 #include "serve/serve_fixture.h"
 #include "support/test_images.h"
+#include "support/wide_archive.h"
 
 namespace tessera::test {
 namespace {
@@ -671,6 +674,74 @@ TEST(TileServer, FolderServesEveryArchiveInside) {
   std::vector<std::string> names = server->archiveNames();
   EXPECT_NE(std::find(names.begin(), names.end(), "pngb1"), names.end());
   EXPECT_EQ(httpRequest(server->port(), "/pngb1/info.json").status, 200u);
+}
+
+// A u16 archive's stored tile as an 8-bit picture: each texel is the window formula of its
+// sample; the NaN-free u16 case keeps every pixel opaque. Bad window and gamma values are
+// 400s naming the parameter.
+TEST(WideTiles, PicturesOfU16TilesFollowTheWindowInTheQuery) {
+  auto sampleAt = [](uint32_t x, uint32_t y) { return uint16_t(x * 1000 + y * 7); };
+  const std::string archive_path = testTempDir() + "wide16.tess";
+  ASSERT_TRUE(buildWideArchive(archive_path, 64, 64, 1, SampleType::kU16,
+                               [&](uint32_t x, uint32_t y, uint32_t) { return sampleAt(x, y); }));
+  auto server = startServer({archive_path});
+  ASSERT_TRUE(server);
+  const uint16_t port = server->port();
+
+  HttpReply info = httpRequest(port, "/wide16/info.json");
+  ASSERT_EQ(info.status, 200u);
+  const nlohmann::json image_info = nlohmann::json::parse(info.body)["images"][0];
+  EXPECT_EQ(image_info["sample_type"], "u16");
+  EXPECT_LT(image_info["display_window"]["low"], image_info["display_window"]["high"]);
+  // The native tile: the stored zstd payload.
+  EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0").header("x-tessera-codec"), "zstd");
+
+  const DisplayWindow window{5000, 40000, 0.5};
+  HttpReply reply = httpRequest(port, "/wide16/0/0/0/0?format=png&window=5000,40000&gamma=0.5");
+  // The stored tile, the Deep Zoom tile of the full-size level and the XYZ tile of the deepest
+  // zoom hold the same 64 x 64 texels.
+  const std::string query = "?window=5000,40000&gamma=0.5";
+  HttpReply dzi = httpRequest(port, "/wide16/0_files/6/0_0.png" + query);
+  HttpReply xyz = httpRequest(port, "/wide16/0/xyz/0/0/0.png" + query);
+  for (const auto& [picture, side] :
+       {std::pair{&reply, 64u}, std::pair{&dzi, 64u}, std::pair{&xyz, 256u}}) {
+    ASSERT_EQ(picture->status, 200u) << picture->body;
+    Image got = decodePicture(Codec::kPng, picture->body, side, side, 4);
+    uint32_t wrong = 0;
+    for (uint32_t y = 0; y < 64; ++y)
+      for (uint32_t x = 0; x < 64; ++x) {
+        const uint8_t* p = got.texels.data() + (size_t(y) * side + x) * 4;
+        const uint8_t want = windowSample(sampleAt(x, y), window);
+        wrong += p[0] != want || p[1] != want || p[2] != want || p[3] != 255;
+      }
+    EXPECT_EQ(wrong, 0u) << side;
+  }
+  // Another window is another picture.
+  HttpReply other = httpRequest(port, "/wide16/0/0/0/0?format=png&window=0,1000");
+  ASSERT_EQ(other.status, 200u);
+  EXPECT_NE(other.body, reply.body);
+  // The default window comes from the statistics: a picture, not an error.
+  EXPECT_EQ(httpRequest(port, "/wide16/0/0/0/0?format=png").status, 200u);
+  // Percentiles resolved once serve every route after: the same window, the same picture.
+  HttpReply first = httpRequest(port, "/wide16/0/0/0/0?format=png&window=p0,p100");
+  HttpReply again = httpRequest(port, "/wide16/0_files/6/0_0.png?window=p0,p100");
+  ASSERT_EQ(first.status, 200u);
+  ASSERT_EQ(again.status, 200u);
+  EXPECT_EQ(decodePicture(Codec::kPng, first.body, 64, 64, 4).texels,
+            decodePicture(Codec::kPng, again.body, 64, 64, 4).texels);
+
+  for (const char* bad : {"window=5", "window=9,2", "window=a,b", "window=p1,200"})
+    for (const std::string path : {"/wide16/0/0/0/0?format=png&", "/wide16/0_files/6/0_0.png?",
+                                   "/wide16/0/xyz/0/0/0.png?"}) {
+      HttpReply refused = httpRequest(port, path + bad);
+      EXPECT_EQ(refused.status, 400u) << path << bad;
+      EXPECT_NE(refused.body.find("window"), std::string::npos) << refused.body;
+    }
+  for (const char* bad : {"gamma=0", "gamma=-1", "gamma=x", "gamma=nan"}) {
+    HttpReply refused = httpRequest(port, std::string("/wide16/0/0/0/0?format=png&") + bad);
+    EXPECT_EQ(refused.status, 400u) << bad;
+    EXPECT_NE(refused.body.find("gamma"), std::string::npos) << refused.body;
+  }
 }
 
 }  // namespace

@@ -252,6 +252,27 @@ TEST_F(Cli, WideSamplesBuildShowAndExtractAsStored) {
         }
       }
     }
+    // Drawn headless through a display window (docs/rendering.md, "Display window"); the
+    // at-rest picture has no CPU reference to be compared with.
+    const std::string flown = work_ + "fly-wide";
+    RunResult drawn = run({"fly", archive_path, "--path", "zoom", "--duration", "0.2", "--fps",
+                           "10", "--viewport", "64x48", "--render", "tile-quads", "--window",
+                           is_float ? "0,0.5" : "p1,p99", "--gamma", "0.8", "-q", "--out", flown});
+    ASSERT_EQ(drawn.exit_code, 0) << drawn.err;
+    const nlohmann::json summary = nlohmann::json::parse(slurp(flown + "/summary.json"));
+    EXPECT_TRUE(summary["rest_psnr_db_min"].is_null());
+    for (const char* window : {"9,2", "p1", "auto,1"}) {
+      RunResult refused = run({"fly", archive_path, "--render", "tile-quads", "--window", window,
+                               "-q", "--out", flown});
+      EXPECT_EQ(refused.exit_code, 2) << window;
+      EXPECT_NE(refused.err.find(std::string("--window: window '") + window + "'"),
+                std::string::npos)
+          << refused.err;
+    }
+    RunResult no_gamma =
+        run({"fly", archive_path, "--render", "tile-quads", "--gamma", "0", "-q", "--out", flown});
+    EXPECT_EQ(no_gamma.exit_code, 2);
+    EXPECT_NE(no_gamma.err.find("--gamma"), std::string::npos) << no_gamma.err;
   }
 }
 

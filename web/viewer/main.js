@@ -13,7 +13,16 @@ import {
   visibleTileRange,
   zoomAbout,
 } from './view.js';
-import { LruCache, RateMeter, planRequests, tileUrl, uniformColour, viewProgress } from './schedule.js';
+import {
+  LruCache,
+  RateMeter,
+  isWide,
+  planRequests,
+  tileUrl,
+  uniformColour,
+  viewProgress,
+  windowQuery,
+} from './schedule.js';
 import { LEVEL_COLOURS, TileRenderer } from './renderer.js';
 
 const DEFAULT_MAX_IN_FLIGHT = 6; // Chromium's and Firefox's HTTP/1.1 connections per host
@@ -29,6 +38,7 @@ class Viewer {
     this.image = null; // info.images[i]
     this.view = null;
     this.overlay = false;
+    this.display = null; // {low, high, gamma} of a wide image; null: the server's default
     this.maxInFlight = DEFAULT_MAX_IN_FLIGHT;
     this.inFlight = new Map(); // key -> {controller, tile}
     this.failed = new Map(); // key -> message
@@ -65,9 +75,37 @@ class Viewer {
     this.generation += 1;
     this.archive = { name, info };
     this.image = image;
+    this.display = null;
     this.view = fitView(image, this.canvas.width, this.canvas.height);
     this.fillImageSelect();
+    this.fillWindowControls();
     this.changed();
+  }
+
+  /**
+   * Shows a wide image through another display window ({low, high, gamma}, or null for the
+   * server's default): every tile is fetched again, mapped by the server (docs/web.md). Throws
+   * a RangeError for a window the server would refuse.
+   */
+  setDisplay(display) {
+    windowQuery(display); // checks it
+    this.cancelAll();
+    this.cache.clear();
+    this.failed.clear();
+    this.generation += 1;
+    this.display = display;
+    this.fillWindowControls();
+    this.changed();
+  }
+
+  fillWindowControls() {
+    const wide = isWide(this.image);
+    $('window').hidden = !wide;
+    if (!wide) return;
+    const shown = this.display || { ...this.image.display_window, gamma: 1 };
+    $('window-low').value = shown.low ?? '';
+    $('window-high').value = shown.high ?? '';
+    $('window-gamma').value = shown.gamma ?? 1;
   }
 
   cancelAll() {
@@ -128,7 +166,7 @@ class Viewer {
     const generation = this.generation;
     this.inFlight.set(tile.key, { controller, tile });
     this.counters.requested += 1;
-    const path = tileUrl(this.archive.name, this.image, tile.level, tile.x, tile.y, forcePng);
+    const path = tileUrl(this.archive.name, this.image, tile.level, tile.x, tile.y, forcePng, this.display);
     const done = () => {
       // A cancelled request was already taken out of the map (maybe replaced by a new one).
       const current = this.inFlight.get(tile.key);
@@ -466,6 +504,22 @@ async function start() {
   archiveSelect.addEventListener('change', () => openAndReport(archiveSelect.value, 0));
   $('image').addEventListener('change', () => openAndReport(viewer.archive.name, Number($('image').value)));
   $('overlay').addEventListener('change', () => viewer.setOverlay($('overlay').checked));
+  const applyWindow = () => {
+    const display = {
+      low: Number.parseFloat($('window-low').value),
+      high: Number.parseFloat($('window-high').value),
+      gamma: Number.parseFloat($('window-gamma').value),
+    };
+    try {
+      viewer.setDisplay(display);
+      $('error').textContent = '';
+    } catch (error) {
+      showError(error);
+    }
+  };
+  for (const id of ['window-low', 'window-high', 'window-gamma'])
+    $(id).addEventListener('change', applyWindow);
+  $('window-auto').addEventListener('click', () => viewer.setDisplay(null));
 
   const params = new URLSearchParams(location.hash.slice(1));
   window.tessera = {
@@ -477,6 +531,7 @@ async function start() {
     status: () => viewer.status(),
     textureAt: (sx, sy) => screenToTexture(viewer.view, sx, sy),
     setOverlay: (on) => viewer.setOverlay(on),
+    setDisplayWindow: (display) => viewer.setDisplay(display),
     showPanels: (on) => {
       for (const id of ['stats', 'bar']) $(id).hidden = !on;
     },

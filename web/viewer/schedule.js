@@ -151,11 +151,33 @@ const BROWSER_TYPES = new Set(['image/jpeg', 'image/png', 'image/webp']);
  * The URL path of a tile for the browser: the stored payload when the archive's codec is one
  * browsers decode (tile_content_type image/jpeg, png or webp), else `?format=png`, a lossless
  * transcode of the same stored tile (borders included). `forcePng` asks for the transcode
- * anyway: uniform and empty tiles have no stored payload.
+ * anyway: uniform and empty tiles have no stored payload. A 16-bit or float image
+ * (sample_type u16 or f32) is always the transcode, mapped to 8 bits by the server with
+ * `display` ({low, high, gamma}; null: the server's default window).
  */
-export function tileUrl(archiveName, image, level, x, y, forcePng = false) {
+export function tileUrl(archiveName, image, level, x, y, forcePng = false, display = null) {
   const path = `${encodeURIComponent(archiveName)}/${image.index}/${level}/${x}/${y}`;
+  if (isWide(image)) return `${path}?format=png${windowQuery(display)}`;
   return forcePng || !BROWSER_TYPES.has(image.tile_content_type) ? `${path}?format=png` : path;
+}
+
+/** True for an image whose samples are not 8-bit: its tiles need a display window. */
+export function isWide(image) {
+  return image.sample_type !== undefined && image.sample_type !== 'u8';
+}
+
+/**
+ * The query parameters of a display window (docs/serve.md): `&window=LOW,HIGH&gamma=G`, or
+ * nothing for null. Throws a RangeError for a window the server would refuse, so that the
+ * viewer says so before any request.
+ */
+export function windowQuery(display) {
+  if (!display) return '';
+  const { low, high, gamma } = display;
+  if (![low, high, gamma].every(Number.isFinite)) throw new RangeError('the window needs numbers');
+  if (!(low < high)) throw new RangeError('the window\'s low end must be below its high end');
+  if (!(gamma > 0)) throw new RangeError('gamma must be above 0');
+  return `&window=${low},${high}&gamma=${gamma}`;
 }
 
 /**

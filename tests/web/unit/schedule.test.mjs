@@ -7,6 +7,7 @@ import {
   RateMeter,
   planRequests,
   tileUrl,
+  windowQuery,
   uniformColour,
   viewProgress,
 } from '../../../web/viewer/schedule.js';
@@ -104,6 +105,20 @@ test('tile URLs: stored payload for browser codecs, a PNG transcode otherwise', 
   assert.equal(tileUrl('earth', png, 3, 4, 5), 'earth/2/3/4/5');
   assert.equal(tileUrl('earth', png, 3, 4, 5, true), 'earth/2/3/4/5?format=png');
   assert.equal(tileUrl('a b', zstd, 0, 1, 2), 'a%20b/0/0/1/2?format=png');
+});
+
+test('tile URLs of wide images: always the 8-bit transcode, with the display window', () => {
+  const u16 = { index: 1, tile_content_type: 'application/octet-stream', sample_type: 'u16' };
+  const u8png = { index: 0, tile_content_type: 'image/png', sample_type: 'u8' };
+  assert.equal(tileUrl('dem', u16, 2, 3, 4), 'dem/1/2/3/4?format=png');
+  assert.equal(
+    tileUrl('dem', u16, 2, 3, 4, false, { low: -5.5, high: 1200, gamma: 0.5 }),
+    'dem/1/2/3/4?format=png&window=-5.5,1200&gamma=0.5',
+  );
+  assert.equal(tileUrl('rgb', u8png, 0, 0, 0, false, { low: 0, high: 1, gamma: 1 }), 'rgb/0/0/0/0');
+  assert.throws(() => windowQuery({ low: 5, high: 5, gamma: 1 }), RangeError);
+  assert.throws(() => windowQuery({ low: 0, high: 5, gamma: 0 }), RangeError);
+  assert.throws(() => windowQuery({ low: Number.NaN, high: 5, gamma: 1 }), RangeError);
 });
 
 test('the byte rate counts the last window only', () => {

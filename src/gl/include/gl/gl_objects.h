@@ -9,6 +9,7 @@
 #include <utility>
 #include <vector>
 
+#include <tessera/format.h>
 #include <tessera/result.h>
 
 namespace tessera::gl {
@@ -88,11 +89,21 @@ GLenum tileInternalFormat(uint32_t channels);
 /// opaque, as tessera/render.h's Picture does.
 void setChannelSwizzle(const Texture& texture, uint32_t channels);
 
-/// A 2D array texture that stores tiles of `channels` channels as they are stored
-/// (GL_R8 ... GL_RGBA8), with a swizzle that shows grey as (g, g, g, 1), grey+alpha as
+/// How tiles of a sample type travel to the GPU and are held there, samples as stored: u8 as
+/// GL_R8 ... GL_RGBA8, u16 as GL_R16 ... GL_RGBA16 (normalised: v / 65535), f32 as GL_R32F ...
+/// GL_RGBA32F. The shaders' display window maps them back to sample values (renderer_base).
+struct TileTexelFormat {
+  GLenum internal_format = GL_R8;  ///< for glTextureStorage*
+  GLenum pixel_format = GL_RED;    ///< GL_RED ... GL_RGBA, for pixel transfers
+  GLenum pixel_type = GL_UNSIGNED_BYTE;
+};
+TileTexelFormat tileTexelFormat(uint32_t channels, SampleType type);
+
+/// A 2D array texture that stores tiles of `channels` channels of `type` as they are stored
+/// (tileTexelFormat), with a swizzle that shows grey as (g, g, g, 1), grey+alpha as
 /// (g, g, g, a) and RGB as opaque, as tessera/render.h's Picture does. Linear filtering,
 /// clamped at the edges. Null when the driver cannot allocate it.
-Texture createTileArray(uint32_t channels, GLsizei side, GLsizei layers);
+Texture createTileArray(uint32_t channels, SampleType type, GLsizei side, GLsizei layers);
 
 /// A frame's upload staging: the bytes of every tile copied into one pixel-unpack buffer,
 /// orphaned each frame so the driver never waits for the previous frame's transfer.

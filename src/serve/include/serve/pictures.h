@@ -7,6 +7,7 @@
 #include <string>
 
 #include <tessera/archive.h>
+#include <tessera/display_window.h>
 #include <tessera/result.h>
 
 namespace tessera::detail {
@@ -47,21 +48,27 @@ struct Picture {
   bool copied = false;  ///< the stored payload as is, neither decoded nor encoded
 };
 
+/// Pictures of u16 and f32 images are their samples mapped to RGBA8 by `window`
+/// (windowToRgba8; NaN transparent); u8 images ignore it.
+///
 /// DZI tile (dz_level, col, row) of `image`, edge tiles cropped to the image, encoded in
 /// `format`. kNotFound outside the pyramid or the level's tile grid.
 [[nodiscard]] Result<Picture> renderDziTile(const Archive& archive, uint32_t image,
                                             uint32_t dz_level, uint32_t col, uint32_t row,
-                                            PictureFormat format, int jpeg_quality);
+                                            PictureFormat format, int jpeg_quality,
+                                            const DisplayWindow& window = {});
 
 /// XYZ tile (z, x, y): always 256 x 256, the part outside the image transparent (PNG) or
 /// black (JPEG). kNotFound for z > xyzMaxZoom or a tile wholly outside the image.
 [[nodiscard]] Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z,
                                             uint32_t x, uint32_t y, PictureFormat format,
-                                            int jpeg_quality);
+                                            int jpeg_quality, const DisplayWindow& window = {});
 
 /// A stored tile (borders included, the stored geometry) decoded and re-encoded: for codecs
-/// browsers cannot decode and for empty/uniform tiles, which have no payload.
+/// browsers cannot decode and for empty/uniform tiles, which have no payload. A u16 or f32
+/// tile is mapped to RGBA8 by `window` (windowToRgba8: NaN transparent); u8 tiles ignore it.
 [[nodiscard]] Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,
-                                                  PictureFormat format, int jpeg_quality);
+                                                  PictureFormat format, int jpeg_quality,
+                                                  const DisplayWindow& window = {});
 
 }  // namespace tessera::detail
