@@ -35,6 +35,8 @@ if [[ ! -s earth.jpg ]]; then
 fi
 archive=real-16384-t256-q85.tess
 if [[ ! -s $archive ]]; then
+  command -v vips >/dev/null ||
+    { echo "real_jump.sh: needs vips (libvips-tools, scripts/install-deps.sh)" >&2; exit 1; }
   # Not measurements: niced, on spare cycles.
   nice -n 10 vips replicate earth.jpg "real-16384.tmp.tif[tile,tile-width=256,tile-height=256]" 8 16
   mv real-16384.tmp.tif real-16384.tif
