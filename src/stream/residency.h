@@ -78,6 +78,8 @@ class ResidencyManager {
   void addRect(uint32_t level, const TileRect& rect, int cls, bool prefetch, bool ahead = false);
   void addVisibleOrtho();
   void addVisiblePerspective(const View& view);
+  /// True when the view centre moved a whole clip region or more since the last frame.
+  bool jumpedThisFrame() const;
   void addLookahead();
   /// Class 2 and the keep regions; returns the desired level's clip region.
   TileRect addClipRegions();

@@ -489,6 +489,19 @@ TEST(Residency, AJumpIsNotAVelocityForTheLookahead) {
   EXPECT_FALSE(residency.isWanted({0, 0, 55, 32}));
 }
 
+TEST(Residency, AJumpPrefetchesNothingBeyondTheNewRegion) {
+  ImageInfo info = imageOf(16384, 16384, 256);
+  const double t = 256;
+  ResidencyOptions options;
+  options.lookahead_frames = 0;  // the prefetch rule alone, as in DirectionalPrefetch
+  ResidencyManager residency(info, 0, options);
+  residency.plan(orthoView(10.5 * t, 10.5 * t, 1, 1920, 1080));
+  // 30 tiles right and down in one frame: both boundaries crossed, yet no row or column.
+  EXPECT_TRUE(prefetchOf(residency.plan(orthoView(40.5 * t, 40.5 * t, 1, 1920, 1080))).empty());
+  // One region less a tile is a flight: the crossing prefetches again.
+  EXPECT_FALSE(prefetchOf(residency.plan(orthoView(55.5 * t, 40.5 * t, 1, 1920, 1080))).empty());
+}
+
 TEST(Residency, MovingWithinATilePrefetchesNothing) {
   ImageInfo info = imageOf(16384, 16384, 256);
   ResidencyManager residency(info, 0, {});
