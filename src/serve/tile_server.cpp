@@ -184,7 +184,11 @@ struct TileServer::Impl {
   ~Impl() {
     if (reserve_fd >= 0) ::close(reserve_fd);
   }
+  /// Most connections taken from the backlog in one turn of the accepting thread.
+  static constexpr int kAcceptBatch = 64;
   void accept();
+  /// Starts serving an accepted socket, or closes it when over --max-connections.
+  void adopt(tcp::socket socket);
   /// On EMFILE/ENFILE: refuses one waiting connection through the reserve descriptor. False
   /// when there was no reserve to spend (the caller retries later).
   bool refuseOverFileLimit();
@@ -506,34 +510,52 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   bool stop_requested_ = false;  // close after the response in progress
 };
 
+void TileServer::Impl::adopt(tcp::socket socket) {
+  out_of_descriptors = false;
+  if (metrics.open() >= options.max_connections) {
+    metrics.connectionRejected();
+    beast::error_code ignored;
+    socket.close(ignored);
+    return;
+  }
+  // Responses leave in one write; Nagle's algorithm would only hold back the tail of a large
+  // one behind a delayed ACK.
+  beast::error_code ignored;
+  socket.set_option(tcp::no_delay(true), ignored);
+  if (std::shared_ptr<ssl::context> tls = currentTls())
+    std::make_shared<Connection<TlsStream>>(*this, std::move(socket), std::move(tls))->start();
+  else
+    std::make_shared<Connection<PlainStream>>(*this, std::move(socket), nullptr)->start();
+}
+
 void TileServer::Impl::accept() {
   net::io_context& context = *contexts[next_context++ % contexts.size()];
   acceptor->async_accept(context, [this](beast::error_code ec, tcp::socket socket) {
     if (ec == net::error::operation_aborted || stopping.load()) return;
+    if (!ec) {
+      adopt(std::move(socket));
+      // Connections come in bursts (a viewer opening, a thousand clients at once): the ones
+      // already waiting are taken now, not one per turn of this thread's queue, where each
+      // would wait behind the handlers of every open connection. The acceptor is
+      // non-blocking, so the loop ends at would_block.
+      for (int taken = 0; taken < kAcceptBatch && !ec; ++taken) {
+        tcp::socket next(*contexts[next_context % contexts.size()]);
+        if (acceptor->accept(next, ec); ec) break;
+        ++next_context;
+        adopt(std::move(next));
+      }
+      if (ec == net::error::would_block || ec == net::error::try_again) ec = {};
+    }
     if (outOfDescriptors(ec) && refuseOverFileLimit()) return accept();
     if (ec) {
-      // Out of descriptors and the like: try again shortly instead of spinning.
+      // Out of descriptors without a reserve, and the like: try again shortly instead of
+      // spinning.
       metrics.recordError(detail::ServeError::kIo);
       accept_retry->expires_after(std::chrono::milliseconds(50));
       accept_retry->async_wait([this](beast::error_code wait_ec) {
         if (!wait_ec) accept();
       });
       return;
-    }
-    out_of_descriptors = false;
-    if (metrics.open() >= options.max_connections) {
-      metrics.connectionRejected();
-      beast::error_code ignored;
-      socket.close(ignored);
-    } else {
-      // Responses leave in one write; Nagle's algorithm would only hold back the tail of a
-      // large one behind a delayed ACK.
-      beast::error_code ignored;
-      socket.set_option(tcp::no_delay(true), ignored);
-      if (std::shared_ptr<ssl::context> tls = currentTls())
-        std::make_shared<Connection<TlsStream>>(*this, std::move(socket), std::move(tls))->start();
-      else
-        std::make_shared<Connection<PlainStream>>(*this, std::move(socket), nullptr)->start();
     }
     accept();
   });
@@ -625,7 +647,10 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
     return fail(ErrorCode::kIo, fmt::format("serve: cannot bind {}: {}", where, ec.message()));
   if (impl->acceptor->listen(net::socket_base::max_listen_connections, ec); ec)
     return fail(ErrorCode::kIo, fmt::format("serve: cannot listen on {}: {}", where, ec.message()));
-  // refuseOverFileLimit accepts on the raw descriptor and must never block there.
+  // The accept handler's batch and refuseOverFileLimit accept synchronously, and must get
+  // would_block instead of waiting when nobody is left in the backlog (asynchronous accepts
+  // are unaffected).
+  impl->acceptor->non_blocking(true, ec);
   impl->acceptor->native_non_blocking(true, ec);
   impl->port = impl->acceptor->local_endpoint().port();
   impl->address = address.to_string();
