@@ -74,30 +74,32 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# tessera serve: the port comes from its first line.
-mkfifo "$RUN/tessera.out"
-"$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" >"$RUN/tessera.out" 2>"$RUN/tessera.err" &
-TESSERA_PID=$!
-PIDS+=($TESSERA_PID)
-exec 3<"$RUN/tessera.out"
-read -r line <&3
-TESSERA_PORT=${line##*:}
-echo "serve_bench: $line (threads $THREADS)"
+# tessera serve: the port comes from its first line, read through a FIFO kept open for the
+# whole run. Sets STARTED_PID and STARTED_PORT.
+start_tessera() {  # name [serve options...]
+  local name=$1 fd line
+  shift
+  mkfifo "$RUN/$name.out"
+  "$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" "$@" >"$RUN/$name.out" 2>"$RUN/$name.err" &
+  STARTED_PID=$!
+  PIDS+=($STARTED_PID)
+  exec {fd}<"$RUN/$name.out"
+  read -r line <&"$fd"
+  STARTED_PORT=${line##*:}
+  echo "serve_bench: $line (threads $THREADS)"
+}
+
+start_tessera tessera
+TESSERA_PID=$STARTED_PID
+TESSERA_PORT=$STARTED_PORT
 
 # One self-signed certificate for both TLS servers (wrk does not verify it).
 openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 1 -subj /CN=127.0.0.1 \
   -keyout "$RUN/key.pem" -out "$RUN/cert.pem" 2>/dev/null
 chmod 644 "$RUN/key.pem"
 if ((TLS)); then
-  mkfifo "$RUN/tessera-tls.out"
-  "$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" --tls-cert "$RUN/cert.pem" \
-    --tls-key "$RUN/key.pem" >"$RUN/tessera-tls.out" 2>"$RUN/tessera-tls.err" &
-  TESSERA_TLS_PID=$!
-  PIDS+=($TESSERA_TLS_PID)
-  exec 5<"$RUN/tessera-tls.out"
-  read -r line <&5
-  TESSERA_TLS_PORT=${line##*:}
-  echo "serve_bench: $line"
+  start_tessera tessera-tls --tls-cert "$RUN/cert.pem" --tls-key "$RUN/key.pem"
+  TESSERA_TLS_PORT=$STARTED_PORT
 fi
 
 # Tile list and files: every encoded tile (204 = uniform or empty, no payload, skipped).
