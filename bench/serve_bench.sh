@@ -1,24 +1,31 @@
 #!/usr/bin/env bash
-# HTTP tile server load test (issue 5, item 7): `tessera serve` next to nginx serving the same
-# tile bytes as plain files, both on loopback, both measured by wrk in one run.
+# HTTP tile server load test (issue 5, item 7; issue 34, item 6): `tessera serve` next to nginx
+# serving the same tile bytes as plain files, both on loopback, plain HTTP and HTTPS, all
+# measured by wrk in one run.
 #
 #   1. an archive (synthetic 8192 x 8192, 256-px JPEG q85 tiles, no border) is built once into
 #      $TESSERA_BENCH_DIR/serve (reused when present);
 #   2. tessera serve starts on an ephemeral port; every encoded tile of every level is fetched
 #      from it once into files at the same URL paths (tiles/<archive>/<image>/<level>/<x>/<y>),
 #      which both warms the page cache and gives nginx the identical bytes;
-#   3. nginx starts on loopback with its own config, pid and logs in a temp folder;
-#   4. wrk (random tiles from the list, --latency) runs against each server at 64 and 1000
-#      connections, then at 64 connections while a helper holds 1000 slow clients (partial
-#      headers, one byte every few seconds, reconnecting when closed) on the same server;
+#   3. nginx starts on loopback with its own config, pid and logs in a temp folder, with a
+#      plain and a TLS port; a second tessera serve runs with --tls-cert; both TLS servers use
+#      one self-signed P-256 certificate made by openssl for the run;
+#   4. wrk (random tiles from the list, --latency, keep-alive) runs against each server at each
+#      count of --connections (default 64 and 1000), plain and TLS, alternating tessera and
+#      nginx; then (unless --no-slow) at 64 connections while a helper holds 1000 slow clients
+#      (partial headers, one byte every few seconds, reconnecting when closed) on the plain
+#      servers;
 #   5. a table of requests/s, MB/s and p50/p99 latency, and the tessera/nginx ratios, against
-#      the targets (throughput >= 0.8x nginx; p99 < 20 ms at 64 connections; p99 < 100 ms
-#      with 1000 slow clients).
+#      the targets (issue 34: at 1000 connections throughput >= 1.0x nginx and p99 < 50 ms,
+#      TLS on and off; issue 5: p99 < 20 ms at 64 connections, < 100 ms with 1000 slow
+#      clients).
 #
 # Both servers get the same number of worker threads (--threads, default: all cores). The
 # machine is shared: the 1-minute load average is printed before every run.
 #
-#   bench/serve_bench.sh [--duration 10] [--threads N] [--build-dir build]
+#   bench/serve_bench.sh [--duration 10] [--threads N] [--connections "64 1000"] [--no-tls]
+#                        [--no-slow] [--build-dir build]
 set -euo pipefail
 
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -26,18 +33,24 @@ WORK=${TESSERA_BENCH_DIR:-/tmp/tessera-bench}/serve
 BUILD_DIR=$REPO/build
 DURATION=10
 THREADS=$(nproc)
+CONNECTIONS="64 1000"
+TLS=1
+SLOW=1
 while (($#)); do
   case $1 in
     --duration) DURATION=$2; shift 2 ;;
     --threads) THREADS=$2; shift 2 ;;
+    --connections) CONNECTIONS=$2; shift 2 ;;
+    --no-tls) TLS=0; shift ;;
+    --no-slow) SLOW=0; shift ;;
     --build-dir) BUILD_DIR=$2; shift 2 ;;
-    -h|--help) sed -n '2,24p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,31p' "$0"; exit 0 ;;
     *) echo "serve_bench: unknown option $1" >&2; exit 2 ;;
   esac
 done
 
 TESSERA=$BUILD_DIR/src/tools/tessera
-for tool in "$TESSERA" nginx wrk curl python3; do
+for tool in "$TESSERA" nginx wrk curl python3 openssl; do
   command -v "$tool" >/dev/null || [[ -x $tool ]] || { echo "serve_bench: $tool not found" >&2; exit 1; }
 done
 NGINX=$(command -v nginx)
@@ -61,15 +74,33 @@ cleanup() {
 }
 trap cleanup EXIT
 
-# tessera serve: the port comes from its first line.
-mkfifo "$RUN/tessera.out"
-"$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" >"$RUN/tessera.out" 2>"$RUN/tessera.err" &
-TESSERA_PID=$!
-PIDS+=($TESSERA_PID)
-exec 3<"$RUN/tessera.out"
-read -r line <&3
-TESSERA_PORT=${line##*:}
-echo "serve_bench: $line (threads $THREADS)"
+# tessera serve: the port comes from its first line, read through a FIFO kept open for the
+# whole run. Sets STARTED_PID and STARTED_PORT.
+start_tessera() {  # name [serve options...]
+  local name=$1 fd line
+  shift
+  mkfifo "$RUN/$name.out"
+  "$TESSERA" serve "$ARCHIVE" --port 0 --threads "$THREADS" "$@" >"$RUN/$name.out" 2>"$RUN/$name.err" &
+  STARTED_PID=$!
+  PIDS+=($STARTED_PID)
+  exec {fd}<"$RUN/$name.out"
+  read -r line <&"$fd"
+  STARTED_PORT=${line##*:}
+  echo "serve_bench: $line (threads $THREADS)"
+}
+
+start_tessera tessera
+TESSERA_PID=$STARTED_PID
+TESSERA_PORT=$STARTED_PORT
+
+# One self-signed certificate for both TLS servers (wrk does not verify it).
+openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 1 -subj /CN=127.0.0.1 \
+  -keyout "$RUN/key.pem" -out "$RUN/cert.pem" 2>/dev/null
+chmod 644 "$RUN/key.pem"
+if ((TLS)); then
+  start_tessera tessera-tls --tls-cert "$RUN/cert.pem" --tls-key "$RUN/key.pem"
+  TESSERA_TLS_PORT=$STARTED_PORT
+fi
 
 # Tile list and files: every encoded tile (204 = uniform or empty, no payload, skipped).
 python3 - "$TESSERA_PORT" "$RUN" <<'EOF'
@@ -105,13 +136,16 @@ EOF
 chmod -R a+rX "$RUN/tiles"
 
 # nginx: its own config, pid and logs; the tiles as files; the same number of workers.
-NGINX_PORT=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])')
+free_port() { python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1",0)); print(s.getsockname()[1])'; }
+NGINX_PORT=$(free_port)
+NGINX_TLS_PORT=$(free_port)
 mkdir -p "$RUN/nginx-tmp"
 cat >"$RUN/nginx.conf" <<EOF
 worker_processes $THREADS;
 pid $RUN/nginx.pid;
 error_log $RUN/nginx-error.log warn;
-events { worker_connections 4096; }
+worker_rlimit_nofile 20000;
+events { worker_connections 8192; }
 http {
   access_log off;
   sendfile on;
@@ -123,8 +157,13 @@ http {
   uwsgi_temp_path $RUN/nginx-tmp;
   scgi_temp_path $RUN/nginx-tmp;
   default_type application/octet-stream;
+  ssl_certificate $RUN/cert.pem;
+  ssl_certificate_key $RUN/key.pem;
+  ssl_protocols TLSv1.2 TLSv1.3;
+  ssl_session_cache shared:bench:1m;
   server {
     listen 127.0.0.1:$NGINX_PORT;
+    listen 127.0.0.1:$NGINX_TLS_PORT ssl;
     root $RUN/tiles;
     add_header Cache-Control "public, max-age=31536000, immutable";
   }
@@ -182,12 +221,12 @@ EOF
 
 RESULTS=$RUN/results.txt
 : >"$RESULTS"
-run_wrk() {  # name port connections
-  local name=$1 port=$2 conns=$3
+run_wrk() {  # name port connections [scheme]
+  local name=$1 port=$2 conns=$3 scheme=${4:-http}
   local wrk_threads=$((THREADS < 4 ? THREADS : 4))
   echo "serve_bench: $name, $conns connections, ${DURATION}s, load average $(cut -d' ' -f1 /proc/loadavg)"
   TILE_LIST=$RUN/paths.txt wrk -t"$wrk_threads" -c"$conns" -d"${DURATION}s" --latency \
-    -s "$RUN/random_tiles.lua" "http://127.0.0.1:$port" >"$RUN/wrk.txt" 2>&1
+    -s "$RUN/random_tiles.lua" "$scheme://127.0.0.1:$port" >"$RUN/wrk.txt" 2>&1
   python3 - "$name" "$conns" "$RUN/wrk.txt" >>"$RESULTS" <<'EOF'
 import re, sys
 name, conns, path = sys.argv[1], sys.argv[2], sys.argv[3]
@@ -207,12 +246,21 @@ EOF
   tail -1 "$RESULTS"
 }
 
-run_wrk tessera "$TESSERA_PORT" 64
-run_wrk nginx "$NGINX_PORT" 64
-run_wrk tessera "$TESSERA_PORT" 1000
-run_wrk nginx "$NGINX_PORT" 1000
+if ((TLS)); then
+  curl -sfk -o /dev/null "https://127.0.0.1:$NGINX_TLS_PORT$(head -1 "$RUN/paths.txt")" ||
+    { echo "serve_bench: nginx does not serve the tiles over TLS" >&2; exit 1; }
+fi
+for conns in $CONNECTIONS; do
+  run_wrk tessera "$TESSERA_PORT" "$conns"
+  run_wrk nginx "$NGINX_PORT" "$conns"
+  if ((TLS)); then
+    run_wrk tessera-tls "$TESSERA_TLS_PORT" "$conns" https
+    run_wrk nginx-tls "$NGINX_TLS_PORT" "$conns" https
+  fi
+done
 
 for target in tessera nginx; do
+  ((SLOW)) || break
   port=$TESSERA_PORT
   [[ $target == nginx ]] && port=$NGINX_PORT
   mkfifo "$RUN/slow.$target"
@@ -236,14 +284,17 @@ echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket erro
 echo "|---|---:|---:|---:|---:|---:|---|---:|"
 awk -F'\t' '{printf "| %s | %s | %s | %s | %s | %s | %s | %s |\n", $1, $2, $3, $4, $5, $6, $7, $8}' "$RESULTS"
 echo
-awk -F'\t' '
+awk -F'\t' -v conns_list="$CONNECTIONS" -v tls="$TLS" -v slow="$SLOW" '
   { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6 }
   END {
-    split("64 1000", conns, " ")
-    for (i = 1; i <= 2; ++i) {
+    n = split(conns_list, conns, " ")
+    for (i = 1; i <= n; ++i) {
       k = conns[i]
-      printf "throughput tessera/nginx at %s connections: %.2f (target >= 0.8)\n", k, rps["tessera@" k] / rps["nginx@" k]
+      for (t = 0; t <= tls; ++t) {
+        suffix = t ? "-tls" : ""
+        printf "%s at %s connections: throughput tessera/nginx %.2f, p99 tessera %s ms, nginx %s ms\n", t ? "TLS  " : "plain", k, rps["tessera" suffix "@" k] / rps["nginx" suffix "@" k], p99["tessera" suffix "@" k], p99["nginx" suffix "@" k]
+      }
     }
-    printf "tessera p99 at 64 connections: %s ms (target < 20)\n", p99["tessera@64"]
-    printf "tessera p99 at 64 connections with 1000 slow clients: %s ms (target < 100); nginx: %s ms\n", p99["tessera+1000slow@64"], p99["nginx+1000slow@64"]
+    print "targets: at 1000 connections throughput >= 1.0x nginx and p99 < 50 ms, TLS on and off; p99 < 20 ms at 64"
+    if (slow) printf "tessera p99 at 64 connections with 1000 slow clients: %s ms (target < 100); nginx: %s ms\n", p99["tessera+1000slow@64"], p99["nginx+1000slow@64"]
   }' "$RESULTS"

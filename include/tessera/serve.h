@@ -77,7 +77,7 @@ struct ServeStats {
   uint64_t responses_5xx = 0;
   uint64_t body_bytes_sent = 0;
   uint64_t connections_accepted = 0;
-  uint64_t connections_rejected = 0;  ///< over max_connections
+  uint64_t connections_rejected = 0;  ///< over max_connections or the file descriptor limit
   uint64_t connections_open = 0;      ///< gauge
   uint64_t timeouts = 0;              ///< connections closed by a header/body/idle/send timeout
   uint64_t parse_errors = 0;          ///< malformed requests answered 4xx and closed

@@ -42,15 +42,16 @@ void Metrics::recordResponse(Endpoint endpoint, unsigned status, uint64_t body_b
   while (bucket < kLatencyBuckets.size() && latency_s > kLatencyBuckets[bucket]) ++bucket;
   latency_counts_[bucket].fetch_add(1);
   latency_sum_us_.fetch_add(uint64_t(latency_s * 1e6));
-  std::lock_guard lock(mutex_);
-  ++by_status_[{endpoint, status}];
+  if (status >= kFirstStatus && status < kFirstStatus + kStatuses)
+    by_status_[size_t(endpoint)][status - kFirstStatus].fetch_add(1, std::memory_order_relaxed);
 }
 
 uint64_t Metrics::responsesOfClass(unsigned klass) const {
-  std::lock_guard lock(mutex_);
   uint64_t total = 0;
-  for (const auto& [key, count] : by_status_)
-    if (key.second / 100 == klass) total += count;
+  if (klass < 1 || klass > 5) return 0;
+  for (const auto& statuses : by_status_)
+    for (unsigned status = klass * 100; status < klass * 100 + 100; ++status)
+      total += statuses[status - kFirstStatus].load(std::memory_order_relaxed);
   return total;
 }
 
@@ -65,12 +66,11 @@ std::string Metrics::render(const TranscodeCache::Stats& cache) const {
   out +=
       "# HELP tessera_http_requests_total HTTP responses sent, by endpoint and status.\n"
       "# TYPE tessera_http_requests_total counter\n";
-  {
-    std::lock_guard lock(mutex_);
-    for (const auto& [key, count] : by_status_)
-      out += fmt::format("tessera_http_requests_total{{endpoint=\"{}\",status=\"{}\"}} {}\n",
-                         endpointName(key.first), key.second, count);
-  }
+  for (size_t endpoint = 0; endpoint < by_status_.size(); ++endpoint)
+    for (unsigned i = 0; i < kStatuses; ++i)
+      if (const uint64_t count = by_status_[endpoint][i].load(std::memory_order_relaxed))
+        out += fmt::format("tessera_http_requests_total{{endpoint=\"{}\",status=\"{}\"}} {}\n",
+                           endpointName(Endpoint(endpoint)), i + kFirstStatus, count);
   counter("tessera_http_response_body_bytes_total", "Response body bytes sent.",
           body_bytes_.load());
   out +=

@@ -5,8 +5,6 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
-#include <map>
-#include <mutex>
 #include <string>
 
 #include "transcode_cache.h"
@@ -40,7 +38,8 @@ enum class ServeError : uint8_t {
   kCount,
 };
 
-/// Thread-safe: counters are atomics, the (endpoint, status) table has its own mutex.
+/// Thread-safe and lock-free: every counter is an atomic, the (endpoint, status) table too, so
+/// I/O threads recording responses never wait for one another.
 class Metrics {
  public:
   /// Upper bounds of the latency histogram, in seconds.
@@ -73,8 +72,9 @@ class Metrics {
   std::array<std::atomic<uint64_t>, size_t(ServeError::kCount)> errors_{};
   std::array<std::atomic<uint64_t>, kLatencyBuckets.size() + 1> latency_counts_{};
   std::atomic<uint64_t> latency_sum_us_{0};
-  mutable std::mutex mutex_;  // guards by_status_
-  std::map<std::pair<Endpoint, unsigned>, uint64_t> by_status_;
+  /// Responses by endpoint and status, statuses 100..599 (HTTP's range) at status - 100.
+  static constexpr unsigned kFirstStatus = 100, kStatuses = 500;
+  std::array<std::array<std::atomic<uint64_t>, kStatuses>, size_t(Endpoint::kCount)> by_status_{};
 };
 
 }  // namespace tessera::detail

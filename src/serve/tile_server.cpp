@@ -5,6 +5,12 @@
 // stream): only the handshake and the close differ.
 #include <tessera/serve.h>
 
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
 #include <condition_variable>
 #include <cstdio>
@@ -60,6 +66,25 @@ std::string withoutSignature(std::string_view target) {
     out.replace(at + 4, end - at - 4, "REDACTED");
   }
   return out;
+}
+
+// Every connection holds a descriptor, and the usual soft limit (1024) is far below what a
+// busy server needs; the soft limit is raised to the hard one, which only the administrator
+// can raise further. Returns the limit in force.
+uint64_t raiseFileLimit() {
+  rlimit limit{};
+  if (::getrlimit(RLIMIT_NOFILE, &limit) != 0) return 0;
+  if (limit.rlim_cur < limit.rlim_max) {
+    rlimit raised = limit;
+    raised.rlim_cur = limit.rlim_max;
+    if (::setrlimit(RLIMIT_NOFILE, &raised) == 0) return uint64_t(raised.rlim_cur);
+  }
+  return uint64_t(limit.rlim_cur);
+}
+
+bool outOfDescriptors(const boost::system::error_code& ec) {
+  return ec.category() == boost::system::system_category() &&
+         (ec.value() == EMFILE || ec.value() == ENFILE);
 }
 
 class AccessLog {
@@ -147,10 +172,26 @@ struct TileServer::Impl {
   std::vector<std::thread> threads;
   uint16_t port = 0;
   std::string address;
+  uint64_t file_limit = 0;  // RLIMIT_NOFILE after raiseFileLimit
+  // A descriptor held in reserve (on /dev/null): when the process runs out, it is released to
+  // accept one waiting connection and close it, so clients over the limit are refused at once
+  // instead of waiting in the backlog; then it is taken back. Used by the accept handler only.
+  int reserve_fd = -1;
+  bool out_of_descriptors = false;  // reported once per episode; accept handler only
   bool stopped = false;
   std::mutex stop_mutex;  // serialises stop()
 
+  ~Impl() {
+    if (reserve_fd >= 0) ::close(reserve_fd);
+  }
+  /// Most connections taken from the backlog in one turn of the accepting thread.
+  static constexpr int kAcceptBatch = 64;
   void accept();
+  /// Starts serving an accepted socket, or closes it when over --max-connections.
+  void adopt(tcp::socket socket);
+  /// On EMFILE/ENFILE: refuses one waiting connection through the reserve descriptor. False
+  /// when there was no reserve to spend (the caller retries later).
+  bool refuseOverFileLimit();
   std::shared_ptr<ssl::context> currentTls() {
     std::lock_guard lock(tls_mutex);
     return tls_context;
@@ -314,8 +355,11 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
     const Request& request = parser_->get();
     detail::RoutedResponse routed = server_.router->handle(request, peer_);
     endpoint_ = routed.endpoint;
-    method_ = std::string(request.method_string());
-    target_ = std::string(request.target());
+    // Kept for the access log line only: two allocations per request saved without one.
+    if (server_.access_log.enabled()) {
+      method_ = std::string(request.method_string());
+      target_ = std::string(request.target());
+    }
     head_ = request.method() == http::verb::head;
     const bool keep_alive = request.keep_alive() && !stop_requested_ &&
                             !server_.stopping.load(std::memory_order_relaxed);
@@ -466,12 +510,46 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   bool stop_requested_ = false;  // close after the response in progress
 };
 
+void TileServer::Impl::adopt(tcp::socket socket) {
+  out_of_descriptors = false;
+  if (metrics.open() >= options.max_connections) {
+    metrics.connectionRejected();
+    beast::error_code ignored;
+    socket.close(ignored);
+    return;
+  }
+  // Responses leave in one write; Nagle's algorithm would only hold back the tail of a large
+  // one behind a delayed ACK.
+  beast::error_code ignored;
+  socket.set_option(tcp::no_delay(true), ignored);
+  if (std::shared_ptr<ssl::context> tls = currentTls())
+    std::make_shared<Connection<TlsStream>>(*this, std::move(socket), std::move(tls))->start();
+  else
+    std::make_shared<Connection<PlainStream>>(*this, std::move(socket), nullptr)->start();
+}
+
 void TileServer::Impl::accept() {
   net::io_context& context = *contexts[next_context++ % contexts.size()];
   acceptor->async_accept(context, [this](beast::error_code ec, tcp::socket socket) {
     if (ec == net::error::operation_aborted || stopping.load()) return;
+    if (!ec) {
+      adopt(std::move(socket));
+      // Connections come in bursts (a viewer opening, a thousand clients at once): the ones
+      // already waiting are taken now, not one per turn of this thread's queue, where each
+      // would wait behind the handlers of every open connection. The acceptor is
+      // non-blocking, so the loop ends at would_block.
+      for (int taken = 0; taken < kAcceptBatch && !ec; ++taken) {
+        tcp::socket next(*contexts[next_context % contexts.size()]);
+        if (acceptor->accept(next, ec); ec) break;
+        ++next_context;
+        adopt(std::move(next));
+      }
+      if (ec == net::error::would_block || ec == net::error::try_again) ec = {};
+    }
+    if (outOfDescriptors(ec) && refuseOverFileLimit()) return accept();
     if (ec) {
-      // Out of descriptors and the like: try again shortly instead of spinning.
+      // Out of descriptors without a reserve, and the like: try again shortly instead of
+      // spinning.
       metrics.recordError(detail::ServeError::kIo);
       accept_retry->expires_after(std::chrono::milliseconds(50));
       accept_retry->async_wait([this](beast::error_code wait_ec) {
@@ -479,22 +557,40 @@ void TileServer::Impl::accept() {
       });
       return;
     }
-    if (metrics.open() >= options.max_connections) {
-      metrics.connectionRejected();
-      beast::error_code ignored;
-      socket.close(ignored);
-    } else {
-      // Responses leave in one write; Nagle's algorithm would only hold back the tail of a
-      // large one behind a delayed ACK.
-      beast::error_code ignored;
-      socket.set_option(tcp::no_delay(true), ignored);
-      if (std::shared_ptr<ssl::context> tls = currentTls())
-        std::make_shared<Connection<TlsStream>>(*this, std::move(socket), std::move(tls))->start();
-      else
-        std::make_shared<Connection<PlainStream>>(*this, std::move(socket), nullptr)->start();
-    }
     accept();
   });
+}
+
+bool TileServer::Impl::refuseOverFileLimit() {
+  if (!out_of_descriptors) {
+    out_of_descriptors = true;
+    std::fprintf(stderr,
+                 "tessera serve: out of file descriptors (limit %llu, %llu connections open): "
+                 "refusing new connections until some close; raise the hard limit (ulimit -Hn, "
+                 "LimitNOFILE=) to serve more\n",
+                 static_cast<unsigned long long>(file_limit),
+                 static_cast<unsigned long long>(metrics.open()));
+  }
+  if (reserve_fd < 0) return false;
+  ::close(reserve_fd);
+  reserve_fd = -1;
+  const int refused = ::accept4(acceptor->native_handle(), nullptr, nullptr, SOCK_CLOEXEC);
+  if (refused >= 0) {
+    metrics.connectionRejected();
+    // Plain HTTP clients get a reason; a TLS client sees the connection closed. Best effort:
+    // the socket is fresh, so a short send fits its buffer or is dropped.
+    if (!currentTls()) {
+      static constexpr std::string_view kBusy =
+          "HTTP/1.1 503 Service Unavailable\r\nContent-Length: 0\r\nConnection: close\r\n"
+          "Retry-After: 1\r\n\r\n";
+      [[maybe_unused]] const ssize_t sent =
+          ::send(refused, kBusy.data(), kBusy.size(), MSG_DONTWAIT | MSG_NOSIGNAL);
+      ::shutdown(refused, SHUT_WR);
+    }
+    ::close(refused);
+  }
+  reserve_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  return refused >= 0 || errno == EAGAIN || errno == EWOULDBLOCK;
 }
 
 Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& options) {
@@ -507,6 +603,15 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   TESSERA_ASSIGN_OR_RETURN(detail::Catalog catalog, detail::loadCatalog(options.paths));
   auto impl = std::make_unique<Impl>();
   impl->options = options;
+  impl->file_limit = raiseFileLimit();
+  impl->reserve_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  // Past the limit connections are refused cleanly, but an operator should know beforehand
+  // (a few descriptors go to the archives, the log and the I/O threads' event queues).
+  if (impl->file_limit != 0 && impl->file_limit < uint64_t(options.max_connections) + 64)
+    std::fprintf(stderr,
+                 "tessera serve: the file descriptor limit (%llu) is below --max-connections "
+                 "(%u) plus 64 spare: connections past it are refused\n",
+                 static_cast<unsigned long long>(impl->file_limit), options.max_connections);
   std::shared_ptr<const detail::AccessRules> access;
   if (!options.access_file.empty()) {
     TESSERA_ASSIGN_OR_RETURN(access, detail::AccessRules::load(options.access_file));
@@ -542,6 +647,11 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
     return fail(ErrorCode::kIo, fmt::format("serve: cannot bind {}: {}", where, ec.message()));
   if (impl->acceptor->listen(net::socket_base::max_listen_connections, ec); ec)
     return fail(ErrorCode::kIo, fmt::format("serve: cannot listen on {}: {}", where, ec.message()));
+  // The accept handler's batch and refuseOverFileLimit accept synchronously, and must get
+  // would_block instead of waiting when nobody is left in the backlog (asynchronous accepts
+  // are unaffected).
+  impl->acceptor->non_blocking(true, ec);
+  impl->acceptor->native_non_blocking(true, ec);
   impl->port = impl->acceptor->local_endpoint().port();
   impl->address = address.to_string();
 
