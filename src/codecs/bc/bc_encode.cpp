@@ -189,6 +189,21 @@ Result<void> checkEightBit(Codec codec, const ImageView& tile) {
                           sampleTypeName(tile.sample_type)));
 }
 
+/// The payload of `tile`: `encode_block(rgba, block)` writes each block from its 16 texels.
+template <class EncodeBlock>
+std::vector<uint8_t> encodeBlocks(Codec codec, const ImageView& tile, EncodeBlock encode_block) {
+  std::vector<uint8_t> payload(bcPayloadBytes(codec, tile.width_px, tile.height_px));
+  const uint32_t blocks_x = bcBlocksAlong(tile.width_px), blocks_y = bcBlocksAlong(tile.height_px);
+  uint8_t rgba[64];
+  uint8_t* block = payload.data();
+  for (uint32_t by = 0; by < blocks_y; ++by)
+    for (uint32_t bx = 0; bx < blocks_x; ++bx, block += bcBlockBytes(codec)) {
+      gatherBlockRgba(tile, bx, by, rgba);
+      encode_block(rgba, block);
+    }
+  return payload;
+}
+
 }  // namespace
 
 void gatherBlockRgba(const ImageView& tile, uint32_t block_x, uint32_t block_y, uint8_t* rgba) {
@@ -218,16 +233,9 @@ Result<std::vector<uint8_t>> encodeBc1(const ImageView& tile, const EncodeOption
   const int fit = options.effort == 1   ? squish::kColourRangeFit
                   : options.effort >= 3 ? squish::kColourIterativeClusterFit
                                         : squish::kColourClusterFit;
-  std::vector<uint8_t> payload(bcPayloadBytes(Codec::kBc1, tile.width_px, tile.height_px));
-  const uint32_t blocks_x = bcBlocksAlong(tile.width_px), blocks_y = bcBlocksAlong(tile.height_px);
-  uint8_t rgba[64];
-  uint8_t* block = payload.data();
-  for (uint32_t by = 0; by < blocks_y; ++by)
-    for (uint32_t bx = 0; bx < blocks_x; ++bx, block += 8) {
-      gatherBlockRgba(tile, bx, by, rgba);
-      squish::Compress(rgba, block, squish::kDxt1 | fit);
-    }
-  return payload;
+  return encodeBlocks(Codec::kBc1, tile, [fit](const uint8_t* rgba, uint8_t* block) {
+    squish::Compress(rgba, block, squish::kDxt1 | fit);
+  });
 }
 
 Result<std::vector<uint8_t>> encodeBc7(const ImageView& tile, const EncodeOptions& options,
@@ -235,16 +243,9 @@ Result<std::vector<uint8_t>> encodeBc7(const ImageView& tile, const EncodeOption
   TESSERA_TRY(checkEightBit(Codec::kBc7, tile));
   const int effort = options.effort == 0 ? 1 : std::clamp(options.effort, 1, 4);
   const bool alpha_matters = tile.channels == 2 || tile.channels == 4;
-  std::vector<uint8_t> payload(bcPayloadBytes(Codec::kBc7, tile.width_px, tile.height_px));
-  const uint32_t blocks_x = bcBlocksAlong(tile.width_px), blocks_y = bcBlocksAlong(tile.height_px);
-  uint8_t rgba[64];
-  uint8_t* block = payload.data();
-  for (uint32_t by = 0; by < blocks_y; ++by)
-    for (uint32_t bx = 0; bx < blocks_x; ++bx, block += 16) {
-      gatherBlockRgba(tile, bx, by, rgba);
-      encodeBc7Block(rgba, alpha_matters, effort, block);
-    }
-  return payload;
+  return encodeBlocks(Codec::kBc7, tile, [=](const uint8_t* rgba, uint8_t* block) {
+    encodeBc7Block(rgba, alpha_matters, effort, block);
+  });
 }
 
 }  // namespace tessera::detail
