@@ -48,6 +48,11 @@ enum class Codec : uint8_t {
   /// Samples delta-coded along rows and split into byte planes, then zstd: the lossless codec
   /// for 16-bit and float images (docs/codecs.md, "zdelta (7)").
   kZdelta = 7,
+  /// BC1 (DXT1) 4x4 blocks of the stored tile, padded to a multiple of 4, uploaded to the GPU
+  /// as they are (docs/codecs.md, "bc1 (8) and bc7 (9)"); lossy, no alpha.
+  kBc1 = 8,
+  /// BC7 4x4 blocks, as kBc1 but 16 bytes a block, with alpha (docs/codecs.md).
+  kBc7 = 9,
 };
 
 /// What one sample (one channel of one texel) is. Values are stable on disk (image record
@@ -71,10 +76,11 @@ const char* sampleTypeName(SampleType type);
 /// Parses a sample type name; returns false for an unknown name.
 bool parseSampleTypeName(std::string_view name, SampleType* type);
 /// True when `codec` can store samples of `type`: raw, zstd, lz4 and zdelta store any type,
-/// png 8- and 16-bit, jpeg, webp and ptm only 8-bit.
+/// png 8- and 16-bit, jpeg, webp, ptm, bc1 and bc7 only 8-bit.
 bool codecSupportsSampleType(Codec codec, SampleType type);
 
-/// Names a codec for the CLI and JSON: "raw", "zstd", "lz4", "jpeg", "png", "webp", "ptm".
+/// Names a codec for the CLI and JSON: "raw", "zstd", "lz4", "jpeg", "png", "webp", "ptm",
+/// "zdelta", "bc1", "bc7".
 const char* codecName(Codec codec);
 /// Parses a codec name; returns false for an unknown name.
 bool parseCodecName(std::string_view name, Codec* codec);

@@ -26,6 +26,8 @@ EffortRange effortRange(Codec codec) {
     case Codec::kPng: return {0, 9, "the zlib level"};
     case Codec::kWebp: return {0, 9, "the lossless preset"};
     case Codec::kPtm: return {0, 4, "the mode (docs/codecs.md)"};
+    case Codec::kBc1: return {0, 3, "1 range fit, 2 cluster fit, 3 iterative cluster fit"};
+    case Codec::kBc7: return {0, 4, "the endpoint refinement passes"};
     default: return {};
   }
 }

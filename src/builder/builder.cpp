@@ -356,6 +356,12 @@ struct OpenedSources {
 /// Wide samples need a codec that holds them and averaging in the sample type itself.
 Result<void> checkSampleTypeOptions(const ImageInfo& info, const BuildOptions& options,
                                     const std::string& name) {
+  // bc1 has no alpha: refused before any tile is encoded rather than at the first tile.
+  if (options.codec == Codec::kBc1 && (info.channels == 2 || info.channels == 4))
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("{}: {} channels with alpha cannot be stored with --codec bc1 (it "
+                            "keeps no alpha); use bc7",
+                            name, info.channels));
   if (info.sample_type == SampleType::kU8) return {};
   if (!codecSupportsSampleType(options.codec, info.sample_type))
     return fail(ErrorCode::kInvalidArgument,

@@ -7,6 +7,7 @@
 
 #include <tessera/check.h>
 
+#include "bc/bc.h"
 #include "jpeg/jpeg.h"
 #include "lz4/lz4.h"
 #include "png/png.h"
@@ -24,7 +25,8 @@ namespace {
 constexpr CodecDecoder kDecoders[] = {
     {Codec::kRaw, decodeRaw},   {Codec::kZstd, decodeZstd},     {Codec::kLz4, decodeLz4},
     {Codec::kJpeg, decodeJpeg}, {Codec::kPng, decodePng},       {Codec::kWebp, decodeWebp},
-    {Codec::kPtm, decodePtm},   {Codec::kZdelta, decodeZdelta},
+    {Codec::kPtm, decodePtm},   {Codec::kZdelta, decodeZdelta}, {Codec::kBc1, decodeBc1},
+    {Codec::kBc7, decodeBc7},
 };
 constexpr bool tableMatchesCodecValues() {
   for (size_t i = 0; i < std::size(kDecoders); ++i)

@@ -7,6 +7,7 @@
 
 #include <tessera/check.h>
 
+#include "bc/bc.h"
 #include "jpeg/jpeg.h"
 #include "lz4/lz4.h"
 #include "png/png.h"
@@ -24,7 +25,8 @@ namespace {
 constexpr CodecEncoder kEncoders[] = {
     {Codec::kRaw, encodeRaw},          {Codec::kZstd, encodeZstd},     {Codec::kLz4, encodeLz4},
     {Codec::kJpeg, encodeJpeg},        {Codec::kPng, encodePng},       {Codec::kWebp, encodeWebp},
-    {Codec::kPtm, encodePtmForEffort}, {Codec::kZdelta, encodeZdelta},
+    {Codec::kPtm, encodePtmForEffort}, {Codec::kZdelta, encodeZdelta}, {Codec::kBc1, encodeBc1},
+    {Codec::kBc7, encodeBc7},
 };
 constexpr bool tableMatchesCodecValues() {
   for (size_t i = 0; i < std::size(kEncoders); ++i)

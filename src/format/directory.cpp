@@ -137,7 +137,7 @@ Result<std::vector<TileEntry>> decodeTileEntries(std::span<const uint8_t> bytes,
       case uint8_t(TileKind::kEncoded): {
         entry.kind = TileKind::kEncoded;
         entry.offset_bytes = loadU64(p);
-        if (codec > uint8_t(Codec::kZdelta))
+        if (codec > uint8_t(Codec::kBc7))
           return fail(ErrorCode::kCorrupt,
                       fmt::format("{}: entry {} has unknown codec {}", what, i, codec));
         entry.codec = Codec(codec);

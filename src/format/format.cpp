@@ -17,10 +17,11 @@ struct CodecSpec {
 };
 
 constexpr CodecSpec kCodecSpecs[] = {
-    {Codec::kRaw, "raw", false, true}, {Codec::kZstd, "zstd", false, true},
-    {Codec::kLz4, "lz4", false, true}, {Codec::kJpeg, "jpeg", false, false},
-    {Codec::kPng, "png", false, true}, {Codec::kWebp, "webp", false, true},
-    {Codec::kPtm, "ptm", true, true},  {Codec::kZdelta, "zdelta", false, true},
+    {Codec::kRaw, "raw", false, true},  {Codec::kZstd, "zstd", false, true},
+    {Codec::kLz4, "lz4", false, true},  {Codec::kJpeg, "jpeg", false, false},
+    {Codec::kPng, "png", false, true},  {Codec::kWebp, "webp", false, true},
+    {Codec::kPtm, "ptm", true, true},   {Codec::kZdelta, "zdelta", false, true},
+    {Codec::kBc1, "bc1", false, false}, {Codec::kBc7, "bc7", false, false},
 };
 
 const CodecSpec* findSpec(Codec codec) {
@@ -89,7 +90,9 @@ bool codecSupportsSampleType(Codec codec, SampleType type) {
     case Codec::kPng: return type != SampleType::kF32;
     case Codec::kJpeg:
     case Codec::kWebp:
-    case Codec::kPtm: return type == SampleType::kU8;
+    case Codec::kPtm:
+    case Codec::kBc1:
+    case Codec::kBc7: return type == SampleType::kU8;
   }
   return false;
 }

@@ -39,7 +39,7 @@ Codec parseCodec(const std::string& name) {
   if (!parseCodecName(name, &codec))
     throw LibraryError{
         {ErrorCode::kInvalidArgument,
-         "unknown codec '" + name + "' (raw, zstd, lz4, jpeg, png, webp, ptm, zdelta)"}};
+         "unknown codec '" + name + "' (raw, zstd, lz4, jpeg, png, webp, ptm, zdelta, bc1, bc7)"}};
   return codec;
 }
 

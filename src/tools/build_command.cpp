@@ -66,7 +66,8 @@ Result<size_t> pickChoice(const char* option, const std::string& text,
 /// The spelt values of --codec, --order and --chroma into `args.options`.
 Result<void> resolveChoices(BuildArgs& args) {
   static const Codec kCodecs[] = {Codec::kRaw, Codec::kZstd, Codec::kLz4, Codec::kJpeg,
-                                  Codec::kPng, Codec::kWebp, Codec::kPtm, Codec::kZdelta};
+                                  Codec::kPng, Codec::kWebp, Codec::kPtm, Codec::kZdelta,
+                                  Codec::kBc1, Codec::kBc7};
   static const std::vector<Choice> kCodecChoices = {{{"raw", "none", "uncompressed"}},
                                                     {{"zstd", "zst", "zstandard"}},
                                                     {{"lz4"}},
@@ -74,7 +75,9 @@ Result<void> resolveChoices(BuildArgs& args) {
                                                     {{"png"}},
                                                     {{"webp", "webp-lossless"}},
                                                     {{"ptm"}},
-                                                    {{"zdelta"}}};
+                                                    {{"zdelta"}},
+                                                    {{"bc1", "dxt1"}},
+                                                    {{"bc7", "bptc"}}};
   TESSERA_ASSIGN_OR_RETURN(size_t codec, pickChoice("--codec", args.codec, kCodecChoices));
   args.options.codec = kCodecs[codec];
   static const TileOrder kOrders[] = {TileOrder::kHilbert, TileOrder::kQuadtree,

@@ -4,7 +4,8 @@
 // the archives that Tessera 1750ecb's `tessera build INPUT -o OUT OPTIONS --threads 1` wrote
 // (the CLI and buildArchive share their defaults); a change to any byte of the format, a
 // codec's payload or the metadata fails here, naming the case. texture_set's hash is newer: the
-// synthetic source's ragged no-data edge at a row's last, partial cell was fixed after 1750ecb.
+// synthetic source's ragged no-data edge at a row's last, partial cell was fixed after 1750ecb;
+// so are bc1's and bc7's, codecs added after it.
 #include <tessera/build.h>
 
 #include <cstdlib>
@@ -74,6 +75,14 @@ std::vector<GoldenCase> goldenCases() {
   o = options(Codec::kPtm);
   o.effort = 2;
   add("ptm_effort2", {"synthetic:700x500:7:4"}, o, 0x186337eb239c86c9, 442504);
+  // bc1's bytes are libsquish's (Debian 1.15); bc7's are Tessera's own encoder's. Hashes from
+  // the build that introduced them (branch bc-codecs).
+  o = options(Codec::kBc1);
+  o.border_px = 1;
+  add("bc1", {"synthetic:300x200:5:3"}, o, 0xa608142b793106f4, 77192);
+  o = options(Codec::kBc7);
+  o.border_px = 1;
+  add("bc7", {"graya.png"}, o, 0x62b81b854a1ef67f, 151176);
   o = options(Codec::kZstd);
   o.image_names = {"a", "b"};
   add("texture_set", {"synthetic:300x200:1:3", "graya.png"}, o, 0x649dadc90df19380, 220333);

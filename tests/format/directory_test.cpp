@@ -78,7 +78,7 @@ TEST(TileEntries, DecodeOfGoldenBytesGivesEveryField) {
 
 TEST(TileEntries, DecodeInvertsEncodeForEveryCodecAndKind) {
   std::vector<TileEntry> entries;
-  for (uint8_t codec = 0; codec <= uint8_t(Codec::kZdelta); ++codec) {
+  for (uint8_t codec = 0; codec <= uint8_t(Codec::kBc7); ++codec) {
     TileEntry entry;
     entry.kind = TileKind::kEncoded;
     entry.codec = Codec(codec);
@@ -126,7 +126,7 @@ TEST(TileEntries, DecodeRejectsEveryFieldOutOfBounds) {
       {"unknown kind", 0, 12, 4},
       {"kind 255", 0, 12, 255},
       {"procedural kind", 0, 12, 3, ErrorCode::kUnsupported},
-      {"unknown codec", 0, 13, 8},
+      {"unknown codec", 0, 13, 10},
       {"reserved low byte", 0, 14, 1},
       {"reserved high byte", 0, 15, 1},
       {"payload inside the header region", 0, 1, 0x3F},

@@ -276,6 +276,25 @@ TEST_F(Cli, WideSamplesBuildShowAndExtractAsStored) {
   }
 }
 
+TEST_F(Cli, BlockCompressedCodecsBuildVerifyAndRefuseAlphaInBc1) {
+  for (const std::string codec : {"bc1", "bc7"}) {
+    const std::string archive_path = work_ + codec + ".tess";
+    RunResult built = run({"build", "synthetic:150x90:3:3", "-o", archive_path, "--codec", codec,
+                           "--tile", "64", "--border", "1", "-q"});
+    ASSERT_EQ(built.exit_code, 0) << codec << ": " << built.err;
+    RunResult info = run({"info", archive_path, "--json"});
+    ASSERT_EQ(info.exit_code, 0) << info.err;
+    EXPECT_EQ(nlohmann::json::parse(info.out)["images"][0]["codec"], codec) << info.out;
+    RunResult verified = run({"verify", archive_path});
+    EXPECT_EQ(verified.exit_code, 0) << verified.err;
+  }
+  const std::string refused = work_ + "bc1_alpha.tess";
+  RunResult alpha = run({"build", "synthetic:150x90:3:4", "-o", refused, "--codec", "bc1", "-q"});
+  EXPECT_EQ(alpha.exit_code, 2) << alpha.err;
+  EXPECT_NE(alpha.err.find("cannot be stored with --codec bc1"), std::string::npos) << alpha.err;
+  EXPECT_FALSE(std::filesystem::exists(refused));
+}
+
 TEST_F(Cli, RenderDrawsTheReferencePictureOfAnOrthographicView) {
   const std::string archive_path = work_ + "r.tess";
   const std::string source = "synthetic:300x200:5:3";
