@@ -108,9 +108,14 @@ Result<void> HttpSource::fetchRanges(std::span<const ByteRange> wanted) const {
       multi_range_refused_.load() ? 1 : std::max<size_t>(1, options_.max_ranges_per_request);
   std::vector<std::shared_ptr<Transfer>> transfers;
   for (size_t i = 0; i < wanted.size();) {
-    const std::span<const ByteRange> group =
-        wanted.subspan(i, std::min(per_request, wanted.size() - i));
-    i += group.size();
+    // The body of a multi-range request is buffered before it is split: bound it.
+    size_t count = 1;
+    uint64_t bytes = wanted[i].length_bytes;
+    while (count < per_request && i + count < wanted.size() &&
+           bytes + wanted[i + count].length_bytes <= kMultiRangeMaxBytes)
+      bytes += wanted[i + count++].length_bytes;
+    const std::span<const ByteRange> group = wanted.subspan(i, count);
+    i += count;
     auto transfer = std::make_shared<Transfer>();
     transfer->offset_bytes = group.front().offset_bytes;
     transfer->length_bytes =

@@ -42,6 +42,8 @@ inline constexpr int kCancelPollMs = 10;
 /// Room for a multipart part's delimiter and headers (about 110 bytes from nginx and `tessera
 /// serve`) in the body cap of a multi-range request.
 inline constexpr uint64_t kMultipartPartOverheadBytes = 256;
+/// The most range bytes one multi-range request asks for (its body is buffered).
+inline constexpr uint64_t kMultiRangeMaxBytes = 16u << 20;
 /// How often the I/O thread looks for stalled transfers while any is in flight.
 inline constexpr int kStallPollMs = 100;
 

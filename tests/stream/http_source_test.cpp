@@ -691,5 +691,36 @@ TEST_F(MultiRangeFallbackTest, WholeFileAnswerIsCutShortAndFallsBack) {
   EXPECT_EQ(server_.seen().size(), 5u);
 }
 
+TEST_F(MultiRangeFallbackTest, MultipartPartsInAnyOrderGiveEachRangeItsBytes) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  server_.setPlan([](uint64_t) { return test::RangeReply{test::RangeReply::Kind::kMultipart}; });
+  std::vector<ByteRange> ranges = threeRanges();
+  Result<void> read = source->readMany(ranges);
+  ASSERT_TRUE(read) << read.error().message;
+  expectBytes(ranges);
+  EXPECT_EQ(server_.seen().size(), 2u);  // the open and one multi-range request
+}
+
+TEST_F(MultiRangeFallbackTest, MislabelledOrOversizedMultipartFailsNamingTheRequest) {
+  for (auto kind : {test::RangeReply::Kind::kMultipartWrongRange,
+                    test::RangeReply::Kind::kMultipartOversized}) {
+    auto source = open();
+    ASSERT_TRUE(source);
+    server_.setPlan([kind](uint64_t) { return test::RangeReply{kind}; });
+    std::vector<ByteRange> ranges = threeRanges();
+    Result<void> read = source->readMany(ranges);
+    ASSERT_FALSE(read);
+    EXPECT_EQ(read.error().code, ErrorCode::kIo);
+    EXPECT_NE(read.error().message.find(server_.url()), std::string::npos);
+    EXPECT_NE(read.error().message.find(kind == test::RangeReply::Kind::kMultipartWrongRange
+                                            ? "no part holding bytes"
+                                            : "server sent more than"),
+              std::string::npos)
+        << read.error().message;
+    server_.setPlan({});
+  }
+}
+
 }  // namespace
 }  // namespace tessera
