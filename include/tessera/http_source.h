@@ -44,6 +44,11 @@ struct HttpOptions {
   /// bound on that buffer. Hints beyond it are dropped, oldest unread data is evicted first.
   /// 0 ignores hints.
   uint64_t prefetch_buffer_bytes = 16u << 20;
+  /// readMany asks for up to this many ranges in one request (`Range: bytes=a-b,c-d,...`,
+  /// answered multipart/byteranges) where the server does that; 16 is `tessera serve`'s
+  /// limit. A server that answers such a request with one range or the whole file is
+  /// remembered and asked one range a request, without fetching more than asked. 1: never.
+  uint32_t max_ranges_per_request = 16;
   /// Speak HTTP/2 from the first byte over plain http:// (h2c "prior knowledge"): only for a
   /// server known to accept it. Over https:// HTTP/2 is negotiated (ALPN) without this.
   bool http2_prior_knowledge = false;

@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include "content_range.h"
+#include "multipart_ranges.h"
 #include "http_source_impl.h"
 
 namespace tessera::detail {
@@ -158,6 +159,15 @@ Error HttpSource::cancelledOf(const Transfer& transfer) const {
 
 std::string HttpSource::rangeText(const Transfer& transfer) {
   if (transfer.kind == Transfer::Kind::kHeadAfterChange) return "HEAD";
+  if (!transfer.parts.empty()) {
+    // The first few ranges name the request well enough; the count says the rest.
+    std::string text = "bytes=";
+    for (size_t i = 0; i < std::min<size_t>(transfer.parts.size(), 3); ++i)
+      text += fmt::format("{}{}-{}", i ? "," : "", transfer.parts[i].offset_bytes,
+                          transfer.parts[i].offset_bytes + transfer.parts[i].length_bytes - 1);
+    if (transfer.parts.size() > 3) text += fmt::format(",... ({} ranges)", transfer.parts.size());
+    return text;
+  }
   return fmt::format("bytes={}-{}", transfer.offset_bytes,
                      transfer.offset_bytes + transfer.length_bytes - 1);
 }
@@ -175,9 +185,12 @@ void HttpSource::startAttempt(Transfer& transfer) {
   transfer.status = 0;
   transfer.status_text.clear();
   transfer.content_range.clear();
+  transfer.content_type.clear();
   transfer.etag.clear();
   transfer.last_modified.clear();
   transfer.retry_after.clear();
+  transfer.body.clear();
+  transfer.boundary.clear();
   transfer.body_started = false;
   transfer.last_activity = Clock::now();
   transfer.request_sent = false;
@@ -231,8 +244,14 @@ void HttpSource::startAttempt(Transfer& transfer) {
   if (transfer.kind == Transfer::Kind::kHeadAfterChange) {
     curl_easy_setopt(easy, CURLOPT_NOBODY, 1L);
   } else {
-    const std::string range = fmt::format("{}-{}", transfer.offset_bytes,
-                                          transfer.offset_bytes + transfer.length_bytes - 1);
+    // One range, or the parts of a multi-range request: "a-b" or "a-b,c-d,...".
+    std::string range;
+    if (transfer.parts.empty())
+      range = fmt::format("{}-{}", transfer.offset_bytes,
+                          transfer.offset_bytes + transfer.length_bytes - 1);
+    for (const ByteRange& part : transfer.parts)
+      range += fmt::format("{}{}-{}", range.empty() ? "" : ",", part.offset_bytes,
+                           part.offset_bytes + part.length_bytes - 1);
     curl_easy_setopt(easy, CURLOPT_RANGE, range.c_str());
     // The version rule: a changed file answers 412 (If-Match), or, from a server that
     // ignores it, the whole new file (If-Range) whose transfer onBody stops at once.
@@ -356,12 +375,26 @@ bool HttpSource::finishFault(Transfer& transfer, const std::string& what, std::m
         beginChangeReport(transfer, "");
         return true;
       }
+      if (transfer.parts.empty()) {
+        complete(transfer,
+                 fail(ErrorCode::kUnsupported,
+                      fmt::format("{}: server does not honour byte ranges (answered 200 with the "
+                                  "whole file to a Range request)",
+                                  what)),
+                 true);
+        return false;
+      }
+      transfer.fault_detail = "answered 200 with the whole file";
+      [[fallthrough]];
+    case Fault::kMultiRangeRefused:
+      // Not an error of the read: its ranges are fetched again one by one (fetchRanges).
+      multi_range_refused_.store(true);
+      transfer.multi_refused = true;
       complete(transfer,
                fail(ErrorCode::kUnsupported,
-                    fmt::format("{}: server does not honour byte ranges (answered 200 with the "
-                                "whole file to a Range request)",
-                                what)),
-               true);
+                    fmt::format("{}: server does not do multi-range requests ({})", what,
+                                transfer.fault_detail)),
+               false);
       return false;
     case Fault::kBadRange:
     case Fault::kTooLong:
@@ -393,6 +426,17 @@ bool HttpSource::finishResponse(Transfer& transfer, const std::string& what, dou
   if (status == 206) {
     if (!transfer.body_started)
       return retryOrFail(transfer, ErrorCode::kIo, what, "206 without a body", {}, random);
+    if (!transfer.parts.empty()) {
+      if (std::string why = scatterMultiBody(transfer); !why.empty()) {
+        complete(transfer, fail(ErrorCode::kIo, fmt::format("{}: {}", what, why)), true);
+        return false;
+      }
+      transfer.received = transfer.body.size();
+      recordSample(transfer, seconds, first_byte_seconds);
+      transfer.body = {};
+      complete(transfer, {}, false);
+      return false;
+    }
     if (transfer.received != transfer.length_bytes)
       return retryOrFail(transfer, ErrorCode::kIo, what,
                          fmt::format("truncated response: {} of {} bytes", transfer.received,
@@ -528,7 +572,9 @@ void HttpSource::complete(Transfer& transfer, Result<void> result, bool is_error
 
 bool HttpSource::acceptResponse(Transfer& transfer) const {
   ContentRange range;
-  if (!parseContentRange(transfer.content_range, range) || !range.has_range) {
+  const bool multipart =
+      !transfer.parts.empty() && multipartBoundary(transfer.content_type, transfer.boundary);
+  if (!multipart && (!parseContentRange(transfer.content_range, range) || !range.has_range)) {
     transfer.fault = Fault::kBadRange;
     transfer.fault_detail =
         fmt::format("206 without a usable Content-Range (\"{}\")", transfer.content_range);
@@ -557,6 +603,7 @@ bool HttpSource::acceptResponse(Transfer& transfer) const {
     transfer.fault = Fault::kChanged;
     return false;
   }
+  if (!transfer.parts.empty()) return multipart || acceptMultiResponse(transfer, range);
   if (range.first != transfer.offset_bytes ||
       range.last != transfer.offset_bytes + transfer.length_bytes - 1) {
     transfer.fault = Fault::kBadRange;
@@ -564,6 +611,64 @@ bool HttpSource::acceptResponse(Transfer& transfer) const {
     return false;
   }
   return true;
+}
+
+bool HttpSource::acceptMultiResponse(Transfer& transfer, const ContentRange& range) const {
+  // RFC 9110 lets a server answer several ranges with one that holds them all; within the
+  // body cap that is as good as the parts.
+  const ByteRange& last = transfer.parts.back();
+  if (range.first <= transfer.parts.front().offset_bytes &&
+      range.last >= last.offset_bytes + last.length_bytes - 1 &&
+      range.last - range.first < transfer.body_cap) {
+    transfer.single = range;
+    return true;
+  }
+  transfer.fault = Fault::kMultiRangeRefused;
+  transfer.fault_detail = fmt::format("answered bytes {}-{} only", range.first, range.last);
+  return false;
+}
+
+size_t HttpSource::bufferMultiBody(Transfer& transfer, const char* data, size_t bytes) {
+  if (transfer.body.size() + bytes > transfer.body_cap) {
+    transfer.fault = Fault::kTooLong;
+    transfer.fault_detail = fmt::format("server sent more than the {} bytes {} ranges need",
+                                        transfer.body_cap, transfer.parts.size());
+    return CURL_WRITEFUNC_ERROR;
+  }
+  transfer.body.insert(transfer.body.end(), data, data + bytes);
+  transfer.received = transfer.body.size();
+  return bytes;
+}
+
+std::string HttpSource::scatterMultiBody(Transfer& transfer) const {
+  std::vector<MultipartPart> parts;
+  if (transfer.boundary.empty()) {
+    const uint64_t length = transfer.single.last - transfer.single.first + 1;
+    if (transfer.body.size() != length)
+      return fmt::format("truncated response: {} of {} bytes", transfer.body.size(), length);
+    parts.push_back({transfer.single, 0});
+  } else if (std::string why = parseMultipartByteranges(transfer.body, transfer.boundary, parts);
+             !why.empty()) {
+    return "malformed multipart/byteranges answer: " + why;
+  }
+  for (const MultipartPart& part : parts)
+    if (part.range.has_total && part.range.total != size_bytes_)
+      return fmt::format("a part of the answer gives the size {} bytes, not {}", part.range.total,
+                         size_bytes_);
+  // Every range asked must lie inside one part: never a neighbour's bytes, never a gap.
+  for (const ByteRange& wanted : transfer.parts) {
+    const uint64_t wanted_last = wanted.offset_bytes + wanted.length_bytes - 1;
+    auto it = std::find_if(parts.begin(), parts.end(), [&](const MultipartPart& part) {
+      return part.range.first <= wanted.offset_bytes && wanted_last <= part.range.last;
+    });
+    if (it == parts.end())
+      return fmt::format("the answer has no part holding bytes {}-{}", wanted.offset_bytes,
+                         wanted_last);
+    std::memcpy(wanted.out,
+                transfer.body.data() + it->data_offset + (wanted.offset_bytes - it->range.first),
+                wanted.length_bytes);
+  }
+  return "";
 }
 
 size_t HttpSource::onHeader(char* data, size_t size, size_t count, void* user) {
@@ -575,6 +680,7 @@ size_t HttpSource::onHeader(char* data, size_t size, size_t count, void* user) {
   if (line.rfind("HTTP/", 0) == 0) {
     // A new response (after a redirect or an interim 1xx): forget the previous one's.
     transfer.content_range.clear();
+    transfer.content_type.clear();
     transfer.etag.clear();
     transfer.last_modified.clear();
     transfer.retry_after.clear();
@@ -593,6 +699,8 @@ size_t HttpSource::onHeader(char* data, size_t size, size_t count, void* user) {
   std::string value = trim(line.substr(colon + 1));
   if (key == "content-range")
     transfer.content_range = std::move(value);
+  else if (key == "content-type")
+    transfer.content_type = std::move(value);
   else if (key == "etag")
     transfer.etag = std::move(value);
   else if (key == "last-modified")
@@ -617,6 +725,7 @@ size_t HttpSource::onBody(char* data, size_t size, size_t count, void* user) {
     transfer.body_started = true;
     if (!transfer.source->acceptResponse(transfer)) return CURL_WRITEFUNC_ERROR;
   }
+  if (!transfer.parts.empty()) return bufferMultiBody(transfer, data, bytes);
   if (transfer.received + bytes > transfer.length_bytes) {
     transfer.fault = Fault::kTooLong;
     transfer.fault_detail =

@@ -82,7 +82,7 @@ Result<void> HttpSource::readMany(std::span<const ByteRange> ranges) const {
   TESSERA_TRY(changedError());
   std::vector<detail::ReadRun> runs = detail::planReadRuns(ranges);
   std::vector<std::vector<uint8_t>> buffers(runs.size());
-  std::vector<std::shared_ptr<Transfer>> transfers;
+  std::vector<ByteRange> wanted;
   for (size_t i = 0; i < runs.size(); ++i) {
     const detail::ReadRun& run = runs[i];
     TESSERA_TRY(checkBounds(run.offset_bytes, run.length_bytes));
@@ -95,21 +95,52 @@ Result<void> HttpSource::readMany(std::span<const ByteRange> ranges) const {
     std::span<uint8_t> target(out, run.length_bytes);
     Result<bool> taken = takeBuffered(run.offset_bytes, target, nullptr);
     if (taken && *taken) continue;
+    wanted.push_back({run.offset_bytes, run.length_bytes, out});
+  }
+  TESSERA_TRY(fetchRanges(wanted));
+  for (size_t i = 0; i < runs.size(); ++i)
+    if (runs[i].members.size() > 1) detail::scatterRun(runs[i], ranges, buffers[i]);
+  return {};
+}
+
+Result<void> HttpSource::fetchRanges(std::span<const ByteRange> wanted) const {
+  const size_t per_request =
+      multi_range_refused_.load() ? 1 : std::max<size_t>(1, options_.max_ranges_per_request);
+  std::vector<std::shared_ptr<Transfer>> transfers;
+  for (size_t i = 0; i < wanted.size();) {
+    // The body of a multi-range request is buffered before it is split: bound it.
+    size_t count = 1;
+    uint64_t bytes = wanted[i].length_bytes;
+    while (count < per_request && i + count < wanted.size() &&
+           bytes + wanted[i + count].length_bytes <= kMultiRangeMaxBytes)
+      bytes += wanted[i + count++].length_bytes;
+    const std::span<const ByteRange> group = wanted.subspan(i, count);
+    i += count;
     auto transfer = std::make_shared<Transfer>();
-    transfer->offset_bytes = run.offset_bytes;
-    transfer->length_bytes = run.length_bytes;
-    transfer->out = out;
-    transfers.push_back(transfer);
+    transfer->offset_bytes = group.front().offset_bytes;
+    transfer->length_bytes =
+        group.back().offset_bytes + group.back().length_bytes - transfer->offset_bytes;
+    transfer->out = group.front().out;
+    if (group.size() > 1) {
+      transfer->parts.assign(group.begin(), group.end());
+      transfer->body_cap = group.size() * kMultipartPartOverheadBytes + 1024;
+      for (const ByteRange& part : group) transfer->body_cap += part.length_bytes;
+    }
+    transfers.push_back(std::move(transfer));
   }
   submit(transfers);
   Result<void> result;
+  std::vector<ByteRange> again;
   for (const auto& transfer : transfers) {
     Result<void> one = wait(*transfer);
-    if (!one && result) result = std::move(one);
+    if (!one && transfer->multi_refused)
+      again.insert(again.end(), transfer->parts.begin(), transfer->parts.end());
+    else if (!one && result)
+      result = std::move(one);
   }
   if (!result) return result;
-  for (size_t i = 0; i < runs.size(); ++i)
-    if (runs[i].members.size() > 1) detail::scatterRun(runs[i], ranges, buffers[i]);
+  // multi_range_refused_ is set by now: these go one range a request.
+  if (!again.empty()) return fetchRanges(again);
   return {};
 }
 

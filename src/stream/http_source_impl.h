@@ -8,6 +8,8 @@
 
 #include <tessera/http_source.h>
 
+#include "content_range.h"
+
 #include <curl/curl.h>
 
 #include <atomic>
@@ -37,6 +39,11 @@ inline constexpr size_t kRecentSamples = 64;
 /// How often the I/O thread looks at the cancel flags of requests that have one: the bound on
 /// how long a cancelled read keeps the link busy when no byte arrives to run curl's callback.
 inline constexpr int kCancelPollMs = 10;
+/// Room for a multipart part's delimiter and headers (about 110 bytes from nginx and `tessera
+/// serve`) in the body cap of a multi-range request.
+inline constexpr uint64_t kMultipartPartOverheadBytes = 256;
+/// The most range bytes one multi-range request asks for (its body is buffered).
+inline constexpr uint64_t kMultiRangeMaxBytes = 16u << 20;
 /// How often the I/O thread looks for stalled transfers while any is in flight.
 inline constexpr int kStallPollMs = 100;
 
@@ -55,6 +62,9 @@ enum class Fault {
   kTooLong,    ///< more body bytes than the range
   kCancelled,  ///< the reader's cancel flag
   kStalled,    ///< no byte for stall_timeout
+  /// A request of several ranges answered by a single range that does not hold them all, or
+  /// by 200: the server does not do multi-range requests (the reads fall back to one each).
+  kMultiRangeRefused,
 };
 
 struct PrefetchEntry;
@@ -72,13 +82,22 @@ struct Transfer {
   const std::atomic<bool>* cancel = nullptr;
   std::shared_ptr<PrefetchEntry> prefetch;  ///< set for fetch-ahead requests
   const HttpSource* source = nullptr;
+  /// A multi-range request: the ranges (ascending, apart), each with its own `out`; then
+  /// offset_bytes/length_bytes span them all (for messages) and `out` is unused. The body is
+  /// buffered in `body`, at most `body_cap` bytes, and split when complete.
+  std::vector<ByteRange> parts;
+  uint64_t body_cap = 0;
+  std::vector<uint8_t> body;
+  std::string boundary;  ///< of a multipart answer; empty for a single range holding all parts
+  ContentRange single;   ///< a single-range answer's range
+  bool multi_refused = false;  ///< completed with kMultiRangeRefused: read the parts one by one
 
   // Per attempt.
   uint32_t attempt = 0;
   Clock::time_point not_before{};
   long status = 0;
   std::string status_text;
-  std::string content_range, etag, last_modified, retry_after;
+  std::string content_range, content_type, etag, last_modified, retry_after;
   bool body_started = false;
   bool request_sent = false;          ///< out of libcurl's queue and connected: stalls count
   Clock::time_point last_activity{};  ///< when the request went out, or its latest byte
@@ -161,6 +180,11 @@ class HttpSource final : public ByteSource {
 
   Result<void> run(const std::shared_ptr<Transfer>& transfer) const;
 
+  /// Fetches the ranges (ascending, apart, none buffered): several to a request while the
+  /// server does multi-range requests, else one each, all at once. A refused multi-range
+  /// request is remembered and its ranges fetched again one by one.
+  Result<void> fetchRanges(std::span<const ByteRange> wanted) const;
+
   // ---- The I/O thread ----
 
   void ioLoop();
@@ -228,6 +252,17 @@ class HttpSource final : public ByteSource {
   /// opened? Sets the fault and returns false when not.
   bool acceptResponse(Transfer& transfer) const;
 
+  /// acceptResponse for a multi-range request: a multipart body, or one range holding every
+  /// part (within the body cap); anything else is kMultiRangeRefused.
+  bool acceptMultiResponse(Transfer& transfer, const ContentRange& range) const;
+
+  /// onBody for a multi-range request: buffers the body, stopping it past body_cap.
+  static size_t bufferMultiBody(Transfer& transfer, const char* data, size_t bytes);
+
+  /// A complete 206 to a multi-range request: copies each part to its reader's buffer after
+  /// checking the body's ranges against those asked. Empty on success, else what is wrong.
+  std::string scatterMultiBody(Transfer& transfer) const;
+
   // ---- libcurl callbacks (on the I/O thread) ----
 
   static size_t onHeader(char* data, size_t size, size_t count, void* user);
@@ -261,6 +296,9 @@ class HttpSource final : public ByteSource {
   /// Set once the file changed on the server: every later read fails with it, so no reader
   /// gets bytes of the new version under the old one's directory.
   Error changed_;
+  /// Set once the server refused a multi-range request: from then on every range is a
+  /// request of its own (per source, so per server and file).
+  mutable std::atomic<bool> multi_range_refused_{false};
   mutable LinkStats stats_;  ///< totals (recent kept apart)
   mutable std::deque<LinkSample> recent_;
 };

@@ -147,6 +147,8 @@ Result<S3Target> resolveS3Url(const std::string& s3_url, const S3Options& option
 
   S3Target target;
   target.options = options.http;
+  // S3 answers a request of several ranges with the whole object: ask one range a request.
+  target.options.max_ranges_per_request = 1;
   HttpOptions::AwsSigning& aws = target.options.aws;
   aws = {};
   aws.region = resolveRegion(options, profile);

@@ -94,6 +94,36 @@ TEST_F(ServeTest, ConcurrentRangeReadsEqualTheArchiveBytes) {
         << i;
 }
 
+TEST_F(ServeTest, FarApartRangesTravelInOneMultiRangeRequestAndEachGetsItsOwnBytes) {
+  HttpOptions options;
+  options.max_ranges_per_request = 4;
+  auto source = openHttpSource(url_, options);
+  ASSERT_TRUE(source) << source.error().message;
+  // Random lengths, each range more than readMany's 64 KiB merge gap from the next, so every
+  // range is its own run; the bytes around each are checked untouched (no neighbour's bytes).
+  std::mt19937 random(17);
+  std::vector<std::vector<uint8_t>> outs;
+  std::vector<ByteRange> ranges;
+  for (uint64_t offset = 20000; offset + 70000 < bytes_.size() && outs.size() < 10;
+       offset += 70000 + random() % 5000) {
+    outs.emplace_back(1 + random() % 4000 + 2, uint8_t(0xA5));
+    ranges.push_back({offset, outs.back().size() - 2, outs.back().data() + 1});
+  }
+  ASSERT_GE(ranges.size(), 5u) << "archive too small for the test: " << bytes_.size();
+  const uint64_t before = (*source)->linkStats()->requests;
+  ASSERT_TRUE((*source)->readMany(ranges));
+  const uint64_t expected_requests = (ranges.size() + 3) / 4;
+  EXPECT_EQ((*source)->linkStats()->requests - before, expected_requests);
+  for (size_t i = 0; i < ranges.size(); ++i) {
+    EXPECT_EQ(outs[i].front(), 0xA5) << i;
+    EXPECT_EQ(outs[i].back(), 0xA5) << i;
+    EXPECT_TRUE(std::equal(outs[i].begin() + 1, outs[i].end() - 1,
+                           bytes_.begin() + ptrdiff_t(ranges[i].offset_bytes)))
+        << i;
+  }
+  EXPECT_EQ((*source)->linkStats()->errors, 0u);
+}
+
 TEST_F(ServeTest, ArchiveOpensInOneRequestAndDecodesAsTheLocalFile) {
   auto remote = openArchive(url_);
   ASSERT_TRUE(remote) << remote.error().message;

@@ -255,7 +255,8 @@ TEST_F(NginxTest, ReadManyAndPrefetchDeliverTheFileBytes) {
   ranges.push_back({5, 10, nullptr});  // overlapping the head, zero-copy
   std::vector<uint8_t> head(10);
   ranges.back().out = head.data();
-  ASSERT_TRUE(source->readMany(ranges));
+  Result<void> read = source->readMany(ranges);
+  ASSERT_TRUE(read) << read.error().message;
   for (size_t i = 0; i < outs.size(); ++i)
     EXPECT_EQ(outs[i], slice(bytes_, ranges[i].offset_bytes, outs[i].size())) << i;
   EXPECT_EQ(head, slice(bytes_, 5, 10));
@@ -276,6 +277,32 @@ TEST_F(NginxTest, ReadManyAndPrefetchDeliverTheFileBytes) {
   auto bounded = open(nginx_->url("data.bin"), small);
   ASSERT_TRUE(bounded);
   EXPECT_EQ(bounded->prefetch(hints), 100000u);
+}
+
+/// `count` ranges of random lengths, each more than readMany's 64 KiB merge gap from the next.
+std::vector<ByteRange> farApartRanges(std::vector<std::vector<uint8_t>>& outs, size_t count,
+                                      uint64_t first, uint64_t step, uint32_t seed) {
+  std::mt19937 random(seed);
+  outs.assign(count, {});
+  std::vector<ByteRange> ranges;
+  for (size_t i = 0; i < count; ++i) {
+    outs[i].resize(1 + random() % 3000);
+    ranges.push_back({first + i * step, outs[i].size(), outs[i].data()});
+  }
+  return ranges;
+}
+
+TEST_F(NginxTest, FarApartRangesTravelInOneMultiRangeRequest) {
+  auto source = open(nginx_->url("data.bin"));
+  ASSERT_TRUE(source);
+  std::vector<std::vector<uint8_t>> outs;
+  const std::vector<ByteRange> ranges = farApartRanges(outs, 12, 100000, 200000, 5);
+  const uint64_t before = source->linkStats()->requests;
+  Result<void> read = source->readMany(ranges);
+  ASSERT_TRUE(read) << read.error().message;
+  EXPECT_EQ(source->linkStats()->requests - before, 1u);
+  for (size_t i = 0; i < outs.size(); ++i)
+    EXPECT_EQ(outs[i], slice(bytes_, ranges[i].offset_bytes, outs[i].size())) << i;
 }
 
 TEST_F(NginxTest, ArchiveOverHttpDecodesAsTheLocalFile) {
@@ -600,6 +627,99 @@ TEST_F(FaultTest, StalledTransferTimesOutAndIsRetried) {
   });
   EXPECT_EQ(readRange(*source, 1000, 100000), slice(bytes_, 1000, 100000));
   EXPECT_EQ(source->linkStats()->retries, 1u);
+}
+
+}  // namespace
+}  // namespace tessera
+
+namespace tessera {
+namespace {
+
+// Servers that do not do multi-range requests: the RangeServer answers only the first range
+// of a Range header, or (by plan) the whole file.
+class MultiRangeFallbackTest : public FaultTest {
+ protected:
+  std::vector<ByteRange> threeRanges() { return farApartRanges(outs_, 3, 20000, 80000, 9); }
+  void expectBytes(const std::vector<ByteRange>& ranges) {
+    for (size_t i = 0; i < outs_.size(); ++i)
+      EXPECT_EQ(outs_[i], slice(bytes_, ranges[i].offset_bytes, outs_[i].size())) << i;
+  }
+  std::vector<std::vector<uint8_t>> outs_;
+};
+
+TEST_F(MultiRangeFallbackTest, SingleRangeAnswerFallsBackRangeByRangeAndIsRemembered) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  std::vector<ByteRange> ranges = threeRanges();
+  const LinkStats before = *source->linkStats();
+  ASSERT_TRUE(source->readMany(ranges));
+  expectBytes(ranges);
+  const LinkStats after = *source->linkStats();
+  // The refused request stopped at its first body bytes: at most the first range's.
+  uint64_t asked = 0;
+  for (const ByteRange& range : ranges) asked += range.length_bytes;
+  EXPECT_LE(after.bytes_received - before.bytes_received, asked + ranges[0].length_bytes);
+  EXPECT_EQ(after.errors, 0u);
+  std::vector<test::SeenRequest> seen = server_.seen();
+  ASSERT_EQ(seen.size(), 5u);  // the open, the multi-range request, then one per range
+  EXPECT_NE(seen[1].range.find(','), std::string::npos) << seen[1].range;
+  for (size_t i = 2; i < seen.size(); ++i)
+    EXPECT_EQ(seen[i].range.find(','), std::string::npos) << seen[i].range;
+  // Remembered: the next readMany asks range by range at once.
+  ranges = threeRanges();
+  ASSERT_TRUE(source->readMany(ranges));
+  expectBytes(ranges);
+  seen = server_.seen();
+  ASSERT_EQ(seen.size(), 8u);
+  for (size_t i = 5; i < seen.size(); ++i)
+    EXPECT_EQ(seen[i].range.find(','), std::string::npos) << seen[i].range;
+}
+
+TEST_F(MultiRangeFallbackTest, WholeFileAnswerIsCutShortAndFallsBack) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  server_.setPlan([](uint64_t n) {
+    return n == 1 ? test::RangeReply{test::RangeReply::Kind::kWholeFile} : test::RangeReply{};
+  });
+  std::vector<ByteRange> ranges = threeRanges();
+  const uint64_t before = source->linkStats()->bytes_received;
+  ASSERT_TRUE(source->readMany(ranges));
+  expectBytes(ranges);
+  // libcurl hands the body over in pieces of at most 16 KiB: the first is all it took.
+  const uint64_t received = source->linkStats()->bytes_received - before;
+  EXPECT_LT(received, bytes_.size() / 4);
+  EXPECT_EQ(server_.seen().size(), 5u);
+}
+
+TEST_F(MultiRangeFallbackTest, MultipartPartsInAnyOrderGiveEachRangeItsBytes) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  server_.setPlan([](uint64_t) { return test::RangeReply{test::RangeReply::Kind::kMultipart}; });
+  std::vector<ByteRange> ranges = threeRanges();
+  Result<void> read = source->readMany(ranges);
+  ASSERT_TRUE(read) << read.error().message;
+  expectBytes(ranges);
+  EXPECT_EQ(server_.seen().size(), 2u);  // the open and one multi-range request
+}
+
+TEST_F(MultiRangeFallbackTest, MislabelledOrOversizedMultipartFailsNamingTheRequest) {
+  for (auto kind : {test::RangeReply::Kind::kMultipartWrongRange,
+                    test::RangeReply::Kind::kMultipartOversized}) {
+    auto source = open();
+    ASSERT_TRUE(source);
+    server_.setPlan([kind](uint64_t) { return test::RangeReply{kind}; });
+    std::vector<ByteRange> ranges = threeRanges();
+    Result<void> read = source->readMany(ranges);
+    ASSERT_FALSE(read);
+    EXPECT_EQ(read.error().code, ErrorCode::kIo);
+    EXPECT_NE(read.error().message.find(server_.url()), std::string::npos);
+    EXPECT_NE(read.error().message.find(kind == test::RangeReply::Kind::kMultipartWrongRange
+                                            ? "no part holding bytes"
+                                            : "server sent more than"),
+              std::string::npos)
+        << read.error().message;
+    server_.setPlan({});
+  }
 }
 
 }  // namespace

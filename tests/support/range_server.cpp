@@ -141,6 +141,37 @@ void RangeServer::serve(int fd) {
   ::close(fd);
 }
 
+bool RangeServer::sendMultipart(int fd, RangeReply::Kind kind, const std::string& range,
+                                const std::vector<uint8_t>& bytes, const std::string& validator) {
+  std::vector<std::pair<uint64_t, uint64_t>> ranges;
+  for (size_t pos = range.find('=') + 1; pos != 0 && pos < range.size();) {
+    uint64_t first = 0, last = 0;
+    if (std::sscanf(range.c_str() + pos, "%lu-%lu", &first, &last) != 2 || first > last ||
+        last >= bytes.size())
+      return false;
+    ranges.emplace_back(first, last);
+    const size_t comma = range.find(',', pos);
+    pos = comma == std::string::npos ? range.size() : comma + 1;
+  }
+  std::string body;
+  if (kind == RangeReply::Kind::kMultipartOversized) body.assign(1 << 20, 'p');
+  const int shift = kind == RangeReply::Kind::kMultipartWrongRange ? 1 : 0;
+  for (auto it = ranges.rbegin(); it != ranges.rend(); ++it) {
+    body += fmt::format(
+        "\r\n--SEP\r\nContent-Type: application/octet-stream\r\n"
+        "Content-Range: bytes {}-{}/{}\r\n\r\n",
+        it->first + shift, it->second + shift, bytes.size());
+    body.append(reinterpret_cast<const char*>(bytes.data()) + it->first,
+                it->second - it->first + 1);
+  }
+  body += "\r\n--SEP--\r\n";
+  const std::string head = fmt::format(
+      "HTTP/1.1 206 Partial Content\r\n{}Content-Type: multipart/byteranges; boundary=SEP\r\n"
+      "Content-Length: {}\r\n\r\n",
+      validator, body.size());
+  return sendAll(fd, head.data(), head.size()) && sendAll(fd, body.data(), body.size());
+}
+
 bool RangeServer::handle(int fd, const SeenRequest& request) {
   std::unique_lock lock(mutex_);
   const uint64_t index = seen_.size();
@@ -175,6 +206,11 @@ bool RangeServer::handle(int fd, const SeenRequest& request) {
     if (!sendHead(200, "OK", "", bytes.size())) return false;
     return request.method == "HEAD" || sendAll(fd, bytes.data(), bytes.size());
   }
+  const bool multipart = reply.kind == RangeReply::Kind::kMultipart ||
+                         reply.kind == RangeReply::Kind::kMultipartWrongRange ||
+                         reply.kind == RangeReply::Kind::kMultipartOversized;
+  if (multipart && request.range.find(',') != std::string::npos)
+    return sendMultipart(fd, reply.kind, request.range, bytes, validator);
   uint64_t first = 0, last = 0;
   if (std::sscanf(request.range.c_str(), "bytes=%lu-%lu", &first, &last) != 2 || first > last ||
       first >= bytes.size()) {

@@ -18,12 +18,17 @@ namespace tessera::test {
 /// How the server answers one request.
 struct RangeReply {
   enum class Kind {
-    kServe,      ///< honour Range (206) and If-Match / If-Range as RFC 9110 says
-    kStatus,     ///< `status` with a short body (and Retry-After when set)
-    kWholeFile,  ///< 200 with the whole file, whatever was asked
-    kTruncate,   ///< the 206's headers, then half its body, then close the connection
-    kStall,      ///< the 206's headers and half its body, then nothing until the client leaves
-    kWrongRange  ///< a 206 one byte off what was asked
+    kServe,       ///< honour Range (206) and If-Match / If-Range as RFC 9110 says
+    kStatus,      ///< `status` with a short body (and Retry-After when set)
+    kWholeFile,   ///< 200 with the whole file, whatever was asked
+    kTruncate,    ///< the 206's headers, then half its body, then close the connection
+    kStall,       ///< the 206's headers and half its body, then nothing until the client leaves
+    kWrongRange,  ///< a 206 one byte off what was asked
+    /// A request of several ranges answered multipart/byteranges, its parts in reverse order
+    /// (a single range is served as kServe). The next two break it.
+    kMultipart,
+    kMultipartWrongRange,  ///< each part labelled one byte off the bytes it carries
+    kMultipartOversized,   ///< a 1 MiB preamble before the parts
   };
   Kind kind = Kind::kServe;
   int status = 200;
@@ -61,6 +66,8 @@ class RangeServer {
   void acceptLoop();
   void serve(int fd);
   bool handle(int fd, const SeenRequest& request);
+  bool sendMultipart(int fd, RangeReply::Kind kind, const std::string& range,
+                     const std::vector<uint8_t>& bytes, const std::string& validator);
 
   int listen_fd_ = -1;
   uint16_t port_ = 0;
