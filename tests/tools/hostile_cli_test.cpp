@@ -403,7 +403,7 @@ TEST_F(HostileCli, CommonSpellingsAreAcceptedAndUnknownValuesListTheChoices) {
 
   const std::vector<std::pair<std::vector<std::string>, std::string>> unknown = {
       {{"--codec", "gif"},
-       "--codec 'gif' is not one of raw, zstd, lz4, jpeg, png, webp, ptm or zdelta"},
+       "--codec 'gif' is not one of raw, zstd, lz4, jpeg, png, webp, ptm, zdelta, bc1 or bc7"},
       {{"--codec", "zsdt"}, "(did you mean 'zstd'?)"},
       {{"--order", "spiral"}, "--order 'spiral' is not one of hilbert, quadtree or row-major"},
       {{"--chroma", "411"}, "--chroma '411' is not one of 420 or 444"},
