@@ -143,8 +143,8 @@ class Archive {
   /// Same, in the image's own channel count and sample type (no RGBA expansion); outside
   /// texels are zero. A region of many tiles (16 or more) is decoded by up to one thread per
   /// core, started and joined within the call; a damaged tile fails the call naming the first
-  /// one in row-major order. readRegionRgba refuses u16 and f32 images (kUnsupported): their samples
-  /// need a display window to become 8-bit.
+  /// one in row-major order. readRegionRgba refuses u16 and f32 images (kUnsupported): their
+  /// samples need a display window to become 8-bit.
   [[nodiscard]] Result<Image> readRegion(uint32_t image, uint32_t level,
                                          const PixelRect& rect) const;
 

@@ -136,7 +136,6 @@ VersionView viewOf(const std::string& path, uint32_t image, const PixelRect& rec
   return view;
 }
 
-
 // issue 32: `tessera update` and `tessera append` killed at random points leave the archive in
 // place, verifying, and showing exactly the previous or the next version: the new header is
 // written last, after everything it references is synced. TESSERA_KILL_POINTS=100 runs the
