@@ -258,7 +258,28 @@ ChildServer forkServerWithFewDescriptors(const std::string& path) {
   ::_exit(0);
 }
 
+/// True in ASan (+UBSan) builds. Their runtimes need free descriptors of their own: UBSan's
+/// vptr check probes memory through a pipe, and in a process at its descriptor limit it reports
+/// valid objects as having an invalid vptr.
+bool sanitized() {
+#if defined(__SANITIZE_ADDRESS__)
+  return true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+  return true;
+#else
+  return false;
+#endif
+#else
+  return false;
+#endif
+}
+
 TEST_F(ServeLoad, ClientsPastTheDescriptorLimitAreRefusedAndTheServerKeepsServing) {
+  if (sanitized())
+    GTEST_SKIP() << "the sanitizer runtime misreports in a process without free descriptors";
+  // A child that died must fail the test, not kill it with SIGPIPE on the control pipe.
+  ::signal(SIGPIPE, SIG_IGN);
   ChildServer child = forkServerWithFewDescriptors(path_);
   ASSERT_GT(child.pid, 0);
   uint16_t port = 0;
