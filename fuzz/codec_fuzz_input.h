@@ -1,11 +1,12 @@
 #pragma once
 // The input layout of codec_fuzzer, shared with the seed-corpus generator so both agree:
-//   byte 0: bits 0-2 codec (Codec value 0..7), bits 3-4 channels - 1,
+//   byte 0: bits 0-2 the low bits of the codec, bits 3-4 channels - 1,
 //           bit 5 mode (0: decode the payload, 1: encode the texels, decode, compare),
 //           bits 6-7 ptm: the quarter of the parent the tile refines, in x and y; other
 //           codecs: the sample type (0 u8, 1 u16, 2 f32, 3 u8)
-//   byte 1: width - 1 (low 6 bits), byte 2: height - 1 (low 6 bits): tiles up to 64x64 keep
-//           each run fast, and the codecs' size-dependent paths are all reached below that
+//   byte 1: width - 1 (low 6 bits), bit 6 the codec's bit 3 (codec values 10..15, which do
+//           not exist, fold back to 2..7); byte 2: height - 1 (low 6 bits): tiles up to 64x64
+//           keep each run fast, and the codecs' size-dependent paths are all reached below that
 //   decode mode: bytes 3.. are the payload
 //   round-trip mode: byte 3 JPEG quality (1 + b % 100), byte 4 bits 0-3 effort (0..9),
 //           bit 4 chroma subsampling; bytes 5.. are texels, repeated to fill the tile
@@ -47,7 +48,8 @@ inline Image fuzzParentTexels(uint32_t side, uint32_t channels) {
 
 inline bool parseCodecFuzzInput(std::span<const uint8_t> data, CodecFuzzInput* input) {
   if (data.size() < kCodecFuzzHeaderBytes) return false;
-  input->codec = Codec(data[0] & 7);
+  const uint32_t codec = (data[0] & 7u) | ((data[1] >> 6) & 1u) << 3;
+  input->codec = Codec(codec > uint32_t(Codec::kBc7) ? codec - 8 : codec);
   input->channels = ((data[0] >> 3) & 3) + 1;
   input->round_trip = (data[0] >> 5) & 1;
   input->quadrant_x = (data[0] >> 6) & 1;
@@ -66,9 +68,9 @@ inline bool parseCodecFuzzInput(std::span<const uint8_t> data, CodecFuzzInput* i
 inline std::vector<uint8_t> codecFuzzHeader(Codec codec, uint32_t channels, uint32_t width_px,
                                             uint32_t height_px, bool round_trip,
                                             uint32_t quadrant = 0) {
-  return {uint8_t(uint8_t(codec) | (channels - 1) << 3 | (round_trip ? 1 : 0) << 5 |
+  return {uint8_t((uint8_t(codec) & 7) | (channels - 1) << 3 | (round_trip ? 1 : 0) << 5 |
                   (quadrant & 1) << 6 | (quadrant & 1) << 7),
-          uint8_t(width_px - 1), uint8_t(height_px - 1)};
+          uint8_t((width_px - 1) | (uint8_t(codec) >> 3 & 1) << 6), uint8_t(height_px - 1)};
 }
 
 }  // namespace tessera::fuzz
