@@ -15,6 +15,7 @@
 #include <bit>
 #include <cstdlib>
 #include <cstring>
+#include <iterator>
 
 #include <fmt/format.h>
 
@@ -104,18 +105,22 @@ struct FlatFit {
 
 FlatFit makeFlatFit(int bits) {
   FlatFit fit{};
+  int best[256];
+  std::fill(std::begin(best), std::end(best), 1 << 30);
   const int levels = 1 << bits;
-  for (int value = 0; value < 256; ++value) {
-    int best = 1 << 30;
-    for (int a = 0; a < levels; ++a)
-      for (int b = 0; b < levels; ++b) {
-        const int wa = widen(a, bits), wb = widen(b, bits);
+  // Each pair is scored against the values near its colour only: every value has a pair
+  // within a level of it (the tests check), so the nearest is always among those.
+  for (int a = 0; a < levels; ++a)
+    for (int b = 0; b < levels; ++b) {
+      const int wa = widen(a, bits), wb = widen(b, bits), colour = (2 * wa + wb) / 3;
+      for (int value = std::max(0, colour - 4); value <= std::min(255, colour + 4); ++value) {
         // A narrow pair breaks ties: GPUs round the thirds a little differently, and the
         // narrower the pair, the less that moves the colour.
-        const int cost = std::abs((2 * wa + wb) / 3 - value) * 1024 + std::abs(wa - wb);
-        if (cost < best) best = cost, fit.first[value] = uint8_t(a), fit.second[value] = uint8_t(b);
+        const int cost = std::abs(colour - value) * 1024 + std::abs(wa - wb);
+        if (cost < best[value])
+          best[value] = cost, fit.first[value] = uint8_t(a), fit.second[value] = uint8_t(b);
       }
-  }
+    }
   return fit;
 }
 
