@@ -173,11 +173,21 @@ void gatherGroup(const ImageView& tile, uint32_t first_block_x, uint32_t block_y
         const uint32_t t = y * kBcBlockSidePx + x;
         const uint8_t* src = row + x * kChannels;
         if constexpr (kChannels >= 3 && std::endian::native == std::endian::little) {
-          // A texel's bytes read as one little-endian word per lane and split by shifts.
-          uint32_t words[kLanes];
-          for (uint32_t lane = 0; lane < kLanes; ++lane)
-            std::memcpy(&words[lane], src + lane * kLaneBytes, 4);
-          const I4 w = {int32_t(words[0]), int32_t(words[1]), int32_t(words[2]), int32_t(words[3])};
+          // A texel's bytes read as one little-endian word per lane and split by shifts. For
+          // RGB, lanes are 12 bytes apart: one 16-byte read holds two lanes' words, at its
+          // first and last word.
+          I4 w;
+          if constexpr (kChannels == 3) {
+            I4 low, high;
+            std::memcpy(&low, src, 16);
+            std::memcpy(&high, src + 2 * kLaneBytes, 16);
+            w = __builtin_shufflevector(low, high, 0, 3, 4, 7);
+          } else {
+            uint32_t words[kLanes];
+            for (uint32_t lane = 0; lane < kLanes; ++lane)
+              std::memcpy(&words[lane], src + lane * kLaneBytes, 4);
+            w = I4{int32_t(words[0]), int32_t(words[1]), int32_t(words[2]), int32_t(words[3])};
+          }
           group.texel[0][t] = __builtin_convertvector(w & 0xff, F4);
           group.texel[1][t] = __builtin_convertvector((w >> 8) & 0xff, F4);
           group.texel[2][t] = __builtin_convertvector((w >> 16) & 0xff, F4);
