@@ -83,11 +83,11 @@ struct Endpoints {
 };
 
 /// A group's BC1 fields: the endpoints quantised to 565 in the four-colour order (colour0
-/// above colour1), and each texel's step on the line from colour0 (0) to colour1 (3).
+/// above colour1), and the 16 2-bit indices, texel 0 in the low bits.
 struct Fit {
   I4 colour0;
   I4 colour1;
-  I4 step[kTexels];
+  I4 indices;
 };
 
 /// An endpoint channel of `bits` bits (5 or 6) widened to 8 as the decoder does (bc_decode.cpp).
@@ -287,9 +287,9 @@ void findEndpoints(const BlockGroup& group, Endpoints& ends, I4& flat) {
   }
 }
 
-/// Quantises the endpoints to 565 and gives each texel the step of its position on the axis
+/// Quantises the endpoints to 565 and gives each texel the index of its position on the axis
 /// (one pass less than projecting onto the quantised endpoints' line, for 0.2 dB).
-void fitSteps(const Endpoints& ends, Fit& fit) {
+void fitIndices(const Endpoints& ends, Fit& fit) {
   I4 packed_a = {}, packed_b = {};
   for (uint32_t c = 0; c < 3; ++c) {
     const int bits = c == 1 ? 6 : 5, shift = c == 0 ? 11 : c == 1 ? 5 : 0;
@@ -306,26 +306,16 @@ void fitSteps(const Endpoints& ends, Fit& fit) {
   const F4 scale = span > 0 ? 3.0f / vmax(span, splat(1e-6f)) : splat(0);
   const F4 origin = swap ? ends.position_b : ends.position_a;
   const F4 step_scale = swap ? -scale : scale;
-  for (uint32_t t = 0; t < kTexels; ++t) {
-    const F4 s = (ends.position[t] - origin) * step_scale + 0.5f;
-    fit.step[t] = __builtin_convertvector(vmin(vmax(s, splat(0)), splat(3)), I4);
-  }
-}
-
-/// Writes the group's blocks, steps turned into BC1 indices.
-void packGroup(const Fit& fit, uint8_t* out) {
-  const I4 differ = fit.colour0 != fit.colour1;
   I4 indices = {};
   for (uint32_t t = 0; t < kTexels; ++t) {
-    // Steps 0, 1, 2, 3 from colour0 are indices 0, 2, 3, 1: the high bit is step 1 or 2, the
-    // low bit step 2 or 3. Equal colours (a flat block's) take index 0.
-    const I4 step = fit.step[t];
-    const I4 index = ((((step ^ (step >> 1)) & 1) << 1) | (step >> 1)) & differ;
-    indices |= index << (2 * t);
+    // `s` runs from 0 at colour0 to 3 at colour1; the nearest of steps 0, 1, 2, 3 is index 0,
+    // 2, 3, 1: the low bit from step 2 on, the high bit at steps 1 and 2.
+    const F4 s = (ends.position[t] - origin) * step_scale;
+    const I4 low_bit = s >= 1.5f, high_bit = (s >= 0.5f) & (s < 2.5f);
+    indices |= ((low_bit & 1) | (high_bit & 2)) << (2 * t);
   }
-  for (uint32_t l = 0; l < kLanes; ++l)
-    writeBlock(uint32_t(fit.colour0[l]), uint32_t(fit.colour1[l]), uint32_t(indices[l]),
-               out + 8 * l);
+  // Equal colours (a flat block's, or one that 565 made flat) take index 0.
+  fit.indices = indices & (fit.colour0 != fit.colour1);
 }
 
 template <uint32_t kChannels>
@@ -335,14 +325,12 @@ void encodeTile(const ImageView& tile, uint8_t* payload) {
   Endpoints ends;
   Fit fit;
   I4 flat;
-  alignas(16) uint8_t blocks[kLanes * 8];
   for (uint32_t by = 0; by < blocks_y; ++by)
     for (uint32_t bx = 0; bx < blocks_x; bx += kLanes) {
       group.lanes = std::min(kLanes, blocks_x - bx);
       gatherGroup<kChannels>(tile, bx, by, group);
       findEndpoints(group, ends, flat);
-      fitSteps(ends, fit);
-      packGroup(fit, blocks);
+      fitIndices(ends, fit);
       for (uint32_t l = 0; l < group.lanes; ++l) {
         uint8_t* out = payload + (size_t(by) * blocks_x + bx + l) * 8;
         if (flat[l]) {
@@ -350,7 +338,8 @@ void encodeTile(const ImageView& tile, uint8_t* payload) {
                               int(group.texel[2][0][l])};
           encodeFlatBlock(rgb, out);
         } else {
-          std::memcpy(out, blocks + 8 * l, 8);
+          writeBlock(uint32_t(fit.colour0[l]), uint32_t(fit.colour1[l]), uint32_t(fit.indices[l]),
+                     out);
         }
       }
     }
