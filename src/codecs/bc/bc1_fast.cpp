@@ -1,14 +1,15 @@
-// The fast BC1 encoder (bc1_fast.h). Per block: the principal axis of the texels (power
-// iteration on their covariance, started from the bounding box's diagonal), endpoints at the
+// The fast BC1 encoder (bc1_fast.h; docs/codecs.md, "Fast bc1 transcoder"). Per block: the
+// principal axis of the texels (power iteration on their covariance), endpoints at the
 // extreme projections on it pulled in by 1/16 of their span (the inset of van Waveren's
 // "Real-Time DXT Compression", 2006: extremes are often outliers the palette need not reach),
 // rounded to 565, and each texel's 2-bit index by rounding its position along the axis (for
 // four evenly spaced colours on a line that is the nearest colour). A least-squares refit of the
-// endpoints to those indices gained 0.4 dB on real imagery for 45 % more time, which a
+// endpoints to those indices gained 0.4 dB on real imagery for about 30 % more time, which a
 // load-time transcode cannot spend.
 //
 // Four blocks are encoded together, one per lane of a vector, so that every step is SIMD
-// arithmetic (SSE2 on x86-64) with no reduction across lanes and no branch per block.
+// arithmetic (SSE2 on x86-64) with no reduction across lanes and no branch per block; flat
+// blocks alone are rewritten afterwards, one at a time.
 #include "bc/bc1_fast.h"
 
 #include <algorithm>
