@@ -34,6 +34,14 @@ const char* codecContentType(Codec codec) {
   }
 }
 
+// The side of a stored tile's payload image: block codecs pad it to whole 4x4 blocks
+// (docs/codecs.md), which a client uploading the blocks as stored must size its texture by.
+uint32_t payloadSidePx(const ImageInfo& info) {
+  const uint32_t side = info.storedTileSidePx();
+  const bool blocks = info.default_codec == Codec::kBc1 || info.default_codec == Codec::kBc7;
+  return blocks ? (side + 3) / 4 * 4 : side;
+}
+
 std::string httpDate(std::time_t time) {
   std::tm parts{};
   ::gmtime_r(&time, &parts);
@@ -259,6 +267,7 @@ Router::Router(Catalog catalog, const ServeOptions& options, Metrics& metrics,
                               {"border", info.border_px},
                               {"codec", codecName(info.default_codec)},
                               {"tile_content_type", codecContentType(info.default_codec)},
+                              {"payload_side", payloadSidePx(info)},
                               {"level_count", info.level_count},
                               {"levels", levels},
                               {"dzi", fmt::format("/{}/{}.dzi", name, i)},

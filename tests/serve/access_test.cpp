@@ -14,6 +14,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <tessera/archive.h>
+
 #include "serve/serve_fixture.h"
 
 namespace tessera::detail {
@@ -279,6 +281,37 @@ TEST_F(AccessServerTest, CredentialsOpenTheirArchivesPrivatelyAndTheListFollowsT
   const std::string expired = signedQuery("web", kSecret, "/jpeg3.tess", now - 1, "0-16383");
   EXPECT_EQ(test::httpRequest(port, "/jpeg3.tess?" + expired, {{"Range", "bytes=0-9"}}).status,
             403u);
+}
+
+// The stored blocks of a bc1 archive, which the web viewer uploads as they are, are a tile
+// route like the others: no bytes without the token, the stored payload with it.
+TEST_F(AccessServerTest, BlockTilesOfAProtectedArchiveNeedTheToken) {
+  paths_.push_back(test::servedArchive("scan-b", 200, 150, 3, Codec::kBc1, 64, 0));
+  auto server = start();
+  ASSERT_NE(server, nullptr);
+  const uint16_t port = server->port();
+  std::shared_ptr<Archive> archive = Archive::openFile(paths_.back()).value();
+  const TileId id{0, 0, 0, 0};
+  const TileEntry entry = archive->tileEntry(id).value();
+  ASSERT_EQ(entry.kind, TileKind::kEncoded);
+  const std::vector<uint8_t> payload = archive->readPayload(id, entry).value();
+  for (const char* method : {"GET", "HEAD"}) {
+    test::HttpReply refused = test::httpRequest(port, "/scan-b/0/0/0/0", {}, method);
+    EXPECT_EQ(refused.status, 401u) << method;
+    EXPECT_EQ(refused.header("etag"), "") << method;
+    EXPECT_EQ(refused.body.find(std::string(payload.begin(), payload.begin() + 8)),
+              std::string::npos);
+  }
+  const std::string bearer = "Bearer " + std::string(kToken);
+  test::HttpReply tile = test::httpRequest(port, "/scan-b/0/0/0/0", {{"Authorization", bearer}});
+  ASSERT_EQ(tile.status, 200u) << tile.body;
+  EXPECT_EQ(tile.body, std::string(payload.begin(), payload.end()));
+  EXPECT_EQ(tile.header("x-tessera-codec"), "bc1");
+  EXPECT_TRUE(tile.header("cache-control").starts_with("private")) << tile.header("cache-control");
+  test::HttpReply head =
+      test::httpRequest(port, "/scan-b/0/0/0/0", {{"Authorization", bearer}}, "HEAD");
+  EXPECT_EQ(head.status, 200u);
+  EXPECT_EQ(head.header("content-length"), std::to_string(payload.size()));
 }
 
 TEST_F(AccessServerTest, RateLimitsAnswer429AndTheLogHidesSignatures) {

@@ -156,6 +156,49 @@ TEST_F(TileServerTest, TileEndpointSendsTheStoredPayload) {
   EXPECT_EQ(jpeg.body, std::string(payload.begin(), payload.end()));
 }
 
+// bc1 and bc7 tiles go out as stored, so that a browser offering S3TC or BPTC uploads them
+// as they are (docs/web.md); info.json gives the side the blocks cover, padding included.
+TEST(TileServerBlocks, BlockTilesAreTheStoredBlocksSizedByPayloadSide) {
+  // Stored side 66: padded to 68, whole 4x4 blocks.
+  const std::string path = servedArchive("bc1b1", 300, 200, 3, Codec::kBc1, 64, 1);
+  std::shared_ptr<Archive> archive = Archive::openFile(path).value();
+  std::unique_ptr<TileServer> server = startServer({path, pngArchive()});
+  ASSERT_NE(server, nullptr);
+  const uint16_t port = server->port();
+  const nlohmann::json image =
+      nlohmann::json::parse(httpRequest(port, "/bc1b1/info.json").body)["images"][0];
+  EXPECT_EQ(image["codec"], "bc1");
+  EXPECT_EQ(image["payload_side"], 68);
+  EXPECT_EQ(nlohmann::json::parse(
+                httpRequest(port, "/pngb1/info.json").body)["images"][0]["payload_side"],
+            130);
+  const ImageInfo& info = archive->images()[0];
+  int encoded = 0;
+  for (uint32_t y = 0; y < info.tilesY(0); ++y)
+    for (uint32_t x = 0; x < info.tilesX(0); ++x) {
+      const TileId id{0, 0, x, y};
+      const TileEntry entry = archive->tileEntry(id).value();
+      if (entry.kind != TileKind::kEncoded) continue;
+      ++encoded;
+      const std::string target = fmt::format("/bc1b1/0/0/{}/{}", x, y);
+      HttpReply reply = httpRequest(port, target);
+      ASSERT_EQ(reply.status, 200u) << target << ": " << reply.body;
+      const std::vector<uint8_t> payload = archive->readPayload(id, entry).value();
+      EXPECT_EQ(reply.body, std::string(payload.begin(), payload.end())) << target;
+      EXPECT_EQ(reply.body.size(), (68u / 4) * (68u / 4) * 8) << target;
+      EXPECT_EQ(reply.header("content-type"), "application/octet-stream");
+      EXPECT_EQ(reply.header("x-tessera-codec"), "bc1");
+      EXPECT_EQ(reply.header("cache-control"), "public, max-age=31536000, immutable");
+      HttpReply head = httpRequest(port, target, {}, "HEAD");
+      EXPECT_EQ(head.status, 200u);
+      EXPECT_EQ(head.header("content-length"), std::to_string(payload.size()));
+      EXPECT_TRUE(head.body.empty());
+      EXPECT_EQ(head.header("etag"), reply.header("etag"));
+      EXPECT_EQ(httpRequest(port, target, {{"If-None-Match", reply.header("etag")}}).status, 304u);
+    }
+  EXPECT_GT(encoded, 0);
+}
+
 TEST_F(TileServerTest, TileEtagAnswers304) {
   HttpReply first = httpRequest(port_, "/pngb1/0/0/2/3");
   ASSERT_EQ(first.status, 200u);

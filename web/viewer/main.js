@@ -16,6 +16,8 @@ import {
 import {
   LruCache,
   RateMeter,
+  blockCodec,
+  blockPayloadBytes,
   isWide,
   planRequests,
   tileUrl,
@@ -45,7 +47,10 @@ class Viewer {
     this.generation = 0; // bumped when the archive or image changes
     this.cache = this.makeCache(DEFAULT_CACHE_TILES);
     this.rate = new RateMeter(1000);
-    this.counters = { requested: 0, loaded: 0, aborted: 0, failed: 0, bytes: 0, frames: 0 };
+    this.counters = { requested: 0, loaded: 0, aborted: 0, failed: 0, bytes: 0, frames: 0, blockUploads: 0 };
+    // False: bc1 and bc7 tiles come as PNG transcodes even where the GPU samples their blocks
+    // (a comparison of the two paths; window.tessera.setBlockUploads).
+    this.blockUploads = true;
     this.frameTimes = [];
     this.dirty = true;
     this.drawnSinceChange = false;
@@ -108,6 +113,21 @@ class Viewer {
     $('window-gamma').value = shown.gamma ?? 1;
   }
 
+  /** The block codecs whose stored tiles this viewer uploads as they are (a Set of names). */
+  gpuCodecs() {
+    return this.blockUploads ? new Set(this.renderer.blockFormats.keys()) : new Set();
+  }
+
+  /** Uploads bc1 and bc7 tiles as stored (on) or fetches PNG transcodes (off); refetches. */
+  setBlockUploads(on) {
+    this.blockUploads = Boolean(on);
+    this.cancelAll();
+    this.cache.clear();
+    this.failed.clear();
+    this.generation += 1;
+    this.changed();
+  }
+
   cancelAll() {
     for (const { controller } of this.inFlight.values()) controller.abort();
     this.counters.aborted += this.inFlight.size;
@@ -166,7 +186,9 @@ class Viewer {
     const generation = this.generation;
     this.inFlight.set(tile.key, { controller, tile });
     this.counters.requested += 1;
-    const path = tileUrl(this.archive.name, this.image, tile.level, tile.x, tile.y, forcePng, this.display);
+    const codecs = this.gpuCodecs();
+    const path = tileUrl(this.archive.name, this.image, tile.level, tile.x, tile.y, forcePng, this.display, codecs);
+    const blocks = forcePng ? null : blockCodec(this.image, codecs);
     const done = () => {
       // A cancelled request was already taken out of the map (maybe replaced by a new one).
       const current = this.inFlight.get(tile.key);
@@ -191,6 +213,24 @@ class Viewer {
         }
         if (controller.signal.aborted || generation !== this.generation) return;
         this.store(tile, this.renderer.uploadPixels(new Uint8Array(colour), 1, 1), 0, done);
+        return;
+      }
+      if (blocks) {
+        // A tile stored in another codec than the archive's has no blocks to upload.
+        if (response.headers.get('X-Tessera-Codec') !== blocks) {
+          done();
+          if (generation === this.generation && !controller.signal.aborted) this.fetchTile(tile, true);
+          return;
+        }
+        const data = new Uint8Array(await response.arrayBuffer());
+        if (controller.signal.aborted || generation !== this.generation) return;
+        const side = this.image.payload_side;
+        const expected = blockPayloadBytes(blocks, side);
+        if (data.byteLength !== expected)
+          throw new Error(`${path}: ${data.byteLength} bytes of ${blocks}, expected ${expected} for ${side}x${side} texels`);
+        const entry = this.renderer.uploadBlocks(blocks, data, side);
+        this.counters.blockUploads += 1;
+        this.store(tile, entry, data.byteLength, done);
         return;
       }
       const blob = await response.blob();
@@ -314,6 +354,7 @@ class Viewer {
       inFlight: this.inFlight.size,
       inFlightKeys: [...this.inFlight.keys()],
       maxInFlight: this.maxInFlight,
+      blockCodecs: [...this.renderer.blockFormats.keys()],
       cacheTiles: this.cache.size,
       cacheCapacity: this.cache.capacity,
       cacheBytes: [...this.cache.entries.values()].reduce((sum, e) => sum + e.bytes, 0),
@@ -339,7 +380,8 @@ class Viewer {
         `${(1 / s.view.tpp).toFixed(3)} px/texel`,
       `in flight ${s.inFlight}/${s.maxInFlight}   missing ${s.missing}/${s.needed}`,
       `cache ${s.cacheTiles}/${s.cacheCapacity} tiles, ${mib(s.cacheBytes)} MiB, ${s.evictions} evicted`,
-      `${(this.rate.rate(now) / 1024).toFixed(0)} KiB/s   ${mib(s.bytes)} MiB in ${s.loaded} tiles`,
+      `${(this.rate.rate(now) / 1024).toFixed(0)} KiB/s   ${mib(s.bytes)} MiB in ${s.loaded} tiles` +
+        (s.blockUploads ? `, ${s.blockUploads} as GPU blocks` : ''),
       `requested ${s.requested}   aborted ${s.aborted}   failed ${s.failed}`,
       s.settled ? 'at rest: every tile at the desired level' : s.complete ? 'drawing' : 'loading',
     ];
@@ -535,6 +577,8 @@ async function start() {
     showPanels: (on) => {
       for (const id of ['stats', 'bar']) $(id).hidden = !on;
     },
+    /** On (the default): bc1 and bc7 tiles go to the GPU as stored where it samples them. */
+    setBlockUploads: (on) => viewer.setBlockUploads(on),
     setMaxInFlight: (n) => {
       viewer.maxInFlight = Math.max(1, n | 0);
       viewer.changed();

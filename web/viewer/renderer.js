@@ -10,7 +10,10 @@
 // border are filtered in the shader, as the native tile-quads renderer does
 // (docs/rendering.md): each quad also gets the 3 x 3 tiles around it, and the four texels of a
 // bilinear footprint come from whichever of them holds each; a neighbour that is not resident
-// lends nothing, its texels come from the nearest texels of the tile itself.
+// lends nothing, its texels come from the nearest texels of the tile itself. Tiles of a bc1
+// or bc7 archive may be compressed textures of the stored blocks, padded past the stored
+// tile's last column and row to whole blocks: bordered quads scale their texture coordinates
+// by the padded side, and the unbordered shader's texel fetches never reach the padding.
 
 import { tileRect } from './view.js';
 
@@ -175,6 +178,14 @@ export class TileRenderer {
     gl.vertexAttribPointer(0, 2, gl.FLOAT, false, 0, 0);
     gl.bindVertexArray(null);
     this.maxTextureSize = gl.getParameter(gl.MAX_TEXTURE_SIZE);
+    // Block codecs the context samples as stored, by codec name: their tiles skip the decode
+    // and take an eighth (bc1) or a quarter (bc7) of the texture memory. RGBA DXT1, as the CPU
+    // decoder reads bc1: a three-colour block's index 3 is transparent black.
+    this.blockFormats = new Map();
+    const s3tc = gl.getExtension('WEBGL_compressed_texture_s3tc');
+    if (s3tc) this.blockFormats.set('bc1', s3tc.COMPRESSED_RGBA_S3TC_DXT1_EXT);
+    const bptc = gl.getExtension('EXT_texture_compression_bptc');
+    if (bptc) this.blockFormats.set('bc7', bptc.COMPRESSED_RGBA_BPTC_UNORM_EXT);
   }
 
   /** A texture of a decoded stored tile (ImageBitmap or ImageData), exactly as decoded. */
@@ -191,6 +202,23 @@ export class TileRenderer {
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
     gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
     return { texture, width: source.width, height: source.height, bytes: source.width * source.height * 4 };
+  }
+
+  /**
+   * A texture of a stored bc1 or bc7 tile (a Uint8Array of 4x4 blocks, row-major) covering
+   * `side` x `side` texels, padding included (`payload_side`; a multiple of 4). The padding
+   * lies past the stored tile's last column and row; `paddedSide` lets the quads skip it.
+   */
+  uploadBlocks(codec, blocks, side) {
+    const gl = this.gl;
+    const texture = gl.createTexture();
+    gl.bindTexture(gl.TEXTURE_2D, texture);
+    gl.compressedTexImage2D(gl.TEXTURE_2D, 0, this.blockFormats.get(codec), side, side, 0, blocks);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+    return { texture, width: side, height: side, paddedSide: side, bytes: blocks.byteLength };
   }
 
   /** A texture of RGBA8 pixels (a uniform tile: 1x1, stretched over the tile's quad). */
@@ -263,6 +291,9 @@ export class TileRenderer {
     const gl = this.gl;
     const border = image.border;
     const side = image.tile_size + 2 * border;
+    // Texture coordinates are fractions of the texture, whose padding (block tiles) follows the
+    // stored tile.
+    const texSide = entry.paddedSide || side;
     const scale = 2 ** level;
     const [u0, v0, u1, v1] = tileRect(image, level, x, y);
     // The rectangle in this tile's level texels, offset by the border into the stored tile.
@@ -271,10 +302,10 @@ export class TileRenderer {
     gl.uniform4f(loc.u_rect, u0 - view.cx, v0 - view.cy, u1 - view.cx, v1 - view.cy);
     gl.uniform4f(
       loc.u_texRect,
-      (u0 / scale - ox) / side,
-      (v0 / scale - oy) / side,
-      (u1 / scale - ox) / side,
-      (v1 / scale - oy) / side,
+      (u0 / scale - ox) / texSide,
+      (v0 / scale - oy) / texSide,
+      (u1 / scale - ox) / texSide,
+      (v1 / scale - oy) / texSide,
     );
     gl.activeTexture(gl.TEXTURE0);
     gl.bindTexture(gl.TEXTURE_2D, entry.texture);

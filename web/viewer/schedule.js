@@ -147,18 +147,40 @@ export class RateMeter {
 
 const BROWSER_TYPES = new Set(['image/jpeg', 'image/png', 'image/webp']);
 
+/** Bytes of one 4x4 block of the codecs whose stored tiles a GPU samples as they are. */
+const BLOCK_BYTES = { bc1: 8, bc7: 16 };
+
+/**
+ * The block codec (`bc1` or `bc7`) of an image whose stored tiles the viewer uploads as they
+ * are, or null. It needs 8-bit samples, `payload_side` in info.json (the side the blocks cover,
+ * padding included) and the codec in `gpuCodecs`, the names of the block codecs the WebGL
+ * context samples (a Set; null or empty: none).
+ */
+export function blockCodec(image, gpuCodecs) {
+  if (!gpuCodecs || !Object.hasOwn(BLOCK_BYTES, image.codec) || !gpuCodecs.has(image.codec)) return null;
+  if (isWide(image) || !Number.isInteger(image.payload_side) || image.payload_side % 4 !== 0) return null;
+  return image.codec;
+}
+
+/** The bytes of a stored tile of block codec `codec` whose blocks cover `side` x `side` texels. */
+export function blockPayloadBytes(codec, side) {
+  return Math.ceil(side / 4) ** 2 * BLOCK_BYTES[codec];
+}
+
 /**
  * The URL path of a tile for the browser: the stored payload when the archive's codec is one
- * browsers decode (tile_content_type image/jpeg, png or webp), else `?format=png`, a lossless
- * transcode of the same stored tile (borders included). `forcePng` asks for the transcode
- * anyway: uniform and empty tiles have no stored payload. A 16-bit or float image
- * (sample_type u16 or f32) is always the transcode, mapped to 8 bits by the server with
- * `display` ({low, high, gamma}; null: the server's default window).
+ * browsers decode (tile_content_type image/jpeg, png or webp) or a block codec the GPU samples
+ * (`blockCodec(image, gpuCodecs)`), else `?format=png`, a lossless transcode of the same stored
+ * tile (borders included). `forcePng` asks for the transcode anyway: uniform and empty tiles
+ * have no stored payload. A 16-bit or float image (sample_type u16 or f32) is always the
+ * transcode, mapped to 8 bits by the server with `display` ({low, high, gamma}; null: the
+ * server's default window).
  */
-export function tileUrl(archiveName, image, level, x, y, forcePng = false, display = null) {
+export function tileUrl(archiveName, image, level, x, y, forcePng = false, display = null, gpuCodecs = null) {
   const path = `${encodeURIComponent(archiveName)}/${image.index}/${level}/${x}/${y}`;
   if (isWide(image)) return `${path}?format=png${windowQuery(display)}`;
-  return forcePng || !BROWSER_TYPES.has(image.tile_content_type) ? `${path}?format=png` : path;
+  if (forcePng) return `${path}?format=png`;
+  return BROWSER_TYPES.has(image.tile_content_type) || blockCodec(image, gpuCodecs) ? path : `${path}?format=png`;
 }
 
 /** True for an image whose samples are not 8-bit: its tiles need a display window. */

@@ -5,6 +5,8 @@ import { test } from 'node:test';
 import {
   LruCache,
   RateMeter,
+  blockCodec,
+  blockPayloadBytes,
   planRequests,
   tileUrl,
   windowQuery,
@@ -105,6 +107,28 @@ test('tile URLs: stored payload for browser codecs, a PNG transcode otherwise', 
   assert.equal(tileUrl('earth', png, 3, 4, 5), 'earth/2/3/4/5');
   assert.equal(tileUrl('earth', png, 3, 4, 5, true), 'earth/2/3/4/5?format=png');
   assert.equal(tileUrl('a b', zstd, 0, 1, 2), 'a%20b/0/0/1/2?format=png');
+});
+
+test('tile URLs of bc1 and bc7 archives: the stored blocks where the GPU samples them', () => {
+  const bc1 = { index: 0, codec: 'bc1', tile_content_type: 'application/octet-stream', sample_type: 'u8', payload_side: 260 };
+  const bc7 = { ...bc1, codec: 'bc7' };
+  const both = new Set(['bc1', 'bc7']);
+  assert.equal(blockCodec(bc1, both), 'bc1');
+  assert.equal(blockCodec(bc7, new Set(['bc7'])), 'bc7');
+  assert.equal(blockCodec(bc7, new Set(['bc1'])), null);
+  assert.equal(blockCodec(bc1, null), null);
+  // Without the padded side from info.json the texture cannot be sized: PNG.
+  assert.equal(blockCodec({ ...bc1, payload_side: undefined }, both), null);
+  assert.equal(blockCodec({ ...bc1, payload_side: 258 }, both), null);
+  assert.equal(blockCodec({ ...bc1, codec: 'zstd' }, both), null);
+  assert.equal(blockCodec({ ...bc1, codec: 'toString' }, both), null);
+  assert.equal(tileUrl('e', bc1, 1, 2, 3, false, null, both), 'e/0/1/2/3');
+  assert.equal(tileUrl('e', bc1, 1, 2, 3, true, null, both), 'e/0/1/2/3?format=png');
+  assert.equal(tileUrl('e', bc1, 1, 2, 3, false, null, new Set()), 'e/0/1/2/3?format=png');
+  assert.equal(tileUrl('e', bc1, 1, 2, 3), 'e/0/1/2/3?format=png');
+  // 260 px: 65 x 65 blocks of 8 (bc1) or 16 (bc7) bytes.
+  assert.equal(blockPayloadBytes('bc1', 260), 65 * 65 * 8);
+  assert.equal(blockPayloadBytes('bc7', 128), 32 * 32 * 16);
 });
 
 test('tile URLs of wide images: always the 8-bit transcode, with the display window', () => {
