@@ -46,7 +46,7 @@ RendererBase::RendererBase(const ImageInfo& info, const RendererOptions& options
   // Here, not at the first upload: mapping the ring (tens of MiB the driver may clear) would
   // otherwise fall inside the first frame of a flight.
   staging_.emplace(options_.staging_ring_bytes);
-  ++stats_.storage_allocations;
+  if (options_.staging_ring_bytes > 0) ++stats_.storage_allocations;
 }
 
 void RendererBase::setDisplayWindow(const DisplayWindow& window) {
