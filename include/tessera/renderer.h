@@ -54,17 +54,25 @@ struct RenderStats {
   uint32_t resident_tiles = 0;  ///< tiles the renderer holds now
   uint32_t tiles_drawn = 0;     ///< tiles (quads) the last draw drew, after culling
   uint64_t gpu_bytes = 0;       ///< texture memory allocated for tiles
-  double apply_cpu_ms = 0;      ///< render-thread time of the last apply
-  double draw_cpu_ms = 0;       ///< render-thread time of the last draw (commands issued)
+  /// Texture and buffer storage allocated since creation: the tile array or clip layers
+  /// (each growth or reallocation), the staging ring and the colour target (each new size).
+  /// Sized up front (RendererOptions), a flight at one viewport adds none after its first
+  /// draw: a frame that allocates stalls the render thread (docs/rendering.md, "Uploads").
+  uint32_t storage_allocations = 0;
+  double apply_cpu_ms = 0;  ///< render-thread time of the last apply
+  double draw_cpu_ms = 0;   ///< render-thread time of the last draw (commands issued)
 };
 
-/// Sizes a renderer starts with; each grows on demand.
+/// Sizes a renderer starts with, allocated by createRenderer; each grows on demand. A caller
+/// that knows its viewport sizes them so that no frame allocates: `initial_layers` from
+/// residentTilesBound (tessera/stream.h), `initial_clip_tiles` from clipRegionTiles.
 struct RendererOptions {
   /// Tile quads: tile layers allocated at first; the array grows by doubling up to the
   /// driver's limit.
   uint32_t initial_layers = 64;
   /// Clipmap: tiles along a level layer's side at first (n of Backes et al., eq. 3); a frame
-  /// whose clip regions are larger reallocates the layers. 0: the first frame's size.
+  /// whose clip regions are larger reallocates the layers. 0: the first frame's size,
+  /// allocated at that frame.
   uint32_t initial_clip_tiles = 0;
   /// Bytes of the persistently mapped staging ring uploads go through (OpenGL 4.4 buffer
   /// storage; docs/rendering.md, "Uploads"): two frames at the largest adaptive upload

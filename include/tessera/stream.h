@@ -114,6 +114,14 @@ struct ResidencyOptions {
   uint32_t lookahead_frames = 6;
 };
 
+/// The most tiles of `info` a TileStreamer with `options` keeps resident for a viewport of
+/// `viewport_w` x `viewport_h` px: per level, the clip region (eq. 3) with its keep margin on
+/// each side, or the whole level when smaller (FrameUpdate::resident_tiles_bound). A renderer
+/// sized from it before the first frame allocates no texture storage during a flight at that
+/// viewport. Thread-safe.
+uint64_t residentTilesBound(const ImageInfo& info, uint32_t viewport_w, uint32_t viewport_h,
+                            const ResidencyOptions& options);
+
 /// What a frame looked like: the figures `tessera fly` records.
 struct FrameReport {
   uint32_t desired_level = 0;
@@ -212,6 +220,10 @@ struct FrameUpdate {
   /// far perspective ground can exceed it for a while; a renderer sizes its texture storage
   /// from it up front and grows only past it.
   uint64_t resident_tiles_bound = 0;
+  /// True when this update recomputed the residency plan (clip regions, wanted tiles and their
+  /// priorities); false when the view and everything the plan depends on were as in the last
+  /// update, which reused that plan.
+  bool replanned = false;
   FrameReport report;
   /// Loads that failed since the last update, in the order they failed
   /// (FrameReport::load_failures_total counts them all).

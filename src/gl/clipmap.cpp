@@ -149,6 +149,7 @@ class ClipmapRenderer final : public RendererBase {
     anchor_frac_uniform_ = glGetUniformLocation(p, "u_anchor_frac");
     slots_uniform_ = glGetUniformLocation(p, "u_slots");
     vertex_array_ = createVertexArray();
+    if (options_.initial_clip_tiles > 0) reallocate(options_.initial_clip_tiles);
     return {};
   }
 
@@ -405,6 +406,7 @@ class ClipmapRenderer final : public RendererBase {
     for (const auto& [id, slot] : slot_of_) drop(id);
     slot_of_.clear();
     slots_ = slots;
+    ++stats_.storage_allocations;
     const GLsizei side = GLsizei(slots_ * info_.tile_size_px);
     const GLsizei levels = GLsizei(info_.level_count);
     texels_ = createTileArray(info_.channels, info_.sample_type, side, levels);

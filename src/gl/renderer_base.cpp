@@ -42,7 +42,12 @@ RendererBase::RendererBase(const ImageInfo& info, const RendererOptions& options
     : info_(info),
       options_(options),
       texel_format_(tileTexelFormat(info.channels, info.sample_type)),
-      window_(fullRangeWindow(info.sample_type)) {}
+      window_(fullRangeWindow(info.sample_type)) {
+  // Here, not at the first upload: mapping the ring (tens of MiB the driver may clear) would
+  // otherwise fall inside the first frame of a flight.
+  staging_.emplace(options_.staging_ring_bytes);
+  if (options_.staging_ring_bytes > 0) ++stats_.storage_allocations;
+}
 
 void RendererBase::setDisplayWindow(const DisplayWindow& window) {
   // The viewer sets it every frame: unchanged, it costs no GL call.
@@ -134,7 +139,6 @@ void RendererBase::uploadStaged(
   sources_.clear();
   for (const PendingUpload& p : pending)
     if (p.tile) sources_.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
-  if (!staging_) staging_.emplace(options_.staging_ring_bytes);
   size_t offset = staging_->stage(sources_);  // staged one after the other, in this order
   for (const PendingUpload& p : pending) {
     if (!p.tile) continue;
@@ -151,7 +155,6 @@ void RendererBase::uploadStaged(
 }
 
 size_t RendererBase::stagingRoom() {
-  if (!staging_) staging_.emplace(options_.staging_ring_bytes);
   return staging_->room();
 }
 
@@ -162,6 +165,8 @@ const ApplyResult& RendererBase::endApply(Clock::time_point started, size_t resi
 }
 
 ViewProjection RendererBase::beginDraw(const View& view) {
+  if (target_.width() != view.viewportWidth() || target_.height() != view.viewportHeight())
+    ++stats_.storage_allocations;  // bind() makes a target of the new size
   target_.bind(view.viewportWidth(), view.viewportHeight());
   glClearColor(0, 0, 0, 0);
   glClear(GL_COLOR_BUFFER_BIT);

@@ -87,7 +87,7 @@ class RendererBase : public Renderer {
 
  private:
   ColourTarget target_;
-  std::optional<UploadRing> staging_;  ///< made at first use, with the context current
+  std::optional<UploadRing> staging_;  ///< made at construction, with the context current
   GLint view_projection_uniform_ = -1;
   /// Sets the window's uniforms of program `p` from window_.
   void uploadWindow(GLuint p) const;

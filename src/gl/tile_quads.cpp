@@ -392,6 +392,7 @@ class TileQuadsRenderer final : public RendererBase {
     for (uint32_t layer = layer_capacity_; layer < layers; ++layer)
       free_layers_.push_back(GLint(layers - 1 - (layer - layer_capacity_)));
     tiles_ = std::move(grown);
+    ++stats_.storage_allocations;
     layer_capacity_ = layers;
     stats_.gpu_bytes = uint64_t(layers) * info_.storedTileBytes();
     return {};

@@ -12,6 +12,16 @@ uint32_t clipRegionTiles(uint32_t screen_w, uint32_t screen_h, uint32_t tile_siz
   return std::max(1u, (longest + tile_size_px - 1) / tile_size_px) * 2;  // eq. 3
 }
 
+uint64_t residentTilesBound(const ImageInfo& info, uint32_t viewport_w, uint32_t viewport_h,
+                            const ResidencyOptions& options) {
+  const uint64_t side = clipRegionTiles(viewport_w, viewport_h, info.tile_size_px) +
+                        2 * uint64_t(options.keep_margin_tiles);
+  uint64_t bound = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level)
+    bound += std::min(side * side, uint64_t(info.tilesX(level)) * info.tilesY(level));
+  return bound;
+}
+
 int64_t clipCentreTile(double f_level_px, uint32_t tile_size_px) {
   return int64_t(std::floor(f_level_px / tile_size_px));  // eq. 4
 }

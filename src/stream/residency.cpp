@@ -102,6 +102,22 @@ TileRect intersect(const TileRect& a, const TileRect& b) {
   return {std::max(a.x0, b.x0), std::max(a.y0, b.y0), std::min(a.x1, b.x1), std::min(a.y1, b.y1)};
 }
 
+/// True when planning for `a` and `b` gives the same result: the same image, kind and, of
+/// the kind's camera, every field.
+bool sameView(const View& a, const View& b) {
+  if (a.kind != b.kind || a.image != b.image) return false;
+  if (a.kind == View::Kind::kOrtho) {
+    const OrthoView &p = a.ortho, &q = b.ortho;
+    return p.centre_x == q.centre_x && p.centre_y == q.centre_y &&
+           p.texels_per_pixel == q.texels_per_pixel && p.viewport_w == q.viewport_w &&
+           p.viewport_h == q.viewport_h && p.rotation_rad == q.rotation_rad;
+  }
+  const PerspectiveView &p = a.perspective, &q = b.perspective;
+  return p.eye_x == q.eye_x && p.eye_y == q.eye_y && p.eye_z == q.eye_z && p.yaw_rad == q.yaw_rad &&
+         p.pitch_rad == q.pitch_rad && p.fov_y_rad == q.fov_y_rad && p.viewport_w == q.viewport_w &&
+         p.viewport_h == q.viewport_h && p.roll_rad == q.roll_rad;
+}
+
 /// Tiles of `level` under a box in level-0 pixels.
 TileRect tilesUnder(double x0, double y0, double x1, double y1, uint32_t level, uint32_t t) {
   double span = levelScale(level) * t;
@@ -312,7 +328,12 @@ void ResidencyManager::finishPlan() {
 }
 
 const ResidencyPlan& ResidencyManager::plan(const View& view) {
+  // A held view (the viewer at rest, a flight between jumps) would otherwise rebuild and sort
+  // the same wanted set every frame on the render thread.
+  const bool same_view = has_last_view_ && sameView(view, last_view_);
+  if (same_view && settled_) return plan_;
   const uint32_t coarsest = info_.level_count - 1;
+  centres_before_.assign(centres_.begin(), centres_.end());
   frame_.fp = footprintOf(view, info_);
   frame_.desired = frame_.fp.desired_level;
   frame_.n = clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info_.tile_size_px);
@@ -351,6 +372,16 @@ const ResidencyPlan& ResidencyManager::plan(const View& view) {
   finishPlan();
   last_centre_x_ = frame_.fp.centre_x;
   last_centre_y_ = frame_.fp.centre_y;
+  // Settled: this frame saw no motion (the footprint centre was the last frame's) and moved
+  // no centre, so planning the same view again repeats every step above.
+  bool centres_moved = false;
+  for (uint32_t l = 0; l <= coarsest; ++l)
+    centres_moved = centres_moved || centres_[l].valid != centres_before_[l].valid ||
+                    centres_[l].x != centres_before_[l].x || centres_[l].y != centres_before_[l].y;
+  settled_ = same_view && !centres_moved;
+  last_view_ = view;
+  has_last_view_ = true;
+  ++plans_computed_;
   return plan_;
 }
 

@@ -35,7 +35,12 @@ class ResidencyManager {
   /// wanted set with priorities: class 0 the coarsest level, class 1 visible tiles (then
   /// those the lookahead expects on screen soon), class 2 the rest of the clip regions,
   /// class 3 prefetch; within each coarse levels first, then nearer the view centre first.
+  /// A view equal to the last one, once the plan has settled (no motion since the frame
+  /// before, no clip centre still stepping towards its target), reuses the last plan: it
+  /// would come out the same.
   const ResidencyPlan& plan(const View& view);
+  /// Plans computed so far (calls of plan() that did not reuse the last one).
+  uint64_t plansComputed() const { return plans_computed_; }
 
   /// True when `tile` is in the current wanted set.
   bool isWanted(const TileId& tile) const;
@@ -91,11 +96,18 @@ class ResidencyManager {
   uint32_t image_;
   ResidencyOptions options_;
   std::vector<LevelCentre> centres_;
+  std::vector<LevelCentre> centres_before_;  ///< scratch of plan(): centres at its start
   ResidencyPlan plan_;
   FrameState frame_;
   double last_centre_x_ = 0, last_centre_y_ = 0;  ///< the footprint centre of the last plan
   std::unordered_map<TileId, double, TileIdHash> wanted_index_;
   std::vector<TileRect> keep_rects_;  ///< per level, in tiles
+  View last_view_;                    ///< the view of the last plan computed
+  bool has_last_view_ = false;
+  /// The last plan saw the same view as the one before it and moved no clip centre: the
+  /// same view again gives the same plan.
+  bool settled_ = false;
+  uint64_t plans_computed_ = 0;
 };
 
 }  // namespace tessera::detail

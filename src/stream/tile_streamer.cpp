@@ -297,18 +297,17 @@ const FrameUpdate& TileStreamer::update(const View& view) {
   const uint32_t image = std::min<uint32_t>(view.image, uint32_t(s.archive->images().size() - 1));
   const ImageInfo& info = s.archive->images()[image];
   detail::ResidencyManager& residency = s.residencyOf(image);
+  const uint64_t plans_before = residency.plansComputed();
   const detail::ResidencyPlan& plan = residency.plan(view);
+  out.replanned = residency.plansComputed() != plans_before;
   ViewerMotion motion = plan.motion;
   motion.tile_size_px = info.tile_size_px;
   s.cache->setViewerMotion(motion);
   out.regions = plan.clip_regions;
   out.clip_region_tiles =
       clipRegionTiles(view.viewportWidth(), view.viewportHeight(), info.tile_size_px);
-  const uint64_t side = out.clip_region_tiles + 2 * uint64_t(s.options.residency.keep_margin_tiles);
-  out.resident_tiles_bound = 0;
-  for (uint32_t level = 0; level < info.level_count; ++level)
-    out.resident_tiles_bound +=
-        std::min(side * side, uint64_t(info.tilesX(level)) * info.tilesY(level));
+  out.resident_tiles_bound =
+      residentTilesBound(info, view.viewportWidth(), view.viewportHeight(), s.options.residency);
 
   const uint64_t upload_bytes = s.chooseUploads(plan, info);
   FrameReport& report = out.report;

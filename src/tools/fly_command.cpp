@@ -286,6 +286,9 @@ struct FlightLog {
   size_t late_frames = 0;  ///< frames shown more than a frame interval after their time
   /// Frames of the path not drawn: their time had passed, or the GPU was still busy.
   size_t dropped_frames = 0;
+  /// Frames whose streamer update recomputed the residency plan (FrameUpdate::replanned); the
+  /// others held the view of the frame before and reused its plan.
+  size_t replanned_frames = 0;
   double capture_s = 0;  ///< time the clock stood still for pictures at rest and screenshots
   std::vector<double> upload_budget_bytes;  ///< the budget each frame's uploads had
 
@@ -432,6 +435,7 @@ Result<void> flyFrames(const FlyArgs& args, const FlightSetup& setup, TileStream
     view.image = args.image;
     view.ortho = setup.path.at(t_s, setup.viewport_w, setup.viewport_h);
     const FrameUpdate& update = streamer.update(view);
+    if (update.replanned) ++log.replanned_frames;
     if (args.decode_bound)
       for (const auto& tile : update.uploads) log.jumps.back().uploaded.push_back(tile->id);
     last_t_s = t_s;
@@ -561,6 +565,7 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
       {"slowdown", setup.path.durationS() > 0 ? log.wall_s / setup.path.durationS() : 1.0},
       {"late_frames_pct", frames ? 100.0 * log.late_frames / frames : 0},
       {"dropped_frames", log.dropped_frames},
+      {"replanned_frames", log.replanned_frames},
       {"capture_s", log.capture_s},
       {"drawn_fps", log.wall_s > 0 ? double(frames) / log.wall_s : 0},
       {"pacing", args.render == "none" ? "every frame (no rendering)"
@@ -677,6 +682,8 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
   summary["renderer"] = args.render;
   summary["gl"] = gpu.description();
   summary["render_ms"] = flightPercentiles(log.render_ms);
+  summary["render_setup_ms"] = gpu.setupMs();
+  summary["render_storage_allocations"] = gpu.flightAllocations();
   summary["gpu_ms"] = flightPercentiles(gpu_ms);
   nlohmann::json psnr_min;  // null until a picture at rest was compared
   for (const JumpTiming& jump : log.jumps)
@@ -768,7 +775,11 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     Result<DisplayWindow> display =
         displayWindowFromOptions(*setup.archive, args.image, args.window, args.gamma);
     if (!display) return forwardError(display);
-    Result<std::unique_ptr<FlyRenderer>> created = FlyRenderer::create(*kind, setup.info);
+    View first;
+    first.image = args.image;
+    first.ortho = setup.path.at(0, setup.viewport_w, setup.viewport_h);
+    Result<std::unique_ptr<FlyRenderer>> created =
+        FlyRenderer::create(*kind, setup.info, first, options.residency);
     if (!created) return forwardError(created);
     gpu = std::move(*created);
     gpu->renderer().setDisplayWindow(*display);

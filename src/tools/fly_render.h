@@ -18,11 +18,17 @@
 
 namespace tessera::cli {
 
-/// A headless context and renderer driven once per flight frame.
+/// A headless context and renderer driven once per flight frame. Owned by one thread: the
+/// flight's render thread.
 class FlyRenderer {
  public:
-  [[nodiscard]] static Result<std::unique_ptr<FlyRenderer>> create(RendererKind kind,
-                                                                   const ImageInfo& info);
+  /// Makes the context and the renderer, and does before the flight's clock starts what its
+  /// first frame would otherwise pay for: texture storage for every tile the streamer may keep
+  /// resident at `first_view`'s viewport (residentTilesBound with `residency`), the staging
+  /// ring, the colour target, and a first draw of `first_view`, waited for.
+  [[nodiscard]] static Result<std::unique_ptr<FlyRenderer>> create(
+      RendererKind kind, const ImageInfo& info, const View& first_view,
+      const ResidencyOptions& residency);
   ~FlyRenderer();
 
   /// Applies the frame's uploads (acknowledged to `streamer`; with `upload` false they are all
@@ -41,6 +47,13 @@ class FlyRenderer {
   std::vector<double> finishGpuTimes();
 
   Renderer& renderer() { return *renderer_; }
+  /// Milliseconds create() spent on the renderer before the flight (allocation, first draw).
+  double setupMs() const { return setup_ms_; }
+  /// Storage the renderer allocated after create() (RenderStats::storage_allocations): 0 when
+  /// no frame of the flight allocated.
+  uint32_t flightAllocations() const {
+    return renderer_->stats().storage_allocations - allocations_at_start_;
+  }
   std::string description() const { return context_->description(); }
 
  private:
@@ -59,6 +72,8 @@ class FlyRenderer {
   size_t next_query_ = 0;
   std::vector<double> gpu_ms_;
   GLsync frame_fence_ = nullptr;  ///< the last frame's end; null once seen signalled
+  double setup_ms_ = 0;
+  uint32_t allocations_at_start_ = 0;  ///< RenderStats::storage_allocations after create()
 };
 
 /// The picture with each pixel tinted by the level that draws it (Backes et al., Fig. 1), as

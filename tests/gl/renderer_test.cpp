@@ -491,6 +491,61 @@ TEST(TileQuads, TheTileArrayIsSizedFromTheResidencyBoundAtTheFirstFrameAndNeverG
   }
 }
 
+class SizedUpFront : public testing::TestWithParam<RendererKind> {};
+
+TEST_P(SizedUpFront, StorageIsAllocatedAtCreationAndNoFrameOfAPanAllocates) {
+  test::SyntheticArchiveSpec spec;
+  spec.border_px = 1;
+  Rig rig(spec, GetParam());
+  ASSERT_TRUE(rig.ready());
+  const ImageInfo& info = rig.archive->images()[0];
+  const View first = orthoAt(100, info.height_px / 2.0, 1, 128, 96);
+  // Left to size itself, a renderer allocates during its first frames.
+  const RenderStats lazy_before = rig.renderer->stats();
+  rig.frame(first);
+  rig.streamer->waitIdleForTesting();
+  rig.frame(first);
+  EXPECT_GT(rig.renderer->stats().storage_allocations, lazy_before.storage_allocations);
+  EXPECT_GT(rig.renderer->stats().gpu_bytes, lazy_before.gpu_bytes) << "tile storage grew";
+  // Sized as `tessera fly` sizes it, before its clock starts.
+  RendererOptions sized;
+  sized.initial_layers = uint32_t(residentTilesBound(info, 128, 96, StreamerOptions{}.residency));
+  sized.initial_clip_tiles = clipRegionTiles(128, 96, info.tile_size_px);
+  auto made = createRenderer(GetParam(), info, sized);
+  ASSERT_TRUE(made) << made.error().message;
+  rig.renderer = std::move(*made);
+  EXPECT_GT(rig.renderer->stats().gpu_bytes, 0u) << "tile storage allocated at creation";
+  if (GetParam() == RendererKind::kTileQuads) {
+    EXPECT_EQ(rig.renderer->stats().gpu_bytes, sized.initial_layers * info.storedTileBytes());
+  }
+  rig.renderer->draw(first);  // makes the colour target, as FlyRenderer::create does
+  const uint32_t allocated = rig.renderer->stats().storage_allocations;
+  EXPECT_GE(allocated, 3u) << "tile storage, staging ring and colour target";
+  // The streamer still thinks the first renderer holds its tiles: a fresh streamer.
+  StreamerOptions options;
+  options.cache_budget_bytes = size_t(256) << 20;
+  options.loader_threads = 2;
+  auto streamer = TileStreamer::create(rig.archive, options);
+  ASSERT_TRUE(streamer) << streamer.error().message;
+  rig.streamer = std::move(*streamer);
+  uint32_t most_resident = 0;
+  for (int i = 0; i < 30; ++i) {
+    rig.frame(orthoAt(100 + (info.width_px - 200.0) * i / 29.0, info.height_px / 2.0, 1, 128, 96));
+    EXPECT_EQ(rig.renderer->stats().storage_allocations, allocated) << "frame " << i;
+    most_resident = std::max(most_resident, rig.renderer->stats().resident_tiles);
+    rig.streamer->waitIdleForTesting();
+  }
+  EXPECT_GT(most_resident, 1u) << "the pan uploaded tiles";
+}
+
+INSTANTIATE_TEST_SUITE_P(Renderers, SizedUpFront,
+                         testing::Values(RendererKind::kTileQuads, RendererKind::kClipmap),
+                         [](const testing::TestParamInfo<RendererKind>& param_info) {
+                           return std::string(param_info.param == RendererKind::kTileQuads
+                                                  ? "TileQuads"
+                                                  : "Clipmap");
+                         });
+
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {
   test::SyntheticArchiveSpec spec;
   spec.border_px = 1;

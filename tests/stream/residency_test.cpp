@@ -210,6 +210,65 @@ TEST(Residency, MaxCentreStepLimitsHowFarTheClipRegionMovesPerFrame) {
   EXPECT_EQ(x0s, (std::vector<int64_t>{10, 12, 14, 16, 16, 16}));
 }
 
+TEST(Residency, AHeldViewReplansUntilItsPlanSettlesThenReusesIt) {
+  ImageInfo info = imageOf(16384, 16384, 256);
+  ResidencyOptions options;
+  options.max_centre_step_tiles = 2;
+  ResidencyManager residency(info, 0, options);
+  const double t = 256;
+  residency.plan(orthoView(16.5 * t, 16.5 * t, 1, 1920, 1080));
+  // 10 tiles right (a flight, not a jump): the clip centre steps 2 tiles a plan, so holding
+  // the view still changes the plan for four more frames.
+  const View held = orthoView(26.5 * t, 16.5 * t, 1, 1920, 1080);
+  std::vector<int64_t> x0s;
+  std::vector<uint64_t> computed;
+  size_t prefetch_first = 0, prefetch_after = 0;
+  for (int frame = 0; frame < 8; ++frame) {
+    const ResidencyPlan& plan = residency.plan(held);
+    x0s.push_back(clipAt(plan, 0).x0);
+    computed.push_back(residency.plansComputed());
+    (frame == 0 ? prefetch_first : prefetch_after) += prefetchOf(plan).size();
+  }
+  EXPECT_EQ(x0s, (std::vector<int64_t>{10, 12, 14, 16, 16, 16, 16, 16}));
+  // Computed while the centre stepped, once more to see it stay, then reused.
+  EXPECT_EQ(computed, (std::vector<uint64_t>{2, 3, 4, 5, 6, 6, 6, 6}));
+  // The move's prefetch (the column it crossed into) went with the first plan: the held view
+  // has no motion, and its reused plan prefetches nothing.
+  EXPECT_GT(prefetch_first, 0u);
+  EXPECT_EQ(prefetch_after, 0u);
+  EXPECT_EQ(residency.plan(held).motion.motion_x, 0);
+  // Any change of the view plans again: a pixel's move, a zoom, a rotation.
+  View moved = held;
+  moved.ortho.centre_x += 1;
+  residency.plan(moved);
+  EXPECT_EQ(residency.plansComputed(), 7u);
+  View rotated = moved;
+  rotated.ortho.rotation_rad = 0.1;
+  residency.plan(rotated);
+  EXPECT_EQ(residency.plansComputed(), 8u);
+}
+
+TEST(Residency, AReusedPlanWantsWhatAFreshPlanOfTheSameViewWants) {
+  ImageInfo info = imageOf(16384, 16384, 256);
+  ResidencyManager residency(info, 0, ResidencyOptions{});
+  const View view = orthoView(5000, 7000, 1.5, 1280, 720);
+  residency.plan(orthoView(4000, 7000, 1.5, 1280, 720));
+  for (int frame = 0; frame < 4; ++frame) residency.plan(view);
+  const uint64_t computed = residency.plansComputed();
+  const std::vector<TileRequest> reused = residency.plan(view).wanted;
+  ASSERT_EQ(residency.plansComputed(), computed) << "the held view was planned again";
+  // A manager that saw the view held for one frame computes its plan afresh.
+  ResidencyManager fresh(info, 0, ResidencyOptions{});
+  fresh.plan(orthoView(4000, 7000, 1.5, 1280, 720));
+  fresh.plan(view);
+  const std::vector<TileRequest> expected = fresh.plan(view).wanted;
+  ASSERT_EQ(reused.size(), expected.size());
+  for (size_t i = 0; i < reused.size(); ++i) {
+    EXPECT_EQ(keyOf(reused[i].id), keyOf(expected[i].id)) << i;
+    EXPECT_EQ(reused[i].priority, expected[i].priority) << i;
+  }
+}
+
 TEST(Residency, MaxCentreStepStillWantsWhatTheViewShows) {
   ImageInfo info = imageOf(16384, 16384, 256);
   ResidencyOptions options;

@@ -149,6 +149,33 @@ TEST_P(TileStreamerTest, FixedViewReachesFullDetailWithEveryVisibleTileResident)
   EXPECT_GE(report.bytes_read_total, report.payload_bytes_total);
 }
 
+TEST_P(TileStreamerTest, AnUnchangedViewIsNotReplannedButStillGetsItsUploads) {
+  start();
+  // One frame whose uploads are all declined (offered again later); whether it replanned.
+  auto declining = [&](const View& view) {
+    const FrameUpdate& update = streamer_->update(view);
+    const bool replanned = update.replanned;
+    ApplyResult result;
+    for (const auto& tile : update.uploads) result.declined.push_back(tile->id);
+    streamer_->acknowledge(result);
+    return replanned;
+  };
+  const View view = orthoView(512, 384);
+  frame(orthoView(400, 384));
+  std::vector<bool> replanned;
+  for (int i = 0; i < 6; ++i) {
+    streamer_->waitIdleForTesting();
+    replanned.push_back(declining(view));
+  }
+  // The move plans, the first still frame plans once more (no motion now), then the plan holds.
+  EXPECT_EQ(replanned, (std::vector<bool>{true, true, false, false, false, false}));
+  // The reused plan still hands over what loaded meanwhile, and full detail comes as before.
+  const FrameReport report = settle(view);
+  EXPECT_EQ(report.coverage_desired, 1.0);
+  EXPECT_FALSE(declining(view));
+  EXPECT_TRUE(declining(orthoView(513, 384)));
+}
+
 TEST_P(TileStreamerTest, ZoomedOutViewIsAtFullDetailOnACoarserLevel) {
   start();
   const View view = orthoView(512, 384, 4);  // 4 texels per pixel: level 2

@@ -556,6 +556,10 @@ TEST_F(Cli, FlyRecordsEveryFrameAndTimesEachJump) {
     EXPECT_EQ(s["renderer"], renderer);
     EXPECT_GT(s["render_ms"]["p50"].get<double>(), 0);
     EXPECT_GT(s["gpu_ms"]["max"].get<double>(), 0);
+    // Storage was allocated before the flight's clock started, and no frame allocated more.
+    EXPECT_GT(s["render_setup_ms"].get<double>(), 0);
+    EXPECT_EQ(s["render_storage_allocations"].get<uint32_t>(), 0u);
+    EXPECT_LE(s["replanned_frames"].get<size_t>(), s["frames"].get<size_t>());
     for (const auto& jump : s["jumps"]) EXPECT_GE(jump["rest_psnr_db"].get<double>(), 45.0);
     for (const char* file : {"frame-3.png", "frame-20.png", "rest-0.png", "rest-1.png",
                              "rest-1-levels.png", "report.html"})
