@@ -1,0 +1,40 @@
+#pragma once
+// Pictures of one-colour tiles for the export writers. A flat area of an image is stored as
+// uniform tiles with no payload; cutting each of them afresh would encode the same picture once
+// per tile, so each distinct colour is encoded once and reused.
+
+#include <cstdint>
+#include <unordered_map>
+
+#include <tessera/archive.h>
+#include <tessera/result.h>
+
+#include "serve/pictures.h"
+
+namespace tessera::detail {
+
+/// XYZ pictures of uniform stored tiles, encoded on first use. Owned by one thread.
+class UniformPictures {
+ public:
+  UniformPictures(const ImageInfo& info, PictureFormat format, int jpeg_quality)
+      : info_(info), format_(format), jpeg_quality_(jpeg_quality) {}
+
+  /// What renderXyzTile returns for an XYZ tile that is wholly a stored tile of colour
+  /// `texel` (xyzStoredTile, uniformTexel). The picture lives as long as this object.
+  [[nodiscard]] Result<const Picture*> xyz(UniformTexel texel);
+  PictureFormat format() const { return format_; }
+  int jpegQuality() const { return jpeg_quality_; }
+
+ private:
+  const ImageInfo& info_;
+  PictureFormat format_;
+  int jpeg_quality_;
+  std::unordered_map<uint32_t, Picture> xyz_;  ///< by UniformTexel::rgba; nodes never move
+};
+
+/// renderXyzTile for the export writers: a tile that is wholly one uniform stored tile comes
+/// from `uniforms` instead of being cut and encoded again.
+[[nodiscard]] Result<Picture> exportXyzTile(const Archive& archive, uint32_t image, uint32_t z,
+                                            uint32_t x, uint32_t y, UniformPictures& uniforms);
+
+}  // namespace tessera::detail
