@@ -22,6 +22,10 @@ class UniformPictures {
   /// What renderXyzTile returns for an XYZ tile that is wholly a stored tile of colour
   /// `texel` (xyzStoredTile, uniformTexel). The picture lives as long as this object.
   [[nodiscard]] Result<const Picture*> xyz(UniformTexel texel);
+  /// What renderDziTile returns for a Deep Zoom tile of `width_px` x `height_px` cut from a
+  /// stored tile of colour `texel` (dziStoredTile, uniformTexel). Lives as long as this object.
+  [[nodiscard]] Result<const Picture*> dzi(UniformTexel texel, uint32_t width_px,
+                                           uint32_t height_px);
   PictureFormat format() const { return format_; }
   int jpegQuality() const { return jpeg_quality_; }
 
@@ -30,11 +34,18 @@ class UniformPictures {
   PictureFormat format_;
   int jpeg_quality_;
   std::unordered_map<uint32_t, Picture> xyz_;  ///< by UniformTexel::rgba; nodes never move
+  /// By colour, width and height (rgba << 32 | width << 16 | height: sides under 2^16).
+  std::unordered_map<uint64_t, Picture> dzi_;
 };
 
 /// renderXyzTile for the export writers: a tile that is wholly one uniform stored tile comes
 /// from `uniforms` instead of being cut and encoded again.
 [[nodiscard]] Result<Picture> exportXyzTile(const Archive& archive, uint32_t image, uint32_t z,
                                             uint32_t x, uint32_t y, UniformPictures& uniforms);
+
+/// renderDziTile for the export writers, uniform tiles from `uniforms` as in exportXyzTile.
+[[nodiscard]] Result<Picture> exportDziTile(const Archive& archive, uint32_t image,
+                                            uint32_t dz_level, uint32_t col, uint32_t row,
+                                            UniformPictures& uniforms);
 
 }  // namespace tessera::detail

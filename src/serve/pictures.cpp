@@ -121,6 +121,18 @@ Image filled(uint32_t width, uint32_t height, uint32_t channels, const uint8_t* 
   return out;
 }
 
+// Deep Zoom tile (col, row) of the level scaled by 2^scale, inside that level's grid: overlap
+// is added on the sides that have a neighbour (the Deep Zoom convention).
+PixelRect dziTileRect(const ImageInfo& info, uint32_t scale, uint32_t col, uint32_t row) {
+  const uint32_t width = scaledWidthPx(info, scale), height = scaledHeightPx(info, scale);
+  const uint32_t tile = info.tile_size_px, overlap = dziOverlap(info);
+  const uint64_t x0 = uint64_t(col) * tile - (col > 0 ? overlap : 0);
+  const uint64_t y0 = uint64_t(row) * tile - (row > 0 ? overlap : 0);
+  const uint64_t x1 = std::min<uint64_t>(uint64_t(col + 1) * tile + overlap, width);
+  const uint64_t y1 = std::min<uint64_t>(uint64_t(row + 1) * tile + overlap, height);
+  return {int64_t(x0), int64_t(y0), uint32_t(x1 - x0), uint32_t(y1 - y0)};
+}
+
 Result<void> checkImage(const Archive& archive, uint32_t image) {
   if (image >= archive.images().size())
     return fail(ErrorCode::kNotFound, fmt::format("{}: no image {}", archive.name(), image));
@@ -197,12 +209,8 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
     return fail(ErrorCode::kNotFound,
                 fmt::format("{}: Deep Zoom tile {}/{}_{} is outside the level's {}x{} tiles",
                             archive.name(), dz_level, col, row, cols, rows));
-  // Overlap is added on the sides that have a neighbour (the Deep Zoom convention).
-  const uint64_t x0 = uint64_t(col) * tile - (col > 0 ? overlap : 0);
-  const uint64_t y0 = uint64_t(row) * tile - (row > 0 ? overlap : 0);
-  const uint64_t x1 = std::min<uint64_t>(uint64_t(col + 1) * tile + overlap, width);
-  const uint64_t y1 = std::min<uint64_t>(uint64_t(row + 1) * tile + overlap, height);
-  const PixelRect rect{int64_t(x0), int64_t(y0), uint32_t(x1 - x0), uint32_t(y1 - y0)};
+  const PixelRect rect = dziTileRect(info, scale, col, row);
+  const uint64_t x0 = uint64_t(rect.x), y0 = uint64_t(rect.y);
 
   if (scale < info.level_count) {
     // One stored tile holds the whole DZI tile: its border is the overlap.
@@ -296,6 +304,25 @@ Result<Picture> uniformXyzPicture(const ImageInfo& info, UniformTexel texel, Pic
   for (uint32_t c = 0; c < 4; ++c) stored[c] = uint8_t(texel.rgba >> (8 * c));
   toRgba8(stored, info.channels, rgba);
   return encode(filled(kXyzTileSizePx, kXyzTileSizePx, 4, rgba), format, jpeg_quality);
+}
+
+std::optional<DziStoredTile> dziStoredTile(const ImageInfo& info, uint32_t image, uint32_t dz_level,
+                                           uint32_t col, uint32_t row) {
+  const uint32_t max_level = dziMaxLevel(info);
+  if (dz_level > max_level || max_level - dz_level >= info.level_count) return std::nullopt;
+  const uint32_t scale = max_level - dz_level, tile = info.tile_size_px;
+  if (uint64_t(col) * tile >= scaledWidthPx(info, scale) ||
+      uint64_t(row) * tile >= scaledHeightPx(info, scale))
+    return std::nullopt;
+  const PixelRect rect = dziTileRect(info, scale, col, row);
+  return DziStoredTile{{image, scale, col, row}, rect.width, rect.height};
+}
+
+Result<Picture> uniformDziPicture(const ImageInfo& info, UniformTexel texel, uint32_t width_px,
+                                  uint32_t height_px, PictureFormat format, int jpeg_quality) {
+  uint8_t stored[4];
+  for (uint32_t c = 0; c < 4; ++c) stored[c] = uint8_t(texel.rgba >> (8 * c));
+  return encode(filled(width_px, height_px, info.channels, stored), format, jpeg_quality);
 }
 
 Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,

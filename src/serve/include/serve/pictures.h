@@ -87,6 +87,23 @@ std::optional<UniformTexel> uniformTexel(const ImageInfo& info, const TileEntry&
 [[nodiscard]] Result<Picture> uniformXyzPicture(const ImageInfo& info, UniformTexel texel,
                                                 PictureFormat format, int jpeg_quality);
 
+/// A Deep Zoom tile at a level the archive stores, which is cut from one stored tile (its border
+/// is the overlap).
+struct DziStoredTile {
+  TileId tile;
+  uint32_t width_px = 0;  ///< of the Deep Zoom tile: overlap included, cropped to the image
+  uint32_t height_px = 0;
+};
+/// The stored tile Deep Zoom tile (dz_level, col, row) of `info` (image number `image`) is cut
+/// from; nullopt outside the grid and at levels coarser than the archive's coarsest.
+std::optional<DziStoredTile> dziStoredTile(const ImageInfo& info, uint32_t image, uint32_t dz_level,
+                                           uint32_t col, uint32_t row);
+/// The Deep Zoom picture cut from a stored tile of one colour (dziStoredTile, uniformTexel):
+/// the bytes renderDziTile returns for it, made without reading the archive.
+[[nodiscard]] Result<Picture> uniformDziPicture(const ImageInfo& info, UniformTexel texel,
+                                                uint32_t width_px, uint32_t height_px,
+                                                PictureFormat format, int jpeg_quality);
+
 /// A stored tile (borders included, the stored geometry) decoded and re-encoded: for codecs
 /// browsers cannot decode and for empty/uniform tiles, which have no payload. A u16 or f32
 /// tile is mapped to RGBA8 by `window` (windowToRgba8: NaN transparent); u8 tiles ignore it.
