@@ -58,6 +58,7 @@ Result<void> cutDeepZoomTiles(const Archive& archive, const ExportOptions& optio
       }
     }
   }
+  report.tiles_uniform = uniforms.tilesServed();
   return {};
 }
 

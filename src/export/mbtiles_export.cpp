@@ -90,6 +90,7 @@ Result<void> insertTiles(const std::string& path, sqlite3* db, const Archive& ar
     ++report.tiles;
     if (options.on_progress) options.on_progress(report.tiles, tiles.size());
   }
+  report.tiles_uniform = uniforms.tilesServed();
   return {};
 }
 

@@ -72,6 +72,7 @@ class TileSources {
         return blobs_.copy(*stored, entry);
       }
       if (const std::optional<UniformTexel> texel = uniformTexel(info_, entry)) {
+        ++report.tiles_uniform;
         if (auto found = placed_uniform_.find(texel->rgba); found != placed_uniform_.end())
           return PlacedBlob{found->second.offset_bytes, found->second.length_bytes, false};
         TESSERA_ASSIGN_OR_RETURN(const Picture* picture, uniforms_.xyz(*texel));

@@ -3,6 +3,7 @@
 namespace tessera::detail {
 
 Result<const Picture*> UniformPictures::xyz(UniformTexel texel) {
+  ++tiles_served_;
   if (auto found = xyz_.find(texel.rgba); found != xyz_.end()) return &found->second;
   TESSERA_ASSIGN_OR_RETURN(Picture picture,
                            uniformXyzPicture(info_, texel, format_, jpeg_quality_));
@@ -11,6 +12,7 @@ Result<const Picture*> UniformPictures::xyz(UniformTexel texel) {
 
 Result<const Picture*> UniformPictures::dzi(UniformTexel texel, uint32_t width_px,
                                             uint32_t height_px) {
+  ++tiles_served_;
   const uint64_t key = uint64_t(texel.rgba) << 32 | uint64_t(width_px) << 16 | height_px;
   if (auto found = dzi_.find(key); found != dzi_.end()) return &found->second;
   TESSERA_ASSIGN_OR_RETURN(Picture picture, uniformDziPicture(info_, texel, width_px, height_px,

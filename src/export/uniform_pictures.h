@@ -26,6 +26,8 @@ class UniformPictures {
   /// stored tile of colour `texel` (dziStoredTile, uniformTexel). Lives as long as this object.
   [[nodiscard]] Result<const Picture*> dzi(UniformTexel texel, uint32_t width_px,
                                            uint32_t height_px);
+  /// Tiles answered by xyz() and dzi() so far.
+  uint64_t tilesServed() const { return tiles_served_; }
   PictureFormat format() const { return format_; }
   int jpegQuality() const { return jpeg_quality_; }
 
@@ -33,6 +35,7 @@ class UniformPictures {
   const ImageInfo& info_;
   PictureFormat format_;
   int jpeg_quality_;
+  uint64_t tiles_served_ = 0;
   std::unordered_map<uint32_t, Picture> xyz_;  ///< by UniformTexel::rgba; nodes never move
   /// By colour, width and height (rgba << 32 | width << 16 | height: sides under 2^16).
   std::unordered_map<uint64_t, Picture> dzi_;

@@ -142,6 +142,7 @@ TEST_P(UniformExportTest, PmtilesStoresEachUniformPictureOnce) {
   // Three colours, each over several tiles at two zooms: one blob per colour.
   EXPECT_EQ(offsets_by_colour.size(), 3u);
   EXPECT_GT(uniform_tiles, 2 * offsets_by_colour.size());
+  EXPECT_EQ(report->tiles_uniform, uniform_tiles);
   for (const auto& [colour, offsets] : offsets_by_colour)
     EXPECT_EQ(offsets.size(), 1u) << "colour " << std::hex << colour;
   // Nothing else in the tile data: every distinct blob once, back to back.
@@ -170,6 +171,7 @@ TEST_P(UniformExportTest, DeepZoomAndMbtilesTilesEqualTheServers) {
     ++files;
   }
   EXPECT_EQ(files, dzi->tiles);
+  EXPECT_GT(dzi->tiles_uniform, 0u);
 
   // MBTiles goes through exportXyzTile, which the PMTiles test above does not: tile by tile.
   UniformPictures uniforms(info, format, 85);
