@@ -81,10 +81,13 @@ class TileSources {
         return placed;
       }
     }
-    TESSERA_ASSIGN_OR_RETURN(Picture picture, renderXyzTile(archive_, options_.image, t.z, t.x, t.y,
-                                                            format_, options_.jpeg_quality));
-    report.tiles_copied += picture.copied ? 1 : 0;
-    return blobs_.put(asBytes(picture.bytes));
+    Result<Picture> picture =
+        renderXyzTile(archive_, options_.image, t.z, t.x, t.y, format_, options_.jpeg_quality);
+    if (!picture)
+      return fail(picture.error().code,
+                  fmt::format("XYZ tile {}/{}/{}: {}", t.z, t.x, t.y, picture.error().message));
+    report.tiles_copied += picture->copied ? 1 : 0;
+    return blobs_.put(asBytes(picture->bytes));
   }
 
  private:
@@ -127,9 +130,10 @@ Result<ExportReport> exportPmtiles(const Archive& archive, const std::string& ou
   uint64_t contents = 0;
   for (const auto& [id, t] : ordered) {
     Result<PlacedBlob> placed = sources.place(t, report);
+    // Copied payloads are verified a run at a time, so an error names the stored tile it is
+    // about (the archive's message), which need not be the XYZ tile placed now.
     if (!placed)
-      return fail(placed.error().code, fmt::format("{}: XYZ tile {}/{}/{}: {}", out_path, t.z, t.x,
-                                                   t.y, placed.error().message));
+      return fail(placed.error().code, fmt::format("{}: {}", out_path, placed.error().message));
     contents += placed->fresh ? 1 : 0;
     Entry* last = entries.empty() ? nullptr : &entries.back();
     if (last && last->offset == placed->offset_bytes && last->tile_id + last->run_length == id)
