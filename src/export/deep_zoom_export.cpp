@@ -15,6 +15,7 @@
 #include <fmt/format.h>
 
 #include "export_writers.h"
+#include "uniform_pictures.h"
 #include "output/output_file.h"
 #include "serve/pictures.h"
 
@@ -42,12 +43,13 @@ Result<void> cutDeepZoomTiles(const Archive& archive, const ExportOptions& optio
   uint64_t total = 0;
   for (uint32_t d = 0; d <= max_level; ++d) total += uint64_t(grid(d).first) * grid(d).second;
   report.tile_format = dziExtension(format);
+  UniformPictures uniforms(info, format, options.jpeg_quality);
   for (uint32_t d = 0; d <= max_level; ++d) {
     const auto [cols, rows] = grid(d);
     for (uint32_t row = 0; row < rows; ++row) {
       for (uint32_t col = 0; col < cols; ++col) {
-        TESSERA_ASSIGN_OR_RETURN(Picture picture, renderDziTile(archive, options.image, d, col, row,
-                                                                format, options.jpeg_quality));
+        TESSERA_ASSIGN_OR_RETURN(Picture picture,
+                                 exportDziTile(archive, options.image, d, col, row, uniforms));
         TESSERA_TRY(sink(d, col, row, picture));
         report.bytes += picture.bytes.size();
         report.tiles_copied += picture.copied ? 1 : 0;
@@ -56,6 +58,7 @@ Result<void> cutDeepZoomTiles(const Archive& archive, const ExportOptions& optio
       }
     }
   }
+  report.tiles_uniform = uniforms.tilesServed();
   return {};
 }
 

@@ -7,6 +7,7 @@
 #include <sqlite3.h>
 
 #include "export_writers.h"
+#include "uniform_pictures.h"
 #include "output/output_file.h"
 
 namespace tessera::detail {
@@ -70,9 +71,9 @@ Result<void> insertTiles(const std::string& path, sqlite3* db, const Archive& ar
                                 "INSERT INTO tiles (zoom_level, tile_column, tile_row, tile_data) "
                                 "VALUES (?, ?, ?, ?)"));
   const std::vector<XyzTile> tiles = xyzTilesOf(archive.images()[options.image]);
+  UniformPictures uniforms(archive.images()[options.image], format, options.jpeg_quality);
   for (const XyzTile& t : tiles) {
-    Result<Picture> picture =
-        renderXyzTile(archive, options.image, t.z, t.x, t.y, format, options.jpeg_quality);
+    Result<Picture> picture = exportXyzTile(archive, options.image, t.z, t.x, t.y, uniforms);
     if (!picture)
       return fail(picture.error().code, fmt::format("{}: XYZ tile {}/{}/{}: {}", path, t.z, t.x,
                                                     t.y, picture.error().message));
@@ -89,6 +90,7 @@ Result<void> insertTiles(const std::string& path, sqlite3* db, const Archive& ar
     ++report.tiles;
     if (options.on_progress) options.on_progress(report.tiles, tiles.size());
   }
+  report.tiles_uniform = uniforms.tilesServed();
   return {};
 }
 

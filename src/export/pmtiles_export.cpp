@@ -2,16 +2,17 @@
 // blobs after it in tile id order (identical blobs stored once, runs of them as one entry),
 // then the metadata and, when the root would not fit, leaf directories.
 #include <algorithm>
-#include <map>
+#include <unordered_map>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 #include "export/pmtiles.h"
 #include "export_writers.h"
-#include "format/checksum.h"
 #include "output/file_appender.h"
 #include "output/output_file.h"
+#include "tile_blobs.h"
+#include "uniform_pictures.h"
 
 namespace tessera::detail {
 
@@ -50,33 +51,53 @@ Directories layoutDirectories(const std::vector<Entry>& entries, uint32_t leaf_e
   }
 }
 
-// Blobs already written, by checksum and length; equal bytes are confirmed before sharing.
-class BlobStore {
+// Where each XYZ tile's blob comes from: the stored payload when it is the tile exactly, the
+// picture of a uniform tile encoded once per colour, else the tile cut and encoded.
+class TileSources {
  public:
-  BlobStore(const TempFile& out, uint64_t start)
-      : out_(out), appender_(out, start), start_(start) {}
-  // Offset from the start of the tile data, and whether the bytes were new.
-  Result<std::pair<uint64_t, bool>> put(std::string_view bytes) {
-    const uint64_t key = checksum64(asBytes(bytes));
-    auto [first, last] = seen_.equal_range({key, bytes.size()});
-    for (auto it = first; it != last; ++it) {
-      TESSERA_TRY(appender_.flush());
-      std::string stored(bytes.size(), '\0');
-      TESSERA_TRY(out_.pread(start_ + it->second,
-                             {reinterpret_cast<uint8_t*>(stored.data()), stored.size()}));
-      if (stored == bytes) return std::pair{it->second, false};
+  TileSources(const Archive& archive, const ExportOptions& options, PictureFormat format,
+              TileBlobs& blobs)
+      : archive_(archive),
+        info_(archive.images()[options.image]),
+        options_(options),
+        format_(format),
+        blobs_(blobs),
+        uniforms_(info_, format, options.jpeg_quality) {}
+
+  Result<PlacedBlob> place(const XyzTile& t, ExportReport& report) {
+    if (const std::optional<TileId> stored = xyzStoredTile(info_, options_.image, t.z, t.x, t.y)) {
+      TESSERA_ASSIGN_OR_RETURN(const TileEntry entry, archive_.tileEntry(*stored));
+      if (entry.kind == TileKind::kEncoded && browserReady(info_, entry.codec, format_)) {
+        ++report.tiles_copied;
+        return blobs_.copy(*stored, entry);
+      }
+      if (const std::optional<UniformTexel> texel = uniformTexel(info_, entry)) {
+        ++report.tiles_uniform;
+        if (auto found = placed_uniform_.find(texel->rgba); found != placed_uniform_.end())
+          return PlacedBlob{found->second.offset_bytes, found->second.length_bytes, false};
+        TESSERA_ASSIGN_OR_RETURN(const Picture* picture, uniforms_.xyz(*texel));
+        TESSERA_ASSIGN_OR_RETURN(const PlacedBlob placed, blobs_.put(asBytes(picture->bytes)));
+        placed_uniform_.emplace(texel->rgba, placed);
+        return placed;
+      }
     }
-    TESSERA_ASSIGN_OR_RETURN(uint64_t at, appender_.append(asBytes(bytes)));
-    seen_.insert({{key, bytes.size()}, at - start_});
-    return std::pair{at - start_, true};
+    Result<Picture> picture =
+        renderXyzTile(archive_, options_.image, t.z, t.x, t.y, format_, options_.jpeg_quality);
+    if (!picture)
+      return fail(picture.error().code,
+                  fmt::format("XYZ tile {}/{}/{}: {}", t.z, t.x, t.y, picture.error().message));
+    report.tiles_copied += picture->copied ? 1 : 0;
+    return blobs_.put(asBytes(picture->bytes));
   }
-  FileAppender& appender() { return appender_; }
 
  private:
-  const TempFile& out_;
-  FileAppender appender_;
-  uint64_t start_;
-  std::multimap<std::pair<uint64_t, size_t>, uint64_t> seen_;
+  const Archive& archive_;
+  const ImageInfo& info_;
+  const ExportOptions& options_;
+  PictureFormat format_;
+  TileBlobs& blobs_;
+  UniformPictures uniforms_;
+  std::unordered_map<uint32_t, PlacedBlob> placed_uniform_;  ///< by UniformTexel::rgba
 };
 
 std::string metadataJson(const Archive& archive, const ImageInfo& info,
@@ -101,28 +122,30 @@ Result<ExportReport> exportPmtiles(const Archive& archive, const std::string& ou
             [](const auto& a, const auto& b) { return a.first < b.first; });
 
   TESSERA_ASSIGN_OR_RETURN(TempFile out, TempFile::create(out_path));
-  BlobStore blobs(out, pmtiles::kRootWindowBytes);
+  TileBlobs blobs(archive, out, pmtiles::kRootWindowBytes);
+  TileSources sources(archive, options, format, blobs);
   std::vector<Entry> entries;
   ExportReport report;
   report.tile_format = dziExtension(format);
   uint64_t contents = 0;
   for (const auto& [id, t] : ordered) {
-    Result<Picture> picture =
-        renderXyzTile(archive, options.image, t.z, t.x, t.y, format, options.jpeg_quality);
-    if (!picture)
-      return fail(picture.error().code, fmt::format("{}: XYZ tile {}/{}/{}: {}", out_path, t.z, t.x,
-                                                    t.y, picture.error().message));
-    TESSERA_ASSIGN_OR_RETURN(auto placed, blobs.put(picture->bytes));
-    contents += placed.second ? 1 : 0;
+    Result<PlacedBlob> placed = sources.place(t, report);
+    // Copied payloads are verified a run at a time, so an error names the stored tile it is
+    // about (the archive's message), which need not be the XYZ tile placed now.
+    if (!placed)
+      return fail(placed.error().code, fmt::format("{}: {}", out_path, placed.error().message));
+    contents += placed->fresh ? 1 : 0;
     Entry* last = entries.empty() ? nullptr : &entries.back();
-    if (last && last->offset == placed.first && last->tile_id + last->run_length == id)
+    if (last && last->offset == placed->offset_bytes && last->tile_id + last->run_length == id)
       ++last->run_length;
     else
-      entries.push_back({id, placed.first, uint32_t(picture->bytes.size()), 1});
-    report.tiles_copied += picture->copied ? 1 : 0;
+      entries.push_back({id, placed->offset_bytes, placed->length_bytes, 1});
     ++report.tiles;
     if (options.on_progress) options.on_progress(report.tiles, ordered.size());
   }
+  Result<void> flushed = blobs.flush();
+  if (!flushed)
+    return fail(flushed.error().code, fmt::format("{}: {}", out_path, flushed.error().message));
   FileAppender& appender = blobs.appender();
   pmtiles::Header header;
   header.tile_data_offset = pmtiles::kRootWindowBytes;

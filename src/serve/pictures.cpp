@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstring>
+#include <span>
 
 #include <fmt/format.h>
 
@@ -97,10 +98,40 @@ Result<Picture> encode(const Image& picture, PictureFormat format, int jpeg_qual
   return Picture{std::string(bytes->begin(), bytes->end())};
 }
 
-bool browserReady(const ImageInfo& info, Codec codec, PictureFormat format) {
-  if (format == PictureFormat::kJpeg)
-    return codec == Codec::kJpeg && (info.channels == 1 || info.channels == 3);
-  return codec == Codec::kPng;
+// An XYZ tile is RGBA whatever the image: gray is spread to the colour channels, and alpha is
+// opaque where the image has none.
+void toRgba8(const uint8_t* texel, uint32_t channels, uint8_t* out) {
+  const bool gray = channels <= 2;
+  out[0] = texel[0];
+  out[1] = gray ? texel[0] : texel[1];
+  out[2] = gray ? texel[0] : texel[2];
+  out[3] = channels == 2 ? texel[1] : channels == 4 ? texel[3] : 255;
+}
+
+// A picture of one colour: the first texel written, then doubled by copies of what is filled.
+Image filled(uint32_t width, uint32_t height, uint32_t channels, const uint8_t* texel) {
+  Image out(width, height, channels);
+  std::span<uint8_t> texels(out.texels);
+  size_t done = std::min<size_t>(channels, texels.size());
+  std::memcpy(texels.data(), texel, done);
+  while (done < texels.size()) {
+    const size_t copy = std::min(done, texels.size() - done);
+    std::memcpy(texels.data() + done, texels.data(), copy);
+    done += copy;
+  }
+  return out;
+}
+
+// Deep Zoom tile (col, row) of the level scaled by 2^scale, inside that level's grid: overlap
+// is added on the sides that have a neighbour (the Deep Zoom convention).
+PixelRect dziTileRect(const ImageInfo& info, uint32_t scale, uint32_t col, uint32_t row) {
+  const uint32_t width = scaledWidthPx(info, scale), height = scaledHeightPx(info, scale);
+  const uint32_t tile = info.tile_size_px, overlap = dziOverlap(info);
+  const uint64_t x0 = uint64_t(col) * tile - (col > 0 ? overlap : 0);
+  const uint64_t y0 = uint64_t(row) * tile - (row > 0 ? overlap : 0);
+  const uint64_t x1 = std::min<uint64_t>(uint64_t(col + 1) * tile + overlap, width);
+  const uint64_t y1 = std::min<uint64_t>(uint64_t(row + 1) * tile + overlap, height);
+  return {int64_t(x0), int64_t(y0), uint32_t(x1 - x0), uint32_t(y1 - y0)};
 }
 
 Result<void> checkImage(const Archive& archive, uint32_t image) {
@@ -132,6 +163,12 @@ PictureFormat dziFormat(const ImageInfo& info) {
 
 const char* dziExtension(PictureFormat format) {
   return format == PictureFormat::kPng ? "png" : "jpg";
+}
+
+bool browserReady(const ImageInfo& info, Codec codec, PictureFormat format) {
+  if (format == PictureFormat::kJpeg)
+    return codec == Codec::kJpeg && (info.channels == 1 || info.channels == 3);
+  return codec == Codec::kPng;
 }
 
 std::string dziDescriptor(const ImageInfo& info) {
@@ -173,12 +210,8 @@ Result<Picture> renderDziTile(const Archive& archive, uint32_t image, uint32_t d
     return fail(ErrorCode::kNotFound,
                 fmt::format("{}: Deep Zoom tile {}/{}_{} is outside the level's {}x{} tiles",
                             archive.name(), dz_level, col, row, cols, rows));
-  // Overlap is added on the sides that have a neighbour (the Deep Zoom convention).
-  const uint64_t x0 = uint64_t(col) * tile - (col > 0 ? overlap : 0);
-  const uint64_t y0 = uint64_t(row) * tile - (row > 0 ? overlap : 0);
-  const uint64_t x1 = std::min<uint64_t>(uint64_t(col + 1) * tile + overlap, width);
-  const uint64_t y1 = std::min<uint64_t>(uint64_t(row + 1) * tile + overlap, height);
-  const PixelRect rect{int64_t(x0), int64_t(y0), uint32_t(x1 - x0), uint32_t(y1 - y0)};
+  const PixelRect rect = dziTileRect(info, scale, col, row);
+  const uint64_t x0 = uint64_t(rect.x), y0 = uint64_t(rect.y);
 
   if (scale < info.level_count) {
     // One stored tile holds the whole DZI tile: its border is the overlap.
@@ -226,12 +259,10 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
   const uint32_t inside_w = uint32_t(std::min<uint64_t>(kXyzTileSizePx, width - x0));
   const uint32_t inside_h = uint32_t(std::min<uint64_t>(kXyzTileSizePx, height - y0));
 
-  if (scale < info.level_count && info.tile_size_px == kXyzTileSizePx && info.border_px == 0 &&
-      inside_w == kXyzTileSizePx && inside_h == kXyzTileSizePx) {
-    const TileId id{image, scale, x, y};
-    TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(id));
+  if (const std::optional<TileId> id = xyzStoredTile(info, image, z, x, y)) {
+    TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(*id));
     if (entry.kind == TileKind::kEncoded && browserReady(info, entry.codec, format)) {
-      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload, archive.readPayload(id, entry));
+      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload, archive.readPayload(*id, entry));
       return Picture{std::string(payload.begin(), payload.end()), true};
     }
   }
@@ -243,17 +274,56 @@ Result<Picture> renderXyzTile(const Archive& archive, uint32_t image, uint32_t z
   for (uint32_t row = 0; row < inside_h; ++row) {
     const uint8_t* src = region.row(row);
     uint8_t* dst = tile.row(row);
-    for (uint32_t col = 0; col < inside_w; ++col) {
-      const uint8_t* texel = src + size_t(col) * region.channels;
-      uint8_t* out = dst + size_t(col) * 4;
-      const bool gray = region.channels <= 2;
-      out[0] = texel[0];
-      out[1] = gray ? texel[0] : texel[1];
-      out[2] = gray ? texel[0] : texel[2];
-      out[3] = region.channels == 2 ? texel[1] : region.channels == 4 ? texel[3] : 255;
-    }
+    for (uint32_t col = 0; col < inside_w; ++col)
+      toRgba8(src + size_t(col) * region.channels, region.channels, dst + size_t(col) * 4);
   }
   return encode(tile, format, jpeg_quality);
+}
+
+std::optional<TileId> xyzStoredTile(const ImageInfo& info, uint32_t image, uint32_t z, uint32_t x,
+                                    uint32_t y) {
+  const uint32_t max_zoom = xyzMaxZoom(info);
+  if (z > max_zoom) return std::nullopt;
+  const uint32_t scale = max_zoom - z;
+  if (scale >= info.level_count || info.tile_size_px != kXyzTileSizePx || info.border_px != 0)
+    return std::nullopt;
+  const uint64_t x1 = (uint64_t(x) + 1) * kXyzTileSizePx, y1 = (uint64_t(y) + 1) * kXyzTileSizePx;
+  if (x1 > scaledWidthPx(info, scale) || y1 > scaledHeightPx(info, scale)) return std::nullopt;
+  return TileId{image, scale, x, y};
+}
+
+std::optional<UniformTexel> uniformTexel(const ImageInfo& info, const TileEntry& entry) {
+  if (info.sample_type != SampleType::kU8) return std::nullopt;
+  if (entry.kind == TileKind::kEmpty) return UniformTexel{0};
+  if (entry.kind == TileKind::kUniform) return UniformTexel{entry.uniform_rgba};
+  return std::nullopt;
+}
+
+Result<Picture> uniformXyzPicture(const ImageInfo& info, UniformTexel texel, PictureFormat format,
+                                  int jpeg_quality) {
+  uint8_t stored[4], rgba[4];
+  for (uint32_t c = 0; c < 4; ++c) stored[c] = uint8_t(texel.rgba >> (8 * c));
+  toRgba8(stored, info.channels, rgba);
+  return encode(filled(kXyzTileSizePx, kXyzTileSizePx, 4, rgba), format, jpeg_quality);
+}
+
+std::optional<DziStoredTile> dziStoredTile(const ImageInfo& info, uint32_t image, uint32_t dz_level,
+                                           uint32_t col, uint32_t row) {
+  const uint32_t max_level = dziMaxLevel(info);
+  if (dz_level > max_level || max_level - dz_level >= info.level_count) return std::nullopt;
+  const uint32_t scale = max_level - dz_level, tile = info.tile_size_px;
+  if (uint64_t(col) * tile >= scaledWidthPx(info, scale) ||
+      uint64_t(row) * tile >= scaledHeightPx(info, scale))
+    return std::nullopt;
+  const PixelRect rect = dziTileRect(info, scale, col, row);
+  return DziStoredTile{{image, scale, col, row}, rect.width, rect.height};
+}
+
+Result<Picture> uniformDziPicture(const ImageInfo& info, UniformTexel texel, uint32_t width_px,
+                                  uint32_t height_px, PictureFormat format, int jpeg_quality) {
+  uint8_t stored[4];
+  for (uint32_t c = 0; c < 4; ++c) stored[c] = uint8_t(texel.rgba >> (8 * c));
+  return encode(filled(width_px, height_px, info.channels, stored), format, jpeg_quality);
 }
 
 Result<Picture> transcodeStoredTile(const Archive& archive, const TileId& tile,

@@ -56,11 +56,12 @@ int runExport(const ExportArgs& args) {
       std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (!args.quiet)
     std::printf(
-        "%s: %llu %s tiles (%llu copied as stored, the rest cut and encoded), %s in "
-        "%.2f s\n",
+        "%s: %llu %s tiles (%llu copied as stored, %llu of one colour encoded once per colour, "
+        "the rest cut and encoded), %s in %.2f s\n",
         args.output.c_str(), static_cast<unsigned long long>(report->tiles),
         report->tile_format.c_str(), static_cast<unsigned long long>(report->tiles_copied),
-        formatBytes(report->bytes).c_str(), seconds);
+        static_cast<unsigned long long>(report->tiles_uniform), formatBytes(report->bytes).c_str(),
+        seconds);
   if (!args.quiet && report->georeferenced)
     std::printf("%s: the source's GeoTIFF georeference written back\n", args.output.c_str());
   // Not errors (the pixels are all there) but a difference the user must hear of.

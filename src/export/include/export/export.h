@@ -36,8 +36,11 @@ struct ExportOptions {
 struct ExportReport {
   uint64_t tiles = 0;         ///< tiles written (PMTiles: addressed tiles)
   uint64_t tiles_copied = 0;  ///< of those, stored payloads copied without decoding
-  uint64_t bytes = 0;         ///< bytes of the output (folder: every file)
-  std::string tile_format;    ///< "jpg" or "png"
+  /// Of those, tiles of one uniform stored tile, whose picture is encoded once per colour (and
+  /// Deep Zoom size) and shared.
+  uint64_t tiles_uniform = 0;
+  uint64_t bytes = 0;       ///< bytes of the output (folder: every file)
+  std::string tile_format;  ///< "jpg" or "png"
   /// TIFF: the source's GeoTIFF tags were written back (docs/export.md).
   bool georeferenced = false;
   /// What was exported differently from what the archive holds, one line each (for example a
