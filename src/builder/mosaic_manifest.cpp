@@ -57,7 +57,7 @@ Result<void> checkKeys(const nlohmann::json& object, std::initializer_list<std::
       std::string list;
       for (std::string_view name : known)
         list += fmt::format("{}\"{}\"", list.empty() ? "" : ", ", name);
-      return fail(ErrorCode::kInvalidArgument,
+      return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: unknown key \"{}\" (known: {})", where, key, list));
     }
   }
@@ -71,10 +71,10 @@ Result<void> readPixels(const nlohmann::json& object, const char* key, bool requ
   const auto it = object.find(key);
   if (it == object.end()) {
     if (!required) return {};
-    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: \"{}\" missing", where, key));
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: \"{}\" missing", where, key));
   }
   if (!it->is_number_unsigned())
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: \"{}\" is {}, want a whole number of pixels >= 0", where, key,
                             it->dump()));
   const uint64_t number = it->get<uint64_t>();
@@ -89,13 +89,13 @@ Result<MosaicImage> readImage(const MosaicManifest& manifest, const nlohmann::js
                               size_t index) {
   const std::string where = fmt::format("{}: images[{}]", manifest.path, index);
   if (!entry.is_object())
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: want an object with \"path\", \"x\" and \"y\"", where));
   TESSERA_TRY(checkKeys(entry, {"path", "x", "y", "width", "height"}, where));
   MosaicImage image;
   const auto path = entry.find("path");
   if (path == entry.end() || !path->is_string() || path->get<std::string>().empty())
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: \"path\" missing or not a non-empty string", where));
   image.path_text = path->get<std::string>();
   const std::filesystem::path file(image.path_text);
@@ -109,7 +109,7 @@ Result<MosaicImage> readImage(const MosaicManifest& manifest, const nlohmann::js
   TESSERA_TRY(readPixels(entry, "height", false, named, image.height_px));
   if ((entry.contains("width") && image.width_px == 0) ||
       (entry.contains("height") && image.height_px == 0))
-    return fail(ErrorCode::kInvalidArgument, named + ": a stated width or height must be >= 1");
+    return fail(ErrorCode::kCorrupt, named + ": a stated width or height must be >= 1");
   return image;
 }
 
@@ -118,19 +118,18 @@ Result<void> readCanvas(const nlohmann::json& document, MosaicManifest& manifest
   TESSERA_TRY(readPixels(document, "height", false, manifest.path, manifest.height_px));
   if ((document.contains("width") && manifest.width_px == 0) ||
       (document.contains("height") && manifest.height_px == 0))
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 manifest.path + ": a stated canvas width or height must be >= 1");
   const auto background = document.find("background");
   if (background == document.end()) return {};
   if (!background->is_array() || background->empty() || background->size() > 4)
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: \"background\" is {}, want 1 to 4 numbers, one per channel",
                             manifest.path, background->dump()));
   for (const nlohmann::json& value : *background) {
     if (!value.is_number())
-      return fail(
-          ErrorCode::kInvalidArgument,
-          fmt::format("{}: \"background\" holds {}, want numbers", manifest.path, value.dump()));
+      return fail(ErrorCode::kCorrupt, fmt::format("{}: \"background\" holds {}, want numbers",
+                                                   manifest.path, value.dump()));
     manifest.background.push_back(value.get<double>());
   }
   return {};
@@ -162,20 +161,19 @@ Result<MosaicManifest> readMosaicManifest(const std::string& path) {
     if (const size_t column = problem.find(", column "); column != std::string_view::npos)
       if (const size_t colon = problem.find(": ", column); colon != std::string_view::npos)
         problem.remove_prefix(colon + 2);
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}:{}: bad JSON: {}", path,
                             lineColumn(text, e.byte > 0 ? e.byte - 1 : 0), problem));
   }
   MosaicManifest manifest;
   manifest.path = path;
   if (!document.is_object())
-    return fail(ErrorCode::kInvalidArgument,
-                path + ": a mosaic manifest is a JSON object with \"images\"");
+    return fail(ErrorCode::kCorrupt, path + ": a mosaic manifest is a JSON object with \"images\"");
   TESSERA_TRY(checkKeys(document, {"width", "height", "background", "images"}, path));
   TESSERA_TRY(readCanvas(document, manifest));
   const auto images = document.find("images");
   if (images == document.end() || !images->is_array() || images->empty())
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 path + ": \"images\" missing or not a non-empty array of {\"path\", \"x\", \"y\"}");
   if (images->size() > kMaxMosaicImages)
     return fail(ErrorCode::kTooLarge, fmt::format("{}: {} images, over the limit of {}", path,

@@ -80,13 +80,13 @@ Result<void> MosaicReader::checkImage(size_t index, const SourceInfo& file) cons
   const bool width_differs = image.width_px != 0 && image.width_px != file.width_px;
   const bool height_differs = image.height_px != 0 && image.height_px != file.height_px;
   if (width_differs || height_differs)
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: the manifest states a {} of {} px, the file is {}x{} px",
                             manifest_.where(index), width_differs ? "width" : "height",
                             width_differs ? image.width_px : image.height_px, file.width_px,
                             file.height_px));
   if (index > 0 && (file.channels != info_.channels || file.sample_type != info_.sample_type))
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: {} channel(s) of {} samples; a mosaic's images must all match "
                             "images[0] ({}: {} channel(s) of {} samples)",
                             manifest_.where(index), file.channels, sampleTypeName(file.sample_type),
@@ -125,7 +125,7 @@ Result<std::vector<uint8_t>> backgroundPixel(const MosaicManifest& manifest,
   std::vector<uint8_t> pixel(info.channels * sample_bytes, 0);
   if (manifest.background.empty()) return pixel;
   if (manifest.background.size() != info.channels)
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: \"background\" has {} value(s), the images {} channel(s)",
                             manifest.path, manifest.background.size(), info.channels));
   const double high = info.sample_type == SampleType::kU8 ? 255 : 65535;
@@ -138,7 +138,7 @@ Result<std::vector<uint8_t>> backgroundPixel(const MosaicManifest& manifest,
       continue;
     }
     if (value < 0 || value > high || value != std::floor(value))
-      return fail(ErrorCode::kInvalidArgument,
+      return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: \"background\" value {} is not a whole number 0..{} for {} "
                               "samples",
                               manifest.path, value, high, sampleTypeName(info.sample_type)));
@@ -165,7 +165,7 @@ Result<void> MosaicReader::describe() {
     const MosaicImage& image = manifest_.images[i];
     if (uint64_t(image.x_px) + image.width_px > width ||
         uint64_t(image.y_px) + image.height_px > height)
-      return fail(ErrorCode::kInvalidArgument,
+      return fail(ErrorCode::kCorrupt,
                   fmt::format("{}: {}x{} px at ({}, {}) reaches past the canvas of {}x{} px",
                               manifest_.where(i), image.width_px, image.height_px, image.x_px,
                               image.y_px, width, height));
@@ -232,7 +232,7 @@ Result<std::unique_ptr<BandReader>> MosaicReader::openAt(size_t index, uint32_t 
   // Replaced since open()? The placement was checked for the old size.
   if (file_info.width_px != image.width_px || file_info.height_px != image.height_px ||
       file_info.channels != info_.channels || file_info.sample_type != info_.sample_type)
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: the file changed during the build (now {}x{} px, {} channel(s))",
                             manifest_.where(index), file_info.width_px, file_info.height_px,
                             file_info.channels));
