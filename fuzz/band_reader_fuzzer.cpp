@@ -1,5 +1,6 @@
-// Fuzzes the builder's band readers over libtiff, libpng and libjpeg (src/builder): the input
-// is written to a file, opened by content (openBandReader), and read top to bottom in bands.
+// Fuzzes the builder's band readers over libtiff, libpng and libjpeg, and the mosaic manifest
+// parser (src/builder): the input is written to a file, opened by content (openBandReader), and
+// read top to bottom in bands.
 // Checks that what opens describes a sane image and that a reader never writes outside the
 // band it is given; the memory a reader takes is bounded by libFuzzer's RSS limit. Bands are
 // read while the image is at most kMaxPixels, so a huge claimed size costs one open, not a

@@ -1,5 +1,6 @@
 #include "band_reader.h"
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -12,13 +13,15 @@
 
 #include "file_reader.h"
 #include "grid_reader.h"
+#include "mosaic_manifest.h"
+#include "mosaic_reader.h"
 
 namespace tessera::detail {
 namespace {
 
 constexpr std::string_view kSyntheticPrefix = "synthetic:";
 
-enum class SourceKind { kTiff, kPng, kJpeg, kUnknown };
+enum class SourceKind { kTiff, kPng, kJpeg, kManifest, kUnknown };
 
 // Content decides, never the extension: a ".tif" that is really a PNG is common in the wild
 // (exports renamed by hand), and the magic bytes are unambiguous.
@@ -32,6 +35,7 @@ SourceKind sniff(const uint8_t* bytes, size_t size) {
   }
   if (starts("\x89PNG\r\n\x1a\n"sv)) return SourceKind::kPng;
   if (starts("\xff\xd8\xff"sv)) return SourceKind::kJpeg;
+  if (looksLikeManifest(bytes, size)) return SourceKind::kManifest;
   return SourceKind::kUnknown;
 }
 
@@ -69,28 +73,48 @@ Result<void> checkSourceDimensions(const std::string& path, uint64_t width_px, u
   return {};
 }
 
+namespace {
+
+/// An image file by its content; a mosaic manifest too when `allow_manifest` (not for the
+/// images a manifest names: manifests do not nest).
+Result<std::unique_ptr<BandReader>> openFile(const std::string& path, bool allow_manifest) {
+  TESSERA_TRY(checkSourceFile(path));
+  std::FILE* file = std::fopen(path.c_str(), "rb");
+  if (!file) {
+    return fail(ErrorCode::kIo, fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
+  }
+  // Enough for a manifest's leading whitespace as pretty-printers write it.
+  uint8_t magic[64] = {};
+  const size_t got = std::fread(magic, 1, sizeof(magic), file);
+  std::fclose(file);
+  switch (sniff(magic, got)) {
+    case SourceKind::kTiff: return openTiffReader(path);
+    case SourceKind::kPng: return openPngReader(path);
+    case SourceKind::kJpeg: return openJpegReader(path);
+    case SourceKind::kManifest:
+      if (allow_manifest) return openMosaicReader(path);
+      return fail(ErrorCode::kUnsupported,
+                  path + ": a mosaic manifest, not an image (a manifest cannot name another)");
+    case SourceKind::kUnknown: break;
+  }
+  return fail(ErrorCode::kUnsupported,
+              fmt::format("{}: not a TIFF, PNG or JPEG image{} (starts with {})", path,
+                          allow_manifest ? " or a mosaic manifest" : "",
+                          hexPrefix(magic, std::min<size_t>(got, 8))));
+}
+
+}  // namespace
+
 Result<std::unique_ptr<BandReader>> openBandReader(const std::string& source) {
   if (source.starts_with(kSyntheticPrefix)) {
     return openSyntheticReader(source.substr(kSyntheticPrefix.size()));
   }
   if (source.starts_with(kGridPrefix)) return openGridReader(source);
-  TESSERA_TRY(checkSourceFile(source));
-  std::FILE* file = std::fopen(source.c_str(), "rb");
-  if (!file) {
-    return fail(ErrorCode::kIo, fmt::format("{}: cannot open: {}", source, std::strerror(errno)));
-  }
-  uint8_t magic[8] = {};
-  const size_t got = std::fread(magic, 1, sizeof(magic), file);
-  std::fclose(file);
-  switch (sniff(magic, got)) {
-    case SourceKind::kTiff: return openTiffReader(source);
-    case SourceKind::kPng: return openPngReader(source);
-    case SourceKind::kJpeg: return openJpegReader(source);
-    case SourceKind::kUnknown: break;
-  }
-  return fail(ErrorCode::kUnsupported,
-              fmt::format("{}: not a TIFF, PNG or JPEG image (starts with {})", source,
-                          hexPrefix(magic, got)));
+  return openFile(source, true);
+}
+
+Result<std::unique_ptr<BandReader>> openImageFileReader(const std::string& path) {
+  return openFile(path, false);
 }
 
 }  // namespace tessera::detail

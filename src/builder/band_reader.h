@@ -73,8 +73,9 @@ class BandReader {
   virtual uint64_t storedBytesRead() const { return 0; }
 };
 
-/// Opens a source by name: "synthetic:WxH[:seed]" or a path whose content (not extension)
-/// decides between TIFF/BigTIFF, PNG and JPEG. Fails naming the path and the problem: missing,
+/// Opens a source by name: "synthetic:WxH[:seed]", "grid:COLSxROWS:PATTERN" or a path whose
+/// content (not extension) decides between TIFF/BigTIFF, PNG, JPEG and a mosaic manifest (a
+/// JSON object, mosaic_reader.h). Fails naming the path and the problem: missing,
 /// empty, unrecognised, truncated header, zero or absurd dimensions (over kMaxImageSidePx),
 /// unsupported sample format (16-bit, float, palette, CMYK, planar where unsupported).
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openBandReader(const std::string& source);
@@ -88,6 +89,10 @@ struct TiffImageRef {
   /// reduced levels inherit the base's: vips writes float pyramids whose overviews omit it.
   uint16_t missing_sample_format = 0;
 };
+
+/// A TIFF/BigTIFF, PNG or JPEG file by its content, nothing else: the files a grid or a
+/// mosaic manifest names. Fails like openBandReader.
+[[nodiscard]] Result<std::unique_ptr<BandReader>> openImageFileReader(const std::string& path);
 
 /// Readers by format, used by openBandReader and tests.
 [[nodiscard]] Result<std::unique_ptr<BandReader>> openTiffReader(const std::string& path,

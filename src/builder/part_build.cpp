@@ -17,6 +17,7 @@
 #include "format/checksum.h"
 #include "format/header.h"
 #include "grid_reader.h"
+#include "mosaic_manifest.h"
 #include "output/output_file.h"
 #include "part_build.h"
 #include "part_plan.h"
@@ -97,6 +98,10 @@ Result<nlohmann::json> inputIdentity(const std::string& input, const SourceInfo&
     for (uint32_t row = 0; row < grid.rows; ++row)
       for (uint32_t column = 0; column < grid.columns; ++column)
         files.push_back(grid.path(column, row));
+  }
+  if (source.format == "mosaic") {  // the manifest and every image it names
+    TESSERA_ASSIGN_OR_RETURN(MosaicManifest manifest, readMosaicManifest(input));
+    for (const MosaicImage& image : manifest.images) files.push_back(image.path);
   }
   uint64_t bytes = 0;
   int64_t latest_ns = 0;

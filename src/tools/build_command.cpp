@@ -178,7 +178,8 @@ void registerBuildCommand(CLI::App& app, int& exit_code) {
   CLI::App* cmd = app.add_subcommand("build",
                                      "Build an archive from TIFF/BigTIFF, PNG, JPEG, "
                                      "synthetic:WxH[:seed[:channels]], grid:COLSxROWS:PATTERN "
-                                     "(files with {col} and {row}), or a pyramid to import "
+                                     "(files with {col} and {row}), a mosaic manifest (JSON: "
+                                     "images placed on a canvas), or a pyramid to import "
                                      "(pyramidal TIFF/COG, NAME.dzi, a whole-slide image, "
                                      "openslide:PATH)");
   cmd->add_option("inputs", args->options.inputs, "Source image(s); several make a texture set");
