@@ -756,9 +756,6 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     if (!compositor) return forwardError(compositor);
     setup.archive->setTileCompositor(std::move(*compositor));
   }
-  const StreamerOptions options = flightStreamerOptions(args, setup);
-  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
-  if (!streamer) return forwardError(streamer);
   std::unique_ptr<FlyRenderer> gpu;
   if (args.render != "none") {
     const std::optional<RendererKind> kind = rendererNamed(args.render);
@@ -773,6 +770,12 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     gpu = std::move(*created);
     gpu->renderer().setDisplayWindow(*display);
   }
+  // The renderer first: whether it uploads bc1/bc7 blocks as stored decides what the loaders
+  // hand it.
+  StreamerOptions options = flightStreamerOptions(args, setup);
+  options.keep_block_compressed = gpu && gpu->renderer().takesStoredBlocks();
+  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
+  if (!streamer) return forwardError(streamer);
   TESSERA_TRY(startFramesCsv(args));
   FlightLog log;
   TESSERA_TRY(flyFrames(args, setup, **streamer, gpu.get(), log));
