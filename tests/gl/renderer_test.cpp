@@ -281,11 +281,11 @@ TEST_P(Renderers, AtRestTheyMatchTheReferenceOnALosslessArchive) {
 /// An archive whose 64-px tiles are each one flat colour, unlike their neighbours: any texel
 /// a renderer takes from the wrong tile, or any edge it clamps instead of filtering across,
 /// shows as a seam.
-std::shared_ptr<Archive> checkerArchive(uint32_t border_px) {
-  static std::map<uint32_t, std::vector<uint8_t>> built;
-  auto& bytes = built[border_px];
+std::shared_ptr<Archive> checkerArchive(uint32_t border_px, Codec codec = Codec::kPng) {
+  static std::map<std::pair<uint32_t, Codec>, std::vector<uint8_t>> built;
+  auto& bytes = built[{border_px, codec}];
   if (bytes.empty())
-    bytes = [border_px] {
+    bytes = [border_px, codec] {
       const uint32_t w = 512, h = 384, t = 64;
       std::vector<uint8_t> pixels(size_t(w) * h * 3);
       for (uint32_t y = 0; y < h; ++y)
@@ -300,15 +300,16 @@ std::shared_ptr<Archive> checkerArchive(uint32_t border_px) {
       test::PngSpec png;
       png.width_px = w;
       png.height_px = h;
-      const std::string input = dir + "checker.png",
-                        output = dir + "checker-" + std::to_string(border_px) + ".tess";
+      const std::string input = dir + "checker.png", output = dir + "checker-" +
+                                                              std::to_string(border_px) + "-" +
+                                                              codecName(codec) + ".tess";
       EXPECT_EQ(test::writePng(input, png, pixels), "");
       BuildOptions options;
       options.inputs = {input};
       options.output = output;
       options.tile_size_px = t;
       options.border_px = border_px;
-      options.codec = Codec::kPng;
+      options.codec = codec;
       auto report = buildArchive(options);
       EXPECT_TRUE(report) << report.error().message;
       return test::readFileBytes(output);
@@ -582,6 +583,52 @@ TEST_P(BlockTiles, GoUpAsStoredAndDrawTheReferencesDecodedTexels) {
     EXPECT_EQ(gpu_transparent, reference_transparent);
   }
   EXPECT_GT(block_tiles, 0u) << "no tile went up as blocks";
+}
+
+// A flat 64-px tile is stored as a uniform entry, which has no blocks: it goes up decoded, into
+// the RGBA array beside the block array. Borderless, level 0 is all such tiles and level 1 all
+// blocks (each of its tiles spans four cells), so a view between the two levels blends texels
+// of both arrays, and a tile's neighbours lend texels across its edges from either.
+TEST(TileQuads, UniformTilesBesideBlockTilesShowNoSeams) {
+  if (std::string missing = blockFormatMissing(Codec::kBc7); !missing.empty())
+    GTEST_SKIP() << missing;
+  std::shared_ptr<Archive> archive = checkerArchive(0, Codec::kBc7);
+  ASSERT_TRUE(archive);
+  auto renderer = createRenderer(RendererKind::kTileQuads, archive->images()[0]);
+  ASSERT_TRUE(renderer);
+  ASSERT_TRUE((*renderer)->takesStoredBlocks());
+  StreamerOptions options;
+  options.loader_threads = 2;
+  options.keep_block_compressed = true;
+  auto streamer = TileStreamer::create(archive, options);
+  ASSERT_TRUE(streamer);
+  size_t as_blocks = 0, decoded = 0;
+  for (double tpp : {0.6, 1.5, 2.5}) {
+    SCOPED_TRACE(tpp);
+    const View view = orthoAt(256.3, 192.4, tpp, 128, 96);
+    for (int i = 0; i < 200; ++i) {
+      const FrameUpdate& update = (*streamer)->update(view);
+      for (const auto& tile : update.uploads) ++(tile->keptAsBlocks() ? as_blocks : decoded);
+      (*streamer)->acknowledge((*renderer)->apply(update));
+      if (update.uploads.empty() && update.report.queue_length == 0 &&
+          update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
+        break;
+      (*streamer)->waitIdleForTesting();
+    }
+    (*renderer)->draw(view);
+    Picture gpu = (*renderer)->readPixels();
+    ReferenceOptions reference_options;
+    reference_options.available = [&](const TileId& id) { return (*renderer)->resident(id); };
+    auto reference = renderReference(*archive, view, reference_options);
+    ASSERT_TRUE(reference);
+    auto difference = comparePictures(gpu, *reference);
+    ASSERT_TRUE(difference);
+    // A seam, or a layer read from the wrong array, is a row of texels off by ~100.
+    EXPECT_LE(difference->max_abs, 2u);
+    EXPECT_GE(difference->psnr_db, 54.0);
+  }
+  EXPECT_GT(as_blocks, 0u);
+  EXPECT_GT(decoded, 0u);
 }
 
 INSTANTIATE_TEST_SUITE_P(
