@@ -683,6 +683,12 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
     if (jump.rest_psnr_db >= 0 && (psnr_min.is_null() || jump.rest_psnr_db < psnr_min))
       psnr_min = jump.rest_psnr_db;
   summary["rest_psnr_db_min"] = psnr_min;
+  // What the tiles cost the GPU at the end of the flight (docs/rendering.md, "Block-compressed
+  // tiles"): bc1/bc7 blocks as stored, or texels.
+  const RenderStats& stats = gpu.renderer().stats();
+  summary["texture"] = {{"stored_blocks", gpu.renderer().takesStoredBlocks()},
+                        {"gpu_bytes", stats.gpu_bytes},
+                        {"resident_tiles", stats.resident_tiles}};
 }
 
 /// The one or two lines `tessera fly` prints unless --json or --quiet.

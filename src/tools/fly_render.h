@@ -41,6 +41,7 @@ class FlyRenderer {
   std::vector<double> finishGpuTimes();
 
   Renderer& renderer() { return *renderer_; }
+  const Renderer& renderer() const { return *renderer_; }
   std::string description() const { return context_->description(); }
 
  private:
