@@ -27,11 +27,30 @@ struct TileIdHash {
   }
 };
 
-/// A decoded tile: the stored tile with its borders, immutable once cached.
+/// A bc1 or bc7 tile kept as stored, for a renderer that uploads it to the GPU as it is
+/// (docs/codecs.md, "bc1 (8) and bc7 (9)"): the stored tile's 4x4 blocks, row-major, the
+/// tile padded to a multiple of 4 on each side.
+struct StoredBlocks {
+  Codec codec = Codec::kRaw;    ///< kBc1 or kBc7; kRaw: the tile is not kept as blocks
+  uint32_t padded_side_px = 0;  ///< the stored side rounded up to a multiple of 4
+  std::vector<uint8_t> bytes;   ///< (padded_side_px / 4)^2 blocks of 8 (bc1) or 16 (bc7) bytes
+};
+
+/// A loaded tile, immutable once cached: the stored tile with its borders, decoded (`texels`)
+/// or, for a streamer that keeps bc1/bc7 payloads as stored, as blocks (`blocks`, with
+/// `texels` empty).
 struct DecodedTile {
   TileId id;
   Image texels;
-  size_t bytes() const { return texels.texels.size() + sizeof(DecodedTile); }
+  StoredBlocks blocks;
+  /// True when the tile holds blocks instead of texels.
+  bool keptAsBlocks() const { return blocks.codec != Codec::kRaw; }
+  /// The bytes a renderer uploads: the blocks or the texels.
+  std::span<const uint8_t> uploadBytes() const {
+    return keptAsBlocks() ? std::span<const uint8_t>(blocks.bytes)
+                          : std::span<const uint8_t>(texels.texels);
+  }
+  size_t bytes() const { return texels.texels.size() + blocks.bytes.size() + sizeof(DecodedTile); }
 };
 
 /// Counters since construction. `peak_bytes` includes reservations.

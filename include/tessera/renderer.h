@@ -109,6 +109,11 @@ class Renderer {
   /// images as stored. Cheap: uniforms only, no tile is uploaded again.
   virtual void setDisplayWindow(const DisplayWindow& window) = 0;
   virtual const DisplayWindow& displayWindow() const = 0;
+  /// True when the renderer uploads this image's bc1/bc7 tiles as stored, into block-compressed
+  /// textures: the caller then sets `StreamerOptions::keep_block_compressed` so that the
+  /// loaders skip the CPU decode. False for other codecs, for a context without the formats,
+  /// and for renderers that take decoded texels only (docs/rendering.md).
+  virtual bool takesStoredBlocks() const { return false; }
 };
 
 /// Creates the renderer of row `kind` for image `info` (1-4 channels of u8, u16 or f32, any

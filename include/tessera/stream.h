@@ -367,6 +367,10 @@ struct StreamerOptions {
   std::chrono::milliseconds retry_initial{10};
   std::chrono::milliseconds retry_max{1000};
   AdaptiveOptions adaptive;
+  /// bc1 and bc7 tiles with a payload are handed over as stored (`DecodedTile::blocks`, no CPU
+  /// decode) instead of decoded. Set it only for a renderer whose `takesStoredBlocks()` is
+  /// true: any other declines such tiles. Uniform tiles are decoded either way.
+  bool keep_block_compressed = false;
 };
 
 /// Turns `options` into what a source whose every read is a network round trip wants (an

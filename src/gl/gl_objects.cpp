@@ -133,6 +133,32 @@ Texture createTileArray(uint32_t channels, SampleType type, GLsizei side, GLsize
   return texture;
 }
 
+GLenum blockInternalFormat(Codec codec) {
+  // EXT_texture_compression_s3tc's value: epoxy's core headers may not name it.
+  constexpr GLenum kCompressedRgbS3tcDxt1 = 0x83F0;
+  if (codec == Codec::kBc1 && epoxy_has_gl_extension("GL_EXT_texture_compression_s3tc"))
+    return kCompressedRgbS3tcDxt1;
+  if (codec == Codec::kBc7 &&
+      (epoxy_gl_version() >= 42 || epoxy_has_gl_extension("GL_ARB_texture_compression_bptc")))
+    return GL_COMPRESSED_RGBA_BPTC_UNORM;
+  return 0;
+}
+
+Texture createBlockTileArray(GLenum internal_format, uint32_t channels, GLsizei side,
+                             GLsizei layers) {
+  Texture texture = createTexture(GL_TEXTURE_2D_ARRAY);
+  while (glGetError() != GL_NO_ERROR) {
+  }
+  glTextureStorage3D(texture.get(), 1, internal_format, side, side, layers);
+  if (glGetError() != GL_NO_ERROR) return Texture();
+  glTextureParameteri(texture.get(), GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+  glTextureParameteri(texture.get(), GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+  glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+  glTextureParameteri(texture.get(), GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+  setChannelSwizzle(texture, channels);
+  return texture;
+}
+
 void UploadStaging::stage(const std::vector<std::pair<const uint8_t*, size_t>>& sources) {
   if (!buffer_) buffer_ = createBuffer();
   size_t total = 0;

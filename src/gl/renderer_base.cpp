@@ -117,6 +117,9 @@ void RendererBase::beginApply() {
 }
 
 bool RendererBase::holds(const DecodedTile& tile) const {
+  if (tile.keptAsBlocks())
+    return block_codec_ != Codec::kRaw && tile.blocks.codec == block_codec_ &&
+           tile.blocks.padded_side_px == blockSidePx() && tile.id.level < info_.level_count;
   return tile.texels.channels == info_.channels && tile.texels.sample_type == info_.sample_type &&
          tile.texels.width_px == info_.storedTileSidePx() &&
          tile.texels.height_px == info_.storedTileSidePx() && tile.id.level < info_.level_count;
@@ -138,15 +141,15 @@ void RendererBase::uploadStaged(
   const auto started = Clock::now();
   sources_.clear();
   for (const PendingUpload& p : pending)
-    if (p.tile) sources_.emplace_back(p.tile->texels.texels.data(), p.tile->texels.texels.size());
+    if (p.tile) sources_.emplace_back(p.tile->uploadBytes().data(), p.tile->uploadBytes().size());
   size_t offset = staging_->stage(sources_);  // staged one after the other, in this order
   for (const PendingUpload& p : pending) {
     if (!p.tile) continue;
     write(*p.tile, p.place, offset);
-    offset += p.tile->texels.texels.size();
+    offset += p.tile->uploadBytes().size();
     result_.accepted.push_back(p.tile->id);
     ++stats_.uploads;
-    stats_.upload_bytes += p.tile->texels.texels.size();
+    stats_.upload_bytes += p.tile->uploadBytes().size();
   }
   staging_->finish();
   // What the adaptive upload budget is fed (TileStreamer::acknowledge): the render thread's

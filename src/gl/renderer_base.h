@@ -53,8 +53,11 @@ class RendererBase : public Renderer {
   /// Starts an apply: forgets the last one's result and figures.
   void beginApply();
   /// True when this renderer can hold `tile`: this image's channels, sample type, stored tile
-  /// size and levels. Any other tile is declined: never drawn, never a wrong tile.
+  /// size and levels, or, kept as blocks, block_codec_'s at the padded side. Any other tile is
+  /// declined: never drawn, never a wrong tile.
   bool holds(const DecodedTile& tile) const;
+  /// The stored tile side rounded up to whole 4x4 blocks: a block layer's side.
+  uint32_t blockSidePx() const { return (info_.storedTileSidePx() + 3) / 4 * 4; }
   /// Records a tile of this frame's uploads as declined.
   void decline(const TileId& id);
   /// Records a tile held since an earlier frame as dropped.
@@ -81,6 +84,9 @@ class RendererBase : public Renderer {
   ImageInfo info_;
   RendererOptions options_;
   TileTexelFormat texel_format_;  ///< how this image's tiles are uploaded and held
+  /// The codec (bc1, bc7) whose tiles this renderer takes as stored blocks; kRaw: none (a
+  /// derived renderer sets it when it has a block texture for them).
+  Codec block_codec_ = Codec::kRaw;
   Program program_;
   VertexArray vertex_array_;
   RenderStats stats_;

@@ -56,11 +56,33 @@ uniform float u_tile_size;
 uniform float u_border;
 uniform float u_stored_side;
 out vec4 o_colour;
+#if BLOCKS
+// bc1/bc7 tiles as stored, in layers padded to whole 4x4 blocks (u_block_side): the padding
+// lies past the stored tile's right and bottom edges, so a texel keeps its coordinate and only
+// the normalisation changes. Layers from TEXEL_LAYER on are decoded tiles (uniform tiles have
+// no blocks) in u_tiles. Level 0 only, so explicit-LOD sampling in this branch is exact.
+uniform sampler2DArray u_blocks;
+uniform float u_block_side;
+vec4 tileTexture(vec2 texel, int layer) {
+  if (layer >= TEXEL_LAYER)
+    return textureLod(u_tiles, vec3(texel / u_stored_side, float(layer - TEXEL_LAYER)), 0.0);
+  return textureLod(u_blocks, vec3(texel / u_block_side, float(layer)), 0.0);
+}
+vec4 tileTexel(ivec2 texel, int layer) {
+  if (layer >= TEXEL_LAYER) return texelFetch(u_tiles, ivec3(texel, layer - TEXEL_LAYER), 0);
+  return texelFetch(u_blocks, ivec3(texel, layer), 0);
+}
+#else
+vec4 tileTexture(vec2 texel, int layer) {
+  return texture(u_tiles, vec3(texel / u_stored_side, float(layer)));
+}
+vec4 tileTexel(ivec2 texel, int layer) { return texelFetch(u_tiles, ivec3(texel, layer), 0); }
+#endif
 // Bilinear at `level` inside one stored tile; its border holds the neighbours' texels, so the
 // four texels around any point of the tile are in it.
 vec4 sampleTile(vec2 world, vec2 origin, int level, int layer) {
   vec2 texel = (world - origin) * exp2(-float(level)) + u_border;
-  return texture(u_tiles, vec3(texel / u_stored_side, float(layer)));
+  return tileTexture(texel, layer);
 }
 #if BORDERLESS
 // Without borders: per instance, the layers of the 3 x 3 tiles around the tile, then around
@@ -86,7 +108,7 @@ vec4 sampleBorderless(vec2 world, vec2 origin, int level, ivec2 tile, int table)
       layer = neighbours[v_instance * 18 + table + 4];
       global = clamp(global, tile * t, tile * t + t - 1);
     }
-    texels[k] = texelFetch(u_tiles, ivec3(global - (tile + d) * t, layer), 0);
+    texels[k] = tileTexel(global - (tile + d) * t, layer);
   }
   return mix(mix(texels[0], texels[1], f.x), mix(texels[2], texels[3], f.x), f.y);
 }
@@ -140,6 +162,7 @@ class TileQuadsRenderer final : public RendererBase {
       : RendererBase(info, options) {}
 
   Result<void> init() {
+    chooseBlockFormat();
     // One program per way of filtering across tile edges, chosen here: a software renderer
     // runs both sides of a branch on every fragment, and the borderless fetches cost a
     // bordered archive's frames several times the bilinear sample it needs.
@@ -148,9 +171,12 @@ class TileQuadsRenderer final : public RendererBase {
     // level, no second fetch. The orthographic ones are linked first: the base class keeps
     // u_view_projection of the last program linked, the perspective one.
     for (int mode : {1, 2, 0}) {
-      const std::string fragment = fmt::format("#define BORDERLESS {}\n#define ORTHO_LOD {}\n",
-                                               info_.border_px == 0 ? 1 : 0, mode) +
-                                   kFragmentShader;
+      const std::string fragment =
+          fmt::format(
+              "#define BORDERLESS {}\n#define ORTHO_LOD {}\n#define BLOCKS {}\n"
+              "#define TEXEL_LAYER {}\n",
+              info_.border_px == 0 ? 1 : 0, mode, blockMode() ? 1 : 0, kTexelLayer) +
+          kFragmentShader;
       TESSERA_TRY(linkRendererProgram("tile-quads", kVertexShader, fragment.c_str()));
       const GLuint p = program_.get();
       glProgramUniform1i(p, glGetUniformLocation(p, "u_tiles"), 0);
@@ -158,6 +184,10 @@ class TileQuadsRenderer final : public RendererBase {
       glProgramUniform1f(p, glGetUniformLocation(p, "u_border"), float(info_.border_px));
       glProgramUniform1f(p, glGetUniformLocation(p, "u_stored_side"),
                          float(info_.storedTileSidePx()));
+      if (blockMode()) {
+        glProgramUniform1i(p, glGetUniformLocation(p, "u_blocks"), 1);
+        glProgramUniform1f(p, glGetUniformLocation(p, "u_block_side"), float(blockSidePx()));
+      }
       if (mode == 0) break;
       OrthoProgram& ortho = ortho_programs_[mode - 1];
       ortho.view_projection = glGetUniformLocation(p, "u_view_projection");
@@ -165,7 +195,9 @@ class TileQuadsRenderer final : public RendererBase {
       ortho.program = std::move(program_);
     }
     glGetIntegerv(GL_MAX_ARRAY_TEXTURE_LAYERS, &max_layers_);
-    TESSERA_TRY(growLayers(std::max<uint32_t>(1, options_.initial_layers)));
+    TESSERA_TRY(growLayers(primary(), std::max<uint32_t>(1, options_.initial_layers)));
+    // With blocks, decoded tiles are the few uniform ones: a small array, grown on demand.
+    if (blockMode()) TESSERA_TRY(growLayers(texels_, kInitialTexelLayersBesideBlocks));
 
     instances_buffer_ = createBuffer();
     vertex_array_ = createVertexArray();
@@ -200,31 +232,44 @@ class TileQuadsRenderer final : public RendererBase {
       sized_from_bound_ = true;
       const uint64_t wanted =
           std::min<uint64_t>(update.resident_tiles_bound, uint64_t(std::max(max_layers_, 1)));
-      if (wanted > layer_capacity_ && layers_.empty()) (void)growLayers(uint32_t(wanted));
+      if (wanted > primary().capacity && layers_.empty())
+        (void)growLayers(primary(), uint32_t(wanted));
     }
     pending_.clear();
     size_t room = stagingRoom();
     for (const auto& tile : update.uploads) {
       // Not this image's, or no room left in the staging ring this frame (offered again).
-      if (!holds(*tile) || tile->texels.texels.size() > room) {
+      const size_t bytes = tile->uploadBytes().size();
+      if (!holds(*tile) || bytes > room) {
         decline(tile->id);
         continue;
       }
+      // A tile held in the other array (now blocks, before decoded) moves.
       auto existing = layers_.find(tile->id);
-      const GLint layer = existing != layers_.end() ? existing->second : takeLayer();
+      if (existing != layers_.end() && inBlocks(existing->second) != tile->keptAsBlocks())
+        release(tile->id);
+      existing = layers_.find(tile->id);
+      const GLint layer =
+          existing != layers_.end() ? existing->second : takeLayer(tile->keptAsBlocks());
       if (layer < 0) {
         decline(tile->id);
         continue;
       }
       layers_[tile->id] = layer;
       pending_.push_back({tile.get(), uint32_t(layer)});
-      room -= tile->texels.texels.size();
+      room -= bytes;
     }
-    const GLsizei side = GLsizei(info_.storedTileSidePx());
-    uploadStaged(pending_, [&](const DecodedTile&, uint32_t layer, size_t offset) {
-      glTextureSubImage3D(tiles_.get(), 0, 0, 0, GLint(layer), side, side, 1,
-                          texel_format_.pixel_format, texel_format_.pixel_type,
-                          reinterpret_cast<const void*>(offset));
+    uploadStaged(pending_, [&](const DecodedTile& tile, uint32_t layer, size_t offset) {
+      const auto* source = reinterpret_cast<const void*>(offset);
+      if (tile.keptAsBlocks()) {
+        const GLsizei side = GLsizei(blockSidePx());
+        glCompressedTextureSubImage3D(blocks_.texture.get(), 0, 0, 0, GLint(layer), side, side, 1,
+                                      block_format_, GLsizei(tile.blocks.bytes.size()), source);
+        return;
+      }
+      const GLsizei side = GLsizei(info_.storedTileSidePx());
+      glTextureSubImage3D(texels_.texture.get(), 0, 0, 0, GLint(layer) - texelTag(), side, side, 1,
+                          texel_format_.pixel_format, texel_format_.pixel_type, source);
     });
     return endApply(started, layers_.size());
   }
@@ -239,7 +284,8 @@ class TileQuadsRenderer final : public RendererBase {
                         instances_.data(), GL_STREAM_DRAW);
       if (info_.border_px == 0) bindNeighbours(view.image);
       glUseProgram(programFor(view, transform));
-      glBindTextureUnit(0, tiles_.get());
+      glBindTextureUnit(0, texels_.texture.get());
+      if (blockMode()) glBindTextureUnit(1, blocks_.texture.get());
       glBindVertexArray(vertex_array_.get());
       glDrawArraysInstanced(GL_TRIANGLE_STRIP, 0, 4, GLsizei(instances_.size()));
       glBindVertexArray(0);
@@ -248,6 +294,7 @@ class TileQuadsRenderer final : public RendererBase {
   }
 
   bool resident(const TileId& tile) const override { return layers_.count(tile) > 0; }
+  bool takesStoredBlocks() const override { return blockMode(); }
   RendererKind kind() const override { return RendererKind::kTileQuads; }
 
  private:
@@ -378,51 +425,95 @@ class TileQuadsRenderer final : public RendererBase {
     glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, neighbours_buffer_.get());
   }
 
-  /// (Re)allocates the tile array with `layers` layers, copying the layers in use.
-  Result<void> growLayers(uint32_t layers) {
-    const GLsizei side = GLsizei(info_.storedTileSidePx());
-    Texture grown = createTileArray(info_.channels, info_.sample_type, side, GLsizei(layers));
+  /// One texture array of tiles and its free layers (as layers_ names them: tagged).
+  struct LayerArray {
+    Texture texture;
+    uint32_t capacity = 0;
+    std::vector<GLint> free;
+  };
+
+  /// Block mode: this image's tiles are bc1/bc7 (its default codec), RGB or RGBA, and the
+  /// context samples the format. Grey bc tiles stay decoded: their swizzle reads alpha from
+  /// the second channel, which a block texture does not have.
+  void chooseBlockFormat() {
+    const Codec codec = info_.default_codec;
+    const bool rgb_or_rgba = info_.channels == 3 || (info_.channels == 4 && codec == Codec::kBc7);
+    if ((codec != Codec::kBc1 && codec != Codec::kBc7) || !rgb_or_rgba ||
+        info_.sample_type != SampleType::kU8)
+      return;
+    block_format_ = blockInternalFormat(codec);
+    if (block_format_ != 0) block_codec_ = codec;
+  }
+  bool blockMode() const { return block_codec_ != Codec::kRaw; }
+  /// What layers_ adds to a layer of texels_ in block mode, to tell the arrays apart.
+  GLint texelTag() const { return blockMode() ? kTexelLayer : 0; }
+  bool inBlocks(GLint layer) const { return blockMode() && layer < kTexelLayer; }
+  /// The array the streamer's residency bound sizes: blocks in block mode.
+  LayerArray& primary() { return blockMode() ? blocks_ : texels_; }
+  uint64_t layerBytes(bool blocks) const {
+    if (!blocks) return info_.storedTileBytes();
+    const uint64_t blocks_along = blockSidePx() / 4;
+    return blocks_along * blocks_along * (block_codec_ == Codec::kBc1 ? 8 : 16);
+  }
+
+  /// (Re)allocates `array` with `layers` layers, copying the layers in use.
+  Result<void> growLayers(LayerArray& array, uint32_t layers) {
+    const bool blocks = &array == &blocks_;
+    const GLsizei side = GLsizei(blocks ? blockSidePx() : info_.storedTileSidePx());
+    Texture grown = blocks
+                        ? createBlockTileArray(block_format_, info_.channels, side, GLsizei(layers))
+                        : createTileArray(info_.channels, info_.sample_type, side, GLsizei(layers));
     if (!grown)
       return fail(
           ErrorCode::kTooLarge,
           fmt::format("tile array of {} layers of {} px does not fit in GPU memory", layers, side));
-    if (tiles_ && layer_capacity_ > 0)
-      glCopyImageSubData(tiles_.get(), GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, grown.get(),
-                         GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, side, side, GLsizei(layer_capacity_));
-    for (uint32_t layer = layer_capacity_; layer < layers; ++layer)
-      free_layers_.push_back(GLint(layers - 1 - (layer - layer_capacity_)));
-    tiles_ = std::move(grown);
+    if (array.texture && array.capacity > 0)
+      glCopyImageSubData(array.texture.get(), GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, grown.get(),
+                         GL_TEXTURE_2D_ARRAY, 0, 0, 0, 0, side, side, GLsizei(array.capacity));
+    const GLint tag = blocks ? 0 : texelTag();
+    for (uint32_t layer = array.capacity; layer < layers; ++layer)
+      array.free.push_back(GLint(layers - 1 - (layer - array.capacity)) + tag);
+    array.texture = std::move(grown);
+    array.capacity = layers;
     ++stats_.storage_allocations;
-    layer_capacity_ = layers;
-    stats_.gpu_bytes = uint64_t(layers) * info_.storedTileBytes();
+    stats_.gpu_bytes = uint64_t(blocks_.capacity) * layerBytes(true) +
+                       uint64_t(texels_.capacity) * layerBytes(false);
     return {};
   }
 
-  /// A free layer, growing the array when none is left; -1 at the driver's limit.
-  GLint takeLayer() {
-    if (free_layers_.empty()) {
+  /// A free layer of the block or the texel array, growing it when none is left; -1 at the
+  /// driver's limit.
+  GLint takeLayer(bool blocks) {
+    LayerArray& array = blocks ? blocks_ : texels_;
+    if (array.free.empty()) {
       const uint32_t limit = uint32_t(std::max(max_layers_, 1));
-      if (layer_capacity_ >= limit) return -1;
-      if (!growLayers(std::min(limit, layer_capacity_ * 2))) return -1;
+      if (array.capacity >= limit) return -1;
+      if (!growLayers(array, std::min(limit, array.capacity * 2))) return -1;
     }
-    GLint layer = free_layers_.back();
-    free_layers_.pop_back();
+    GLint layer = array.free.back();
+    array.free.pop_back();
     return layer;
   }
 
   void release(const TileId& id) {
     auto it = layers_.find(id);
     if (it == layers_.end()) return;
-    free_layers_.push_back(it->second);
+    (inBlocks(it->second) ? blocks_ : texels_).free.push_back(it->second);
     layers_.erase(it);
   }
 
+  /// Layer names from here on are layers of texels_ (block mode); far above any driver's
+  /// GL_MAX_ARRAY_TEXTURE_LAYERS.
+  static constexpr GLint kTexelLayer = 1 << 20;
+  static constexpr uint32_t kInitialTexelLayersBesideBlocks = 8;
+
   OrthoProgram ortho_programs_[2];  ///< on a level; blending with the parent
-  Texture tiles_;
-  bool sized_from_bound_ = false;  ///< the first apply sized the array from the streamer
+  LayerArray texels_;               ///< decoded tiles
+  LayerArray blocks_;               ///< tiles kept as blocks of block_codec_ (block mode)
+  GLenum block_format_ = 0;         ///< blocks_'s internal format; 0 outside block mode
+  bool sized_from_bound_ = false;   ///< the first apply sized the array from the streamer
   GLint max_layers_ = 0;
-  uint32_t layer_capacity_ = 0;
-  std::vector<GLint> free_layers_;
+  /// Each resident tile's layer: of blocks_ below kTexelLayer, else of texels_ (minus it).
   std::unordered_map<TileId, GLint, TileIdHash> layers_;
   std::vector<PendingUpload> pending_;  ///< scratch of apply
   Buffer instances_buffer_;

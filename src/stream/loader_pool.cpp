@@ -942,6 +942,11 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
     finish(item.id, {item.id, false, true, "", true}, false);
     return;
   }
+  if (options_.keep_block_compressed && item.entry.kind == TileKind::kEncoded &&
+      (item.entry.codec == Codec::kBc1 || item.entry.codec == Codec::kBc7)) {
+    deliverBlocks(item, payload);
+    return;
+  }
   // The budget counts buffers in flight: no room means try again later, not an error.
   if (!cache_.reserve(tile_bytes)) {
     finish(item.id,
@@ -964,6 +969,44 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
     finish(item.id, failedLoad(*archive_, item.id, decoded.error()), true);
     return;
   }
+  deliver(item, decode_ns, [&](bool wanted) {
+    if (wanted)
+      cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
+    else
+      texel_pool_->give(std::move(texels.texels));
+  });
+}
+
+void LoaderPool::deliverBlocks(const BatchItem& item, std::span<const uint8_t> payload) {
+  const ImageInfo& info = archive_->images()[item.id.image];
+  // The size is a bc payload's only structure (docs/codecs.md); the GPU would read past a
+  // short one.
+  const uint32_t padded_side = (info.storedTileSidePx() + 3) / 4 * 4;
+  const size_t block_bytes = item.entry.codec == Codec::kBc1 ? 8 : 16;
+  const size_t expected = size_t(padded_side / 4) * (padded_side / 4) * block_bytes;
+  if (payload.size() != expected) {
+    finish(item.id,
+           failedLoad(*archive_, item.id,
+                      {ErrorCode::kCorrupt,
+                       fmt::format("{} payload of {} bytes, expected {} for {} px tiles",
+                                   codecName(item.entry.codec), payload.size(), expected,
+                                   info.storedTileSidePx())}),
+           true);
+    return;
+  }
+  deliver(item, 0, [&](bool wanted) {
+    if (!wanted) return;
+    auto tile = std::make_shared<DecodedTile>();
+    tile->id = item.id;
+    tile->blocks.codec = item.entry.codec;
+    tile->blocks.padded_side_px = padded_side;
+    tile->blocks.bytes.assign(payload.begin(), payload.end());
+    cache_.insert(std::move(tile));
+  });
+}
+
+void LoaderPool::deliver(const BatchItem& item, uint64_t decode_ns,
+                         const std::function<void(bool)>& store) {
   bool claimed = false, wanted = false;
   {
     std::lock_guard lock(mutex_);
@@ -980,10 +1023,7 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
     }
   }
   // A tile that left every region while it loaded is dropped here (Backes et al., section 6).
-  if (wanted)
-    cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
-  else
-    texel_pool_->give(std::move(texels.texels));
+  store(wanted);
   if (claimed) finish(item.id, {item.id, wanted, !wanted, ""}, false, true);
 }
 

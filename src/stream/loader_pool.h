@@ -8,6 +8,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <functional>
 #include <condition_variable>
 #include <cstdint>
 #include <memory>
@@ -44,6 +45,8 @@ struct LoaderOptions {
   uint64_t recycled_bytes = 64u << 20;
   /// StreamerOptions::read_ahead_bytes.
   uint64_t read_ahead_bytes = 4u << 20;
+  /// StreamerOptions::keep_block_compressed.
+  bool keep_block_compressed = false;
 };
 
 /// A thread's scheduling figures from /proc's schedstat: nanoseconds on a core, and waiting
@@ -226,6 +229,12 @@ class LoaderPool {
   /// it if it is still wanted (dropped as stale if not) and finishes it.
   void decodeAndDeliver(const BatchItem& item, std::span<const uint8_t> payload, size_t tile_bytes,
                         CodecScratch& scratch);
+  /// A bc1/bc7 payload kept as stored (LoaderOptions::keep_block_compressed): checked for its
+  /// size, copied into a cache tile's blocks and delivered as decodeAndDeliver does.
+  void deliverBlocks(const BatchItem& item, std::span<const uint8_t> payload);
+  /// The end of a load: claims the tile, counts it, hands `store` whether it is still wanted
+  /// (it inserts the tile, or recycles its buffer), and finishes it.
+  void deliver(const BatchItem& item, uint64_t decode_ns, const std::function<void(bool)>& store);
   /// True when `id` is coded against a parent (its image's codec is dependent and it is below
   /// the coarsest level). Lock-free: reads constant members only.
   bool needsParent(const TileId& id) const;

@@ -134,6 +134,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   loader_options.gap_round_trip_share = options.gap_round_trip_share;
   loader_options.max_link_gap_bytes = options.max_link_gap_bytes;
   loader_options.read_ahead_bytes = options.read_ahead_bytes;
+  loader_options.keep_block_compressed = options.keep_block_compressed;
   loader_options.retry_initial = options.retry_initial;
   loader_options.retry_max = options.retry_max;
   impl->loader = std::make_unique<detail::LoaderPool>(archive, *impl->cache, loader_options);
@@ -211,7 +212,7 @@ uint64_t TileStreamer::Impl::chooseUploads(const detail::ResidencyPlan& plan,
       cache->unpin(id);
       continue;
     }
-    upload_bytes += pinned[i]->texels.texels.size();
+    upload_bytes += pinned[i]->uploadBytes().size();
     uploading.insert(id);
     awaiting_upload.insert(id);
     loaded.erase(id);

@@ -690,6 +690,12 @@ void addFlightRenderSummary(const FlyArgs& args, const FlyRenderer& gpu, const F
     if (jump.rest_psnr_db >= 0 && (psnr_min.is_null() || jump.rest_psnr_db < psnr_min))
       psnr_min = jump.rest_psnr_db;
   summary["rest_psnr_db_min"] = psnr_min;
+  // What the tiles cost the GPU at the end of the flight (docs/rendering.md, "Block-compressed
+  // tiles"): bc1/bc7 blocks as stored, or texels.
+  const RenderStats& stats = gpu.renderer().stats();
+  summary["texture"] = {{"stored_blocks", gpu.renderer().takesStoredBlocks()},
+                        {"gpu_bytes", stats.gpu_bytes},
+                        {"resident_tiles", stats.resident_tiles}};
 }
 
 /// The one or two lines `tessera fly` prints unless --json or --quiet.
@@ -763,9 +769,9 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     if (!compositor) return forwardError(compositor);
     setup.archive->setTileCompositor(std::move(*compositor));
   }
-  const StreamerOptions options = flightStreamerOptions(args, setup);
-  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
-  if (!streamer) return forwardError(streamer);
+  // The renderer first: whether it uploads bc1/bc7 blocks as stored decides what the loaders
+  // hand it.
+  StreamerOptions options = flightStreamerOptions(args, setup);
   std::unique_ptr<FlyRenderer> gpu;
   if (args.render != "none") {
     const std::optional<RendererKind> kind = rendererNamed(args.render);
@@ -784,6 +790,9 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     gpu = std::move(*created);
     gpu->renderer().setDisplayWindow(*display);
   }
+  options.keep_block_compressed = gpu && gpu->renderer().takesStoredBlocks();
+  Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
+  if (!streamer) return forwardError(streamer);
   TESSERA_TRY(startFramesCsv(args));
   FlightLog log;
   TESSERA_TRY(flyFrames(args, setup, **streamer, gpu.get(), log));

@@ -54,6 +54,7 @@ class FlyRenderer {
   uint32_t flightAllocations() const {
     return renderer_->stats().storage_allocations - allocations_at_start_;
   }
+  const Renderer& renderer() const { return *renderer_; }
   std::string description() const { return context_->description(); }
 
  private:

@@ -13,6 +13,7 @@
 #include <tessera/render.h>
 #include <tessera/stream.h>
 
+#include "gl/gl_objects.h"
 #include "gl/renderers.h"
 #include "gl_test_context.h"
 #include "support/fault_source.h"
@@ -68,15 +69,17 @@ struct Rig {
     archive = test::openArchiveOrFail(source);
     if (!archive) return;
     test::warmDirectory(*archive);
-    StreamerOptions options;
-    options.cache_budget_bytes = size_t(256) << 20;
-    options.loader_threads = 2;
-    auto created = TileStreamer::create(archive, options);
-    EXPECT_TRUE(created) << created.error().message;
-    if (created) streamer = std::move(*created);
+    // The renderer first, as the tools make them: it says whether bc tiles stay blocks.
     auto made = createRenderer(kind, archive->images()[0], renderer_options);
     EXPECT_TRUE(made) << made.error().message;
     if (made) renderer = std::move(*made);
+    StreamerOptions options;
+    options.cache_budget_bytes = size_t(256) << 20;
+    options.loader_threads = 2;
+    options.keep_block_compressed = renderer && renderer->takesStoredBlocks();
+    auto created = TileStreamer::create(archive, options);
+    EXPECT_TRUE(created) << created.error().message;
+    if (created) streamer = std::move(*created);
   }
 
   // Loader threads held at a closed gate must get out before the streamer joins them.
@@ -278,11 +281,11 @@ TEST_P(Renderers, AtRestTheyMatchTheReferenceOnALosslessArchive) {
 /// An archive whose 64-px tiles are each one flat colour, unlike their neighbours: any texel
 /// a renderer takes from the wrong tile, or any edge it clamps instead of filtering across,
 /// shows as a seam.
-std::shared_ptr<Archive> checkerArchive(uint32_t border_px) {
-  static std::map<uint32_t, std::vector<uint8_t>> built;
-  auto& bytes = built[border_px];
+std::shared_ptr<Archive> checkerArchive(uint32_t border_px, Codec codec = Codec::kPng) {
+  static std::map<std::pair<uint32_t, Codec>, std::vector<uint8_t>> built;
+  auto& bytes = built[{border_px, codec}];
   if (bytes.empty())
-    bytes = [border_px] {
+    bytes = [border_px, codec] {
       const uint32_t w = 512, h = 384, t = 64;
       std::vector<uint8_t> pixels(size_t(w) * h * 3);
       for (uint32_t y = 0; y < h; ++y)
@@ -297,15 +300,16 @@ std::shared_ptr<Archive> checkerArchive(uint32_t border_px) {
       test::PngSpec png;
       png.width_px = w;
       png.height_px = h;
-      const std::string input = dir + "checker.png",
-                        output = dir + "checker-" + std::to_string(border_px) + ".tess";
+      const std::string input = dir + "checker.png", output = dir + "checker-" +
+                                                              std::to_string(border_px) + "-" +
+                                                              codecName(codec) + ".tess";
       EXPECT_EQ(test::writePng(input, png, pixels), "");
       BuildOptions options;
       options.inputs = {input};
       options.output = output;
       options.tile_size_px = t;
       options.border_px = border_px;
-      options.codec = Codec::kPng;
+      options.codec = codec;
       auto report = buildArchive(options);
       EXPECT_TRUE(report) << report.error().message;
       return test::readFileBytes(output);
@@ -545,6 +549,152 @@ INSTANTIATE_TEST_SUITE_P(Renderers, SizedUpFront,
                                                   ? "TileQuads"
                                                   : "Clipmap");
                          });
+
+/// Why the current context cannot sample `codec`'s blocks; empty when it can.
+std::string blockFormatMissing(Codec codec) {
+  sharedContext();
+  if (gl::blockInternalFormat(codec) != 0) return "";
+  return codec == Codec::kBc1 ? "the GL driver offers no S3TC (BC1) textures"
+                              : "the GL driver offers no BPTC (BC7) textures";
+}
+
+class BlockTiles : public testing::TestWithParam<std::tuple<Codec, uint32_t, uint32_t>> {};
+
+// bc tiles go up as stored (no CPU decode, a quarter or an eighth of the bytes), in layers
+// padded to whole blocks when the bordered side (66 px) is not a multiple of 4, and the picture
+// shows the texels the CPU decoder gives the reference renderer: no seam, no uncovered pixel.
+TEST_P(BlockTiles, GoUpAsStoredAndDrawTheReferencesDecodedTexels) {
+  const auto [codec, channels, border] = GetParam();
+  if (std::string missing = blockFormatMissing(codec); !missing.empty()) GTEST_SKIP() << missing;
+  test::SyntheticArchiveSpec spec;
+  spec.width_px = 300;  // odd sizes: the last column and row of tiles are partly padding
+  spec.height_px = 220;
+  spec.channels = channels;
+  spec.codec = codec;
+  spec.border_px = border;
+  Rig rig(spec, RendererKind::kTileQuads);
+  ASSERT_TRUE(rig.ready());
+  ASSERT_TRUE(rig.renderer->takesStoredBlocks());
+  const ImageInfo& info = rig.archive->images()[0];
+  const size_t blocks_along = (info.storedTileSidePx() + 3) / 4;
+  const size_t block_tile_bytes = blocks_along * blocks_along * (codec == Codec::kBc1 ? 8 : 16);
+  // Pixel centres on texel centres show the texels themselves: bc7 decodes exactly as the CPU
+  // does, bc1 within a level (docs/codecs.md). Between texels the driver's bilinear filter
+  // adds its rounding: on llvmpipe, up to 4 levels at the sharpest edges of the synthetic
+  // image when it filters a block layer (bordered tiles), 1 on an RGBA layer.
+  const uint32_t on_texels = codec == Codec::kBc1 ? 1 : 0;
+  const uint32_t filtered = border > 0 ? 4 : 1 + on_texels;
+  struct NamedBlockView {
+    const char* name;
+    View view;
+    uint32_t max_abs;
+  };
+  const NamedBlockView views[] = {
+      {"on texel centres, across tile edges", orthoAt(130, 100, 1, 96, 72), on_texels},
+      {"image corner", orthoAt(280, 200, 1, 64, 48), on_texels},
+      {"between texels", orthoAt(130.3, 100.7, 1, 96, 72), filtered},
+      {"magnified 4x on a tile corner", orthoAt(128.2, 64.9, 0.25, 64, 48), filtered},
+      {"between levels 0 and 1", orthoAt(150, 110, 1.5, 96, 72), filtered},
+      {"whole image, coarse levels", orthoAt(152, 112, 4, 80, 60), filtered},
+  };
+  size_t block_tiles = 0;
+  for (const NamedBlockView& named : views) {
+    SCOPED_TRACE(named.name);
+    // Every accepted upload is as many bytes as the stats say, and a kept tile is its blocks.
+    for (int i = 0; i < 200; ++i) {
+      const FrameUpdate& update = rig.frame(named.view);
+      uint64_t offered_bytes = 0;
+      for (const auto& tile : update.uploads) {
+        offered_bytes += tile->uploadBytes().size();
+        if (!tile->keptAsBlocks()) continue;
+        ++block_tiles;
+        EXPECT_TRUE(tile->texels.texels.empty());
+        EXPECT_EQ(tile->blocks.bytes.size(), block_tile_bytes);
+      }
+      if (rig.renderer->stats().declined == 0) {
+        EXPECT_EQ(rig.renderer->stats().upload_bytes, offered_bytes);
+      }
+      if (update.report.queue_length == 0 && update.report.in_flight == 0 && update.uploads.empty())
+        break;
+      rig.streamer->waitIdleForTesting();
+    }
+    rig.settle(named.view);
+    rig.frame(named.view);
+    Picture gpu = rig.renderer->readPixels();
+    ReferenceOptions options;
+    options.available = [&](const TileId& id) { return rig.renderer->resident(id); };
+    auto reference = renderReference(*rig.archive, named.view, options);
+    ASSERT_TRUE(reference) << reference.error().message;
+    auto difference = comparePictures(gpu, *reference);
+    ASSERT_TRUE(difference) << difference.error().message;
+    EXPECT_LE(difference->max_abs, named.max_abs);
+    EXPECT_GE(difference->psnr_db, 54.0);
+    // No uncovered pixel: inside the image every pixel is drawn (alpha as the reference has it).
+    size_t gpu_transparent = 0, reference_transparent = 0;
+    for (size_t i = 3; i < gpu.rgba.size(); i += 4) {
+      gpu_transparent += gpu.rgba[i] == 0;
+      reference_transparent += reference->rgba[i] == 0;
+    }
+    EXPECT_EQ(gpu_transparent, reference_transparent);
+  }
+  EXPECT_GT(block_tiles, 0u) << "no tile went up as blocks";
+}
+
+// A flat 64-px tile is stored as a uniform entry, which has no blocks: it goes up decoded, into
+// the RGBA array beside the block array. Borderless, level 0 is all such tiles and level 1 all
+// blocks (each of its tiles spans four cells), so a view between the two levels blends texels
+// of both arrays, and a tile's neighbours lend texels across its edges from either.
+TEST(TileQuads, UniformTilesBesideBlockTilesShowNoSeams) {
+  if (std::string missing = blockFormatMissing(Codec::kBc7); !missing.empty())
+    GTEST_SKIP() << missing;
+  std::shared_ptr<Archive> archive = checkerArchive(0, Codec::kBc7);
+  ASSERT_TRUE(archive);
+  auto renderer = createRenderer(RendererKind::kTileQuads, archive->images()[0]);
+  ASSERT_TRUE(renderer);
+  ASSERT_TRUE((*renderer)->takesStoredBlocks());
+  StreamerOptions options;
+  options.loader_threads = 2;
+  options.keep_block_compressed = true;
+  auto streamer = TileStreamer::create(archive, options);
+  ASSERT_TRUE(streamer);
+  size_t as_blocks = 0, decoded = 0;
+  for (double tpp : {0.6, 1.5, 2.5}) {
+    SCOPED_TRACE(tpp);
+    const View view = orthoAt(256.3, 192.4, tpp, 128, 96);
+    for (int i = 0; i < 200; ++i) {
+      const FrameUpdate& update = (*streamer)->update(view);
+      for (const auto& tile : update.uploads) ++(tile->keptAsBlocks() ? as_blocks : decoded);
+      (*streamer)->acknowledge((*renderer)->apply(update));
+      if (update.uploads.empty() && update.report.queue_length == 0 &&
+          update.report.in_flight == 0 && update.report.coverage_desired >= 1 && i > 2)
+        break;
+      (*streamer)->waitIdleForTesting();
+    }
+    (*renderer)->draw(view);
+    Picture gpu = (*renderer)->readPixels();
+    ReferenceOptions reference_options;
+    reference_options.available = [&](const TileId& id) { return (*renderer)->resident(id); };
+    auto reference = renderReference(*archive, view, reference_options);
+    ASSERT_TRUE(reference);
+    auto difference = comparePictures(gpu, *reference);
+    ASSERT_TRUE(difference);
+    // A seam, or a layer read from the wrong array, is a row of texels off by ~100.
+    EXPECT_LE(difference->max_abs, 2u);
+    EXPECT_GE(difference->psnr_db, 54.0);
+  }
+  EXPECT_GT(as_blocks, 0u);
+  EXPECT_GT(decoded, 0u);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    All, BlockTiles,
+    testing::Values(std::make_tuple(Codec::kBc1, 3u, 1u), std::make_tuple(Codec::kBc1, 3u, 0u),
+                    std::make_tuple(Codec::kBc7, 4u, 1u), std::make_tuple(Codec::kBc7, 3u, 0u)),
+    [](const testing::TestParamInfo<std::tuple<Codec, uint32_t, uint32_t>>& param_info) {
+      return std::string(codecName(std::get<0>(param_info.param))) + "_" +
+             std::to_string(std::get<1>(param_info.param)) + "ch_border" +
+             std::to_string(std::get<2>(param_info.param));
+    });
 
 TEST(Clipmap, AfterAMoveEachLayerHoldsWhatAFreshUploadOfTheNewRegionHolds) {
   test::SyntheticArchiveSpec spec;

@@ -425,5 +425,74 @@ INSTANTIATE_TEST_SUITE_P(Codecs, TileStreamerTest,
                            return std::string(codecName(param_info.param));
                          });
 
+/// A small archive (300 x 220, 64-px tiles with a 1-px border: 66 px, padded to 68) of the
+/// codec under test: bc encoders are slow, and the padding only shows off a multiple of 4.
+class BlockStreamerTest : public TileStreamerTest {
+ protected:
+  void SetUp() override {
+    test::SyntheticArchiveSpec spec;
+    spec.width_px = 300;
+    spec.height_px = 220;
+    spec.border_px = 1;
+    spec.codec = codec();
+    const std::vector<uint8_t>& bytes = test::syntheticArchiveBytes(spec);
+    ASSERT_FALSE(bytes.empty());
+    source_ = std::make_shared<FaultSource>(makeMemorySource(bytes, "mem:blocks.tess"));
+    archive_ = test::openArchiveOrFail(source_);
+    ASSERT_TRUE(archive_);
+    options_.loader_threads = 2;
+  }
+};
+
+// With keep_block_compressed, a bc tile with a payload is handed over as its stored blocks
+// (byte for byte the payload, no texels); a uniform tile, which has no payload, and a tile of
+// any other codec still arrive decoded.
+TEST_P(BlockStreamerTest, KeepBlockCompressedHandsBcPayloadsOverAsStored) {
+  options_.keep_block_compressed = true;
+  TileStreamer& streamer = start();
+  const View view = orthoView(300, 200, 1.5, 160, 120);
+  const bool bc = codec() == Codec::kBc1 || codec() == Codec::kBc7;
+  const uint32_t padded = (info().storedTileSidePx() + 3) / 4 * 4;
+  size_t kept = 0, decoded = 0;
+  for (int i = 0; i < 100; ++i) {
+    streamer.waitIdleForTesting();
+    const FrameUpdate& update = streamer.update(view);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) {
+      result.accepted.push_back(tile->id);
+      auto entry = archive_->tileEntry(tile->id);
+      ASSERT_TRUE(entry) << entry.error().message;
+      if (!tile->keptAsBlocks()) {
+        ++decoded;
+        EXPECT_FALSE(bc && entry->kind == TileKind::kEncoded) << "a bc payload was decoded";
+        EXPECT_EQ(tile->texels.texels.size(), info().storedTileBytes());
+        continue;
+      }
+      ++kept;
+      EXPECT_TRUE(bc);
+      EXPECT_EQ(tile->blocks.codec, codec());
+      EXPECT_EQ(tile->blocks.padded_side_px, padded);
+      EXPECT_TRUE(tile->texels.texels.empty());
+      auto payload = archive_->readPayload(tile->id, *entry);
+      ASSERT_TRUE(payload) << payload.error().message;
+      EXPECT_EQ(tile->blocks.bytes, *payload);
+      EXPECT_EQ(tile->uploadBytes().size(), payload->size());
+    }
+    const FrameReport report = update.report;
+    streamer.acknowledge(result);
+    if (report.coverage_desired == 1 && report.uploads == 0 && report.queue_length == 0 &&
+        report.in_flight == 0)
+      break;
+  }
+  EXPECT_GT(kept + decoded, 0u);
+  EXPECT_EQ(kept > 0, bc);
+}
+
+INSTANTIATE_TEST_SUITE_P(Codecs, BlockStreamerTest,
+                         testing::Values(Codec::kBc1, Codec::kBc7, Codec::kZstd),
+                         [](const testing::TestParamInfo<Codec>& param_info) {
+                           return std::string(codecName(param_info.param));
+                         });
+
 }  // namespace
 }  // namespace tessera

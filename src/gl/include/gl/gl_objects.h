@@ -105,6 +105,18 @@ TileTexelFormat tileTexelFormat(uint32_t channels, SampleType type);
 /// clamped at the edges. Null when the driver cannot allocate it.
 Texture createTileArray(uint32_t channels, SampleType type, GLsizei side, GLsizei layers);
 
+/// The block-compressed internal format a tile array of `codec` tiles (bc1, bc7) takes, when
+/// the current context samples it: bc1 as GL_COMPRESSED_RGB_S3TC_DXT1_EXT (its three-colour
+/// blocks opaque black, as the CPU decoder gives RGB), with GL_EXT_texture_compression_s3tc;
+/// bc7 as GL_COMPRESSED_RGBA_BPTC_UNORM, with OpenGL 4.2 or GL_ARB_texture_compression_bptc.
+/// 0 for any other codec or without the extension.
+GLenum blockInternalFormat(Codec codec);
+
+/// As createTileArray, for tiles uploaded as stored blocks of `internal_format`
+/// (blockInternalFormat); `side` is a multiple of 4. Null when the driver cannot allocate it.
+Texture createBlockTileArray(GLenum internal_format, uint32_t channels, GLsizei side,
+                             GLsizei layers);
+
 /// A frame's upload staging: the bytes of every tile copied into one pixel-unpack buffer,
 /// orphaned each frame so the driver never waits for the previous frame's transfer.
 class UploadStaging {
