@@ -63,9 +63,10 @@ class GridReader final : public BandReader {
 };
 
 Result<void> GridReader::checkFile(const std::string& path, const SourceInfo& file) const {
+  // A file that does not match is bad input, as a damaged one is (exit 1, docs/cli.md).
   if (file.width_px != file_info_.width_px || file.height_px != file_info_.height_px ||
       file.channels != file_info_.channels || file.sample_type != file_info_.sample_type)
-    return fail(ErrorCode::kInvalidArgument,
+    return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: {}x{} px, {} channel(s), {} samples; the grid's files must all "
                             "match {} ({}x{} px, {} channel(s), {} samples)",
                             path, file.width_px, file.height_px, file.channels,
