@@ -155,14 +155,21 @@ bool RangeServer::sendMultipart(int fd, RangeReply::Kind kind, const std::string
   }
   std::string body;
   if (kind == RangeReply::Kind::kMultipartOversized) body.assign(1 << 20, 'p');
-  const int shift = kind == RangeReply::Kind::kMultipartWrongRange ? 1 : 0;
   for (auto it = ranges.rbegin(); it != ranges.rend(); ++it) {
+    const bool first = it + 1 == ranges.rend();
+    const int shift = kind == RangeReply::Kind::kMultipartWrongRange ||
+                              (first && kind == RangeReply::Kind::kMultipartFirstMislabelled)
+                          ? 1
+                          : 0;
     body += fmt::format(
         "\r\n--SEP\r\nContent-Type: application/octet-stream\r\n"
         "Content-Range: bytes {}-{}/{}\r\n\r\n",
         it->first + shift, it->second + shift, bytes.size());
+    const size_t data_at = body.size();
     body.append(reinterpret_cast<const char*>(bytes.data()) + it->first,
                 it->second - it->first + 1);
+    if (first && kind == RangeReply::Kind::kMultipartFirstCorrupt)
+      for (size_t i = data_at; i < body.size(); ++i) body[i] = char(~body[i]);
   }
   body += "\r\n--SEP--\r\n";
   const std::string head = fmt::format(
@@ -206,9 +213,7 @@ bool RangeServer::handle(int fd, const SeenRequest& request) {
     if (!sendHead(200, "OK", "", bytes.size())) return false;
     return request.method == "HEAD" || sendAll(fd, bytes.data(), bytes.size());
   }
-  const bool multipart = reply.kind == RangeReply::Kind::kMultipart ||
-                         reply.kind == RangeReply::Kind::kMultipartWrongRange ||
-                         reply.kind == RangeReply::Kind::kMultipartOversized;
+  const bool multipart = reply.kind >= RangeReply::Kind::kMultipart;
   if (multipart && request.range.find(',') != std::string::npos)
     return sendMultipart(fd, reply.kind, request.range, bytes, validator);
   uint64_t first = 0, last = 0;

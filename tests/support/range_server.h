@@ -25,10 +25,14 @@ struct RangeReply {
     kStall,       ///< the 206's headers and half its body, then nothing until the client leaves
     kWrongRange,  ///< a 206 one byte off what was asked
     /// A request of several ranges answered multipart/byteranges, its parts in reverse order
-    /// (a single range is served as kServe). The next two break it.
+    /// (a single range is served as kServe). The kinds after it, all multipart, break it.
     kMultipart,
     kMultipartWrongRange,  ///< each part labelled one byte off the bytes it carries
     kMultipartOversized,   ///< a 1 MiB preamble before the parts
+    /// kMultipart with one bad part, the first range asked (the others are right): labelled
+    /// one byte off, or with its bytes flipped under the right label.
+    kMultipartFirstMislabelled,
+    kMultipartFirstCorrupt,
   };
   Kind kind = Kind::kServe;
   int status = 200;
