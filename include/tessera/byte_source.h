@@ -87,7 +87,8 @@ class ByteSource {
                                                            const std::atomic<bool>& cancel) const;
 
   /// True when readEach of several ranges costs fewer round trips than reading them one by one
-  /// (a network source); the loader then hands it a batch's reads at once. Default false.
+  /// (a network source): the loader then hands it a batch's reads at once, and Archive::open
+  /// reads the directory of the coarse levels ahead in one readEach. Default false.
   virtual bool readsRangesTogether() const { return false; }
 
   /// A hint that these ranges will be read soon (`out` is ignored). A source that can fetch

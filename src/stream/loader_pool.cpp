@@ -167,10 +167,25 @@ LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
     dependent_images_.push_back(codecNeedsParent(info.default_codec) && info.level_count > 1);
     any_dependent_ = any_dependent_ || dependent_images_.back();
   }
+  seedLinkEstimate();
   idle_tids_.assign(thread_count_, 0);
   idle_times_.assign(thread_count_, {});
   for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
   for (uint32_t i = 0; i < helper_count_; ++i) workers_.emplace_back([this, i] { runHelper(i); });
+}
+
+void LoaderPool::seedLinkEstimate() {
+  // The requests that opened the archive (header, directory ahead) crossed the same link:
+  // without them the first frame would know no throughput, and adaptive scheduling would
+  // spend a round trip on the coarsest level alone to measure one.
+  const std::optional<LinkStats> stats = archive_->source().linkStats();
+  if (!stats) return;
+  for (const LinkSample& sample : stats->recent) {
+    const auto started = sample.finished - std::chrono::duration_cast<Clock::duration>(
+                                               std::chrono::duration<double>(sample.seconds));
+    link_.readStarted(started);
+    link_.readFinished(started, sample.finished, sample.bytes);
+  }
 }
 
 LoaderPool::~LoaderPool() {

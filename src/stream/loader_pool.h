@@ -219,6 +219,9 @@ class LoaderPool {
   /// Reads run `index` of `reads`, cancellable through active_reads_ (setWanted abandons it
   /// when none of `tiles` is wanted any more), or skips it (kCancelled) when none is wanted now.
   void readRun(BatchReads& reads, size_t index, std::vector<TileId> tiles);
+  /// Feeds the byte source's requests so far (LinkStats::recent: the archive's open) to the
+  /// link estimate, so the first frame's scheduling knows the link.
+  void seedLinkEstimate();
   /// Reads every run of `reads` with one ByteSource::readEach (a source that reads ranges
   /// together), each run failing alone; cancellable as one read of all of `run_tiles`.
   void readRunsTogether(BatchReads& reads, const std::vector<std::vector<TileId>>& run_tiles);

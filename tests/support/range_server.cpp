@@ -88,6 +88,11 @@ void RangeServer::replace(std::vector<uint8_t> bytes, std::string etag, bool hon
   honour_conditionals_ = honour_conditionals;
 }
 
+void RangeServer::setLatency(std::chrono::milliseconds latency) {
+  std::lock_guard lock(mutex_);
+  latency_ = latency;
+}
+
 std::vector<SeenRequest> RangeServer::seen() const {
   std::lock_guard lock(mutex_);
   return seen_;
@@ -133,7 +138,13 @@ void RangeServer::serve(int fd) {
     request.if_match = headerValue(head, "if-match");
     request.if_range = headerValue(head, "if-range");
     request.if_unmodified_since = headerValue(head, "if-unmodified-since");
-    if (!handle(fd, request)) break;
+    size_t index = 0;
+    const bool keep_open = handle(fd, request, index);
+    {
+      std::lock_guard lock(mutex_);
+      answered_round_max_ = std::max(answered_round_max_, seen_[index].round);
+    }
+    if (!keep_open) break;
   }
   std::lock_guard lock(mutex_);
   auto it = std::find(connection_fds_.begin(), connection_fds_.end(), fd);
@@ -179,15 +190,20 @@ bool RangeServer::sendMultipart(int fd, RangeReply::Kind kind, const std::string
   return sendAll(fd, head.data(), head.size()) && sendAll(fd, body.data(), body.size());
 }
 
-bool RangeServer::handle(int fd, const SeenRequest& request) {
+bool RangeServer::handle(int fd, const SeenRequest& seen, size_t& index) {
   std::unique_lock lock(mutex_);
-  const uint64_t index = seen_.size();
+  index = seen_.size();
+  SeenRequest request = seen;
+  request.round = answered_round_max_ + 1;
   seen_.push_back(request);
   const RangeReply reply = plan_ ? plan_(index) : RangeReply{};
   const std::vector<uint8_t> bytes = bytes_;
   const std::string etag = etag_;
   const bool honour = honour_conditionals_;
+  const std::chrono::milliseconds latency = latency_;
   lock.unlock();
+  // The link's delay: the answer leaves this long after the request came.
+  if (latency.count() > 0) std::this_thread::sleep_for(latency);
   const std::string validator =
       etag.empty() ? "Last-Modified: Mon, 23 Nov 2026 10:00:00 GMT\r\n" : "ETag: " + etag + "\r\n";
   const std::string version = etag.empty() ? "Mon, 23 Nov 2026 10:00:00 GMT" : etag;
