@@ -77,6 +77,20 @@ class ByteSource {
   /// as a whole if any read fails.
   [[nodiscard]] virtual Result<void> readMany(std::span<const ByteRange> ranges) const;
 
+  /// Reads several ranges, each on its own: element i of the result is range i's outcome, so
+  /// one bad range (an I/O error, a server's mislabelled part) fails only itself, and the bytes
+  /// of a range that failed are unspecified. Ranges are in any order and should not overlap.
+  /// Once `cancel` becomes true, ranges not yet read fail with ErrorCode::kCancelled. The
+  /// default reads them one after another through readCancellable (local reads are short);
+  /// the HTTP source sends them together, as few multi-range requests as the server allows.
+  [[nodiscard]] virtual std::vector<Result<void>> readEach(std::span<const ByteRange> ranges,
+                                                           const std::atomic<bool>& cancel) const;
+
+  /// True when readEach of several ranges costs fewer round trips than reading them one by one
+  /// (a network source): the loader then hands it a batch's reads at once, and Archive::open
+  /// reads the directory of the coarse levels ahead in one readEach. Default false.
+  virtual bool readsRangesTogether() const { return false; }
+
   /// A hint that these ranges will be read soon (`out` is ignored). A source that can fetch
   /// ahead starts on them and returns without waiting for the data, so the reads that follow
   /// find it arriving or arrived: the loader hints the tiles queued behind the ones it reads,

@@ -25,10 +25,6 @@ uint64_t levelKey(uint32_t image, uint32_t level) {
   return (uint64_t(image) << 8) | level;
 }
 
-uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
-  return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
-}
-
 }  // namespace
 
 std::string Archive::tileName(const TileId& tile) const {
@@ -221,6 +217,9 @@ Result<std::shared_ptr<Archive>> Archive::open(std::shared_ptr<ByteSource> sourc
     info.name = std::move(metadata.image_names[i]);
     impl->infos.push_back(std::move(info));
   }
+  // Over a network the first view's directory pages come in one request now rather than a
+  // round trip per level later (docs/remote.md, "The first view").
+  if (source->readsRangesTogether()) impl->readDirectoryAhead(Impl::kDirectoryAheadBytes);
   return std::shared_ptr<Archive>(new Archive(std::move(impl)));
 }
 
@@ -268,7 +267,7 @@ std::optional<TileEntry> Archive::tileEntryIfCached(const TileId& tile) const {
   const uint32_t shift = info.page_tiles_log2;
   const uint32_t page_x = tile.x >> shift, page_y = tile.y >> shift;
   const uint64_t key =
-      pageKey(tile.image, tile.level, page_y * detail::pagesX(info, tile.level) + page_x);
+      Impl::pageKey(tile.image, tile.level, page_y * detail::pagesX(info, tile.level) + page_x);
   std::shared_ptr<const std::vector<TileEntry>> entries;
   {
     std::lock_guard lock(impl_->cache_mutex);

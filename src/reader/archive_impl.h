@@ -33,6 +33,14 @@ struct Archive::Impl {
   /// are read one 24-byte reference at a time, each page then verified by its own checksum.
   static constexpr uint64_t kWholePageIndexBytes = 65536;
 
+  /// Directory pages an archive on a network source reads at open, at most (about an image of
+  /// 16384 x 16384 at 256-px tiles, every level).
+  static constexpr uint64_t kDirectoryAheadBytes = 256u << 10;
+
+  static uint64_t pageKey(uint32_t image, uint32_t level, uint32_t page_index) {
+    return (uint64_t(image) << 40) | (uint64_t(level) << 32) | page_index;
+  }
+
   std::mutex cache_mutex;  // guards pages, page_order and page_indexes
   std::unordered_map<uint64_t, std::shared_ptr<const std::vector<TileEntry>>> pages;
   std::deque<uint64_t> page_order;  ///< insertion order of `pages`, for FIFO eviction
@@ -56,6 +64,10 @@ struct Archive::Impl {
   /// Pages being read now, by key (under cache_mutex).
   std::unordered_map<uint64_t, std::shared_future<PageResult>> pages_loading;
   std::string tileName(const TileId& tile) const;
+  /// Reads the directory pages of the coarsest levels, as many whole levels as fit
+  /// `budget_bytes`, in one ByteSource::readEach and caches them (directory_ahead.cpp). Never
+  /// fails: a page it could not read or verify is read again, and reported, by its first reader.
+  void readDirectoryAhead(uint64_t budget_bytes);
 
   /// The section table (format 1.1) and its procedural directory (kind 2); length 0 when the
   /// archive has none.

@@ -64,6 +64,16 @@ Result<void> ByteSource::readMany(std::span<const ByteRange> ranges) const {
   return {};
 }
 
+std::vector<Result<void>> ByteSource::readEach(std::span<const ByteRange> ranges,
+                                               const std::atomic<bool>& cancel) const {
+  std::vector<Result<void>> results;
+  results.reserve(ranges.size());
+  for (const ByteRange& range : ranges)
+    results.push_back(
+        readCancellable(range.offset_bytes, {range.out, size_t(range.length_bytes)}, cancel));
+  return results;
+}
+
 uint64_t ByteSource::prefetch(std::span<const ByteRange>) const {
   return 0;
 }

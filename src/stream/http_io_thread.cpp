@@ -434,6 +434,13 @@ bool HttpSource::finishResponse(Transfer& transfer, const std::string& what, dou
       transfer.received = transfer.body.size();
       recordSample(transfer, seconds, first_byte_seconds);
       transfer.body = {};
+      const auto failed =
+          size_t(std::count_if(transfer.part_errors.begin(), transfer.part_errors.end(),
+                               [](const std::string& e) { return !e.empty(); }));
+      if (failed) {
+        std::lock_guard lock(mutex_);
+        stats_.errors += failed;
+      }
       complete(transfer, {}, false);
       return false;
     }
@@ -642,6 +649,7 @@ size_t HttpSource::bufferMultiBody(Transfer& transfer, const char* data, size_t 
 
 std::string HttpSource::scatterMultiBody(Transfer& transfer) const {
   std::vector<MultipartPart> parts;
+  std::string malformed;
   if (transfer.boundary.empty()) {
     const uint64_t length = transfer.single.last - transfer.single.first + 1;
     if (transfer.body.size() != length)
@@ -649,21 +657,30 @@ std::string HttpSource::scatterMultiBody(Transfer& transfer) const {
     parts.push_back({transfer.single, 0});
   } else if (std::string why = parseMultipartByteranges(transfer.body, transfer.boundary, parts);
              !why.empty()) {
-    return "malformed multipart/byteranges answer: " + why;
+    // The parts before the fault are whole and delimited: their ranges are still good.
+    malformed = "malformed multipart/byteranges answer: " + why;
   }
+  // Another size means another version of the file: no part of it may be used.
   for (const MultipartPart& part : parts)
     if (part.range.has_total && part.range.total != size_bytes_)
       return fmt::format("a part of the answer gives the size {} bytes, not {}", part.range.total,
                          size_bytes_);
-  // Every range asked must lie inside one part: never a neighbour's bytes, never a gap.
-  for (const ByteRange& wanted : transfer.parts) {
+  // Every range asked must lie inside one part: never a neighbour's bytes, never a gap. A
+  // range without one fails alone; the others are delivered.
+  transfer.part_errors.assign(transfer.parts.size(), std::string());
+  for (size_t i = 0; i < transfer.parts.size(); ++i) {
+    const ByteRange& wanted = transfer.parts[i];
     const uint64_t wanted_last = wanted.offset_bytes + wanted.length_bytes - 1;
     auto it = std::find_if(parts.begin(), parts.end(), [&](const MultipartPart& part) {
       return part.range.first <= wanted.offset_bytes && wanted_last <= part.range.last;
     });
-    if (it == parts.end())
-      return fmt::format("the answer has no part holding bytes {}-{}", wanted.offset_bytes,
-                         wanted_last);
+    if (it == parts.end()) {
+      transfer.part_errors[i] = !malformed.empty()
+                                    ? malformed
+                                    : fmt::format("the answer has no part holding bytes {}-{}",
+                                                  wanted.offset_bytes, wanted_last);
+      continue;
+    }
     std::memcpy(wanted.out,
                 transfer.body.data() + it->data_offset + (wanted.offset_bytes - it->range.first),
                 wanted.length_bytes);

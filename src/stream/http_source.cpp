@@ -97,16 +97,51 @@ Result<void> HttpSource::readMany(std::span<const ByteRange> ranges) const {
     if (taken && *taken) continue;
     wanted.push_back({run.offset_bytes, run.length_bytes, out});
   }
-  TESSERA_TRY(fetchRanges(wanted));
+  for (Result<void>& result : fetchRanges(wanted, nullptr))
+    if (!result) return result;
   for (size_t i = 0; i < runs.size(); ++i)
     if (runs[i].members.size() > 1) detail::scatterRun(runs[i], ranges, buffers[i]);
   return {};
 }
 
-Result<void> HttpSource::fetchRanges(std::span<const ByteRange> wanted) const {
+std::vector<Result<void>> HttpSource::readEach(std::span<const ByteRange> ranges,
+                                               const std::atomic<bool>& cancel) const {
+  std::vector<Result<void>> results(ranges.size());
+  if (Result<void> changed = changedError(); !changed) {
+    results.assign(ranges.size(), changed);
+    return results;
+  }
+  // Ascending for the Range header; `order` maps them back to their results.
+  std::vector<size_t> order;
+  for (size_t i = 0; i < ranges.size(); ++i) {
+    const ByteRange& range = ranges[i];
+    if (Result<void> bounds = checkBounds(range.offset_bytes, range.length_bytes); !bounds) {
+      results[i] = std::move(bounds);
+      continue;
+    }
+    if (range.length_bytes == 0) continue;
+    Result<bool> taken =
+        takeBuffered(range.offset_bytes, {range.out, size_t(range.length_bytes)}, &cancel);
+    if (!taken)
+      results[i] = forwardError(taken);
+    else if (!*taken)
+      order.push_back(i);
+  }
+  std::sort(order.begin(), order.end(),
+            [&](size_t a, size_t b) { return ranges[a].offset_bytes < ranges[b].offset_bytes; });
+  std::vector<ByteRange> wanted;
+  for (size_t i : order) wanted.push_back(ranges[i]);
+  std::vector<Result<void>> fetched = fetchRanges(wanted, &cancel);
+  for (size_t k = 0; k < order.size(); ++k) results[order[k]] = std::move(fetched[k]);
+  return results;
+}
+
+std::vector<Result<void>> HttpSource::fetchRanges(std::span<const ByteRange> wanted,
+                                                  const std::atomic<bool>* cancel) const {
   const size_t per_request =
       multi_range_refused_.load() ? 1 : std::max<size_t>(1, options_.max_ranges_per_request);
   std::vector<std::shared_ptr<Transfer>> transfers;
+  std::vector<size_t> first_of;  ///< per transfer: the index of its first range in `wanted`
   for (size_t i = 0; i < wanted.size();) {
     // The body of a multi-range request is buffered before it is split: bound it.
     size_t count = 1;
@@ -115,12 +150,14 @@ Result<void> HttpSource::fetchRanges(std::span<const ByteRange> wanted) const {
            bytes + wanted[i + count].length_bytes <= kMultiRangeMaxBytes)
       bytes += wanted[i + count++].length_bytes;
     const std::span<const ByteRange> group = wanted.subspan(i, count);
+    first_of.push_back(i);
     i += count;
     auto transfer = std::make_shared<Transfer>();
     transfer->offset_bytes = group.front().offset_bytes;
     transfer->length_bytes =
         group.back().offset_bytes + group.back().length_bytes - transfer->offset_bytes;
     transfer->out = group.front().out;
+    transfer->cancel = cancel;
     if (group.size() > 1) {
       transfer->parts.assign(group.begin(), group.end());
       transfer->body_cap = group.size() * kMultipartPartOverheadBytes + 1024;
@@ -129,19 +166,33 @@ Result<void> HttpSource::fetchRanges(std::span<const ByteRange> wanted) const {
     transfers.push_back(std::move(transfer));
   }
   submit(transfers);
-  Result<void> result;
-  std::vector<ByteRange> again;
-  for (const auto& transfer : transfers) {
-    Result<void> one = wait(*transfer);
-    if (!one && transfer->multi_refused)
-      again.insert(again.end(), transfer->parts.begin(), transfer->parts.end());
-    else if (!one && result)
-      result = std::move(one);
+  std::vector<Result<void>> results(wanted.size());
+  std::vector<size_t> again;  ///< ranges of refused multi-range requests
+  for (size_t t = 0; t < transfers.size(); ++t) {
+    const Transfer& transfer = *transfers[t];
+    Result<void> one = wait(transfer);
+    const size_t count = std::max<size_t>(1, transfer.parts.size());
+    for (size_t k = 0; k < count; ++k) {
+      const size_t index = first_of[t] + k;
+      if (!one && transfer.multi_refused)
+        again.push_back(index);
+      else if (!one)
+        results[index] = one;
+      else if (k < transfer.part_errors.size() && !transfer.part_errors[k].empty())
+        results[index] = fail(
+            ErrorCode::kIo, fmt::format("{}: bytes={}-{} of a multi-range request: {}", url_,
+                                        wanted[index].offset_bytes,
+                                        wanted[index].offset_bytes + wanted[index].length_bytes - 1,
+                                        transfer.part_errors[k]));
+    }
   }
-  if (!result) return result;
+  if (again.empty()) return results;
   // multi_range_refused_ is set by now: these go one range a request.
-  if (!again.empty()) return fetchRanges(again);
-  return {};
+  std::vector<ByteRange> retry;
+  for (size_t index : again) retry.push_back(wanted[index]);
+  std::vector<Result<void>> retried = fetchRanges(retry, cancel);
+  for (size_t k = 0; k < again.size(); ++k) results[again[k]] = std::move(retried[k]);
+  return results;
 }
 
 uint64_t HttpSource::prefetch(std::span<const ByteRange> ranges) const {

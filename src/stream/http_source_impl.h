@@ -91,6 +91,9 @@ struct Transfer {
   std::string boundary;  ///< of a multipart answer; empty for a single range holding all parts
   ContentRange single;   ///< a single-range answer's range
   bool multi_refused = false;  ///< completed with kMultiRangeRefused: read the parts one by one
+  /// A multi-range request that completed: per part, empty when its bytes were delivered,
+  /// else why not (no part of the answer holds it, or the answer broke off before it).
+  std::vector<std::string> part_errors;
 
   // Per attempt.
   uint32_t attempt = 0;
@@ -149,6 +152,13 @@ class HttpSource final : public ByteSource {
   // connections (or HTTP/2 streams) instead of one round trip after another.
   Result<void> readMany(std::span<const ByteRange> ranges) const override;
 
+  // The ranges in as few multi-range requests as the server allows (one range a request,
+  // all at once, where it does not do them), each range with its own result.
+  std::vector<Result<void>> readEach(std::span<const ByteRange> ranges,
+                                     const std::atomic<bool>& cancel) const override;
+
+  bool readsRangesTogether() const override { return true; }
+
   // Fetch-ahead into a bounded buffer that the following reads find (docs/remote.md).
   uint64_t prefetch(std::span<const ByteRange> ranges) const override;
 
@@ -182,8 +192,10 @@ class HttpSource final : public ByteSource {
 
   /// Fetches the ranges (ascending, apart, none buffered): several to a request while the
   /// server does multi-range requests, else one each, all at once. A refused multi-range
-  /// request is remembered and its ranges fetched again one by one.
-  Result<void> fetchRanges(std::span<const ByteRange> wanted) const;
+  /// request is remembered and its ranges fetched again one by one. Result i is range i's;
+  /// `cancel` (may be null) abandons the requests still on the wire.
+  std::vector<Result<void>> fetchRanges(std::span<const ByteRange> wanted,
+                                        const std::atomic<bool>* cancel) const;
 
   // ---- The I/O thread ----
 

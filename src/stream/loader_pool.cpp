@@ -167,10 +167,25 @@ LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
     dependent_images_.push_back(codecNeedsParent(info.default_codec) && info.level_count > 1);
     any_dependent_ = any_dependent_ || dependent_images_.back();
   }
+  seedLinkEstimate();
   idle_tids_.assign(thread_count_, 0);
   idle_times_.assign(thread_count_, {});
   for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
   for (uint32_t i = 0; i < helper_count_; ++i) workers_.emplace_back([this, i] { runHelper(i); });
+}
+
+void LoaderPool::seedLinkEstimate() {
+  // The requests that opened the archive (header, directory ahead) crossed the same link:
+  // without them the first frame would know no throughput, and adaptive scheduling would
+  // spend a round trip on the coarsest level alone to measure one.
+  const std::optional<LinkStats> stats = archive_->source().linkStats();
+  if (!stats) return;
+  for (const LinkSample& sample : stats->recent) {
+    const auto started = sample.finished - std::chrono::duration_cast<Clock::duration>(
+                                               std::chrono::duration<double>(sample.seconds));
+    link_.readStarted(started);
+    link_.readFinished(started, sample.finished, sample.bytes);
+  }
 }
 
 LoaderPool::~LoaderPool() {
@@ -860,7 +875,7 @@ LoaderPool::ReadSizing LoaderPool::readSizing() const {
 
 LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
   // The batch's payloads in file order, each run whose gaps are under merge_gap_bytes in one
-  // call. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set on one
+  // range. Not ByteSource::readMany: its gap is fixed at 64 KiB, it fails the whole set on one
   // bad read, and the loader must count the reads and bytes it makes.
   std::vector<const BatchItem*> encoded;
   for (const auto& item : batch.items)
@@ -880,9 +895,13 @@ LoaderPool::BatchReads LoaderPool::readBatch(const Batch& batch) {
     if (batch.items[i].entry.hasPayload())
       run_tiles[reads.run_of_item[i]].push_back(batch.items[i].id);
   reads.runs.resize(spans.size());
-  for (size_t i = 0; i < spans.size(); ++i) {
-    reads.runs[i].span = spans[i];
-    readRun(reads, i, std::move(run_tiles[i]));
+  for (size_t i = 0; i < spans.size(); ++i) reads.runs[i].span = spans[i];
+  // Over a network the runs go out together (one multi-range request where the server does
+  // them): a round trip per batch, not per run. A local read is short: one run at a time.
+  if (spans.size() > 1 && archive_->source().readsRangesTogether()) {
+    readRunsTogether(reads, run_tiles);
+  } else {
+    for (size_t i = 0; i < spans.size(); ++i) readRun(reads, i, std::move(run_tiles[i]));
   }
   if (reads.reads) {
     std::lock_guard lock(mutex_);
@@ -920,6 +939,47 @@ void LoaderPool::readRun(BatchReads& reads, size_t index, std::vector<TileId> ti
   if (run.read || run.read.error().code != ErrorCode::kCancelled)
     reads.bytes_read += run.bytes.size();
   ++reads.reads;
+}
+
+void LoaderPool::readRunsTogether(BatchReads& reads,
+                                  const std::vector<std::vector<TileId>>& run_tiles) {
+  const Archive& archive = *archive_;
+  ActiveRead active;
+  for (const std::vector<TileId>& tiles : run_tiles)
+    active.tiles.insert(active.tiles.end(), tiles.begin(), tiles.end());
+  {
+    std::lock_guard lock(mutex_);
+    if (!anyWantedLocked(active.tiles)) {
+      for (BatchReads::Run& run : reads.runs)
+        run.read = fail(ErrorCode::kCancelled, fmt::format("{}: read at offset {} no longer wanted",
+                                                           archive.name(), run.span.offset_bytes));
+      return;
+    }
+    active_reads_.push_back(&active);
+  }
+  std::vector<ByteRange> ranges;
+  for (BatchReads::Run& run : reads.runs) {
+    run.bytes.resize(run.span.length_bytes);
+    ranges.push_back({run.span.offset_bytes, run.span.length_bytes, run.bytes.data()});
+  }
+  const auto started = Clock::now();
+  link_.readStarted(started);
+  std::vector<Result<void>> results = archive.source().readEach(ranges, active.cancel);
+  uint64_t delivered = 0;
+  for (size_t i = 0; i < reads.runs.size(); ++i) {
+    BatchReads::Run& run = reads.runs[i];
+    run.read = std::move(results[i]);
+    if (run.read) delivered += run.bytes.size();
+    // As readRun counts: an abandoned range no bytes, a failed one those asked for.
+    if (run.read || run.read.error().code != ErrorCode::kCancelled)
+      reads.bytes_read += run.bytes.size();
+  }
+  link_.readFinished(started, Clock::now(), delivered);
+  {
+    std::lock_guard lock(mutex_);
+    active_reads_.erase(std::find(active_reads_.begin(), active_reads_.end(), &active));
+  }
+  reads.reads += ranges.size();
 }
 
 Result<std::span<const uint8_t>> LoaderPool::payloadOf(const BatchItem& item,

@@ -70,7 +70,7 @@ struct LoadEvent {
 struct LoaderStats {
   uint64_t bytes_read = 0;     ///< including gaps read inside merged ranges
   uint64_t payload_bytes = 0;  ///< payload bytes of tiles delivered
-  uint64_t reads = 0;          ///< read calls on the byte source
+  uint64_t reads = 0;          ///< ranges read from the byte source (merged runs)
   uint64_t tiles_loaded = 0;
   uint64_t failures = 0;
   uint64_t cancelled = 0;      ///< queued requests dropped because no longer wanted
@@ -215,12 +215,19 @@ class LoaderPool {
   /// Adds to `batch` the candidates that extend its first tile's read (neighboursInRange) and
   /// are still queued, taking them in flight.
   void addNeighbours(Batch& batch, const TileEntry& first_entry);
-  /// Reads the batch's payloads in file order, runs with gaps under merge_gap_bytes in one call
-  /// each, counting the reads and bytes in stats_.
+  /// Reads the batch's payloads in file order, runs with gaps under merge_gap_bytes in one range
+  /// each (one call each, or all in one readEach on a source that reads ranges together),
+  /// counting the reads (ranges) and bytes in stats_.
   BatchReads readBatch(const Batch& batch);
   /// Reads run `index` of `reads`, cancellable through active_reads_ (setWanted abandons it
   /// when none of `tiles` is wanted any more), or skips it (kCancelled) when none is wanted now.
   void readRun(BatchReads& reads, size_t index, std::vector<TileId> tiles);
+  /// Feeds the byte source's requests so far (LinkStats::recent: the archive's open) to the
+  /// link estimate, so the first frame's scheduling knows the link.
+  void seedLinkEstimate();
+  /// Reads every run of `reads` with one ByteSource::readEach (a source that reads ranges
+  /// together), each run failing alone; cancellable as one read of all of `run_tiles`.
+  void readRunsTogether(BatchReads& reads, const std::vector<std::vector<TileId>>& run_tiles);
   /// The verified payload of batch item `index` (empty for a tile without one); its run's
   /// error when the read failed or was abandoned (kCancelled).
   Result<std::span<const uint8_t>> payloadOf(const BatchItem& item, const BatchReads& reads,

@@ -117,10 +117,10 @@ std::string parseMultipartByteranges(std::span<const uint8_t> body, std::string_
                          part.range.last);
     part.data_offset = pos;
     pos += size_t(part.range.last - part.range.first) + 1;
-    parts.push_back(part);
     if (!atDelimiterAfterData(text, pos, delimiter))
       return fmt::format("part bytes {}-{} not followed by a boundary delimiter", part.range.first,
                          part.range.last);
+    parts.push_back(part);
   }
 }
 

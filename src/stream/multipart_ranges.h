@@ -29,8 +29,9 @@ bool multipartBoundary(std::string_view content_type, std::string& boundary);
 /// exactly that many bytes, followed by a line break and the next delimiter; the close
 /// delimiter ends the body (a preamble before the first delimiter and an epilogue after the
 /// last are ignored). Line breaks may be CRLF or a bare LF. Returns an empty string on
-/// success, else what is wrong (for the error message); on success every part's data lies
-/// inside the body.
+/// success, else what is wrong (for the error message). Either way `parts` holds the parts
+/// read whole (their data lies inside the body and a delimiter follows it); on a failure these
+/// are the ones before the fault.
 std::string parseMultipartByteranges(std::span<const uint8_t> body, std::string_view boundary,
                                      std::vector<MultipartPart>& parts);
 

@@ -316,8 +316,8 @@ TEST_F(NginxTest, ArchiveOverHttpDecodesAsTheLocalFile) {
   auto local = Archive::openFile((dir_ / "www" / "x.tess").string());
   ASSERT_TRUE(local);
   // The header region, root directory and metadata of a small archive are in the first
-  // 16 KiB: the open's one request.
-  EXPECT_EQ((*remote)->source().linkStats()->requests, 1u);
+  // 16 KiB: the open's first request; its directory pages, read ahead, the second.
+  EXPECT_EQ((*remote)->source().linkStats()->requests, 2u);
   EXPECT_EQ((*remote)->images().size(), (*local)->images().size());
   for (const TileId& id : test::allTiles(**local)) {
     Result<Image> a = (*remote)->readTile(id);
@@ -720,6 +720,65 @@ TEST_F(MultiRangeFallbackTest, MislabelledOrOversizedMultipartFailsNamingTheRequ
         << read.error().message;
     server_.setPlan({});
   }
+}
+
+TEST_F(MultiRangeFallbackTest, ReadEachSendsOneRequestAndFailsOnlyTheMislabelledRange) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  server_.setPlan([](uint64_t) {
+    return test::RangeReply{test::RangeReply::Kind::kMultipartFirstMislabelled};
+  });
+  std::vector<ByteRange> ranges = threeRanges();
+  // Out of file order: each result must still be its own range's.
+  std::swap(ranges[0], ranges[2]);
+  std::swap(outs_[0], outs_[2]);
+  const std::atomic<bool> cancel{false};
+  std::vector<Result<void>> results = source->readEach(ranges, cancel);
+  ASSERT_EQ(results.size(), 3u);
+  // The lowest range, now third, was the server's first: its part is one byte off.
+  ASSERT_FALSE(results[2]);
+  EXPECT_EQ(results[2].error().code, ErrorCode::kIo);
+  EXPECT_NE(results[2].error().message.find("no part holding bytes " +
+                                            std::to_string(ranges[2].offset_bytes) + "-"),
+            std::string::npos)
+      << results[2].error().message;
+  for (size_t i = 0; i < 2; ++i) {
+    ASSERT_TRUE(results[i]) << results[i].error().message;
+    EXPECT_EQ(outs_[i], slice(bytes_, ranges[i].offset_bytes, outs_[i].size())) << i;
+  }
+  EXPECT_EQ(server_.seen().size(), 2u);  // the open and one multi-range request
+  EXPECT_EQ(source->linkStats()->errors, 1u);
+}
+
+TEST_F(MultiRangeFallbackTest, ReadEachWithoutMultiRangeReadsEveryRangeAndRemembers) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  EXPECT_TRUE(source->readsRangesTogether());
+  const std::atomic<bool> cancel{false};
+  for (size_t round = 0; round < 2; ++round) {
+    std::vector<ByteRange> ranges = threeRanges();
+    std::vector<Result<void>> results = source->readEach(ranges, cancel);
+    ASSERT_EQ(results.size(), 3u);
+    for (const Result<void>& result : results) ASSERT_TRUE(result) << result.error().message;
+    expectBytes(ranges);
+  }
+  // The open, the refused multi-range request and three singles; then three singles.
+  const std::vector<test::SeenRequest> seen = server_.seen();
+  ASSERT_EQ(seen.size(), 8u);
+  for (size_t i = 2; i < seen.size(); ++i)
+    EXPECT_EQ(seen[i].range.find(','), std::string::npos) << seen[i].range;
+}
+
+TEST_F(MultiRangeFallbackTest, ReadEachCancelledBeforeItStartsSendsNothing) {
+  auto source = open();
+  ASSERT_TRUE(source);
+  const std::atomic<bool> cancel{true};
+  std::vector<ByteRange> ranges = threeRanges();
+  for (const Result<void>& result : source->readEach(ranges, cancel)) {
+    ASSERT_FALSE(result);
+    EXPECT_EQ(result.error().code, ErrorCode::kCancelled);
+  }
+  EXPECT_EQ(server_.seen().size(), 1u);
 }
 
 }  // namespace

@@ -88,6 +88,11 @@ void RangeServer::replace(std::vector<uint8_t> bytes, std::string etag, bool hon
   honour_conditionals_ = honour_conditionals;
 }
 
+void RangeServer::setLatency(std::chrono::milliseconds latency) {
+  std::lock_guard lock(mutex_);
+  latency_ = latency;
+}
+
 std::vector<SeenRequest> RangeServer::seen() const {
   std::lock_guard lock(mutex_);
   return seen_;
@@ -133,7 +138,13 @@ void RangeServer::serve(int fd) {
     request.if_match = headerValue(head, "if-match");
     request.if_range = headerValue(head, "if-range");
     request.if_unmodified_since = headerValue(head, "if-unmodified-since");
-    if (!handle(fd, request)) break;
+    size_t index = 0;
+    const bool keep_open = handle(fd, request, index);
+    {
+      std::lock_guard lock(mutex_);
+      answered_round_max_ = std::max(answered_round_max_, seen_[index].round);
+    }
+    if (!keep_open) break;
   }
   std::lock_guard lock(mutex_);
   auto it = std::find(connection_fds_.begin(), connection_fds_.end(), fd);
@@ -155,14 +166,21 @@ bool RangeServer::sendMultipart(int fd, RangeReply::Kind kind, const std::string
   }
   std::string body;
   if (kind == RangeReply::Kind::kMultipartOversized) body.assign(1 << 20, 'p');
-  const int shift = kind == RangeReply::Kind::kMultipartWrongRange ? 1 : 0;
   for (auto it = ranges.rbegin(); it != ranges.rend(); ++it) {
+    const bool first = it + 1 == ranges.rend();
+    const int shift = kind == RangeReply::Kind::kMultipartWrongRange ||
+                              (first && kind == RangeReply::Kind::kMultipartFirstMislabelled)
+                          ? 1
+                          : 0;
     body += fmt::format(
         "\r\n--SEP\r\nContent-Type: application/octet-stream\r\n"
         "Content-Range: bytes {}-{}/{}\r\n\r\n",
         it->first + shift, it->second + shift, bytes.size());
+    const size_t data_at = body.size();
     body.append(reinterpret_cast<const char*>(bytes.data()) + it->first,
                 it->second - it->first + 1);
+    if (first && kind == RangeReply::Kind::kMultipartFirstCorrupt)
+      for (size_t i = data_at; i < body.size(); ++i) body[i] = char(~body[i]);
   }
   body += "\r\n--SEP--\r\n";
   const std::string head = fmt::format(
@@ -172,15 +190,20 @@ bool RangeServer::sendMultipart(int fd, RangeReply::Kind kind, const std::string
   return sendAll(fd, head.data(), head.size()) && sendAll(fd, body.data(), body.size());
 }
 
-bool RangeServer::handle(int fd, const SeenRequest& request) {
+bool RangeServer::handle(int fd, const SeenRequest& seen, size_t& index) {
   std::unique_lock lock(mutex_);
-  const uint64_t index = seen_.size();
+  index = seen_.size();
+  SeenRequest request = seen;
+  request.round = answered_round_max_ + 1;
   seen_.push_back(request);
   const RangeReply reply = plan_ ? plan_(index) : RangeReply{};
   const std::vector<uint8_t> bytes = bytes_;
   const std::string etag = etag_;
   const bool honour = honour_conditionals_;
+  const std::chrono::milliseconds latency = latency_;
   lock.unlock();
+  // The link's delay: the answer leaves this long after the request came.
+  if (latency.count() > 0) std::this_thread::sleep_for(latency);
   const std::string validator =
       etag.empty() ? "Last-Modified: Mon, 23 Nov 2026 10:00:00 GMT\r\n" : "ETag: " + etag + "\r\n";
   const std::string version = etag.empty() ? "Mon, 23 Nov 2026 10:00:00 GMT" : etag;
@@ -206,9 +229,7 @@ bool RangeServer::handle(int fd, const SeenRequest& request) {
     if (!sendHead(200, "OK", "", bytes.size())) return false;
     return request.method == "HEAD" || sendAll(fd, bytes.data(), bytes.size());
   }
-  const bool multipart = reply.kind == RangeReply::Kind::kMultipart ||
-                         reply.kind == RangeReply::Kind::kMultipartWrongRange ||
-                         reply.kind == RangeReply::Kind::kMultipartOversized;
+  const bool multipart = reply.kind >= RangeReply::Kind::kMultipart;
   if (multipart && request.range.find(',') != std::string::npos)
     return sendMultipart(fd, reply.kind, request.range, bytes, validator);
   uint64_t first = 0, last = 0;

@@ -5,6 +5,7 @@
 // deterministically. Keep-alive; one thread per connection.
 
 #include <atomic>
+#include <chrono>
 #include <condition_variable>
 #include <cstdint>
 #include <functional>
@@ -25,10 +26,14 @@ struct RangeReply {
     kStall,       ///< the 206's headers and half its body, then nothing until the client leaves
     kWrongRange,  ///< a 206 one byte off what was asked
     /// A request of several ranges answered multipart/byteranges, its parts in reverse order
-    /// (a single range is served as kServe). The next two break it.
+    /// (a single range is served as kServe). The kinds after it, all multipart, break it.
     kMultipart,
     kMultipartWrongRange,  ///< each part labelled one byte off the bytes it carries
     kMultipartOversized,   ///< a 1 MiB preamble before the parts
+    /// kMultipart with one bad part, the first range asked (the others are right): labelled
+    /// one byte off, or with its bytes flipped under the right label.
+    kMultipartFirstMislabelled,
+    kMultipartFirstCorrupt,
   };
   Kind kind = Kind::kServe;
   int status = 200;
@@ -42,6 +47,10 @@ struct SeenRequest {
   std::string if_match;  ///< If-Match, or empty
   std::string if_range;  ///< If-Range, or empty
   std::string if_unmodified_since;
+  /// 1 + the highest round of the requests answered before this one came (1 when none was):
+  /// the round trips on the client's critical path to it, at most (a request sent after an
+  /// answer it did not wait for also counts as one round later).
+  uint32_t round = 1;
 };
 
 /// Thread-safe.
@@ -59,13 +68,17 @@ class RangeServer {
   /// server ignore If-Match and If-Range (a broken cache in the way).
   void replace(std::vector<uint8_t> bytes, std::string etag, bool honour_conditionals);
   std::vector<SeenRequest> seen() const;
+  /// Every answer leaves `latency` after its request came (a long link's round trip), so the
+  /// requests a client sends together all come before any is answered. Default 0.
+  void setLatency(std::chrono::milliseconds latency);
   /// Blocks until a kStall reply has sent its partial body.
   void waitStalled();
 
  private:
   void acceptLoop();
   void serve(int fd);
-  bool handle(int fd, const SeenRequest& request);
+  /// Answers one request, `index` its place in seen_; false closes the connection.
+  bool handle(int fd, const SeenRequest& seen, size_t& index);
   bool sendMultipart(int fd, RangeReply::Kind kind, const std::string& range,
                      const std::vector<uint8_t>& bytes, const std::string& validator);
 
@@ -79,6 +92,8 @@ class RangeServer {
   bool honour_conditionals_ = true;
   std::function<RangeReply(uint64_t)> plan_;
   std::vector<SeenRequest> seen_;
+  uint32_t answered_round_max_ = 0;  ///< the highest round of the requests answered
+  std::chrono::milliseconds latency_{0};
   std::vector<std::thread> connections_;
   std::vector<int> connection_fds_;
   bool stalled_ = false;
