@@ -168,6 +168,7 @@ LoaderPool::LoaderPool(std::shared_ptr<Archive> archive, TileCache& cache,
     any_dependent_ = any_dependent_ || dependent_images_.back();
   }
   seedLinkEstimate();
+  reads_cost_egress_ = archive_->source().linkStats().has_value();
   idle_tids_.assign(thread_count_, 0);
   idle_times_.assign(thread_count_, {});
   for (uint32_t i = 0; i < thread_count_; ++i) workers_.emplace_back([this, i] { run(i); });
@@ -553,7 +554,10 @@ bool LoaderPool::idleWorkersStarvedLocked(Clock::time_point now) {
 bool LoaderPool::takeHostageLocked(Batch& batch, Clock::time_point now, double up_to) {
   // The best tile an idle worker took more than kStarvedAfter ago and still holds, not being
   // loaded again already, while that worker waits for a core (a worker waiting on a read is
-  // not starving, and its read is not made twice).
+  // not starving, and its read is not made twice). Over a network the tile is left to its
+  // worker: loading it again would read its bytes over the link a second time, which costs
+  // egress (the budget counts each tile once) and, on a busy machine, more than the wait.
+  if (reads_cost_egress_) return false;
   const TileId* best = nullptr;
   double best_priority = 0;
   std::vector<int8_t> runnable(idle_tids_.size(), -1);

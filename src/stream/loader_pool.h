@@ -294,6 +294,9 @@ class LoaderPool {
   /// Per image: whether its tiles are coded against their parents (ptm). Constant.
   std::vector<bool> dependent_images_;
   bool any_dependent_ = false;  ///< any of dependent_images_; constant
+  /// The archive's reads cross a network (ByteSource::linkStats): a second load of a tile
+  /// would pay its bytes twice on the link, against the egress budget. Constant.
+  bool reads_cost_egress_ = false;
   std::shared_ptr<TexelPool> texel_pool_;
   std::atomic<size_t> last_tile_bytes_{0};  ///< the size of the last tile loaded, for prewarming
 
