@@ -565,6 +565,48 @@ TEST_P(BlockStreamerTest, TranscodeToBc1HandsJpegTilesOverAsBc1Blocks) {
   EXPECT_EQ(last.transcode_ms_total > 0, jpeg);
 }
 
+// Tiles with alpha keep it: with transcode_to_bc1 a JPEG archive with an alpha plane (grey +
+// alpha and RGBA) still hands its tiles over decoded, as bc1's opaque blocks would lose it.
+TEST(TranscodeToBc1, LeavesJpegTilesWithAlphaDecoded) {
+  for (uint32_t channels : {2u, 4u}) {
+    SCOPED_TRACE(channels);
+    test::SyntheticArchiveSpec spec;
+    spec.width_px = 300;
+    spec.height_px = 220;
+    spec.channels = channels;
+    spec.codec = Codec::kJpeg;
+    std::shared_ptr<Archive> archive = test::openArchiveOrFail(
+        makeMemorySource(test::syntheticArchiveBytes(spec), "mem:alpha.tess"));
+    ASSERT_TRUE(archive);
+    StreamerOptions options;
+    options.loader_threads = 2;
+    options.transcode_to_bc1 = true;
+    auto streamer = TileStreamer::create(archive, options);
+    ASSERT_TRUE(streamer) << streamer.error().message;
+    const View view = orthoView(150, 110, 1.5, 160, 120);
+    size_t delivered = 0;
+    FrameReport last;
+    for (int i = 0; i < 100; ++i) {
+      (*streamer)->waitIdleForTesting();
+      const FrameUpdate& update = (*streamer)->update(view);
+      ApplyResult result;
+      for (const auto& tile : update.uploads) {
+        result.accepted.push_back(tile->id);
+        ++delivered;
+        EXPECT_FALSE(tile->keptAsBlocks());
+        EXPECT_EQ(tile->texels.texels.size(), archive->images()[0].storedTileBytes());
+      }
+      last = update.report;
+      (*streamer)->acknowledge(result);
+      if (last.coverage_desired == 1 && last.uploads == 0 && last.queue_length == 0 &&
+          last.in_flight == 0)
+        break;
+    }
+    EXPECT_GT(delivered, 0u);
+    EXPECT_EQ(last.tiles_transcoded_total, 0u);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Codecs, BlockStreamerTest,
                          testing::Values(Codec::kBc1, Codec::kBc7, Codec::kZstd, Codec::kJpeg),
                          [](const testing::TestParamInfo<Codec>& param_info) {
