@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "bc/bc.h"
-#include "bc/bc1_fast.h"
+#include "codecs/bc1_fast.h"
 #include "codecs/encode.h"
 
 using namespace tessera;

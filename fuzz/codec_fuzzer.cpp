@@ -6,7 +6,7 @@
 
 #include "codec_fuzz_input.h"
 #include "codecs/bc/bc.h"
-#include "codecs/bc/bc1_fast.h"
+#include "codecs/bc1_fast.h"
 #include "codecs/encode.h"
 
 namespace tessera::fuzz {

@@ -80,6 +80,12 @@ struct RendererOptions {
   /// again later, instead of waiting for the GPU. 0, or a driver without buffer storage: a
   /// staging buffer orphaned each frame, with no limit.
   size_t staging_ring_bytes = size_t(64) << 20;
+  /// Tile quads: the streamer transcodes this image's JPEG tiles to bc1
+  /// (StreamerOptions::transcode_to_bc1), so an image whose default codec is JPEG, 8-bit grey
+  /// or RGB, is drawn from a bc1 block array as a bc1 archive is (`takesStoredBlocks()`
+  /// true). Set before creation: the arrays are sized by it. The clipmap and the view
+  /// renderers ignore it and keep RGBA texels.
+  bool transcode_to_bc1 = false;
 };
 
 /// Draws views of one image. Render thread only: the thread on which its backend's context

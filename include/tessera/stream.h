@@ -144,7 +144,11 @@ struct FrameReport {
   uint64_t reads_total = 0;          ///< read calls on the byte source
   uint64_t tiles_loaded_total = 0;
   uint64_t load_failures_total = 0;
-  double decode_ms_total = 0;       ///< worker time spent decoding since start
+  double decode_ms_total = 0;  ///< worker time spent decoding since start
+  /// Of decode_ms_total, the time spent encoding JPEG tiles to bc1
+  /// (StreamerOptions::transcode_to_bc1), and the delivered tiles so encoded.
+  double transcode_ms_total = 0;
+  uint64_t tiles_transcoded_total = 0;
   uint64_t hinted_bytes_total = 0;  ///< bytes the byte source was told to fetch ahead
   double update_ms = 0;             ///< render-thread time of this update() call
 
@@ -371,6 +375,13 @@ struct StreamerOptions {
   /// decode) instead of decoded. Set it only for a renderer whose `takesStoredBlocks()` is
   /// true: any other declines such tiles. Uniform tiles are decoded either way.
   bool keep_block_compressed = false;
+  /// JPEG tiles of 8-bit grey or RGB, once decoded on a loader thread, are encoded to bc1 by
+  /// Tessera's fast encoder (docs/codecs.md, "Fast bc1 transcoder") and handed over as blocks,
+  /// as a bc1 archive's tiles are: an eighth of RGBA's upload and GPU bytes, at the fast
+  /// encoder's error. Uniform tiles, tiles with alpha and other codecs stay decoded. As with
+  /// keep_block_compressed, set it only for a renderer whose `takesStoredBlocks()` is true
+  /// (and created with RendererOptions::transcode_to_bc1, docs/rendering.md).
+  bool transcode_to_bc1 = false;
 };
 
 /// Turns `options` into what a source whose every read is a network round trip wants (an

@@ -434,10 +434,15 @@ class TileQuadsRenderer final : public RendererBase {
 
   /// Block mode: this image's tiles are bc1/bc7 (its default codec), RGB or RGBA, and the
   /// context samples the format. Grey bc tiles stay decoded: their swizzle reads alpha from
-  /// the second channel, which a block texture does not have.
+  /// the second channel, which a block texture does not have. A JPEG image whose tiles the
+  /// streamer transcodes (RendererOptions::transcode_to_bc1) is drawn as a bc1 one, grey
+  /// included: its blocks hold the grey in R, G and B alike, and the one-channel swizzle
+  /// reads R.
   void chooseBlockFormat() {
-    const Codec codec = info_.default_codec;
-    const bool rgb_or_rgba = info_.channels == 3 || (info_.channels == 4 && codec == Codec::kBc7);
+    const bool transcoded = info_.default_codec == Codec::kJpeg && options_.transcode_to_bc1;
+    const Codec codec = transcoded ? Codec::kBc1 : info_.default_codec;
+    const bool rgb_or_rgba = info_.channels == 3 || (info_.channels == 4 && codec == Codec::kBc7) ||
+                             (info_.channels == 1 && transcoded);
     if ((codec != Codec::kBc1 && codec != Codec::kBc7) || !rgb_or_rgba ||
         info_.sample_type != SampleType::kU8)
       return;

@@ -15,6 +15,7 @@
 
 #include <tessera/codec_scratch.h>
 
+#include "codecs/bc1_fast.h"
 #include "reader/parent_chain.h"
 
 namespace tessera::detail {
@@ -1033,12 +1034,52 @@ void LoaderPool::decodeAndDeliver(const BatchItem& item, std::span<const uint8_t
     finish(item.id, failedLoad(*archive_, item.id, decoded.error()), true);
     return;
   }
+  uint64_t transcode_ns = 0;
+  StoredBlocks blocks;
+  if (options_.transcode_to_bc1) blocks = transcodeToBc1(item, texels, transcode_ns);
+  if (blocks.codec != Codec::kRaw) {
+    // The texels served only the encoder: recycle them now, the cache keeps the blocks.
+    texel_pool_->give(std::move(texels.texels));
+    deliver(
+        item, decode_ns + transcode_ns,
+        [&](bool wanted) {
+          if (!wanted) return;
+          auto tile = std::make_shared<DecodedTile>();
+          tile->id = item.id;
+          tile->blocks = std::move(blocks);
+          cache_.insert(std::move(tile));
+        },
+        transcode_ns);
+    return;
+  }
   deliver(item, decode_ns, [&](bool wanted) {
     if (wanted)
       cache_.insert(texel_pool_->makeTile(item.id, std::move(texels)));
     else
       texel_pool_->give(std::move(texels.texels));
   });
+}
+
+StoredBlocks LoaderPool::transcodeToBc1(const BatchItem& item, const Image& texels,
+                                        uint64_t& transcode_ns) const {
+  // Uniform tiles (no payload) stay one colour, cheaper as texels; alpha would be lost by
+  // bc1 (opaque blocks), so tiles with it stay decoded RGBA. Other codecs are left as they
+  // are: a lossless archive's user chose exact texels.
+  const uint32_t side = archive_->images()[item.id.image].storedTileSidePx();
+  if (item.entry.kind != TileKind::kEncoded || item.entry.codec != Codec::kJpeg ||
+      texels.sample_type != SampleType::kU8 || (texels.channels != 1 && texels.channels != 3) ||
+      texels.width_px != side || texels.height_px != side)
+    return {};
+  const auto started = Clock::now();
+  StoredBlocks blocks;
+  const uint32_t blocks_along = (side + 3) / 4;
+  blocks.bytes.resize(size_t(blocks_along) * blocks_along * 8);
+  if (!encodeBc1Fast(texels.view(), blocks.bytes)) return {};
+  blocks.codec = Codec::kBc1;
+  blocks.padded_side_px = blocks_along * 4;
+  transcode_ns = uint64_t(
+      std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
+  return blocks;
 }
 
 void LoaderPool::deliverBlocks(const BatchItem& item, std::span<const uint8_t> payload) {
@@ -1070,7 +1111,8 @@ void LoaderPool::deliverBlocks(const BatchItem& item, std::span<const uint8_t> p
 }
 
 void LoaderPool::deliver(const BatchItem& item, uint64_t decode_ns,
-                         const std::function<void(bool)>& store) {
+                         const std::function<void(bool)>& store,
+                         std::optional<uint64_t> transcode_ns) {
   bool claimed = false, wanted = false;
   {
     std::lock_guard lock(mutex_);
@@ -1079,7 +1121,9 @@ void LoaderPool::deliver(const BatchItem& item, uint64_t decode_ns,
     claimed = claimLocked(item.id);
     wanted = claimed && wanted_.count(item.id) > 0;
     stats_.decode_ns += decode_ns;
+    stats_.transcode_ns += transcode_ns.value_or(0);
     if (wanted) {
+      if (transcode_ns) ++stats_.tiles_transcoded;
       ++stats_.tiles_loaded;
       stats_.payload_bytes += item.entry.length_bytes;
     } else if (claimed) {

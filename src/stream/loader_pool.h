@@ -17,6 +17,7 @@
 #include <string>
 #include <thread>
 #include <unordered_map>
+#include <optional>
 #include <unordered_set>
 #include <vector>
 
@@ -47,6 +48,8 @@ struct LoaderOptions {
   uint64_t read_ahead_bytes = 4u << 20;
   /// StreamerOptions::keep_block_compressed.
   bool keep_block_compressed = false;
+  /// StreamerOptions::transcode_to_bc1.
+  bool transcode_to_bc1 = false;
 };
 
 /// A thread's scheduling figures from /proc's schedstat: nanoseconds on a core, and waiting
@@ -76,6 +79,10 @@ struct LoaderStats {
   uint64_t cancelled = 0;      ///< queued requests dropped because no longer wanted
   uint64_t stale_dropped = 0;  ///< finished requests dropped because no longer wanted
   uint64_t decode_ns = 0;
+  /// Of decode_ns, the time spent encoding decoded JPEG tiles to bc1
+  /// (LoaderOptions::transcode_to_bc1), and the tiles so encoded.
+  uint64_t transcode_ns = 0;
+  uint64_t tiles_transcoded = 0;
   uint64_t hinted_bytes = 0;  ///< bytes the byte source was told to fetch ahead
   /// Reads abandoned in flight through readCancellable because every tile they carried left
   /// the wanted set (their tiles are neither failures nor retried).
@@ -239,9 +246,15 @@ class LoaderPool {
   /// A bc1/bc7 payload kept as stored (LoaderOptions::keep_block_compressed): checked for its
   /// size, copied into a cache tile's blocks and delivered as decodeAndDeliver does.
   void deliverBlocks(const BatchItem& item, std::span<const uint8_t> payload);
+  /// LoaderOptions::transcode_to_bc1: the blocks of a decoded opaque 8-bit JPEG tile (grey or
+  /// RGB, a full stored tile) encoded by encodeBc1Fast; codec kRaw (keep the texels) for any
+  /// other tile. Adds the encoding time to `transcode_ns`.
+  StoredBlocks transcodeToBc1(const BatchItem& item, const Image& texels,
+                              uint64_t& transcode_ns) const;
   /// The end of a load: claims the tile, counts it, hands `store` whether it is still wanted
   /// (it inserts the tile, or recycles its buffer), and finishes it.
-  void deliver(const BatchItem& item, uint64_t decode_ns, const std::function<void(bool)>& store);
+  void deliver(const BatchItem& item, uint64_t decode_ns, const std::function<void(bool)>& store,
+               std::optional<uint64_t> transcode_ns = std::nullopt);
   /// True when `id` is coded against a parent (its image's codec is dependent and it is below
   /// the coarsest level). Lock-free: reads constant members only.
   bool needsParent(const TileId& id) const;

@@ -135,6 +135,7 @@ Result<std::unique_ptr<TileStreamer>> TileStreamer::create(std::shared_ptr<Archi
   loader_options.max_link_gap_bytes = options.max_link_gap_bytes;
   loader_options.read_ahead_bytes = options.read_ahead_bytes;
   loader_options.keep_block_compressed = options.keep_block_compressed;
+  loader_options.transcode_to_bc1 = options.transcode_to_bc1;
   loader_options.retry_initial = options.retry_initial;
   loader_options.retry_max = options.retry_max;
   impl->loader = std::make_unique<detail::LoaderPool>(archive, *impl->cache, loader_options);
@@ -272,6 +273,8 @@ void TileStreamer::Impl::reportLoader(FrameReport& report) const {
   report.tiles_loaded_total = stats.tiles_loaded;
   report.load_failures_total = stats.failures;
   report.decode_ms_total = stats.decode_ns / 1e6;
+  report.transcode_ms_total = stats.transcode_ns / 1e6;
+  report.tiles_transcoded_total = stats.tiles_transcoded;
   report.hinted_bytes_total = stats.hinted_bytes;
   report.link_bytes_per_s = stats.link.bytes_per_s;
   report.link_latency_ms = stats.link.latency_s * 1e3;

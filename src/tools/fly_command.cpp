@@ -210,6 +210,9 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
   if (!archive) return forwardError(archive);
   setup.archive = std::move(*archive);
   setup.open_ms = std::chrono::duration<double, std::milli>(Clock::now() - open_start).count();
+  if (args.transcode != "none" && args.transcode != "bc1")
+    return fail(ErrorCode::kInvalidArgument,
+                fmt::format("--transcode {}: must be none or bc1", args.transcode));
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
   setup.remote = setup.link || isRemoteUri(args.archive);
@@ -274,6 +277,9 @@ struct FlightLog {
   size_t startup_frames = 0;
   double startup_ms = -1;
   uint64_t uploaded_payload_bytes = 0;
+  /// Bytes of the tiles handed to the renderer (texels, or bc blocks), declined ones again
+  /// each time they are offered.
+  uint64_t upload_bytes_offered = 0;
   FrameReport last{};
   /// Loads that failed, as the frames saw them: per tile whether it loaded on a later try,
   /// and the first kFailuresKept failures with their messages.
@@ -318,6 +324,7 @@ struct FlightLog {
     if (startup_ms < 0) ++startup_frames;
     frames_covered += r.fully_covered;
     uploaded_payload_bytes = r.payload_bytes_total;
+    upload_bytes_offered += r.upload_bytes;
     JumpTiming& jump = jumps.back();
     double since_ms = std::max(0.0, (now_s - jump.at_s) * 1000);
     if (jump.full_detail_ms < 0 && r.coverage_desired >= 1.0) jump.full_detail_ms = since_ms;
@@ -606,6 +613,12 @@ nlohmann::json flightSummary(const FlyArgs& args, const FlightSetup& setup,
                                                   [](const auto& tile) { return tile.second; })},
       {"failures", flightFailures(log)},
       {"decode_ms_total", last.decode_ms_total},
+      {"upload_bytes_offered", log.upload_bytes_offered},
+      {"transcode",
+       {{"requested", args.transcode},
+        {"active", options.transcode_to_bc1},
+        {"tiles", last.tiles_transcoded_total},
+        {"ms_total", last.transcode_ms_total}}},
       {"cache",
        {{"hits", cache.hits},
         {"misses", cache.misses},
@@ -785,12 +798,15 @@ Result<nlohmann::json> runFlight(const FlyArgs& args, const FlightSetup& setup) 
     first.image = args.image;
     first.ortho = setup.path.at(0, setup.viewport_w, setup.viewport_h);
     Result<std::unique_ptr<FlyRenderer>> created =
-        FlyRenderer::create(*kind, setup.info, first, options.residency);
+        FlyRenderer::create(*kind, setup.info, first, options.residency, args.transcode == "bc1");
     if (!created) return forwardError(created);
     gpu = std::move(*created);
     gpu->renderer().setDisplayWindow(*display);
   }
   options.keep_block_compressed = gpu && gpu->renderer().takesStoredBlocks();
+  // Without a renderer the loaders still transcode (their cost is what such a run measures);
+  // the clipmap keeps RGBA texels, so for it the tiles stay decoded.
+  options.transcode_to_bc1 = args.transcode == "bc1" && (!gpu || options.keep_block_compressed);
   Result<std::unique_ptr<TileStreamer>> streamer = TileStreamer::create(setup.archive, options);
   if (!streamer) return forwardError(streamer);
   TESSERA_TRY(startFramesCsv(args));
@@ -921,6 +937,11 @@ void registerFlyCommand(CLI::App& app, int& exit_code) {
   cmd->add_option("--render", args->render,
                   "Draw every frame headless: tile-quads or clipmap (none: no GPU work)")
       ->check(CLI::IsMember({"none", "tile-quads", "clipmap"}))
+      ->capture_default_str();
+  cmd->add_option("--transcode", args->transcode,
+                  "bc1: encode JPEG tiles to bc1 on the loader threads, drawn from a bc1 array "
+                  "by tile-quads (none: tiles as stored)")
+      ->check(CLI::IsMember({"none", "bc1"}))
       ->capture_default_str();
   cmd->add_option("--composite", args->composite,
                   "Where procedural tiles are composited: cpu (the loader threads) or gpu (a "

@@ -46,6 +46,9 @@ struct FlyArgs {
   bool cold = false;
   bool decode_bound = false;
   std::string render = "none";
+  /// "bc1": the loaders encode JPEG tiles to bc1 and tile quads draw them from a bc1 array
+  /// (StreamerOptions::transcode_to_bc1); "none": tiles as the archive stores them.
+  std::string transcode = "none";
   /// Where procedural tiles are composited: "cpu" (the loader threads) or "gpu" (a thread
   /// with a headless context, docs/procedural.md "GPU compositing").
   std::string composite = "cpu";

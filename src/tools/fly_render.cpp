@@ -27,7 +27,8 @@ constexpr size_t kQueryRing = 8;
 
 Result<std::unique_ptr<FlyRenderer>> FlyRenderer::create(RendererKind kind, const ImageInfo& info,
                                                          const View& first_view,
-                                                         const ResidencyOptions& residency) {
+                                                         const ResidencyOptions& residency,
+                                                         bool transcode_to_bc1) {
   std::unique_ptr<FlyRenderer> fly(new FlyRenderer());
   Result<std::unique_ptr<GlContext>> context = GlContext::createHeadless();
   if (!context) return forwardError(context);
@@ -44,6 +45,7 @@ Result<std::unique_ptr<FlyRenderer>> FlyRenderer::create(RendererKind kind, cons
       uint64_t(std::max(max_layers, 1))));
   options.initial_clip_tiles =
       clipRegionTiles(first_view.viewportWidth(), first_view.viewportHeight(), info.tile_size_px);
+  options.transcode_to_bc1 = transcode_to_bc1;
   Result<std::unique_ptr<Renderer>> renderer = createRenderer(kind, info, options);
   if (!renderer) return forwardError(renderer);
   fly->renderer_ = std::move(*renderer);

@@ -28,7 +28,7 @@ class FlyRenderer {
   /// ring, the colour target, and a first draw of `first_view`, waited for.
   [[nodiscard]] static Result<std::unique_ptr<FlyRenderer>> create(
       RendererKind kind, const ImageInfo& info, const View& first_view,
-      const ResidencyOptions& residency);
+      const ResidencyOptions& residency, bool transcode_to_bc1 = false);
   ~FlyRenderer();
 
   /// Applies the frame's uploads (acknowledged to `streamer`; with `upload` false they are all

@@ -1,7 +1,7 @@
 // The fast BC1 encoder: its payloads decode (decodeBc1Block, decodeTile) to what it was given
 // within the limits of BC1, on flat colours, gradients, noise and photo-like tiles, at sizes that
 // are not a multiple of 4, for grey, RGB and RGBA input; and it refuses what it cannot encode.
-#include "bc/bc1_fast.h"
+#include "codecs/bc1_fast.h"
 
 #include <algorithm>
 #include <cmath>

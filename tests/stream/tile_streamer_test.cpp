@@ -4,12 +4,15 @@
 #include <tessera/stream.h>
 
 #include <chrono>
+#include <cmath>
 #include <set>
 #include <thread>
 #include <tuple>
 
 #include <gtest/gtest.h>
 
+#include "codecs/bc/bc.h"
+#include "codecs/bc1_fast.h"
 #include "support/fault_source.h"
 #include "support/synthetic_archive.h"
 
@@ -488,8 +491,124 @@ TEST_P(BlockStreamerTest, KeepBlockCompressedHandsBcPayloadsOverAsStored) {
   EXPECT_EQ(kept > 0, bc);
 }
 
+/// PSNR over R, G and B of a decoded bc1 tile (RGBA, padded side) against the JPEG decode
+/// of the same tile (grey spread, or RGB), over the stored tile only.
+double bc1Psnr(const Image& rgba, const Image& jpeg) {
+  double squared = 0;
+  for (uint32_t y = 0; y < jpeg.height_px; ++y)
+    for (uint32_t x = 0; x < jpeg.width_px; ++x)
+      for (uint32_t c = 0; c < 3; ++c) {
+        const double want = jpeg.row(y)[x * jpeg.channels + std::min(c, jpeg.channels - 1)];
+        const double got = rgba.row(y)[x * 4 + c];
+        squared += (want - got) * (want - got);
+      }
+  const double mse = squared / (double(jpeg.width_px) * jpeg.height_px * 3);
+  return mse == 0 ? 99.0 : 10 * std::log10(255.0 * 255.0 / mse);
+}
+
+// With transcode_to_bc1, a JPEG tile with a payload is decoded and handed over as bc1 blocks
+// in the stored layout: the fast encoder's blocks for the JPEG decode, within its error of it,
+// at an eighth of RGBA's upload bytes; uniform tiles and other codecs
+// arrive decoded, and the report counts the transcoded tiles and their time.
+TEST_P(BlockStreamerTest, TranscodeToBc1HandsJpegTilesOverAsBc1Blocks) {
+  options_.transcode_to_bc1 = true;
+  TileStreamer& streamer = start();
+  const View view = orthoView(300, 200, 1.5, 160, 120);
+  const bool jpeg = codec() == Codec::kJpeg;
+  const uint32_t side = info().storedTileSidePx();
+  const uint32_t padded = (side + 3) / 4 * 4;
+  size_t kept = 0, decoded = 0;
+  FrameReport last;
+  for (int i = 0; i < 100; ++i) {
+    streamer.waitIdleForTesting();
+    const FrameUpdate& update = streamer.update(view);
+    ApplyResult result;
+    for (const auto& tile : update.uploads) {
+      result.accepted.push_back(tile->id);
+      auto entry = archive_->tileEntry(tile->id);
+      ASSERT_TRUE(entry) << entry.error().message;
+      if (!tile->keptAsBlocks()) {
+        ++decoded;
+        EXPECT_FALSE(jpeg && entry->kind == TileKind::kEncoded) << "a JPEG tile was not transcoded";
+        continue;
+      }
+      ++kept;
+      ASSERT_TRUE(jpeg);
+      EXPECT_EQ(tile->blocks.codec, Codec::kBc1);
+      EXPECT_EQ(tile->blocks.padded_side_px, padded);
+      EXPECT_TRUE(tile->texels.texels.empty());
+      EXPECT_EQ(tile->uploadBytes().size(), size_t(padded) * padded * 4 / 8);
+      auto reference = archive_->readTile(tile->id);
+      ASSERT_TRUE(reference) << reference.error().message;
+      ASSERT_EQ(reference->width_px, side);
+      // Byte for byte the fast encoder's output for the JPEG decode, so the error is its
+      // error; the floor checks that error on this archive's busy synthetic picture.
+      std::vector<uint8_t> expected(tile->blocks.bytes.size());
+      ASSERT_TRUE(detail::encodeBc1Fast(reference->view(), expected));
+      EXPECT_EQ(tile->blocks.bytes, expected);
+      Image rgba(padded, padded, 4);
+      ASSERT_TRUE(detail::decodeBc1(tile->blocks.bytes, rgba, nullptr, nullptr));
+      // 32.7 dB at worst here.
+      EXPECT_GT(bc1Psnr(rgba, *reference), 30.0) << "tile " << tile->id.x << "," << tile->id.y;
+    }
+    last = update.report;
+    streamer.acknowledge(result);
+    if (last.coverage_desired == 1 && last.uploads == 0 && last.queue_length == 0 &&
+        last.in_flight == 0)
+      break;
+  }
+  EXPECT_GT(kept + decoded, 0u);
+  EXPECT_EQ(kept > 0, jpeg);
+  EXPECT_EQ(last.tiles_transcoded_total > 0, jpeg);
+  EXPECT_GE(last.tiles_transcoded_total, kept);
+  EXPECT_LE(last.transcode_ms_total, last.decode_ms_total);
+  EXPECT_EQ(last.transcode_ms_total > 0, jpeg);
+}
+
+// Tiles with alpha keep it: with transcode_to_bc1 a JPEG archive with an alpha plane (grey +
+// alpha and RGBA) still hands its tiles over decoded, as bc1's opaque blocks would lose it.
+TEST(TranscodeToBc1, LeavesJpegTilesWithAlphaDecoded) {
+  for (uint32_t channels : {2u, 4u}) {
+    SCOPED_TRACE(channels);
+    test::SyntheticArchiveSpec spec;
+    spec.width_px = 300;
+    spec.height_px = 220;
+    spec.channels = channels;
+    spec.codec = Codec::kJpeg;
+    std::shared_ptr<Archive> archive = test::openArchiveOrFail(
+        makeMemorySource(test::syntheticArchiveBytes(spec), "mem:alpha.tess"));
+    ASSERT_TRUE(archive);
+    StreamerOptions options;
+    options.loader_threads = 2;
+    options.transcode_to_bc1 = true;
+    auto streamer = TileStreamer::create(archive, options);
+    ASSERT_TRUE(streamer) << streamer.error().message;
+    const View view = orthoView(150, 110, 1.5, 160, 120);
+    size_t delivered = 0;
+    FrameReport last;
+    for (int i = 0; i < 100; ++i) {
+      (*streamer)->waitIdleForTesting();
+      const FrameUpdate& update = (*streamer)->update(view);
+      ApplyResult result;
+      for (const auto& tile : update.uploads) {
+        result.accepted.push_back(tile->id);
+        ++delivered;
+        EXPECT_FALSE(tile->keptAsBlocks());
+        EXPECT_EQ(tile->texels.texels.size(), archive->images()[0].storedTileBytes());
+      }
+      last = update.report;
+      (*streamer)->acknowledge(result);
+      if (last.coverage_desired == 1 && last.uploads == 0 && last.queue_length == 0 &&
+          last.in_flight == 0)
+        break;
+    }
+    EXPECT_GT(delivered, 0u);
+    EXPECT_EQ(last.tiles_transcoded_total, 0u);
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(Codecs, BlockStreamerTest,
-                         testing::Values(Codec::kBc1, Codec::kBc7, Codec::kZstd),
+                         testing::Values(Codec::kBc1, Codec::kBc7, Codec::kZstd, Codec::kJpeg),
                          [](const testing::TestParamInfo<Codec>& param_info) {
                            return std::string(codecName(param_info.param));
                          });

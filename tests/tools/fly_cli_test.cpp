@@ -112,6 +112,7 @@ TEST_F(FlyCli, RefusesNumbersThatAreNotNumbersOrOutOfRange) {
       {"--loader-priority", "realtime"},
       {"--egress", "0.5"},
       {"--egress", "cheap"},
+      {"--transcode", "bc7"},
   };
   for (const std::vector<std::string>& options : bad) {
     std::string joined;
@@ -133,6 +134,32 @@ TEST_F(FlyCli, RefusesNumbersThatAreNotNumbersOrOutOfRange) {
     RunResult result = fly(archive_, dir_ + "bad", {"--path", path});
     EXPECT_EQ(result.exit_code, 2) << result.err;
     EXPECT_NE(result.err.find("bad.path:3"), std::string::npos) << result.err;
+  }
+}
+
+// --transcode bc1 without a renderer: the loaders encode the JPEG tiles they load and
+// summary.json says so, with their time; without the option nothing is transcoded.
+TEST_F(FlyCli, TranscodeBc1ReportsTheTranscodedTilesAndTheirTime) {
+  const std::string jpeg = dir_ + "jpeg.tess";
+  ASSERT_EQ(
+      run({"build", "synthetic:512x384:2:3", "-o", jpeg, "--tile", "128", "--codec", "jpeg", "-q"})
+          .exit_code,
+      0);
+  for (const std::string transcode : {"bc1", "none"}) {
+    SCOPED_TRACE(transcode);
+    const std::string out = dir_ + "transcode-" + transcode;
+    RunResult result = fly(jpeg, out, {"--duration", "0.3", "--transcode", transcode, "-q"});
+    ASSERT_EQ(result.exit_code, 0) << result.err;
+    nlohmann::json summary = nlohmann::json::parse(slurp(out + "/summary.json"));
+    const nlohmann::json& t = summary["transcode"];
+    EXPECT_EQ(t["requested"], transcode);
+    EXPECT_EQ(t["active"].get<bool>(), transcode == "bc1");
+    const uint64_t tiles = t["tiles"].get<uint64_t>();
+    const double ms = t["ms_total"].get<double>();
+    EXPECT_EQ(tiles > 0, transcode == "bc1");
+    EXPECT_EQ(ms > 0, transcode == "bc1");
+    EXPECT_LE(ms, summary["decode_ms_total"].get<double>());
+    EXPECT_LE(tiles, summary["tiles_loaded"].get<uint64_t>());
   }
 }
 

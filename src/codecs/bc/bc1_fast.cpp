@@ -10,7 +10,7 @@
 // Four blocks are encoded together, one per lane of a vector, so that every step is SIMD
 // arithmetic (SSE2 on x86-64) with no reduction across lanes and no branch per block; flat
 // blocks alone are rewritten afterwards, one at a time.
-#include "bc/bc1_fast.h"
+#include "codecs/bc1_fast.h"
 
 #include <algorithm>
 #include <bit>
