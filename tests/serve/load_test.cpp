@@ -32,6 +32,7 @@
 
 #include "serve/serve_fixture.h"
 #include "serve/test_certificate.h"
+#include "support/sanitizers.h"
 
 namespace tessera::test {
 namespace {
@@ -258,25 +259,10 @@ ChildServer forkServerWithFewDescriptors(const std::string& path) {
   ::_exit(0);
 }
 
-/// True in ASan (+UBSan) builds. Their runtimes need free descriptors of their own: UBSan's
-/// vptr check probes memory through a pipe, and in a process at its descriptor limit it reports
-/// valid objects as having an invalid vptr.
-bool sanitized() {
-#if defined(__SANITIZE_ADDRESS__)
-  return true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-  return true;
-#else
-  return false;
-#endif
-#else
-  return false;
-#endif
-}
-
 TEST_F(ServeLoad, ClientsPastTheDescriptorLimitAreRefusedAndTheServerKeepsServing) {
-  if (sanitized())
+  // UBSan's vptr check probes memory through a pipe: in a process at its descriptor limit it
+  // reports valid objects as having an invalid vptr.
+  if (test::sanitized())
     GTEST_SKIP() << "the sanitizer runtime misreports in a process without free descriptors";
   // A child that died must fail the test, not kill it with SIGPIPE on the control pipe.
   ::signal(SIGPIPE, SIG_IGN);

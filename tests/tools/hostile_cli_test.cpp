@@ -23,6 +23,7 @@
 #include <gtest/gtest.h>
 
 #include "support/archive_fixture.h"
+#include "support/sanitizers.h"
 #include "support/test_images.h"
 
 extern char** environ;
@@ -131,22 +132,6 @@ std::vector<uint8_t> jpegClaiming65500(const std::string& dir) {
   return bytes;
 }
 
-/// The ASan and UBSan runtimes hold far more than the program: peak memory is compared in
-/// plain builds only.
-bool sanitized() {
-#if defined(__SANITIZE_ADDRESS__)
-  return true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-  return true;
-#else
-  return false;
-#endif
-#else
-  return false;
-#endif
-}
-
 mode_t fileType(const std::string& path) {
   struct stat st {};
   return ::lstat(path.c_str(), &st) == 0 ? st.st_mode & S_IFMT : 0;
@@ -206,7 +191,9 @@ TEST_F(HostileCli, HeadersClaimingAbsurdSizesFailInOneLineWithinTheBudget) {
       EXPECT_LT(seconds, 10) << c.name << " " << limit;
       // Under the default limit (half of this machine's memory) a file may pass the memory
       // check and fail on free space or at its first row; either way nothing is allocated.
-      if (!sanitized()) {
+      // The ASan and UBSan runtimes hold far more than the program: peak memory is compared in
+      // plain builds only.
+      if (!test::sanitized()) {
         EXPECT_LT(result.peak_rss_kib, kBudgetMiB * 1024) << c.name;
       }
       if (*limit) {
@@ -231,7 +218,7 @@ TEST_F(HostileCli, AHeaderWithinTheBudgetFailsAtItsFirstRowWithoutGrowing) {
   EXPECT_EQ(result.exit_code, 1) << result.err;
   EXPECT_NE(result.err.find("gray.png: row 0: truncated or corrupt data"), std::string::npos)
       << result.err;
-  if (!sanitized()) {
+  if (!test::sanitized()) {  // peak memory: plain builds only
     EXPECT_LT(result.peak_rss_kib, 100u * 1024) << result.err;
   }
 }
