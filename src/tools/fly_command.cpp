@@ -213,6 +213,13 @@ Result<FlightSetup> setUpFlight(const FlyArgs& args) {
   if (args.transcode != "none" && args.transcode != "bc1")
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("--transcode {}: must be none or bc1", args.transcode));
+  // The display window maps --render's picture; without one it would be ignored unseen.
+  if (args.render == "none" && (args.window != "auto" || args.gamma != "1"))
+    return fail(
+        ErrorCode::kInvalidArgument,
+        fmt::format("{}: the display window applies to --render's picture; add --render "
+                    "tile-quads or clipmap",
+                    args.window != "auto" ? "--window " + args.window : "--gamma " + args.gamma));
   if (args.adaptive != "auto" && args.adaptive != "on" && args.adaptive != "off")
     return fail(ErrorCode::kInvalidArgument, "--adaptive must be auto, on or off");
   setup.remote = setup.link || isRemoteUri(args.archive);

@@ -113,6 +113,8 @@ TEST_F(FlyCli, RefusesNumbersThatAreNotNumbersOrOutOfRange) {
       {"--egress", "0.5"},
       {"--egress", "cheap"},
       {"--transcode", "bc7"},
+      {"--window", "0,100"},  // without --render there is no picture to window
+      {"--gamma", "2"},
   };
   for (const std::vector<std::string>& options : bad) {
     std::string joined;
