@@ -16,6 +16,7 @@
 #include <tessera/codec_scratch.h>
 
 #include "codecs/bc1_fast.h"
+#include "codecs/bc_layout.h"
 #include "reader/parent_chain.h"
 
 namespace tessera::detail {
@@ -1072,11 +1073,10 @@ StoredBlocks LoaderPool::transcodeToBc1(const BatchItem& item, const Image& texe
     return {};
   const auto started = Clock::now();
   StoredBlocks blocks;
-  const uint32_t blocks_along = (side + 3) / 4;
-  blocks.bytes.resize(size_t(blocks_along) * blocks_along * 8);
+  blocks.bytes.resize(bcPayloadBytes(Codec::kBc1, side, side));
   if (!encodeBc1Fast(texels.view(), blocks.bytes)) return {};
   blocks.codec = Codec::kBc1;
-  blocks.padded_side_px = blocks_along * 4;
+  blocks.padded_side_px = bcBlocksAlong(side) * kBcBlockSidePx;
   transcode_ns = uint64_t(
       std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now() - started).count());
   return blocks;
@@ -1086,9 +1086,8 @@ void LoaderPool::deliverBlocks(const BatchItem& item, std::span<const uint8_t> p
   const ImageInfo& info = archive_->images()[item.id.image];
   // The size is a bc payload's only structure (docs/codecs.md); the GPU would read past a
   // short one.
-  const uint32_t padded_side = (info.storedTileSidePx() + 3) / 4 * 4;
-  const size_t block_bytes = item.entry.codec == Codec::kBc1 ? 8 : 16;
-  const size_t expected = size_t(padded_side / 4) * (padded_side / 4) * block_bytes;
+  const uint32_t side = info.storedTileSidePx();
+  const size_t expected = bcPayloadBytes(item.entry.codec, side, side);
   if (payload.size() != expected) {
     finish(item.id,
            failedLoad(*archive_, item.id,
@@ -1104,7 +1103,7 @@ void LoaderPool::deliverBlocks(const BatchItem& item, std::span<const uint8_t> p
     auto tile = std::make_shared<DecodedTile>();
     tile->id = item.id;
     tile->blocks.codec = item.entry.codec;
-    tile->blocks.padded_side_px = padded_side;
+    tile->blocks.padded_side_px = bcBlocksAlong(side) * kBcBlockSidePx;
     tile->blocks.bytes.assign(payload.begin(), payload.end());
     cache_.insert(std::move(tile));
   });

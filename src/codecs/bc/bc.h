@@ -8,23 +8,10 @@
 #include <span>
 #include <vector>
 
+#include "codecs/bc_layout.h"
 #include "codecs/encode.h"
 
 namespace tessera::detail {
-
-inline constexpr uint32_t kBcBlockSidePx = 4;
-/// Bytes of one 4x4 block: 8 for BC1, 16 for BC7.
-constexpr size_t bcBlockBytes(Codec codec) {
-  return codec == Codec::kBc1 ? 8 : 16;
-}
-/// Blocks along a side of `side_px` texels (the padded side over 4).
-constexpr uint32_t bcBlocksAlong(uint32_t side_px) {
-  return (side_px + kBcBlockSidePx - 1) / kBcBlockSidePx;
-}
-/// The payload size of a `width_px` x `height_px` tile.
-constexpr size_t bcPayloadBytes(Codec codec, uint32_t width_px, uint32_t height_px) {
-  return size_t(bcBlocksAlong(width_px)) * bcBlocksAlong(height_px) * bcBlockBytes(codec);
-}
 
 /// Decodes one BC1 block into 16 RGBA texels, row-major (`rgba` holds 64 bytes).
 void decodeBc1Block(const uint8_t* block, uint8_t* rgba);
