@@ -23,6 +23,7 @@
 #include "support/archive_fixture.h"
 #include "support/nginx_server.h"
 #include "support/reference_pyramid.h"
+#include "support/sanitizers.h"
 #include "support/test_images.h"
 #include "run_program.h"
 
@@ -847,24 +848,17 @@ TEST_F(Cli, ViewUnderXvfbDrawsFramesAndWritesAScreenshot) {
   if (xvfb_run.empty()) GTEST_SKIP() << "xvfb-run is not installed (apt-get install xvfb)";
   const std::string archive = work_ + "v.tess";
   ASSERT_EQ(run({"build", "synthetic:1000x700", "-o", archive, "--tile", "64", "-q"}).exit_code, 0);
-  // LeakSanitizer's exit-time scan stops every thread, and its tracer has crashed (signal 11,
-  // exit 134) while X and llvmpipe threads wound down: the window's leak check is left off.
-  std::vector<std::string> env = {"ASAN_OPTIONS=detect_leaks=0"};
-  for (char** entry = environ; *entry; ++entry) {
-    const std::string text = *entry;
-    if (text.rfind("ASAN_OPTIONS=", 0) == 0)
-      env[0] = text + ":detect_leaks=0";  // the last setting of a flag wins
-    else
-      env.push_back(text);
-  }
+  // Each window runs as `env ASAN_OPTIONS=...:detect_leaks=0 tessera view` (support/sanitizers.h).
+  const std::string no_leak_check = test::asanOptionsWithoutLeakCheck();
   for (const char* renderer : {"tile-quads", "clipmap"}) {
     const std::string shots = work_ + renderer;
     std::filesystem::create_directories(shots);
-    RunResult result = runProgram(
-        xvfb_run,
-        {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive, "--renderer",
-         renderer, "--size", "320x240", "--frames", "30", "--screenshot-dir", shots},
-        logs_, &env);
+    RunResult result =
+        runProgram(xvfb_run,
+                   {"-a", "-s", "-screen 0 1024x768x24", "env", no_leak_check, TESSERA_CLI_PATH,
+                    "view", archive, "--renderer", renderer, "--size", "320x240", "--frames", "30",
+                    "--screenshot-dir", shots},
+                   logs_);
     ASSERT_EQ(result.exit_code, 0) << renderer << ": " << result.err;
     const std::string shot = shots + "/tessera-screenshot-1.png";
     ASSERT_TRUE(std::filesystem::exists(shot)) << renderer << ": " << result.err;
@@ -889,9 +883,9 @@ TEST_F(Cli, ViewUnderXvfbDrawsFramesAndWritesAScreenshot) {
     std::filesystem::create_directories(overlaid);
     RunResult with_overlays =
         runProgram(xvfb_run,
-                   {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive,
-                    "--renderer", renderer, "--size", "320x240", "--frames", "30", "--overlays",
-                    "levels,clip,grid", "--screenshot-dir", overlaid},
+                   {"-a", "-s", "-screen 0 1024x768x24", "env", no_leak_check, TESSERA_CLI_PATH,
+                    "view", archive, "--renderer", renderer, "--size", "320x240", "--frames", "30",
+                    "--overlays", "levels,clip,grid", "--screenshot-dir", overlaid},
                    logs_);
     ASSERT_EQ(with_overlays.exit_code, 0) << with_overlays.err;
     const std::string tinted = slurp(overlaid + "/tessera-screenshot-1.png");
@@ -906,9 +900,9 @@ TEST_F(Cli, ViewUnderXvfbDrawsFramesAndWritesAScreenshot) {
     EXPECT_GT(changed, picture.texels.size() / 4 / 4) << renderer << ": overlays not drawn";
     RunResult fly_over =
         runProgram(xvfb_run,
-                   {"-a", "-s", "-screen 0 1024x768x24", TESSERA_CLI_PATH, "view", archive,
-                    "--renderer", renderer, "--size", "320x240", "--frames", "20", "--perspective",
-                    "--screenshot-dir", overlaid},
+                   {"-a", "-s", "-screen 0 1024x768x24", "env", no_leak_check, TESSERA_CLI_PATH,
+                    "view", archive, "--renderer", renderer, "--size", "320x240", "--frames", "20",
+                    "--perspective", "--screenshot-dir", overlaid},
                    logs_);
     EXPECT_EQ(fly_over.exit_code, 0) << fly_over.err;
     EXPECT_TRUE(std::filesystem::exists(overlaid + "/tessera-screenshot-2.png"));

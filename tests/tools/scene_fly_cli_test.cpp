@@ -13,6 +13,8 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include "support/sanitizers.h"
+
 namespace tessera {
 namespace {
 
@@ -98,10 +100,11 @@ TEST_F(SceneCli, FlyNamesABadPathFileAndItsLine) {
 TEST_F(SceneCli, ViewUnderXvfbWritesAScreenshotWithOverlays) {
   if (shell("sh -c 'command -v xvfb-run' > /dev/null") != 0)
     GTEST_SKIP() << "xvfb-run is not installed";
-  ASSERT_EQ(shell(fmt::format("xvfb-run -a -s '-screen 0 640x480x24' '{}' view '{}' --size "
-                              "160x120 --frames 10 --overlays levels,nodes --screenshot-dir '{}' "
-                              "2> /dev/null",
-                              TESSERA_CLI_PATH, city_, dir_.string())),
+  ASSERT_EQ(shell(fmt::format(
+                "xvfb-run -a -s '-screen 0 640x480x24' env '{}' '{}' view '{}' --size "
+                "160x120 --frames 10 --overlays levels,nodes --screenshot-dir '{}' "
+                "2> /dev/null",
+                test::asanOptionsWithoutLeakCheck(), TESSERA_CLI_PATH, city_, dir_.string())),
             0);
   const std::string png = slurp(dir_ / "tessera-screenshot-1.png");
   ASSERT_GT(png.size(), 8u);

@@ -16,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include "support/sanitizers.h"
 #include "support/test_images.h"
 
 extern char** environ;
@@ -94,8 +95,9 @@ TEST(ViewPanel, CoversAtMostAnEighthOfTheWindowUnderXvfb) {
           .first,
       0);
   const auto [code, err] =
-      run({xvfb_run, "-a", "-s", "-screen 0 1600x900x24", TESSERA_CLI_PATH, "view", archive,
-           "--size", "1280x720", "--frames", "30", "--screenshot-dir", dir},
+      run({xvfb_run, "-a", "-s", "-screen 0 1600x900x24", "env",
+           test::asanOptionsWithoutLeakCheck(), TESSERA_CLI_PATH, "view", archive, "--size",
+           "1280x720", "--frames", "30", "--screenshot-dir", dir},
           dir + "log");
   ASSERT_EQ(code, 0) << err;
   float x = 0, y = 0, w = 0, h = 0;
