@@ -385,6 +385,9 @@ class AdaptiveStreamerTest : public testing::Test {
     ASSERT_TRUE(archive_);
     test::warmDirectory(*archive_);
     options_.loader_threads = 1;
+    // No helper threads: under load the default's helpers rescue a starving idle worker and
+    // take a second tile to the gate, so "the blocked read" would not be one read.
+    options_.loader_priority = LoaderPriority::kNice;
     options_.max_merged_read_bytes = 0;  // one tile per read: the blocked read is one tile
     options_.read_ahead_bytes = 0;
     options_.residency.prefetch = false;
