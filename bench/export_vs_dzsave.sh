@@ -33,13 +33,18 @@ archive=$dir/input-$size.tess
 [[ -f $input ]] || "$make_tiff" "$input" "${size}x${size}" --channels 3 --tile 256 >/dev/null
 [[ -f $archive ]] || "$tessera" build "$input" -o "$archive" --codec jpeg --quality 85 --quiet
 
-# seconds CMD...: wall time of one run, outputs removed before it.
+# seconds CMD...: wall time of one run, outputs removed before it; nan (and the command on
+# stderr) when it fails, so a failed export never shows as a fast one.
 seconds() {
   rm -rf "$dir"/out*
   sync
   local start end
   start=$(date +%s.%N)
-  "$@" >/dev/null 2>&1
+  if ! "$@" >/dev/null 2>&1; then
+    echo "export_vs_dzsave: failed: $*" >&2
+    echo nan
+    return
+  fi
   end=$(date +%s.%N)
   echo "$end - $start" | bc -l
 }
