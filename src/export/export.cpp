@@ -50,18 +50,31 @@ std::optional<ExportFormat> parseExportFormat(std::string_view text) {
   return std::nullopt;
 }
 
+const char* exportFormatName(ExportFormat format) {
+  switch (format) {
+    case ExportFormat::kDeepZoom: return "Deep Zoom";
+    case ExportFormat::kPmtiles: return "PMTiles";
+    case ExportFormat::kMbtiles: return "MBTiles";
+    case ExportFormat::kTiff: return "TIFF";
+  }
+  return "unknown";
+}
+
 Result<ExportReport> exportArchive(const Archive& archive, const std::string& out_path,
                                    const ExportOptions& options) {
   if (options.image >= archive.images().size())
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}: no image {} (the archive has {})", archive.name(), options.image,
                             archive.images().size()));
-  // Every target here stores 8-bit tiles; wide samples would need a window chosen by the user.
-  if (const SampleType type = archive.images()[options.image].sample_type; type != SampleType::kU8)
+  // Deep Zoom, PMTiles and MBTiles tiles are JPEG or PNG pictures for viewers and maps: 8-bit,
+  // and wide samples would need a window chosen by the user. The TIFF keeps them as they are.
+  if (const SampleType type = archive.images()[options.image].sample_type;
+      type != SampleType::kU8 && options.format != ExportFormat::kTiff)
     return fail(ErrorCode::kUnsupported,
-                fmt::format("{}: image {} has {} samples; export writes 8-bit tiles only (read "
-                            "the samples with `tessera extract` or Python instead)",
-                            archive.name(), options.image, sampleTypeName(type)));
+                fmt::format("{}: image {} has {} samples, and {} tiles hold 8-bit samples only; "
+                            "`--to tiff` exports them as they are",
+                            archive.name(), options.image, sampleTypeName(type),
+                            exportFormatName(options.format)));
   switch (options.format) {
     case ExportFormat::kDeepZoom: return exportDeepZoom(archive, out_path, options);
     case ExportFormat::kPmtiles: return exportPmtiles(archive, out_path, options);

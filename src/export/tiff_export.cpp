@@ -2,14 +2,18 @@
 // in the first directory, each coarser level in the next one (a reduced-resolution image),
 // tiles the archive's tile size. Tessera's levels are padded to whole tiles exactly as TIFF's
 // are, so a JPEG archive without border has its payloads written as they are, edge tiles
-// included (TIFF readers ignore the padding); other archives are decoded and stored with
-// Deflate and the horizontal predictor, losslessly. A GeoTIFF source's georeference, kept in the
-// archive's metadata, goes back on level 0's directory.
+// included (TIFF readers ignore the padding); other 8-bit archives are decoded and stored with
+// Deflate and the horizontal predictor, losslessly. u16 and f32 images keep their samples: a
+// zstd payload is a TIFF ZSTD tile byte for byte and is copied, anything else is decoded and
+// compressed again by libtiff. A GeoTIFF source's georeference, kept in the archive's metadata,
+// goes back on level 0's directory.
 #include <tiffio.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <filesystem>
 #include <memory>
+#include <span>
 
 #include <fmt/format.h>
 #include <nlohmann/json.hpp>
@@ -49,18 +53,64 @@ Sampling jpegSampling(std::span<const uint8_t> bytes) {
   return {};
 }
 
-// How a level's tiles are stored: JPEG payloads as they are, or decoded texels with Deflate.
+// How the image's tiles are compressed in the TIFF, the same for every level.
+struct TiffEncoding {
+  uint16_t compression = COMPRESSION_ADOBE_DEFLATE;
+  uint16_t predictor = PREDICTOR_HORIZONTAL;  ///< unused with JPEG
+  bool copy_jpeg = false;  ///< JPEG payloads are written as they are, the rest encoded as JPEG
+  bool copy_zstd = false;  ///< zstd payloads are written as they are, the rest through libtiff
+  const char* name = "deflate";  ///< for the report
+};
+
+TiffEncoding chooseEncoding(const ImageInfo& info) {
+  TiffEncoding encoding;
+  if (info.sample_type == SampleType::kU8) {
+    if (info.default_codec == Codec::kJpeg && info.border_px == 0 &&
+        (info.channels == 1 || info.channels == 3)) {
+      encoding.compression = COMPRESSION_JPEG;
+      encoding.copy_jpeg = true;
+      encoding.name = "jpeg";
+    }
+    return encoding;
+  }
+  // Tessera's zstd payload is one frame of the tile's packed little-endian samples, channels
+  // interleaved: what a TIFF ZSTD tile of a little-endian file decompresses to when the
+  // predictor is none. The predictor is per directory, so it is left out whenever payloads
+  // are copied; otherwise libtiff's own predictor for the type helps the compression.
+  encoding.predictor =
+      info.sample_type == SampleType::kF32 ? PREDICTOR_FLOATINGPOINT : PREDICTOR_HORIZONTAL;
+  if (TIFFIsCODECConfigured(COMPRESSION_ZSTD)) {
+    encoding.compression = COMPRESSION_ZSTD;
+    encoding.name = "zstd";
+    if (info.default_codec == Codec::kZstd && info.border_px == 0) {
+      encoding.copy_zstd = true;
+      encoding.predictor = PREDICTOR_NONE;
+    }
+  }
+  return encoding;
+}
+
+// Whether `payload` is exactly one zstd frame declaring `tile_bytes` of content, the checks
+// the archive's zstd decoder makes before it decompresses: a TIFF reader then gets the texels.
+bool isWholeZstdFrame(std::span<const uint8_t> payload, size_t tile_bytes) {
+  const unsigned long long content = ZSTD_getFrameContentSize(payload.data(), payload.size());
+  if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
+      content != tile_bytes)
+    return false;
+  const size_t frame_bytes = ZSTD_findFrameCompressedSize(payload.data(), payload.size());
+  return !ZSTD_isError(frame_bytes) && frame_bytes == payload.size();
+}
+
 struct LevelPlan {
-  bool copy_jpeg = false;
-  Sampling sampling{2, 2};
+  TiffEncoding encoding;
+  Sampling sampling{2, 2};  ///< of the JPEG tiles, when they are copied
 };
 
 Result<LevelPlan> planLevel(const Archive& archive, const ImageInfo& info, uint32_t image,
                             uint32_t level) {
   LevelPlan plan;
-  plan.copy_jpeg = info.default_codec == Codec::kJpeg && info.border_px == 0 &&
-                   (info.channels == 1 || info.channels == 3);
-  if (!plan.copy_jpeg || info.channels == 1) return plan;
+  plan.encoding = chooseEncoding(info);
+  if (!plan.encoding.copy_jpeg || info.channels == 1) return plan;
   // The file states one subsampling per level: that of the first stored JPEG payload.
   for (uint32_t y = 0; y < info.tilesY(level); ++y) {
     for (uint32_t x = 0; x < info.tilesX(level); ++x) {
@@ -82,12 +132,15 @@ void setLevelTags(TIFF* tiff, const ImageInfo& info, uint32_t level, const Level
   TIFFSetField(tiff, TIFFTAG_IMAGELENGTH, info.levelHeightPx(level));
   TIFFSetField(tiff, TIFFTAG_TILEWIDTH, info.tile_size_px);
   TIFFSetField(tiff, TIFFTAG_TILELENGTH, info.tile_size_px);
-  TIFFSetField(tiff, TIFFTAG_BITSPERSAMPLE, 8);
+  TIFFSetField(tiff, TIFFTAG_BITSPERSAMPLE, 8 * sampleBytes(info.sample_type));
+  if (info.sample_type != SampleType::kU8)
+    TIFFSetField(tiff, TIFFTAG_SAMPLEFORMAT,
+                 info.sample_type == SampleType::kF32 ? SAMPLEFORMAT_IEEEFP : SAMPLEFORMAT_UINT);
   TIFFSetField(tiff, TIFFTAG_SAMPLESPERPIXEL, info.channels);
   TIFFSetField(tiff, TIFFTAG_PLANARCONFIG, PLANARCONFIG_CONTIG);
   TIFFSetField(tiff, TIFFTAG_SOFTWARE, "tessera export");
   const bool color = info.channels >= 3;
-  if (plan.copy_jpeg) {
+  if (plan.encoding.copy_jpeg) {
     TIFFSetField(tiff, TIFFTAG_COMPRESSION, COMPRESSION_JPEG);
     // Each tile is a whole JPEG stream with its own tables.
     TIFFSetField(tiff, TIFFTAG_JPEGTABLESMODE, 0);
@@ -97,8 +150,8 @@ void setLevelTags(TIFF* tiff, const ImageInfo& info, uint32_t level, const Level
                    plan.sampling.vertical);
     return;
   }
-  TIFFSetField(tiff, TIFFTAG_COMPRESSION, COMPRESSION_ADOBE_DEFLATE);
-  TIFFSetField(tiff, TIFFTAG_PREDICTOR, PREDICTOR_HORIZONTAL);
+  TIFFSetField(tiff, TIFFTAG_COMPRESSION, plan.encoding.compression);
+  TIFFSetField(tiff, TIFFTAG_PREDICTOR, plan.encoding.predictor);
   TIFFSetField(tiff, TIFFTAG_PHOTOMETRIC, color ? PHOTOMETRIC_RGB : PHOTOMETRIC_MINISBLACK);
   if (info.channels == 2 || info.channels == 4) {
     const uint16_t alpha = EXTRASAMPLE_UNASSALPHA;
@@ -196,35 +249,43 @@ namespace {
 // The tile's texels without the archive's border, tile_size square.
 Image withoutBorder(const Image& stored, const ImageInfo& info) {
   if (info.border_px == 0) return stored;
-  Image out(info.tile_size_px, info.tile_size_px, stored.channels);
-  const size_t row_bytes = size_t(info.tile_size_px) * stored.channels;
+  Image out(info.tile_size_px, info.tile_size_px, stored.channels, stored.sample_type);
+  const size_t row_bytes = size_t(info.tile_size_px) * stored.texelBytes();
   for (uint32_t y = 0; y < info.tile_size_px; ++y)
-    std::copy_n(stored.row(y + info.border_px) + size_t(info.border_px) * stored.channels,
+    std::copy_n(stored.row(y + info.border_px) + size_t(info.border_px) * stored.texelBytes(),
                 row_bytes, out.row(y));
   return out;
 }
 
-// One tile's bytes as the level stores them, and whether they are the payload as stored.
-Result<std::pair<std::vector<uint8_t>, bool>> tileBytes(const Archive& archive,
-                                                        const ImageInfo& info, const TileId& tile,
-                                                        const LevelPlan& plan, int quality) {
+// One tile's bytes for the TIFF: either the payload as stored, already compressed as the
+// directory says (written raw), or texels for libtiff to compress.
+struct TiffTile {
+  std::vector<uint8_t> bytes;
+  bool compressed = false;  ///< `bytes` are compressed already (written raw)
+  bool copied = false;      ///< `bytes` are the stored payload
+};
+
+Result<TiffTile> tileBytes(const Archive& archive, const ImageInfo& info, const TileId& tile,
+                           const LevelPlan& plan, int quality) {
   TESSERA_ASSIGN_OR_RETURN(TileEntry entry, archive.tileEntry(tile));
   std::vector<uint8_t> payload;
   if (entry.kind == TileKind::kEncoded) {
     TESSERA_ASSIGN_OR_RETURN(payload, archive.readPayload(tile, entry));
-    if (plan.copy_jpeg && entry.codec == Codec::kJpeg &&
-        (info.channels == 1 || jpegSampling(payload) == plan.sampling))
-      return std::pair{std::move(payload), true};
+    const bool copy_jpeg = plan.encoding.copy_jpeg && entry.codec == Codec::kJpeg &&
+                           (info.channels == 1 || jpegSampling(payload) == plan.sampling);
+    const bool copy_zstd = plan.encoding.copy_zstd && entry.codec == Codec::kZstd &&
+                           isWholeZstdFrame(payload, info.storedTileBytes());
+    if (copy_jpeg || copy_zstd) return TiffTile{std::move(payload), true, true};
   }
   TESSERA_ASSIGN_OR_RETURN(Image stored, archive.decodeTile(tile, entry, payload));
   Image texels = withoutBorder(stored, info);
-  if (!plan.copy_jpeg) return std::pair{std::move(texels.texels), false};
+  if (!plan.encoding.copy_jpeg) return TiffTile{std::move(texels.texels), false, false};
   EncodeOptions options;
   options.quality = quality;
   options.chroma_subsampling = plan.sampling.horizontal == 2;
   TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> encoded,
                            encodeTile(Codec::kJpeg, texels.view(), options));
-  return std::pair{std::move(encoded), false};
+  return TiffTile{std::move(encoded), true, false};
 }
 
 Result<void> writeLevel(TIFF* tiff, const std::string& path, const Archive& archive,
@@ -240,18 +301,18 @@ Result<void> writeLevel(TIFF* tiff, const std::string& path, const Archive& arch
   for (uint32_t y = 0; y < info.tilesY(level); ++y) {
     for (uint32_t x = 0; x < info.tilesX(level); ++x) {
       const TileId tile{options.image, level, x, y};
-      TESSERA_ASSIGN_OR_RETURN(auto bytes,
+      TESSERA_ASSIGN_OR_RETURN(TiffTile bytes,
                                tileBytes(archive, info, tile, plan, options.jpeg_quality));
       const uint32_t index =
           TIFFComputeTile(tiff, x * info.tile_size_px, y * info.tile_size_px, 0, 0);
       const tmsize_t written =
-          plan.copy_jpeg
-              ? TIFFWriteRawTile(tiff, index, bytes.first.data(), tmsize_t(bytes.first.size()))
-              : TIFFWriteEncodedTile(tiff, index, bytes.first.data(), tmsize_t(bytes.first.size()));
+          bytes.compressed
+              ? TIFFWriteRawTile(tiff, index, bytes.bytes.data(), tmsize_t(bytes.bytes.size()))
+              : TIFFWriteEncodedTile(tiff, index, bytes.bytes.data(), tmsize_t(bytes.bytes.size()));
       if (written < 0)
         return fail(ErrorCode::kIo,
                     fmt::format("{}: writing {} failed", path, archive.tileName(tile)));
-      report.tiles_copied += bytes.second ? 1 : 0;
+      report.tiles_copied += bytes.copied ? 1 : 0;
       ++report.tiles;
       if (options.on_progress) options.on_progress(report.tiles, total);
     }
@@ -271,13 +332,11 @@ Result<ExportReport> exportTiff(const Archive& archive, const std::string& out_p
   for (uint32_t level = 0; level < info.level_count; ++level)
     total += uint64_t(info.tilesX(level)) * info.tilesY(level);
   ExportReport report;
-  report.tile_format = info.default_codec == Codec::kJpeg && info.border_px == 0 &&
-                               (info.channels == 1 || info.channels == 3)
-                           ? "jpeg"
-                           : "deflate";
+  report.tile_format = chooseEncoding(info).name;
   registerGeoTiffTags();
   const auto write = [&](const std::string& partial) -> Result<void> {
-    TiffFile tiff(TIFFOpen(partial.c_str(), "w8"));
+    // Little-endian whatever the host: copied zstd payloads hold little-endian samples.
+    TiffFile tiff(TIFFOpen(partial.c_str(), "w8l"));
     if (!tiff) return fail(ErrorCode::kIo, fmt::format("{}: cannot create", partial));
     for (uint32_t level = 0; level < info.level_count; ++level)
       TESSERA_TRY(writeLevel(tiff.get(), out_path, archive, options, level, report, total));

@@ -16,12 +16,14 @@ namespace tessera::test {
 /// Sample c of texel (x, y), converted to the archive's type as it is stored (u16 truncated).
 using SampleFunction = std::function<double(uint32_t x, uint32_t y, uint32_t c)>;
 
-/// Builds `path` (zstd, `tile_size_px` tiles) from `sample` and opens it; fails the test and
-/// returns null on error.
+/// Builds `path` (`codec`, `tile_size_px` tiles, `border_px`) from `sample` and opens it; fails
+/// the test and returns null on error.
 inline std::shared_ptr<Archive> buildWideArchive(const std::string& path, uint32_t width_px,
                                                  uint32_t height_px, uint32_t channels,
                                                  SampleType type, const SampleFunction& sample,
-                                                 uint32_t tile_size_px = 64) {
+                                                 uint32_t tile_size_px = 64,
+                                                 Codec codec = Codec::kZstd,
+                                                 uint32_t border_px = 0) {
   RowSource source;
   source.name = "wide";
   source.width_px = width_px;
@@ -48,7 +50,8 @@ inline std::shared_ptr<Archive> buildWideArchive(const std::string& path, uint32
   options.row_sources = {source};
   options.output = path;
   options.tile_size_px = tile_size_px;
-  options.codec = Codec::kZstd;
+  options.codec = codec;
+  options.border_px = border_px;
   auto report = buildArchive(options);
   EXPECT_TRUE(report) << report.error().message;
   if (!report) return nullptr;

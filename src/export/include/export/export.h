@@ -22,6 +22,9 @@ enum class ExportFormat : uint8_t { kDeepZoom, kPmtiles, kMbtiles, kTiff };
 /// "dzi" (or "deepzoom"), "pmtiles", "mbtiles", "tiff" (or "tif"); nullopt for anything else.
 std::optional<ExportFormat> parseExportFormat(std::string_view text);
 
+/// The target's name for messages: "Deep Zoom", "PMTiles", "MBTiles" or "TIFF".
+const char* exportFormatName(ExportFormat format);
+
 struct ExportOptions {
   ExportFormat format = ExportFormat::kDeepZoom;
   uint32_t image = 0;     ///< which image of the archive
@@ -40,7 +43,7 @@ struct ExportReport {
   /// Deep Zoom size) and shared.
   uint64_t tiles_uniform = 0;
   uint64_t bytes = 0;       ///< bytes of the output (folder: every file)
-  std::string tile_format;  ///< "jpg" or "png"
+  std::string tile_format;  ///< "jpg" or "png"; TIFF: "jpeg", "deflate" or "zstd"
   /// TIFF: the source's GeoTIFF tags were written back (docs/export.md).
   bool georeferenced = false;
   /// What was exported differently from what the archive holds, one line each (for example a
@@ -52,7 +55,9 @@ struct ExportReport {
 /// a PMTiles, MBTiles or TIFF file is renamed into place, a Deep Zoom folder `NAME_files` is
 /// written under a temporary name and renamed before `NAME.dzi` is committed. `out_path`
 /// must end in ".dzi" for Deep Zoom; an existing `NAME_files` is refused (never merged).
-/// Errors name the output and the tile.
+/// Errors name the output and the tile. An image of u16 or f32 samples goes to TIFF only,
+/// samples kept as they are; the other targets refuse it with kUnsupported naming the image and
+/// its sample type.
 [[nodiscard]] Result<ExportReport> exportArchive(const Archive& archive,
                                                  const std::string& out_path,
                                                  const ExportOptions& options);
