@@ -1,9 +1,13 @@
 // Exports read back by the tools people will open them with: GDAL (`gdalinfo -json`) for the
-// pyramidal GeoTIFF and MBTiles, libvips (`vips copy`) for the TIFF's levels. Each test skips,
-// saying so, where the tool is not installed (scripts/install-deps.sh installs both).
+// pyramidal GeoTIFF and MBTiles, libvips (`vips copy`, `vips rawsave`) for the TIFF's levels,
+// 8-bit and wide. Each test skips, saying so, where the tool is not installed
+// (scripts/install-deps.sh installs both).
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <limits>
 
 #include <gtest/gtest.h>
 #include <fmt/format.h>
@@ -15,6 +19,7 @@
 #include "export/export.h"
 #include "support/archive_fixture.h"
 #include "support/test_images.h"
+#include "support/wide_archive.h"
 
 namespace tessera::detail {
 namespace {
@@ -125,6 +130,56 @@ TEST_F(IndependentReaders, VipsReadsEveryTiffLevelAsTheArchiveHoldsIt) {
     // The same JPEG payloads through libvips' libjpeg path and Tessera's TurboJPEG one.
     EXPECT_LE(worst, 2) << "level " << level;
   }
+}
+
+// u16 gray and f32 RGB (with NaN, infinities and -0) exported to TIFF: GDAL sees the sample type
+// and every level as an overview; vips writes each level's samples raw (its own libtiff
+// reading, no conversion), and they are the archive's bit for bit.
+TEST(IndependentWideReaders, GdalAndVipsTakeTheWideTiffsSamplesAsTheArchiveHoldsThem) {
+  const bool gdal = onPath("gdalinfo"), vips = onPath("vips");
+  if (!gdal && !vips) GTEST_SKIP() << "neither gdalinfo nor vips installed";
+  const std::string dir = test::testTempDir() + "/export-readers-wide/";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  for (const auto& [type, channels] : {std::pair{SampleType::kU16, 1u}, {SampleType::kF32, 3u}}) {
+    SCOPED_TRACE(sampleTypeName(type));
+    std::shared_ptr<Archive> archive = test::buildWideArchive(
+        dir + "wide.tess", 150, 100, channels, type, [&](uint32_t x, uint32_t y, uint32_t c) {
+          if (type == SampleType::kU16) return double((x * 389 + y * 1201 + c) % 65536);
+          switch ((x + 3 * y + c) % 9) {
+            case 0: return std::numeric_limits<double>::quiet_NaN();
+            case 1: return -std::numeric_limits<double>::infinity();
+            case 2: return -0.0;
+            default: return x * 0.25 - y * 3.5;
+          }
+        });
+    ASSERT_TRUE(archive);
+    ExportOptions options;
+    options.format = ExportFormat::kTiff;
+    const std::string tif = dir + "wide.tif";
+    Result<ExportReport> report = exportArchive(*archive, tif, options);
+    ASSERT_TRUE(report) << report.error().message;
+    const ImageInfo& image = archive->images()[0];
+    if (gdal) {
+      const nlohmann::json info = nlohmann::json::parse(run("gdalinfo -json " + tif));
+      ASSERT_EQ(info["bands"].size(), channels);
+      EXPECT_EQ(info["bands"][0]["type"], type == SampleType::kU16 ? "UInt16" : "Float32");
+      EXPECT_EQ(info["bands"][0]["overviews"].size(), image.level_count - 1);
+    }
+    for (uint32_t level = 0; vips && level < image.level_count; ++level) {
+      const std::string raw = fmt::format("{}level{}.raw", dir, level);
+      run(fmt::format("vips rawsave '{}[page={}]' {}", tif, level, raw));
+      std::ifstream file(raw, std::ios::binary);
+      const std::vector<uint8_t> read{std::istreambuf_iterator<char>(file), {}};
+      Result<Image> expected = archive->readRegion(
+          0, level, {0, 0, image.levelWidthPx(level), image.levelHeightPx(level)});
+      ASSERT_TRUE(expected) << expected.error().message;
+      EXPECT_TRUE(read == expected->texels)
+          << "level " << level << ": vips gave " << read.size() << " bytes, the archive holds "
+          << expected->texels.size();
+    }
+  }
+  fs::remove_all(dir);
 }
 
 }  // namespace
