@@ -127,6 +127,24 @@ std::string tiffText(TIFF* tiff, uint32_t tag) {
   return text;
 }
 
+// The GeoTIFF tags of `geo` on the first directory of `path`, read through libtiff, and none on
+// the first overview.
+void expectGeoTagsOnTheFirstDirectoryOnly(const std::string& path, const test::GeoTags& geo) {
+  registerGeoTiffTags();
+  TIFF* tiff = TIFFOpen(path.c_str(), "r");
+  ASSERT_NE(tiff, nullptr);
+  EXPECT_EQ(tiffArray<double>(tiff, kTagModelPixelScale), geo.model_pixel_scale);
+  EXPECT_EQ(tiffArray<double>(tiff, kTagModelTiepoint), geo.model_tiepoint);
+  EXPECT_EQ(tiffArray<uint16_t>(tiff, kTagGeoKeyDirectory), geo.geo_key_directory);
+  EXPECT_EQ(tiffArray<double>(tiff, kTagGeoDoubleParams), geo.geo_double_params);
+  EXPECT_EQ(tiffText(tiff, kTagGeoAsciiParams), geo.geo_ascii_params);
+  EXPECT_EQ(tiffText(tiff, kTagGdalNodata), geo.gdal_nodata);
+  EXPECT_TRUE(tiffArray<double>(tiff, kTagModelTransformation).empty());
+  ASSERT_EQ(TIFFReadDirectory(tiff), 1);  // the first overview
+  EXPECT_TRUE(tiffArray<double>(tiff, kTagModelTiepoint).empty());
+  TIFFClose(tiff);
+}
+
 // A GeoTIFF's tags go into the archive's metadata at build, then back on the exported
 // TIFF's first directory (and on no overview).
 TEST_F(ExportContainerTest, TiffExportWritesTheSourcesGeoreferenceBack) {
@@ -155,19 +173,7 @@ TEST_F(ExportContainerTest, TiffExportWritesTheSourcesGeoreferenceBack) {
   EXPECT_TRUE(report->georeferenced);
   EXPECT_TRUE(report->warnings.empty());
 
-  registerGeoTiffTags();
-  TIFF* tiff = TIFFOpen((dir_ + "out.tif").c_str(), "r");
-  ASSERT_NE(tiff, nullptr);
-  EXPECT_EQ(tiffArray<double>(tiff, kTagModelPixelScale), spec.geo.model_pixel_scale);
-  EXPECT_EQ(tiffArray<double>(tiff, kTagModelTiepoint), spec.geo.model_tiepoint);
-  EXPECT_EQ(tiffArray<uint16_t>(tiff, kTagGeoKeyDirectory), spec.geo.geo_key_directory);
-  EXPECT_EQ(tiffArray<double>(tiff, kTagGeoDoubleParams), spec.geo.geo_double_params);
-  EXPECT_EQ(tiffText(tiff, kTagGeoAsciiParams), spec.geo.geo_ascii_params);
-  EXPECT_EQ(tiffText(tiff, kTagGdalNodata), spec.geo.gdal_nodata);
-  EXPECT_TRUE(tiffArray<double>(tiff, kTagModelTransformation).empty());
-  ASSERT_EQ(TIFFReadDirectory(tiff), 1);  // the first overview
-  EXPECT_TRUE(tiffArray<double>(tiff, kTagModelTiepoint).empty());
-  TIFFClose(tiff);
+  expectGeoTagsOnTheFirstDirectoryOnly(dir_ + "out.tif", spec.geo);
 
   // An archive built from a PNG has no georeference and exports none.
   BuildOptions plain;
@@ -178,6 +184,40 @@ TEST_F(ExportContainerTest, TiffExportWritesTheSourcesGeoreferenceBack) {
   Result<ExportReport> plain_report = exportArchive(*plain_archive, dir_ + "plain.tif", options);
   ASSERT_TRUE(plain_report) << plain_report.error().message;
   EXPECT_FALSE(plain_report->georeferenced);
+}
+
+// A float elevation model keeps its georeference and NoData through the wide (ZSTD) path too.
+TEST_F(ExportContainerTest, FloatTiffExportWritesTheSourcesGeoreferenceBack) {
+  test::TiffSpec spec{.width_px = 300, .height_px = 200, .samples = 1, .bits = 32};
+  spec.sample_format = SAMPLEFORMAT_IEEEFP;
+  spec.photometric = PHOTOMETRIC_MINISBLACK;
+  spec.geo.model_pixel_scale = {30.0, 30.0, 0.0};
+  spec.geo.model_tiepoint = {0, 0, 0, 300000.0, 5000000.0, 0};
+  spec.geo.geo_key_directory = {1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, 32632};
+  spec.geo.geo_double_params = {6378137.0, 298.257223563};
+  spec.geo.geo_ascii_params = "WGS 84 / UTM zone 32N|";
+  spec.geo.gdal_nodata = "-9999";
+  const std::string source = dir_ + "dem.tif";
+  ASSERT_EQ(test::writeTiff(source, spec, test::makeTestPixels(300, 200, 1, 2)), "");
+  BuildOptions build;
+  build.inputs = {source};
+  build.output = dir_ + "dem.tess";
+  build.codec = Codec::kZstd;
+  build.tile_size_px = 128;
+  Result<BuildReport> built = buildArchive(build);
+  ASSERT_TRUE(built) << built.error().message;
+  std::shared_ptr<Archive> archive = open(build.output);
+  ASSERT_TRUE(archive);
+  ASSERT_EQ(archive->images()[0].sample_type, SampleType::kF32);
+
+  ExportOptions options;
+  options.format = ExportFormat::kTiff;
+  Result<ExportReport> report = exportArchive(*archive, dir_ + "dem-out.tif", options);
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->tile_format, "zstd");
+  EXPECT_TRUE(report->georeferenced);
+  EXPECT_TRUE(report->warnings.empty());
+  expectGeoTagsOnTheFirstDirectoryOnly(dir_ + "dem-out.tif", spec.geo);
 }
 
 // Entries that do not hold what their tag does are left out, each named in a warning; the
