@@ -11,14 +11,19 @@
 #include <filesystem>
 #include <limits>
 #include <ostream>
+#include <span>
 
 #include <gtest/gtest.h>
 #include <fmt/format.h>
+#include <nlohmann/json.hpp>
 
 #include <tessera/archive.h>
 #include <tessera/build.h>
 
+#include "builder/archive_writer.h"
+#include "codecs/encode.h"
 #include "export/export.h"
+#include "format/checksum.h"
 #include "support/test_images.h"
 #include "support/wide_archive.h"
 
@@ -88,6 +93,30 @@ std::vector<uint8_t> levelBytes(const Archive& archive, uint32_t level) {
   return region ? region->texels : std::vector<uint8_t>{};
 }
 
+// The current directory of `tiff`, read tile by tile through libtiff, holds `level` of the
+// archive's image 0 byte for byte.
+void expectDirectoryHoldsTheLevel(TIFF* tiff, const Archive& archive, uint32_t level) {
+  const ImageInfo& info = archive.images()[0];
+  const uint32_t texel_bytes = info.texelBytes();
+  const uint32_t width = info.levelWidthPx(level), height = info.levelHeightPx(level);
+  const std::vector<uint8_t> expected = levelBytes(archive, level);
+  ASSERT_EQ(expected.size(), size_t(width) * height * texel_bytes);
+  std::vector<uint8_t> tile(size_t(TIFFTileSize(tiff)));
+  ASSERT_EQ(tile.size(), size_t(kTile) * kTile * texel_bytes);
+  for (uint32_t ty = 0; ty < height; ty += kTile) {
+    for (uint32_t tx = 0; tx < width; tx += kTile) {
+      ASSERT_EQ(TIFFReadTile(tiff, tile.data(), tx, ty, 0, 0), tmsize_t(tile.size()))
+          << tx << "," << ty;
+      const size_t row_bytes = size_t(std::min(kTile, width - tx)) * texel_bytes;
+      for (uint32_t y = ty; y < std::min(height, ty + kTile); ++y)
+        ASSERT_EQ(std::memcmp(tile.data() + size_t(y - ty) * kTile * texel_bytes,
+                              expected.data() + (size_t(y) * width + tx) * texel_bytes, row_bytes),
+                  0)
+            << "tile at " << tx << "," << ty << ", row " << y;
+    }
+  }
+}
+
 TEST_P(WideTiffExport, TagsSayWhatTheSamplesAreAndLibtiffReadsThemBitForBit) {
   const WideCase& wide = GetParam();
   ExportOptions options;
@@ -102,7 +131,6 @@ TEST_P(WideTiffExport, TagsSayWhatTheSamplesAreAndLibtiffReadsThemBitForBit) {
 
   TIFF* tiff = TIFFOpen(out.c_str(), "r");
   ASSERT_NE(tiff, nullptr);
-  const uint32_t texel_bytes = info.texelBytes();
   uint32_t level = 0;
   do {
     ASSERT_LT(level, info.level_count);
@@ -134,23 +162,7 @@ TEST_P(WideTiffExport, TagsSayWhatTheSamplesAreAndLibtiffReadsThemBitForBit) {
       EXPECT_EQ(extra[0], EXTRASAMPLE_UNASSALPHA);
     }
 
-    const std::vector<uint8_t> expected = levelBytes(*archive_, level);
-    ASSERT_EQ(expected.size(), size_t(width) * height * texel_bytes);
-    std::vector<uint8_t> tile(size_t(TIFFTileSize(tiff)));
-    ASSERT_EQ(tile.size(), size_t(kTile) * kTile * texel_bytes);
-    for (uint32_t ty = 0; ty < height; ty += kTile) {
-      for (uint32_t tx = 0; tx < width; tx += kTile) {
-        ASSERT_EQ(TIFFReadTile(tiff, tile.data(), tx, ty, 0, 0), tmsize_t(tile.size()))
-            << tx << "," << ty;
-        const size_t row_bytes = size_t(std::min(kTile, width - tx)) * texel_bytes;
-        for (uint32_t y = ty; y < std::min(height, ty + kTile); ++y)
-          ASSERT_EQ(
-              std::memcmp(tile.data() + size_t(y - ty) * kTile * texel_bytes,
-                          expected.data() + (size_t(y) * width + tx) * texel_bytes, row_bytes),
-              0)
-              << "tile at " << tx << "," << ty << ", row " << y;
-      }
-    }
+    expectDirectoryHoldsTheLevel(tiff, *archive_, level);
     ++level;
   } while (TIFFReadDirectory(tiff));
   TIFFClose(tiff);
@@ -206,6 +218,84 @@ INSTANTIATE_TEST_SUITE_P(
                       WideCase{SampleType::kF32, 3, Codec::kZstd, 2, false, PREDICTOR_FLOATINGPOINT,
                                PHOTOMETRIC_RGB, "f32_rgb_zstd_border"}),
     [](const ::testing::TestParamInfo<WideCase>& param) { return std::string(param.param.name); });
+
+// A zstd image whose tiles are not all zstd (payloads written by another build, or empty
+// entries): the zstd ones are copied, the others decoded and compressed by libtiff in the same
+// ZSTD directory, and libtiff reads every level back as the archive holds it.
+TEST(WideTiffExportMixed, OtherCodecsAndEmptyTilesAmongCopiedOnesAreCompressedByLibtiff) {
+  const std::string dir = test::testTempDir() + "/wide-tiff-mixed/";
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  std::shared_ptr<Archive> source = test::buildWideArchive(
+      dir + "source.tess", kWidth, kHeight, 2, SampleType::kU16,
+      [](uint32_t x, uint32_t y, uint32_t c) { return wideSample(SampleType::kU16, x, y, c); },
+      kTile);
+  ASSERT_TRUE(source);
+  // The same tiles stored with zstd, raw, zdelta and as empty entries in turn.
+  SpooledImage spooled{source->images()[0], {}};
+  const ImageInfo& info = spooled.info;
+  std::vector<std::vector<uint8_t>> payloads;
+  uint32_t zstd_tiles = 0, turn = 0;
+  for (uint32_t level = 0; level < info.level_count; ++level) {
+    spooled.entries.emplace_back();
+    for (uint32_t y = 0; y < info.tilesY(level); ++y)
+      for (uint32_t x = 0; x < info.tilesX(level); ++x) {
+        SpoolEntry& entry = spooled.entries.back().emplace_back();
+        const Codec codecs[] = {Codec::kZstd, Codec::kRaw, Codec::kZdelta};
+        if (turn % 4 == 3) {
+          ++turn;
+          continue;  // empty
+        }
+        Result<Image> texels = source->readTile({0, level, x, y});
+        ASSERT_TRUE(texels) << texels.error().message;
+        entry.codec = codecs[turn++ % 4];
+        Result<std::vector<uint8_t>> payload = encodeTile(entry.codec, texels->view(), {});
+        ASSERT_TRUE(payload) << payload.error().message;
+        entry.kind = TileKind::kEncoded;
+        entry.length_bytes = uint32_t(payload->size());
+        entry.checksum = checksum64(*payload);
+        entry.spool_offset = payloads.size();
+        payloads.push_back(std::move(*payload));
+        zstd_tiles += entry.codec == Codec::kZstd ? 1 : 0;
+      }
+  }
+  const std::string mixed_path = dir + "mixed.tess";
+  {
+    Result<TempFile> out = TempFile::create(mixed_path);
+    ASSERT_TRUE(out) << out.error().message;
+    auto fetch = [&](const TileId&, const SpoolEntry& entry, std::span<uint8_t> bytes) {
+      std::copy(payloads[entry.spool_offset].begin(), payloads[entry.spool_offset].end(),
+                bytes.begin());
+      return Result<void>{};
+    };
+    Result<WrittenArchive> written =
+        writeArchive(fetch, std::span<const SpooledImage>(&spooled, 1), TileOrder::kRowMajor,
+                     nlohmann::json::parse(source->metadataJson()), *out);
+    ASSERT_TRUE(written) << written.error().message;
+    ASSERT_TRUE(out->commit());
+  }
+  auto mixed = Archive::openFile(mixed_path);
+  ASSERT_TRUE(mixed) << mixed.error().message;
+  ExportOptions options;
+  options.format = ExportFormat::kTiff;
+  Result<ExportReport> report = exportArchive(**mixed, dir + "mixed.tif", options);
+  ASSERT_TRUE(report) << report.error().message;
+  EXPECT_EQ(report->tiles, 9u);
+  EXPECT_EQ(report->tiles_copied, zstd_tiles);
+  EXPECT_GT(zstd_tiles, 0u);
+  EXPECT_LT(zstd_tiles, report->tiles);
+  TIFF* tiff = TIFFOpen((dir + "mixed.tif").c_str(), "r");
+  ASSERT_NE(tiff, nullptr);
+  uint32_t level = 0;
+  do {
+    SCOPED_TRACE(fmt::format("level {}", level));
+    ASSERT_LT(level, info.level_count);
+    expectDirectoryHoldsTheLevel(tiff, **mixed, level++);
+  } while (TIFFReadDirectory(tiff));
+  TIFFClose(tiff);
+  EXPECT_EQ(level, info.level_count);
+  fs::remove_all(dir);
+}
 
 // Deep Zoom, PMTiles and MBTiles tiles are 8-bit pictures: a wide image is refused naming the
 // image, its sample type and the target that does take it, and nothing is written.
