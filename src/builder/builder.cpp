@@ -25,6 +25,7 @@
 #include "tile_cutter.h"
 #include "worker_pool.h"
 #include "format/checksum.h"
+#include "codecs/decode.h"
 #include "codecs/encode.h"
 #include "format/header.h"
 
@@ -530,13 +531,13 @@ Result<void> submitPaddedTile(const ImageInfo& info, uint32_t level, uint32_t x,
       std::min(info.tile_size_px, info.levelWidthPx(level) - x * info.tile_size_px);
   const uint32_t height =
       std::min(info.tile_size_px, info.levelHeightPx(level) - y * info.tile_size_px);
+  const uint32_t c = info.texelBytes();
   if (tile.width_px != width || tile.height_px != height ||
-      tile.texels.size() != size_t(width) * height * info.channels)
+      tile.texels.size() != size_t(width) * height * c)
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: the source's tile is {}x{} px, not {}x{}", what, tile.width_px,
                             tile.height_px, width, height));
   auto buffer = stage.buffers.acquire();
-  const uint32_t c = info.channels;
   for (uint32_t row = 0; row < side; ++row) {
     const uint8_t* src = tile.texels.data() + size_t(std::min(row, height - 1)) * width * c;
     uint8_t* dst = buffer->data() + size_t(row) * side * c;
@@ -554,8 +555,23 @@ Result<void> submitPaddedTile(const ImageInfo& info, uint32_t level, uint32_t x,
   return {};
 }
 
+/// Puts a payload taken as the source stores it into the spool as `entry`'s.
+Result<void> spoolCopiedPayload(std::span<const uint8_t> payload, Codec codec, SpoolEntry& entry,
+                                WorkerSpool& copy_spool, EncodeStage& stage) {
+  entry.kind = TileKind::kEncoded;
+  entry.codec = codec;
+  entry.length_bytes = uint32_t(payload.size());
+  entry.checksum = checksum64(payload);
+  copy_spool.pending.push_back({&entry, copy_spool.chunk.size()});
+  copy_spool.chunk.insert(copy_spool.chunk.end(), payload.begin(), payload.end());
+  ++stage.context.tiles_copied;
+  if (copy_spool.chunk.size() >= kSpoolChunkBytes)
+    TESSERA_TRY(flushWorkerSpool(stage.context, copy_spool));
+  return {};
+}
+
 /// Copies archive level `level` tile for tile from the source's level `source_level`: whole
-/// JPEG payloads go to the spool as stored; other tiles are padded and encoded.
+/// JPEG and zstd payloads go to the spool as stored; other tiles are padded and encoded.
 Result<void> copyLevel(const std::string& source_name, const ImageInfo& info, uint32_t level,
                        PyramidSource& source, uint32_t source_level, SpooledImage& spooled,
                        WorkerSpool& copy_spool, EncodeStage& stage) {
@@ -568,20 +584,20 @@ Result<void> copyLevel(const std::string& source_name, const ImageInfo& info, ui
       std::string what = fmt::format("{}: tile ({},{},{})", source_name, level, x, y);
       TESSERA_ASSIGN_OR_RETURN(SourceTile tile, source.readTile(source_level, x, y));
       SpoolEntry& entry = entries[size_t(y) * info.tilesX(level) + x];
-      if (tile.jpeg.empty()) {
+      if (!tile.jpeg.empty()) {
+        TESSERA_TRY(checkJpegTile(tile.jpeg, info.storedTileSidePx(), info.channels, what));
+        TESSERA_TRY(spoolCopiedPayload(tile.jpeg, Codec::kJpeg, entry, copy_spool, stage));
+      } else if (!tile.zstd.empty()) {
+        // The source checked the frame; checked again here because a wrong size would only
+        // show when the tile is viewed.
+        if (!isWholeZstdFrame(tile.zstd, info.storedTileBytes()))
+          return fail(ErrorCode::kCorrupt,
+                      fmt::format("{}: stored zstd tile is not one frame of {} bytes", what,
+                                  info.storedTileBytes()));
+        TESSERA_TRY(spoolCopiedPayload(tile.zstd, Codec::kZstd, entry, copy_spool, stage));
+      } else {
         TESSERA_TRY(submitPaddedTile(info, level, x, y, std::move(tile), entry, stage, what));
-        continue;
       }
-      TESSERA_TRY(checkJpegTile(tile.jpeg, info.storedTileSidePx(), info.channels, what));
-      entry.kind = TileKind::kEncoded;
-      entry.codec = Codec::kJpeg;
-      entry.length_bytes = uint32_t(tile.jpeg.size());
-      entry.checksum = checksum64(tile.jpeg);
-      copy_spool.pending.push_back({&entry, copy_spool.chunk.size()});
-      copy_spool.chunk.insert(copy_spool.chunk.end(), tile.jpeg.begin(), tile.jpeg.end());
-      ++stage.context.tiles_copied;
-      if (copy_spool.chunk.size() >= kSpoolChunkBytes)
-        TESSERA_TRY(flushWorkerSpool(stage.context, copy_spool));
     }
     if (level == 0) {
       const uint32_t rows = std::min(info.tile_size_px, info.height_px - y * info.tile_size_px);

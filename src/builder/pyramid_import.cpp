@@ -70,12 +70,16 @@ ImportPlan planImport(const ImageInfo& info, const std::vector<SourceLevel>& lev
     }
   }
   matched[0] = 0;
-  const bool archive_takes_jpeg = info.default_codec == Codec::kJpeg && info.border_px == 0;
+  auto copyable = [&](const SourceLevel& level) {
+    if (info.border_px != 0 || level.tile_size_px != info.tile_size_px) return false;
+    if (info.default_codec == Codec::kJpeg) return level.jpeg_tiles;
+    return info.default_codec == Codec::kZstd && info.sample_type != SampleType::kU8 &&
+           level.zstd_tiles && level.zstd_sample_type == info.sample_type &&
+           level.zstd_channels == info.channels;
+  };
   for (uint32_t l = 0; l + 1 < info.level_count; ++l) {
     const int s = matched[l];
-    if (archive_takes_jpeg && s >= 0 && levels[s].jpeg_tiles &&
-        levels[s].tile_size_px == info.tile_size_px)
-      plan.copied_from[l] = s;
+    if (s >= 0 && copyable(levels[s])) plan.copied_from[l] = s;
   }
   // Each computed level joins the pass of the nearest finer matching level.
   for (uint32_t l = 0; l < info.level_count; ++l) {

@@ -26,12 +26,23 @@ struct SourceLevel {
   /// Tiles are (or become, with their tables spliced in) whole baseline JPEG streams of
   /// tile_size_px square in the source's channel layout (gray, or YCbCr decoding to RGB).
   bool jpeg_tiles = false;
+  /// Tiles are zstd-compressed tile_size_px squares of packed little-endian samples, channels
+  /// interleaved, with no predictor (a TIFF ZSTD tile): what the zstd codec stores for a
+  /// `zstd_sample_type` image of `zstd_channels` channels, once its frame is checked.
+  bool zstd_tiles = false;
+  SampleType zstd_sample_type = SampleType::kU8;
+  uint32_t zstd_channels = 0;
 };
 
-/// A stored tile as readTile returns it: a whole JPEG when it can be copied, otherwise the
-/// decoded texels of the tile's part of the level (an edge tile that the source crops).
+/// A stored tile as readTile returns it: a whole JPEG or zstd payload when it can be copied,
+/// otherwise the decoded texels of the tile's part of the level (an edge tile that the source
+/// crops, a zstd frame the archive's decoder would refuse, padding the archive would not have).
 struct SourceTile {
   std::vector<uint8_t> jpeg;  ///< complete JPEG stream (SOI..EOI); empty when texels are set
+  /// One zstd frame recording the whole stored tile's byte size (isWholeZstdFrame), padded
+  /// as the builder pads an edge tile; empty when jpeg or texels are set.
+  std::vector<uint8_t> zstd;
+  /// Packed rows in the source's channels and sample type (host byte order).
   std::vector<uint8_t> texels;
   uint32_t width_px = 0;   ///< of texels: the tile's part of the level
   uint32_t height_px = 0;  ///< of texels
@@ -45,8 +56,8 @@ class PyramidSource {
   virtual const SourceInfo& info() const = 0;
   /// Every level the source holds, finest first; levels()[0] is the full image.
   virtual const std::vector<SourceLevel>& levels() const = 0;
-  /// Tile (x, y) of a level with jpeg_tiles set. Fails naming the file and the tile when it is
-  /// missing, truncated or not what the level claims.
+  /// Tile (x, y) of a level with jpeg_tiles or zstd_tiles set. Fails naming the file and the tile
+  /// when it is missing, truncated or not what the level claims.
   [[nodiscard]] virtual Result<SourceTile> readTile(uint32_t level, uint32_t x, uint32_t y) = 0;
   /// A reader of a level's decoded rows, top to bottom, in info().channels.
   [[nodiscard]] virtual Result<std::unique_ptr<BandReader>> openLevel(uint32_t level) = 0;
@@ -79,10 +90,13 @@ struct ImportPlan {
 
 /// Plans an import into archive geometry `info` (level_count set): a source level matches an
 /// archive level when its size is the archive's ceil(w / 2^L) x ceil(h / 2^L); a match is
-/// copied when its tiles are JPEG of the archive's tile size and the archive is JPEG with no
-/// border. The coarsest level is always computed (its statistics go into the metadata); every
-/// computed level comes from the nearest finer matching level. Without `reuse_levels` (codecs
-/// that code a tile against its parent) the plan is one pass from level 0, as a plain build.
+/// copied when its tiles are of the archive's tile size, the archive has no border, and either
+/// they are JPEG and the archive is JPEG, or they are zstd of the archive's sample type (u16 or
+/// f32) and channels and the archive is zstd (8-bit zstd tiles are computed: the build marks
+/// uniform 8-bit tiles, which a copy would not). The coarsest level is always computed (its
+/// statistics go into the metadata); every computed level comes from the nearest finer matching
+/// level. Without `reuse_levels` (codecs that code a tile against its parent) the plan is one pass
+/// from level 0, as a plain build.
 ImportPlan planImport(const ImageInfo& info, const std::vector<SourceLevel>& levels,
                       bool reuse_levels);
 

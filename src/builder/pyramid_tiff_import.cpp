@@ -2,7 +2,9 @@
 // reduced levels either as its SubIFDs (vips tiffsave --subifd, many slide scanners) or as the
 // following directories marked reduced-resolution (COG, GDAL overviews, vips tiffsave
 // --pyramid). Raw JPEG tiles are read with TIFFReadRawTile and made whole by splicing the
-// directory's JPEGTables in; decoded rows come from the ordinary TIFF band reader.
+// directory's JPEGTables in; raw ZSTD tiles of u16 or f32 samples are the zstd codec's payload
+// (tessera export --to tiff writes them so); decoded rows come from the ordinary TIFF band
+// reader.
 
 #include <algorithm>
 #include <cmath>
@@ -14,6 +16,7 @@
 #include <tiffio.h>
 
 #include "builder/geotiff_tags.h"
+#include "codecs/decode.h"
 #include "file_reader.h"
 #include "pyramid_source.h"
 
@@ -74,6 +77,10 @@ class TiffPyramid final : public PyramidSource {
   }
   // The current directory's geometry and whether its tiles can be copied.
   TiffLevel describeDirectory(const TiffImageRef& image) const;
+  void describeZstdTiles(uint16_t compression, uint16_t photometric, uint16_t spp, uint16_t bits,
+                         uint16_t planar, TiffLevel& out) const;
+  Result<SourceTile> zstdTile(uint32_t level, uint32_t x, uint32_t y, uint32_t tile,
+                              std::vector<uint8_t> raw);
   Result<void> select(uint32_t level);
   Result<void> checkLevelsAgree() const;
 
@@ -109,6 +116,7 @@ TiffLevel TiffPyramid::describeDirectory(const TiffImageRef& image) const {
                          (spp == 1 && photometric == PHOTOMETRIC_MINISBLACK);
   out.level.jpeg_tiles = out.level.tile_size_px != 0 && compression == COMPRESSION_JPEG &&
                          bits == 8 && (planar == PLANARCONFIG_CONTIG || spp == 1) && colour_ok;
+  describeZstdTiles(compression, photometric, spp, bits, planar, out);
   uint32_t tables_bytes = 0;
   void* tables = nullptr;
   if (out.level.jpeg_tiles && TIFFGetField(tif_, TIFFTAG_JPEGTABLES, &tables_bytes, &tables) &&
@@ -117,6 +125,34 @@ TiffLevel TiffPyramid::describeDirectory(const TiffImageRef& image) const {
     out.jpeg_tables.assign(begin, begin + tables_bytes);
   }
   return out;
+}
+
+// A ZSTD tile is the zstd codec's payload when nothing but zstd stands between it and the
+// packed samples: no predictor, the file's byte order the archive's (little-endian), one plane,
+// and a photometric whose samples the band reader passes through unchanged.
+void TiffPyramid::describeZstdTiles(uint16_t compression, uint16_t photometric, uint16_t spp,
+                                    uint16_t bits, uint16_t planar, TiffLevel& out) const {
+  if (out.level.tile_size_px == 0 || compression != COMPRESSION_ZSTD || TIFFIsBigEndian(tif_) ||
+      (planar != PLANARCONFIG_CONTIG && spp != 1))
+    return;
+  const bool colour_ok = (photometric == PHOTOMETRIC_MINISBLACK && spp <= 2) ||
+                         (photometric == PHOTOMETRIC_RGB && (spp == 3 || spp == 4));
+  uint16_t predictor = PREDICTOR_NONE;
+  TIFFGetFieldDefaulted(tif_, TIFFTAG_PREDICTOR, &predictor);
+  uint16_t sample_format = 0;
+  if (!TIFFGetField(tif_, TIFFTAG_SAMPLEFORMAT, &sample_format))
+    sample_format = out.image.missing_sample_format ? out.image.missing_sample_format
+                                                    : uint16_t(SAMPLEFORMAT_UINT);
+  if (!colour_ok || predictor != PREDICTOR_NONE) return;
+  if (sample_format == SAMPLEFORMAT_UINT && bits == 16) {
+    out.level.zstd_sample_type = SampleType::kU16;
+  } else if (sample_format == SAMPLEFORMAT_IEEEFP && bits == 32) {
+    out.level.zstd_sample_type = SampleType::kF32;
+  } else {
+    return;
+  }
+  out.level.zstd_tiles = true;
+  out.level.zstd_channels = spp;
 }
 
 Result<bool> TiffPyramid::open() {
@@ -206,7 +242,8 @@ Result<SourceTile> TiffPyramid::readTile(uint32_t level, uint32_t x, uint32_t y)
     // A sparse tile (GDAL's SPARSE_OK) reads as zeros in libtiff; so it does here.
     out.width_px = std::min(side, geometry.width_px - x * side);
     out.height_px = std::min(side, geometry.height_px - y * side);
-    out.texels.assign(size_t(out.width_px) * out.height_px * info_.channels, 0);
+    out.texels.assign(
+        size_t(out.width_px) * out.height_px * info_.channels * sampleBytes(info_.sample_type), 0);
     return out;
   }
   if (bytes > kMaxRawTileBytes)
@@ -214,11 +251,66 @@ Result<SourceTile> TiffPyramid::readTile(uint32_t level, uint32_t x, uint32_t y)
   std::vector<uint8_t> raw(bytes);
   if (TIFFReadRawTile(tif_, tile, raw.data(), tmsize_t(bytes)) != tmsize_t(bytes))
     return failure(fmt::format("level {} tile ({},{}): short read", level, x, y));
+  if (geometry.zstd_tiles) return zstdTile(level, x, y, tile, std::move(raw));
   auto whole = completeTiffJpeg(tiff_levels_[level].jpeg_tables, raw);
   if (!whole)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: level {} tile ({},{}): {}", path_, level, x,
                                                  y, whole.error().message));
   out.jpeg = std::move(*whole);
+  return out;
+}
+
+// Whether the texels right of `width` and below `height` repeat the last column and row, as
+// the builder pads an edge tile (cutTile).
+bool paddedLikeTheBuilder(const Image& tile, uint32_t width, uint32_t height) {
+  const size_t texel = tile.texelBytes();
+  for (uint32_t y = 0; y < tile.height_px; ++y) {
+    const uint8_t* row = tile.row(y);
+    if (y >= height) {
+      if (std::memcmp(row, tile.row(height - 1), tile.strideBytes()) != 0) return false;
+      continue;
+    }
+    const uint8_t* last = row + (width - 1) * texel;
+    for (uint32_t x = width; x < tile.width_px; ++x)
+      if (std::memcmp(row + x * texel, last, texel) != 0) return false;
+  }
+  return true;
+}
+
+// The stored payload when the archive can keep it: one frame recording its size (libtiff's
+// own writer leaves the size out, so its tiles are decoded here) and, on the right and bottom
+// edges, padding the builder would have written (other writers pad with zeros). Anything else
+// comes back as the tile's texels for the builder to pad and encode.
+Result<SourceTile> TiffPyramid::zstdTile(uint32_t level, uint32_t x, uint32_t y, uint32_t tile,
+                                         std::vector<uint8_t> raw) {
+  const SourceLevel& geometry = levels_[level];
+  const uint32_t side = geometry.tile_size_px;
+  const uint32_t width = std::min(side, geometry.width_px - x * side);
+  const uint32_t height = std::min(side, geometry.height_px - y * side);
+  Image decoded(side, side, geometry.zstd_channels, geometry.zstd_sample_type);
+  SourceTile out;
+  if (isWholeZstdFrame(raw, decoded.texels.size())) {
+    if (width == side && height == side) {
+      out.zstd = std::move(raw);
+      return out;
+    }
+    if (Result<void> done = decodeTile(Codec::kZstd, raw, decoded); !done)
+      return failure(fmt::format("level {} tile ({},{}): {}", level, x, y, done.error().message));
+    if (paddedLikeTheBuilder(decoded, width, height)) {
+      out.zstd = std::move(raw);
+      return out;
+    }
+  } else if (TIFFReadEncodedTile(tif_, tile, decoded.texels.data(),
+                                 tmsize_t(decoded.texels.size())) !=
+             tmsize_t(decoded.texels.size())) {
+    return failure(fmt::format("level {} tile ({},{}) does not decode", level, x, y));
+  }
+  out.width_px = width;
+  out.height_px = height;
+  const size_t row_bytes = size_t(width) * decoded.texelBytes();
+  out.texels.resize(row_bytes * height);
+  for (uint32_t row = 0; row < height; ++row)
+    std::memcpy(out.texels.data() + row * row_bytes, decoded.row(row), row_bytes);
   return out;
 }
 

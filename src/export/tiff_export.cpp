@@ -8,7 +8,6 @@
 // compressed again by libtiff. A GeoTIFF source's georeference, kept in the archive's metadata,
 // goes back on level 0's directory.
 #include <tiffio.h>
-#include <zstd.h>
 
 #include <algorithm>
 #include <filesystem>
@@ -19,6 +18,7 @@
 #include <nlohmann/json.hpp>
 
 #include "builder/geotiff_tags.h"
+#include "codecs/decode.h"
 #include "codecs/encode.h"
 #include "export_writers.h"
 #include "serve/image_metadata.h"
@@ -88,17 +88,6 @@ TiffEncoding chooseEncoding(const ImageInfo& info) {
     }
   }
   return encoding;
-}
-
-// Whether `payload` is exactly one zstd frame declaring `tile_bytes` of content, the checks
-// the archive's zstd decoder makes before it decompresses: a TIFF reader then gets the texels.
-bool isWholeZstdFrame(std::span<const uint8_t> payload, size_t tile_bytes) {
-  const unsigned long long content = ZSTD_getFrameContentSize(payload.data(), payload.size());
-  if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
-      content != tile_bytes)
-    return false;
-  const size_t frame_bytes = ZSTD_findFrameCompressedSize(payload.data(), payload.size());
-  return !ZSTD_isError(frame_bytes) && frame_bytes == payload.size();
 }
 
 struct LevelPlan {

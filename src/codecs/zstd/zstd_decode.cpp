@@ -4,6 +4,7 @@
 #include <zstd.h>
 
 #include "codec_internal.h"
+#include "codecs/decode.h"
 #include "zstd/zstd_frame.h"
 
 namespace tessera::detail {
@@ -55,6 +56,15 @@ Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8
     return fail(ErrorCode::kCorrupt, fmt::format("{}: zstd frame decoded to {} bytes, {} expected",
                                                  what, written, out.size()));
   return {};
+}
+
+bool isWholeZstdFrame(std::span<const uint8_t> payload, size_t content_bytes) {
+  const unsigned long long content = ZSTD_getFrameContentSize(payload.data(), payload.size());
+  if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
+      content != content_bytes)
+    return false;
+  const size_t frame_bytes = ZSTD_findFrameCompressedSize(payload.data(), payload.size());
+  return !ZSTD_isError(frame_bytes) && frame_bytes == payload.size();
 }
 
 Result<void> decodeZstd(std::span<const uint8_t> payload, Image& out,

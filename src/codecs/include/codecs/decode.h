@@ -51,4 +51,11 @@ const CodecDecoder* findDecoder(Codec codec);
                                       const ParentTexels* parent = nullptr,
                                       CodecScratch* scratch = nullptr);
 
+/// Whether `payload` is exactly one zstd frame that records `content_bytes` as its content
+/// size: the header checks the zstd codec's decoder makes before it decompresses. Such a
+/// payload is a zstd tile of that many texel bytes to the archive and to any zstd reader (a
+/// TIFF ZSTD tile), which is why the TIFF export and import copy only those. Reads the frame
+/// and block headers only; does not decompress or allocate. Safe on any bytes.
+bool isWholeZstdFrame(std::span<const uint8_t> payload, size_t content_bytes);
+
 }  // namespace tessera::detail
