@@ -482,6 +482,35 @@ TEST(Codec, ZstdDecodeRejectsTwoFrames) {
   EXPECT_FALSE(decodeTile(Codec::kZstd, twice, decoded).has_value());
 }
 
+// The check the TIFF export and import make before copying a payload: it must accept exactly
+// what the decoder accepts, judged on the headers alone.
+TEST(Codec, ZstdWholeFrameCheckAcceptsOnlyWhatTheDecoderTakes) {
+  Image image = makeImageLike(16, 16, 2);
+  const std::vector<uint8_t> payload = encodeOrDie(Codec::kZstd, image.view());
+  EXPECT_TRUE(isWholeZstdFrame(payload, image.texels.size()));
+  EXPECT_FALSE(isWholeZstdFrame(payload, image.texels.size() + 1));
+  for (size_t length = 0; length < payload.size(); ++length) {
+    const std::vector<uint8_t> prefix(payload.begin(), payload.begin() + length);
+    EXPECT_FALSE(isWholeZstdFrame(prefix, image.texels.size())) << "prefix of " << length;
+  }
+  std::vector<uint8_t> trailing = payload;
+  trailing.push_back(0);
+  EXPECT_FALSE(isWholeZstdFrame(trailing, image.texels.size()));
+  std::vector<uint8_t> twice = payload;
+  twice.insert(twice.end(), payload.begin(), payload.end());
+  EXPECT_FALSE(isWholeZstdFrame(twice, image.texels.size()));
+  // A frame without its content size, as libtiff's ZSTD writer makes them.
+  ZSTD_CCtx* cctx = ZSTD_createCCtx();
+  ZSTD_CCtx_setParameter(cctx, ZSTD_c_contentSizeFlag, 0);
+  std::vector<uint8_t> unsized(ZSTD_compressBound(image.texels.size()));
+  ZSTD_outBuffer output{unsized.data(), unsized.size(), 0};
+  ZSTD_inBuffer input{image.texels.data(), image.texels.size(), 0};
+  ASSERT_EQ(ZSTD_compressStream2(cctx, &output, &input, ZSTD_e_end), 0u);
+  ZSTD_freeCCtx(cctx);
+  unsized.resize(output.pos);
+  EXPECT_FALSE(isWholeZstdFrame(unsized, image.texels.size()));
+}
+
 TEST(Codec, JpegDecodeRejectsProgressiveJpeg) {
   Image image = makeImageLike(64, 64, 3);
   tjhandle handle = tjInitCompress();
