@@ -60,6 +60,7 @@ struct ZstdTiffLayout {
   uint16_t predictor = PREDICTOR_NONE;
   bool own_frames = true;     ///< frames from the zstd codec written raw, else libtiff's encoder
   bool zero_padding = false;  ///< edge tiles padded with zeros, else by edge replication
+  bool sparse_tile = false;   ///< level 0's tile (1,0) left out (a sparse tile, read as zeros)
 };
 
 // Writes the archive's image as a pyramidal little-endian BigTIFF of kTile ZSTD tiles.
@@ -102,6 +103,7 @@ void writeZstdPyramid(const Archive& archive, const std::string& path,
                     (size_t(std::min(sy, height - 1)) * width + std::min(sx, width - 1)) * texel,
                 texel);
           }
+        if (layout.sparse_tile && level == 0 && tx == 1 && ty == 0) continue;
         const uint32_t index = TIFFComputeTile(tiff, tx * kTile, ty * kTile, 0, 0);
         if (layout.own_frames) {
           Result<std::vector<uint8_t>> frame = encodeTile(Codec::kZstd, tile.view(), {});
@@ -217,6 +219,23 @@ TEST_P(WideTiffImport, ZeroPaddedEdgeTilesAreEncodedAndInteriorTilesCopied) {
   EXPECT_EQ(imported.report.tiles_copied, 2u);
   EXPECT_EQ(imported.report.tiles_encoded, 9u - 2u);
   expectSameAsOriginal(*imported.archive, /*same_payloads=*/true);
+}
+
+// A tile the file leaves out reads as zeros, as libtiff reads it, in the image's sample type.
+TEST_P(WideTiffImport, SparseTileIsZerosAndTheOthersAreCopied) {
+  writeZstdPyramid(*original_, dir_ + "sparse.tif", {.sparse_tile = true});
+  Imported imported = import(dir_ + "sparse.tif");
+  ASSERT_TRUE(imported.archive);
+  EXPECT_EQ(imported.report.tiles_copied, kTilesBelowCoarsest - 1);
+  const ImageInfo& info = original_->images()[0];
+  const uint32_t texel = info.texelBytes();
+  std::vector<uint8_t> expected = levelBytes(*original_, 0);
+  for (uint32_t y = 0; y < kTile; ++y)
+    std::fill_n(expected.begin() + (size_t(y) * kWidth + kTile) * texel, size_t(kTile) * texel, 0);
+  EXPECT_TRUE(levelBytes(*imported.archive, 0) == expected);
+  for (uint32_t level = 1; level < info.level_count; ++level)
+    EXPECT_TRUE(levelBytes(*original_, level) == levelBytes(*imported.archive, level))
+        << "level " << level;
 }
 
 TEST_P(WideTiffImport, LibtiffFramesWithoutContentSizeAreDecodedAndEncoded) {
