@@ -287,13 +287,16 @@ Result<SourceTile> TiffPyramid::zstdTile(uint32_t level, uint32_t x, uint32_t y,
   const uint32_t side = geometry.tile_size_px;
   const uint32_t width = std::min(side, geometry.width_px - x * side);
   const uint32_t height = std::min(side, geometry.height_px - y * side);
-  Image decoded(side, side, geometry.zstd_channels, geometry.zstd_sample_type);
+  const size_t tile_bytes =
+      size_t(side) * side * geometry.zstd_channels * sampleBytes(geometry.zstd_sample_type);
   SourceTile out;
-  if (isWholeZstdFrame(raw, decoded.texels.size())) {
-    if (width == side && height == side) {
-      out.zstd = std::move(raw);
-      return out;
-    }
+  const bool whole_frame = isWholeZstdFrame(raw, tile_bytes);
+  if (whole_frame && width == side && height == side) {
+    out.zstd = std::move(raw);
+    return out;
+  }
+  Image decoded(side, side, geometry.zstd_channels, geometry.zstd_sample_type);
+  if (whole_frame) {
     if (Result<void> done = decodeTile(Codec::kZstd, raw, decoded); !done)
       return failure(fmt::format("level {} tile ({},{}): {}", level, x, y, done.error().message));
     if (paddedLikeTheBuilder(decoded, width, height)) {
