@@ -4,8 +4,11 @@
 # compressed again by libtiff (ZSTD level 1, the type's predictor), with `cp` + `sync` of the
 # archive beside them as the disk's floor. Two SIZE x SIZE one-channel sources made by vips:
 # u16, two sine waves plus Gaussian noise of sigma 40 (compressible), and f32 Gaussian noise
-# (not). Each command alternates with the others, --runs times; medians of the wall time, the
-# outputs removed and synced before each. The inputs stay in the page cache.
+# (not). Then the import back: `tessera build --codec zstd` of each exported TIFF, whose tiles
+# are copied as stored from the zstd archive's TIFF and decoded and encoded from the zdelta
+# one's (its directories have a predictor). Each command alternates with the others, --runs
+# times; medians of the wall time, the outputs removed and synced before each. The inputs stay
+# in the page cache.
 #
 # Usage: bench/export_wide_tiff.sh [--size 4096] [--runs 3] [--dir out/bench-export-wide]
 # Environment: TESSERA_BIN (default: build/ of this checkout). Needs vips (libvips-tools).
@@ -49,6 +52,12 @@ for type in u16 f32; do
   done
 done
 
+# The TIFFs the import reads, exported once, outside the timings.
+for archive in "${archives[@]}"; do
+  [[ -f ${archive%.tess}.tif ]] || "$tessera" export "$archive" --to tiff "${archive%.tess}.tif" --quiet
+  cat "${archive%.tess}.tif" >/dev/null
+done
+
 seconds() {
   rm -rf "$dir"/out*
   sync
@@ -59,25 +68,32 @@ seconds() {
   echo "$end - $start" | bc -l
 }
 copy_and_sync() { cp "$1" "$2" && sync "$2"; }
-declare -A export_s copy_s
+declare -A export_s copy_s import_s
 for ((r = 0; r < runs; ++r)); do
   for archive in "${archives[@]}"; do
     export_s[$archive]+=" $(seconds "$tessera" export "$archive" --to tiff "$dir/out.tif" --quiet)"
     copy_s[$archive]+=" $(seconds copy_and_sync "$archive" "$dir/out.tess")"
+    import_s[$archive]+=" $(seconds "$tessera" build "${archive%.tess}.tif" -o "$dir/out.tess" \
+      --codec zstd --quiet)"
   done
 done
 median() { tr ' ' '\n' <<<"$1" | sed '/^$/d' | sort -g | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
 echo "${size}x$size, one channel; load $(cut -d' ' -f1-3 /proc/loadavg); $runs runs, median"
 echo
-echo "| archive | archive MiB | TIFF MiB | tiles copied | export s | cp + sync s |"
-echo "|---|---:|---:|---:|---:|---:|"
+echo "| archive | archive MiB | TIFF MiB | tiles copied | export s | cp + sync s | import --codec zstd: tiles copied | import s |"
+echo "|---|---:|---:|---:|---:|---:|---:|---:|"
 for archive in "${archives[@]}"; do
   summary=$("$tessera" export "$archive" --to tiff "$dir/out.tif")
   copied=$(sed -n 's/.*(\([0-9]*\) copied.*/\1/p' <<<"$summary")
   tiles=$(sed -n 's/.*: \([0-9]*\) zstd tiles.*/\1/p' <<<"$summary")
-  printf '| %s | %.1f | %.1f | %s / %s | %.2f | %.2f |\n' "$(basename "$archive" .tess)" \
-    "$(echo "$(stat -c %s "$archive") / 1048576" | bc -l)" \
+  imported=$("$tessera" build "${archive%.tess}.tif" -o "$dir/out.tess" --codec zstd --json)
+  back=$(sed -n 's/.*"tiles_copied": \([0-9]*\).*/\1/p' <<<"$imported")
+  back_of=$(python3 -c 'import json, sys; r = json.load(sys.stdin)
+print(r["tiles_copied"] + r["tiles_encoded"] + r["tiles_uniform"] + r["tiles_empty"])' <<<"$imported")
+  printf '| %s | %.1f | %.1f | %s / %s | %.2f | %.2f | %s / %s | %.2f |\n' \
+    "$(basename "$archive" .tess)" "$(echo "$(stat -c %s "$archive") / 1048576" | bc -l)" \
     "$(echo "$(stat -c %s "$dir/out.tif") / 1048576" | bc -l)" "$copied" "$tiles" \
-    "$(median "${export_s[$archive]}")" "$(median "${copy_s[$archive]}")"
+    "$(median "${export_s[$archive]}")" "$(median "${copy_s[$archive]}")" "$back" "$back_of" \
+    "$(median "${import_s[$archive]}")"
 done
 rm -rf "$dir"/out*
