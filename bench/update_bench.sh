@@ -38,6 +38,8 @@ fi
 "$TESSERA" build "synthetic:256x256:7:3" -o "$WORK/patch.tess" --codec png --quiet
 "$TESSERA" extract "$WORK/patch.tess" --rect 0,0,256,256 -o "$WORK/patch.png" >/dev/null
 cp "$ARCHIVE" "$WORK/work.tess"
+# The copy's dirty pages would otherwise be written by the first update's fdatasync.
+sync "$WORK/work.tess"
 echo "load average: $(cut -d' ' -f1 /proc/loadavg)"
 printf '%-16s %14s %12s %12s %12s %6s\n' position bytes_written update_ms cpu_ms command_ms tiles
 for at in "32768,32768" "32896,32896" "$((SIZE - 256)),$((SIZE - 256))" "1000,2000" "40000,40000"; do
