@@ -1,10 +1,19 @@
 // mergeArchiveParts: N part archives -> the archive of a single build (docs/builder.md,
-// "Split and merge"). Payloads below level M are copied unchanged, one at a time, in the
-// output's clustering order; levels M and up are computed from the parts' exact level-M rows.
+// "Split and merge"). Payloads below level M are copied unchanged, a stretch stored together
+// in a part at a time, in the output's clustering order; levels M and up are computed from the
+// parts' exact level-M rows.
 #include <tessera/split_build.h>
 
+#include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <optional>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -12,6 +21,7 @@
 #include "build_internals.h"
 #include "codecs/encode.h"
 #include "format/checksum.h"
+#include "output/file_appender.h"
 #include "output/output_file.h"
 #include "part_build.h"
 #include "pyramid_builder.h"
@@ -219,6 +229,146 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   return {};
 }
 
+/// A part's file opened for the copy, apart from its Archive (a byte source, not a file).
+struct PartFile {
+  int fd = -1;
+  uint64_t size_bytes = 0;
+
+  PartFile() = default;
+  PartFile(PartFile&& other) noexcept
+      : fd(std::exchange(other.fd, -1)), size_bytes(other.size_bytes) {}
+  PartFile& operator=(PartFile&&) = delete;
+  ~PartFile() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+/// `length` bytes at `offset` of `fd`, mapped read-only with their page table entries filled
+/// at once (no fault per page), or nothing where the system refuses the mapping.
+std::optional<OwnedBytes> mapStretch(int fd, uint64_t offset, size_t length) {
+  static const uint64_t page_bytes = uint64_t(::sysconf(_SC_PAGESIZE));
+  const uint64_t start = offset - offset % page_bytes;
+  const size_t mapped_bytes = size_t(offset - start) + length;
+  void* base =
+      ::mmap(nullptr, mapped_bytes, PROT_READ, MAP_SHARED | MAP_POPULATE, fd, off_t(start));
+  if (base == MAP_FAILED) return std::nullopt;
+  OwnedBytes bytes;
+  bytes.bytes = {static_cast<const uint8_t*>(base) + (offset - start), length};
+  bytes.release = [base, mapped_bytes] { ::munmap(base, mapped_bytes); };
+  return bytes;
+}
+
+/// Places the payloads of the writer's runs: the coarse levels' from memory, the others from
+/// the parts. A run's payloads from one part lie back to back there (the part is written in
+/// the output's order), so each such stretch is mapped from the part's page cache, its
+/// checksums verified there, and written to the output from the mapping (on the appender's
+/// writer thread, while the next is mapped): one copy, in the kernel, instead of a read into
+/// a buffer and a write out of it.
+class PayloadCopier {
+ public:
+  static Result<PayloadCopier> open(const std::vector<OpenedPart>& parts, uint32_t merge_level,
+                                    const std::vector<std::vector<uint32_t>>& owner,
+                                    const std::vector<std::vector<uint8_t>>& coarse_payloads) {
+    PayloadCopier copier(parts, merge_level, owner, coarse_payloads);
+    for (const OpenedPart& part : parts) {
+      PartFile file;
+      file.fd = ::open(part.path.c_str(), O_RDONLY | O_CLOEXEC);
+      struct stat st {};
+      if (file.fd < 0 || ::fstat(file.fd, &st) != 0)
+        return fail(ErrorCode::kIo,
+                    fmt::format("{}: cannot open for the copy: {}", part.path, strerror(errno)));
+      file.size_bytes = uint64_t(st.st_size);
+      if (file.size_bytes != part.archive->source().sizeBytes())
+        return fail(ErrorCode::kIo, part.path + ": changed while the merge read it");
+      (void)::posix_fadvise(file.fd, 0, 0, POSIX_FADV_SEQUENTIAL);  // a hint for a cold part
+      copier.files_.push_back(std::move(file));
+    }
+    return copier;
+  }
+
+  /// Appends `run`'s payloads, counting what came from the parts in `report`.
+  Result<void> append(std::span<const RunTile> run, FileAppender& appender, MergeReport& report) {
+    auto part_of = [&](const RunTile& tile) -> int64_t {
+      if (tile.tile.level >= merge_level_) return -1;  // computed by the merge
+      return owner_[tile.tile.level][tile.tile.y];
+    };
+    auto same_part = [&](const RunTile& a, const RunTile& b) {
+      return part_of(a) >= 0 && part_of(a) == part_of(b);
+    };
+    auto place = [&](size_t first, size_t end, uint64_t offset, size_t,
+                     size_t length) -> Result<void> {
+      const int64_t owner_part = part_of(run[first]);
+      if (owner_part < 0) {
+        TESSERA_TRY(appender.append(coarse_payloads_[run[first].entry->spool_offset]));
+        return {};
+      }
+      TESSERA_TRY(copyStretch(size_t(owner_part), run.subspan(first, end - first), offset, length,
+                              appender));
+      report.payload_bytes_copied += length;
+      report.tiles_copied += end - first;
+      ++report.part_reads;
+      return {};
+    };
+    return forEachStoredRange(run, place, same_part);
+  }
+
+ private:
+  PayloadCopier(const std::vector<OpenedPart>& parts, uint32_t merge_level,
+                const std::vector<std::vector<uint32_t>>& owner,
+                const std::vector<std::vector<uint8_t>>& coarse_payloads)
+      : parts_(parts),
+        merge_level_(merge_level),
+        owner_(owner),
+        coarse_payloads_(coarse_payloads) {}
+
+  /// `tiles`, stored back to back from `offset` in part `p`, onto the output.
+  Result<void> copyStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset, size_t length,
+                           FileAppender& appender) const {
+    const OpenedPart& part = parts_[p];
+    if (offset + length > files_[p].size_bytes)
+      return fail(
+          ErrorCode::kCorrupt,
+          fmt::format("{}: tile ({},{},{}) lies past the end of the file ({} bytes)", part.path,
+                      tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y, files_[p].size_bytes));
+    if (std::optional<OwnedBytes> mapped = mapStretch(files_[p].fd, offset, length)) {
+      Result<void> verified = verify(part, tiles, mapped->bytes);
+      if (!verified) {
+        mapped->release();
+        return verified;
+      }
+      TESSERA_TRY(appender.appendOwned(std::move(*mapped)));
+      return {};
+    }
+    // No mapping (a file system without mmap, no address space): read into the buffer.
+    auto read = [&](std::span<uint8_t> bytes) -> Result<void> {
+      TESSERA_TRY(part.archive->source().read(offset, bytes));
+      return verify(part, tiles, bytes);
+    };
+    TESSERA_TRY(appender.appendFilled(length, read));
+    return {};
+  }
+
+  static Result<void> verify(const OpenedPart& part, std::span<const RunTile> tiles,
+                             std::span<const uint8_t> bytes) {
+    size_t at = 0;
+    for (const RunTile& tile : tiles) {
+      const uint32_t size = tile.entry->length_bytes;
+      if (checksum64(bytes.subspan(at, size)) != tile.entry->checksum)
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("{}: tile ({},{},{}) fails its checksum", part.path,
+                                tile.tile.level, tile.tile.x, tile.tile.y));
+      at += size;
+    }
+    return {};
+  }
+
+  const std::vector<OpenedPart>& parts_;
+  uint32_t merge_level_;
+  const std::vector<std::vector<uint32_t>>& owner_;  ///< [level][tile row]: the part holding it
+  const std::vector<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
+  std::vector<PartFile> files_;                               ///< by part
+};
+
 }  // namespace
 
 Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
@@ -238,6 +388,14 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
     out.entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
   std::vector<std::vector<uint32_t>> owner;
   TESSERA_TRY(copyPartEntries(parts, plan, out, owner));
+  MergeReport report;
+  auto phase_start = std::chrono::steady_clock::now();
+  auto end_phase = [&](double& phase_s) {
+    const auto now = std::chrono::steady_clock::now();
+    phase_s = std::chrono::duration<double>(now - phase_start).count();
+    phase_start = now;
+  };
+  report.open_s = std::chrono::duration<double>(phase_start - start).count();
 
   nlohmann::json metadata = parts[0].meta["archive_metadata"];
   ImageInfo level_info = info;
@@ -251,51 +409,23 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
   }
   metadata["images"][0]["statistics"] = sink.statistics;
   if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
+  end_phase(report.coarse_s);
 
-  MergeReport report;
-  // A run's payloads from one part lie back to back there (the part is written in the
-  // output's order), so each stretch is one read straight into the writer's buffer, its
-  // checksums verified while the bytes are still in cache.
-  auto part_of = [&](const RunTile& tile) -> int64_t {
-    if (tile.tile.level >= plan.merge_level) return -1;  // computed by the merge
-    return owner[tile.tile.level][tile.tile.y];
-  };
-  auto same_part = [&](const RunTile& a, const RunTile& b) {
-    return part_of(a) >= 0 && part_of(a) == part_of(b);
-  };
-  auto fetch = [&](std::span<const RunTile> run, std::span<uint8_t> bytes) -> Result<void> {
-    if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
-    auto read = [&](size_t first, size_t end, uint64_t offset, size_t at,
-                    size_t length) -> Result<void> {
-      const int64_t owner_part = part_of(run[first]);
-      if (owner_part < 0) {
-        std::memcpy(bytes.data() + at, sink.payloads[run[first].entry->spool_offset].data(),
-                    length);
-        return {};
-      }
-      const OpenedPart& part = parts[size_t(owner_part)];
-      TESSERA_TRY(part.archive->source().read(offset, bytes.subspan(at, length)));
-      for (size_t k = first; k < end; ++k) {
-        const uint32_t size = run[k].entry->length_bytes;
-        if (checksum64(bytes.subspan(at, size)) != run[k].entry->checksum) {
-          const TileId& tile = run[k].tile;
-          return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
-                                                       part.path, tile.level, tile.x, tile.y));
-        }
-        at += size;
-      }
-      report.payload_bytes_copied += length;
-      report.tiles_copied += end - first;
-      ++report.part_reads;
-      return {};
-    };
-    return forEachStoredRange(run, read, same_part);
-  };
   TESSERA_ASSIGN_OR_RETURN(TempFile file, TempFile::create(output));
-  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
-                           writeArchiveRuns(fetch, std::span<const SpooledImage>(&out, 1),
-                                            buildOrderOf(metadata), metadata, file));
+  TESSERA_ASSIGN_OR_RETURN(PayloadCopier copier,
+                           PayloadCopier::open(parts, plan.merge_level, owner, sink.payloads));
+  auto append = [&](std::span<const RunTile> run, size_t, FileAppender& appender) {
+    if (cancel && cancel->load())
+      return Result<void>(fail(ErrorCode::kCancelled, output + ": merge cancelled"));
+    return copier.append(run, appender, report);
+  };
+  TESSERA_ASSIGN_OR_RETURN(
+      WrittenArchive written,
+      writeArchiveAppending(append, std::span<const SpooledImage>(&out, 1), buildOrderOf(metadata),
+                            metadata, file, AppendWrites::kBackground));
+  end_phase(report.copy_s);
   TESSERA_TRY(file.commit());
+  end_phase(report.commit_s);
   report.output_bytes = written.file_bytes;
   report.tiles_computed = sink.payloads.size();
   report.elapsed_s =
