@@ -10,8 +10,13 @@
 #include <unistd.h>
 
 #include <cerrno>
+#include <algorithm>
 #include <chrono>
 #include <cstring>
+#include <deque>
+#include <mutex>
+#include <optional>
+#include <thread>
 #include <optional>
 #include <utility>
 
@@ -25,6 +30,7 @@
 #include "output/output_file.h"
 #include "part_build.h"
 #include "pyramid_builder.h"
+#include "worker_pool.h"
 
 namespace tessera {
 
@@ -111,57 +117,75 @@ Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths)
 }
 
 /// Encodes the coarse levels' tiles as the pyramid announces them, like the builder's
-/// encoders but on this thread: the levels above the parts are a small share of the pixels.
+/// encoders: cut and classified on this thread, encoded by `pool` while this thread decodes
+/// and averages the next rows (the merge's only computing, and all of it before the copy).
 class CoarseSink final : public TileSink {
  public:
   CoarseSink(const ImageInfo& level_info, uint32_t merge_level, SpooledImage& out,
-             const nlohmann::json& build)
-      : info_(level_info), merge_level_(merge_level), out_(out) {
+             const nlohmann::json& build, WorkerPool& pool)
+      : info_(level_info), merge_level_(merge_level), out_(out), pool_(pool) {
     parseCodecName(build["codec"].get<std::string>(), &codec_);
     options_.quality = build["quality"].get<int>();
     options_.effort = build["effort"].get<int>();
     options_.chroma_subsampling = build["chroma_subsampling"] == "4:2:0";
-    tile_.resize(info_.storedTileBytes());
   }
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
     if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
     const uint32_t side = info_.storedTileSidePx();
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
-      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile_.data());
+      std::vector<uint8_t> tile(info_.storedTileBytes());
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile.data());
       SpoolEntry& entry =
           out_.entries[merge_level_ + level][size_t(tile_row) * info_.tilesX(level) + x];
       uint32_t colour = 0;
-      const TileClass kind = classifyTile(tile_.data(), side, info_.channels, &colour);
+      const TileClass kind = classifyTile(tile.data(), side, info_.channels, &colour);
       if (kind != TileClass::kMixed) {
         entry.kind = kind == TileClass::kEmpty ? TileKind::kEmpty : TileKind::kUniform;
         entry.uniform_rgba = kind == TileClass::kEmpty ? 0 : colour;
         continue;
       }
-      ImageView view{tile_.data(), side, side, info_.channels, size_t(side) * info_.channels};
-      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
-                               encodeTile(codec_, view, options_, nullptr, &scratch_));
-      entry.kind = TileKind::kEncoded;
-      entry.codec = codec_;
-      entry.length_bytes = uint32_t(payload.size());
-      entry.checksum = checksum64(payload);
       entry.spool_offset = payloads.size();
-      payloads.push_back(std::move(payload));
+      std::vector<uint8_t>& payload = payloads.emplace_back();  // a deque: stays in place
+      pool_.submit([this, tile = std::move(tile), side, &entry, &payload](WorkerState& state) {
+        ImageView view{tile.data(), side, side, info_.channels, size_t(side) * info_.channels};
+        Result<std::vector<uint8_t>> encoded =
+            encodeTile(codec_, view, options_, nullptr, &state.codec_scratch);
+        if (!encoded) {
+          std::lock_guard<std::mutex> lock(error_mutex_);
+          if (!error_) error_ = std::move(encoded).error();
+          return;
+        }
+        payload = std::move(*encoded);
+        entry.kind = TileKind::kEncoded;
+        entry.codec = codec_;
+        entry.length_bytes = uint32_t(payload.size());
+        entry.checksum = checksum64(payload);
+      });
     }
     return {};
   }
 
+  /// The first encoding failure; valid after the pool's waitIdle().
+  Result<void> error() {
+    std::lock_guard<std::mutex> lock(error_mutex_);
+    if (error_) return Unexpected(*error_);
+    return {};
+  }
+
   nlohmann::json statistics;
-  std::vector<std::vector<uint8_t>> payloads;  ///< by SpoolEntry::spool_offset
+  /// By SpoolEntry::spool_offset; each filled by its encoding job.
+  std::deque<std::vector<uint8_t>> payloads;
 
  private:
   const ImageInfo& info_;
   uint32_t merge_level_;
   SpooledImage& out_;
+  WorkerPool& pool_;
   Codec codec_ = Codec::kJpeg;
   EncodeOptions options_;
-  CodecScratch scratch_;
-  std::vector<uint8_t> tile_;
+  std::mutex error_mutex_;  // guards error_
+  std::optional<Error> error_;
 };
 
 /// Streams the parts' exact level-M rows, part by part and tile row by tile row, through the
@@ -268,7 +292,7 @@ class PayloadCopier {
  public:
   static Result<PayloadCopier> open(const std::vector<OpenedPart>& parts, uint32_t merge_level,
                                     const std::vector<std::vector<uint32_t>>& owner,
-                                    const std::vector<std::vector<uint8_t>>& coarse_payloads) {
+                                    const std::deque<std::vector<uint8_t>>& coarse_payloads) {
     PayloadCopier copier(parts, merge_level, owner, coarse_payloads);
     for (const OpenedPart& part : parts) {
       PartFile file;
@@ -315,7 +339,7 @@ class PayloadCopier {
  private:
   PayloadCopier(const std::vector<OpenedPart>& parts, uint32_t merge_level,
                 const std::vector<std::vector<uint32_t>>& owner,
-                const std::vector<std::vector<uint8_t>>& coarse_payloads)
+                const std::deque<std::vector<uint8_t>>& coarse_payloads)
       : parts_(parts),
         merge_level_(merge_level),
         owner_(owner),
@@ -365,8 +389,8 @@ class PayloadCopier {
   const std::vector<OpenedPart>& parts_;
   uint32_t merge_level_;
   const std::vector<std::vector<uint32_t>>& owner_;  ///< [level][tile row]: the part holding it
-  const std::vector<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
-  std::vector<PartFile> files_;                               ///< by part
+  const std::deque<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
+  std::vector<PartFile> files_;                              ///< by part
 };
 
 }  // namespace
@@ -402,11 +426,17 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
   level_info.width_px = info.levelWidthPx(plan.merge_level);
   level_info.height_px = info.levelHeightPx(plan.merge_level);
   level_info.level_count = info.level_count - plan.merge_level;
-  CoarseSink sink(level_info, plan.merge_level, out, metadata["build"]);
-  {
+  const uint32_t threads = std::clamp(std::thread::hardware_concurrency(), 1u, 4u);
+  TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<WorkerPool> pool,
+                           WorkerPool::start(threads, 2 * threads));
+  CoarseSink sink(level_info, plan.merge_level, out, metadata["build"], *pool);
+  Result<void> computed = [&]() -> Result<void> {
     PyramidBuilder pyramid(level_info, sink);
-    TESSERA_TRY(computeCoarseLevels(parts, info, plan.merge_level, pyramid));
-  }
+    return computeCoarseLevels(parts, info, plan.merge_level, pyramid);
+  }();
+  pool->waitIdle();  // queued jobs hold `sink`
+  TESSERA_TRY(computed);
+  TESSERA_TRY(sink.error());
   metadata["images"][0]["statistics"] = sink.statistics;
   if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
   end_phase(report.coarse_s);
