@@ -354,6 +354,11 @@ class PayloadCopier {
           ErrorCode::kCorrupt,
           fmt::format("{}: tile ({},{},{}) lies past the end of the file ({} bytes)", part.path,
                       tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y, files_[p].size_bytes));
+    // Reading a mapping past the end of the file raises SIGBUS: a part cut short by another
+    // process since it was opened is an error here instead (all but a window of microseconds).
+    struct stat st {};
+    if (::fstat(files_[p].fd, &st) != 0 || uint64_t(st.st_size) < offset + length)
+      return fail(ErrorCode::kIo, part.path + ": cut short while the merge read it");
     if (std::optional<OwnedBytes> mapped = mapStretch(files_[p].fd, offset, length)) {
       Result<void> verified = verify(part, tiles, mapped->bytes);
       if (!verified) {
