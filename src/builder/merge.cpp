@@ -9,15 +9,14 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include <cerrno>
 #include <algorithm>
+#include <cerrno>
 #include <chrono>
 #include <cstring>
 #include <deque>
 #include <mutex>
 #include <optional>
 #include <thread>
-#include <optional>
 #include <utility>
 
 #include <fmt/format.h>

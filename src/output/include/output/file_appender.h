@@ -28,8 +28,8 @@ struct OwnedBytes {
 };
 
 /// Appends at the end of a TempFile from `start`. Owned by one thread (with kBackground it
-/// starts a writer thread of its own, joined by flush() and the destructor). Bytes are in the
-/// file only after flush(); the TempFile must outlive the appender.
+/// starts a writer thread of its own, which flush() waits for and the destructor joins). Bytes
+/// are in the file only after flush(); the TempFile must outlive the appender.
 class FileAppender {
  public:
   /// Bytes held before a write; a larger block is written directly.
