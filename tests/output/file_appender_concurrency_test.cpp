@@ -46,10 +46,10 @@ Written appendMix(const std::string& path, AppendWrites writes) {
   };
   {
     FileAppender appender(*file, kStart, writes);
-    for (int step = 0; step < 40; ++step) {
+    for (int step = 0; step < 48; ++step) {
       const int kind = step == 7 ? 2 : int(random() % 5);
-      // Step 7 is one block over the buffer; the rest stay under 256 KiB.
-      const size_t size = kind == 2 ? FileAppender::kBufferBytes + 4099 : random() % (256 << 10);
+      // Step 7 is one block over the buffer; the rest stay under 96 KiB.
+      const size_t size = kind == 2 ? FileAppender::kBufferBytes + 4099 : random() % (96 << 10);
       Result<uint64_t> offset = uint64_t(0);
       if (kind == 4) {
         offset = appender.skip(size % 5000);
@@ -85,7 +85,7 @@ TEST(FileAppender, BackgroundWritesLeaveTheBytesOfInlineWrites) {
   const std::string dir = test::testTempDir();
   const Written inline_written = appendMix(dir + "inline.bin", AppendWrites::kInline);
   const Written background = appendMix(dir + "background.bin", AppendWrites::kBackground);
-  EXPECT_GT(background.expected.size(), 3 * FileAppender::kBufferBytes);
+  EXPECT_GT(background.expected.size(), 2 * FileAppender::kBufferBytes);
   EXPECT_TRUE(inline_written.bytes == inline_written.expected);
   EXPECT_TRUE(background.bytes == background.expected);
   EXPECT_TRUE(background.expected == inline_written.expected);
