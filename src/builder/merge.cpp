@@ -5,15 +5,16 @@
 #include <tessera/split_build.h>
 
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
+#include <condition_variable>
 #include <cstring>
 #include <deque>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <thread>
@@ -266,27 +267,54 @@ struct PartFile {
   }
 };
 
-/// `length` bytes at `offset` of `fd`, mapped read-only with their page table entries filled
-/// at once (no fault per page), or nothing where the system refuses the mapping.
-std::optional<OwnedBytes> mapStretch(int fd, uint64_t offset, size_t length) {
-  static const uint64_t page_bytes = uint64_t(::sysconf(_SC_PAGESIZE));
-  const uint64_t start = offset - offset % page_bytes;
-  const size_t mapped_bytes = size_t(offset - start) + length;
-  void* base =
-      ::mmap(nullptr, mapped_bytes, PROT_READ, MAP_SHARED | MAP_POPULATE, fd, off_t(start));
-  if (base == MAP_FAILED) return std::nullopt;
-  OwnedBytes bytes;
-  bytes.bytes = {static_cast<const uint8_t*>(base) + (offset - start), length};
-  bytes.release = [base, mapped_bytes] { ::munmap(base, mapped_bytes); };
-  return bytes;
-}
+/// The buffers the stretches of the parts are read into, reused: the merging thread reads and
+/// checks a stretch in one while the appender's writer thread writes the previous from another
+/// and gives it back once written. Never more than kBuffers of kPayloadRunBytes, however large
+/// the merge, and none allocated per stretch. Shared with the release callbacks the writer
+/// runs, so it outlives them.
+class StretchBuffers {
+ public:
+  /// One being filled, one being written, one spare so that the writer giving a buffer back
+  /// rarely holds up the next read.
+  static constexpr size_t kBuffers = 3;
+
+  /// A free buffer (allocated on first use), waiting for the writer to give one back when
+  /// all are out.
+  uint8_t* take() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    given_back_.wait(lock, [&] { return !free_.empty() || owned_.size() < kBuffers; });
+    if (free_.empty()) {
+      owned_.push_back(std::make_unique_for_overwrite<uint8_t[]>(kPayloadRunBytes));
+      return owned_.back().get();
+    }
+    uint8_t* buffer = free_.back();
+    free_.pop_back();
+    return buffer;
+  }
+
+  void giveBack(uint8_t* buffer) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      free_.push_back(buffer);
+    }
+    given_back_.notify_one();
+  }
+
+ private:
+  std::mutex mutex_;  // guards the fields below
+  std::condition_variable given_back_;
+  std::vector<std::unique_ptr<uint8_t[]>> owned_;
+  std::vector<uint8_t*> free_;
+};
 
 /// Places the payloads of the writer's runs: the coarse levels' from memory, the others from
 /// the parts. A run's payloads from one part lie back to back there (the part is written in
-/// the output's order), so each such stretch is mapped from the part's page cache, its
-/// checksums verified there, and written to the output from the mapping (on the appender's
-/// writer thread, while the next is mapped): one copy, in the kernel, instead of a read into
-/// a buffer and a write out of it.
+/// the output's order), so each such stretch is read with pread into a buffer of a small
+/// pool, its checksums verified there, and handed to the appender's writer thread, which
+/// writes it to the output while the next stretch is read and checked. pread, not a mapping:
+/// a part cut short by another process (parts live on shared file systems) is then a short
+/// read, an error naming the part, where reading a mapping past the file's end kills the
+/// process.
 class PayloadCopier {
  public:
   static Result<PayloadCopier> open(const std::vector<OpenedPart>& parts, uint32_t merge_level,
@@ -353,26 +381,52 @@ class PayloadCopier {
           ErrorCode::kCorrupt,
           fmt::format("{}: tile ({},{},{}) lies past the end of the file ({} bytes)", part.path,
                       tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y, files_[p].size_bytes));
-    // Reading a mapping past the end of the file raises SIGBUS: a part cut short by another
-    // process since it was opened is an error here instead (all but a window of microseconds).
-    struct stat st {};
-    if (::fstat(files_[p].fd, &st) != 0 || uint64_t(st.st_size) < offset + length)
-      return fail(ErrorCode::kIo, part.path + ": cut short while the merge read it");
-    if (std::optional<OwnedBytes> mapped = mapStretch(files_[p].fd, offset, length)) {
-      Result<void> verified = verify(part, tiles, mapped->bytes);
-      if (!verified) {
-        mapped->release();
-        return verified;
-      }
-      TESSERA_TRY(appender.appendOwned(std::move(*mapped)));
-      return {};
-    }
-    // No mapping (a file system without mmap, no address space): read into the buffer.
-    auto read = [&](std::span<uint8_t> bytes) -> Result<void> {
-      TESSERA_TRY(part.archive->source().read(offset, bytes));
+    auto read_and_verify = [&](std::span<uint8_t> bytes) -> Result<void> {
+      TESSERA_TRY(readStretch(p, tiles, offset, bytes));
       return verify(part, tiles, bytes);
     };
-    TESSERA_TRY(appender.appendFilled(length, read));
+    if (length > kPayloadRunBytes) {
+      // A single payload larger than the pool's buffers (a run holds at most one such): read
+      // into an allocation of the appender's own and written on this thread.
+      TESSERA_TRY(appender.appendFilled(length, read_and_verify));
+      return {};
+    }
+    uint8_t* buffer = buffers_->take();
+    OwnedBytes owned;
+    owned.bytes = {buffer, length};
+    owned.release = [buffers = buffers_, buffer] { buffers->giveBack(buffer); };
+    Result<void> filled = read_and_verify({buffer, length});
+    if (!filled) {
+      owned.release();
+      return filled;
+    }
+    TESSERA_TRY(appender.appendOwned(std::move(owned)));
+    return {};
+  }
+
+  /// Fills `bytes` from `offset` of part `p`; a part shorter than when it was opened (cut
+  /// short by another process) is an error naming it.
+  Result<void> readStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset,
+                           std::span<uint8_t> bytes) const {
+    const OpenedPart& part = parts_[p];
+    size_t done = 0;
+    while (done < bytes.size()) {
+      const ssize_t got =
+          ::pread(files_[p].fd, bytes.data() + done, bytes.size() - done, off_t(offset + done));
+      if (got > 0) {
+        done += size_t(got);
+        continue;
+      }
+      if (got < 0 && errno == EINTR) continue;
+      const std::string tile =
+          fmt::format("tile ({},{},{})", tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y);
+      if (got == 0)
+        return fail(ErrorCode::kIo,
+                    fmt::format("{}: cut short while the merge read it ({} bytes, {} at byte {})",
+                                part.path, offset + done, tile, offset));
+      return fail(ErrorCode::kIo, fmt::format("{}: cannot read {} at byte {}: {}", part.path, tile,
+                                              offset, strerror(errno)));
+    }
     return {};
   }
 
@@ -395,6 +449,7 @@ class PayloadCopier {
   const std::vector<std::vector<uint32_t>>& owner_;  ///< [level][tile row]: the part holding it
   const std::deque<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
   std::vector<PartFile> files_;                              ///< by part
+  std::shared_ptr<StretchBuffers> buffers_ = std::make_shared<StretchBuffers>();
 };
 
 }  // namespace

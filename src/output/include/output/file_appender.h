@@ -20,8 +20,8 @@ enum class AppendWrites {
   kBackground,  ///< written by a second thread while the next is filled (two buffers)
 };
 
-/// Bytes appended as they lie, without a copy into the appender's buffer (a mapping of another
-/// file), and what frees them once written.
+/// Bytes appended as they lie, without a copy into the appender's buffer (a buffer the caller
+/// filled and reuses), and what gives them back once written.
 struct OwnedBytes {
   std::span<const uint8_t> bytes;
   std::function<void()> release;  ///< called once, after the write (or when dropped); may be empty
