@@ -274,9 +274,9 @@ struct PartFile {
 /// runs, so it outlives them.
 class StretchBuffers {
  public:
-  /// One being filled, one being written, one spare so that the writer giving a buffer back
-  /// rarely holds up the next read.
-  static constexpr size_t kBuffers = 3;
+  /// One being filled, one being written: the appender hands its writer a block only once
+  /// the previous is written and given back, so a third would never be taken.
+  static constexpr size_t kBuffers = 2;
 
   /// A free buffer (allocated on first use), waiting for the writer to give one back when
   /// all are out.
