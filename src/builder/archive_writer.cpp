@@ -84,9 +84,9 @@ std::vector<std::vector<TileEntry>> entriesOf(const SpooledImage& image) {
 }
 
 /// Copies the payloads to the output in the clustering order, in runs of up to
-/// kPayloadRunBytes that `fetch` fills in place. The entries are copies, so the caller's
-/// spool offsets stay intact.
-Result<CopiedPayloads> copyPayloads(const PayloadRunFetcher& fetch,
+/// kPayloadRunBytes that `append` places. The entries are copies, so the caller's spool
+/// offsets stay intact.
+Result<CopiedPayloads> copyPayloads(const PayloadRunAppender& append,
                                     std::span<const SpooledImage> images, TileOrder order,
                                     FileAppender& appender) {
   CopiedPayloads copied;
@@ -96,10 +96,9 @@ Result<CopiedPayloads> copyPayloads(const PayloadRunFetcher& fetch,
   size_t run_bytes = 0;
   auto flush_run = [&]() -> Result<void> {
     if (run.empty()) return {};
-    TESSERA_ASSIGN_OR_RETURN(uint64_t offset,
-                             appender.appendFilled(run_bytes, [&](std::span<uint8_t> bytes) {
-                               return fetch(run, bytes);
-                             }));
+    uint64_t offset = appender.end();
+    TESSERA_TRY(append(run, run_bytes, appender));
+    TESSERA_CHECK(appender.end() == offset + run_bytes) << "a run appended the wrong length";
     for (size_t k = 0; k < run.size(); ++k) {
       placed[k]->offset_bytes = offset;
       offset += run[k].entry->length_bytes;
@@ -230,9 +229,22 @@ Result<WrittenArchive> writeArchive(const PayloadFetcher& fetch,
 Result<WrittenArchive> writeArchiveRuns(const PayloadRunFetcher& fetch,
                                         std::span<const SpooledImage> images, TileOrder order,
                                         const nlohmann::json& metadata, const TempFile& out) {
+  auto fill = [&](std::span<const RunTile> run, size_t run_bytes,
+                  FileAppender& appender) -> Result<void> {
+    TESSERA_TRY(appender.appendFilled(run_bytes,
+                                      [&](std::span<uint8_t> bytes) { return fetch(run, bytes); }));
+    return {};
+  };
+  return writeArchiveAppending(fill, images, order, metadata, out, AppendWrites::kInline);
+}
+
+Result<WrittenArchive> writeArchiveAppending(const PayloadRunAppender& append,
+                                             std::span<const SpooledImage> images, TileOrder order,
+                                             const nlohmann::json& metadata, const TempFile& out,
+                                             AppendWrites writes) {
   const std::string& name = out.finalPath();
-  FileAppender appender(out, kHeaderRegionBytes);
-  TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads, copyPayloads(fetch, images, order, appender));
+  FileAppender appender(out, kHeaderRegionBytes, writes);
+  TESSERA_ASSIGN_OR_RETURN(CopiedPayloads payloads, copyPayloads(append, images, order, appender));
   TESSERA_ASSIGN_OR_RETURN(WrittenDirectory directory,
                            writeDirectoryPages(images, payloads.entries, appender));
 

@@ -14,6 +14,7 @@
 #include <tessera/format.h>
 #include <tessera/result.h>
 
+#include "output/file_appender.h"
 #include "output/output_file.h"
 
 namespace tessera::detail {
@@ -108,5 +109,16 @@ Result<void> forEachStoredRange(std::span<const RunTile> run, Read&& read) {
                                                       TileOrder order,
                                                       const nlohmann::json& metadata,
                                                       const TempFile& out);
+
+/// Appends the payloads of `run` (`run_bytes` in all, back to back in order) to `appender` by
+/// any means: filled into its buffer (appendFilled) or appended where they lie (appendOwned).
+using PayloadRunAppender = std::function<Result<void>(std::span<const RunTile> run,
+                                                      size_t run_bytes, FileAppender& appender)>;
+
+/// writeArchiveRuns with each run placed by `append`, through an appender whose full buffers
+/// are written as `writes` says (kBackground: by a second thread while the next is filled).
+[[nodiscard]] Result<WrittenArchive> writeArchiveAppending(
+    const PayloadRunAppender& append, std::span<const SpooledImage> images, TileOrder order,
+    const nlohmann::json& metadata, const TempFile& out, AppendWrites writes);
 
 }  // namespace tessera::detail

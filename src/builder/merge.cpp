@@ -1,10 +1,24 @@
 // mergeArchiveParts: N part archives -> the archive of a single build (docs/builder.md,
-// "Split and merge"). Payloads below level M are copied unchanged, one at a time, in the
-// output's clustering order; levels M and up are computed from the parts' exact level-M rows.
+// "Split and merge"). Payloads below level M are copied unchanged, a stretch stored together
+// in a part at a time, in the output's clustering order; levels M and up are computed from the
+// parts' exact level-M rows.
 #include <tessera/split_build.h>
 
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
 #include <chrono>
+#include <condition_variable>
 #include <cstring>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <thread>
+#include <utility>
 
 #include <fmt/format.h>
 
@@ -12,9 +26,11 @@
 #include "build_internals.h"
 #include "codecs/encode.h"
 #include "format/checksum.h"
+#include "output/file_appender.h"
 #include "output/output_file.h"
 #include "part_build.h"
 #include "pyramid_builder.h"
+#include "worker_pool.h"
 
 namespace tessera {
 
@@ -101,57 +117,75 @@ Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths)
 }
 
 /// Encodes the coarse levels' tiles as the pyramid announces them, like the builder's
-/// encoders but on this thread: the levels above the parts are a small share of the pixels.
+/// encoders: cut and classified on this thread, encoded by `pool` while this thread decodes
+/// and averages the next rows (the merge's only computing, and all of it before the copy).
 class CoarseSink final : public TileSink {
  public:
   CoarseSink(const ImageInfo& level_info, uint32_t merge_level, SpooledImage& out,
-             const nlohmann::json& build)
-      : info_(level_info), merge_level_(merge_level), out_(out) {
+             const nlohmann::json& build, WorkerPool& pool)
+      : info_(level_info), merge_level_(merge_level), out_(out), pool_(pool) {
     parseCodecName(build["codec"].get<std::string>(), &codec_);
     options_.quality = build["quality"].get<int>();
     options_.effort = build["effort"].get<int>();
     options_.chroma_subsampling = build["chroma_subsampling"] == "4:2:0";
-    tile_.resize(info_.storedTileBytes());
   }
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
     if (level + 1 == info_.level_count) statistics = coarsestLevelStatistics(rows);
     const uint32_t side = info_.storedTileSidePx();
     for (uint32_t x = 0; x < info_.tilesX(level); ++x) {
-      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile_.data());
+      std::vector<uint8_t> tile(info_.storedTileBytes());
+      cutTile(rows, info_.tile_size_px, info_.border_px, x, tile_row, tile.data());
       SpoolEntry& entry =
           out_.entries[merge_level_ + level][size_t(tile_row) * info_.tilesX(level) + x];
       uint32_t colour = 0;
-      const TileClass kind = classifyTile(tile_.data(), side, info_.channels, &colour);
+      const TileClass kind = classifyTile(tile.data(), side, info_.channels, &colour);
       if (kind != TileClass::kMixed) {
         entry.kind = kind == TileClass::kEmpty ? TileKind::kEmpty : TileKind::kUniform;
         entry.uniform_rgba = kind == TileClass::kEmpty ? 0 : colour;
         continue;
       }
-      ImageView view{tile_.data(), side, side, info_.channels, size_t(side) * info_.channels};
-      TESSERA_ASSIGN_OR_RETURN(std::vector<uint8_t> payload,
-                               encodeTile(codec_, view, options_, nullptr, &scratch_));
-      entry.kind = TileKind::kEncoded;
-      entry.codec = codec_;
-      entry.length_bytes = uint32_t(payload.size());
-      entry.checksum = checksum64(payload);
       entry.spool_offset = payloads.size();
-      payloads.push_back(std::move(payload));
+      std::vector<uint8_t>& payload = payloads.emplace_back();  // a deque: stays in place
+      pool_.submit([this, tile = std::move(tile), side, &entry, &payload](WorkerState& state) {
+        ImageView view{tile.data(), side, side, info_.channels, size_t(side) * info_.channels};
+        Result<std::vector<uint8_t>> encoded =
+            encodeTile(codec_, view, options_, nullptr, &state.codec_scratch);
+        if (!encoded) {
+          std::lock_guard<std::mutex> lock(error_mutex_);
+          if (!error_) error_ = std::move(encoded).error();
+          return;
+        }
+        payload = std::move(*encoded);
+        entry.kind = TileKind::kEncoded;
+        entry.codec = codec_;
+        entry.length_bytes = uint32_t(payload.size());
+        entry.checksum = checksum64(payload);
+      });
     }
     return {};
   }
 
+  /// The first encoding failure; valid after the pool's waitIdle().
+  Result<void> error() {
+    std::lock_guard<std::mutex> lock(error_mutex_);
+    if (error_) return Unexpected(*error_);
+    return {};
+  }
+
   nlohmann::json statistics;
-  std::vector<std::vector<uint8_t>> payloads;  ///< by SpoolEntry::spool_offset
+  /// By SpoolEntry::spool_offset; each filled by its encoding job.
+  std::deque<std::vector<uint8_t>> payloads;
 
  private:
   const ImageInfo& info_;
   uint32_t merge_level_;
   SpooledImage& out_;
+  WorkerPool& pool_;
   Codec codec_ = Codec::kJpeg;
   EncodeOptions options_;
-  CodecScratch scratch_;
-  std::vector<uint8_t> tile_;
+  std::mutex error_mutex_;  // guards error_
+  std::optional<Error> error_;
 };
 
 /// Streams the parts' exact level-M rows, part by part and tile row by tile row, through the
@@ -219,6 +253,205 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   return {};
 }
 
+/// A part's file opened for the copy, apart from its Archive (a byte source, not a file).
+struct PartFile {
+  int fd = -1;
+  uint64_t size_bytes = 0;
+
+  PartFile() = default;
+  PartFile(PartFile&& other) noexcept
+      : fd(std::exchange(other.fd, -1)), size_bytes(other.size_bytes) {}
+  PartFile& operator=(PartFile&&) = delete;
+  ~PartFile() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+/// The buffers the stretches of the parts are read into, reused: the merging thread reads and
+/// checks a stretch in one while the appender's writer thread writes the previous from another
+/// and gives it back once written. Never more than kBuffers of kPayloadRunBytes, however large
+/// the merge, and none allocated per stretch. Shared with the release callbacks the writer
+/// runs, so it outlives them.
+class StretchBuffers {
+ public:
+  /// One being filled, one being written: the appender hands its writer a block only once
+  /// the previous is written and given back, so a third would never be taken.
+  static constexpr size_t kBuffers = 2;
+
+  /// A free buffer (allocated on first use), waiting for the writer to give one back when
+  /// all are out.
+  uint8_t* take() {
+    std::unique_lock<std::mutex> lock(mutex_);
+    given_back_.wait(lock, [&] { return !free_.empty() || owned_.size() < kBuffers; });
+    if (free_.empty()) {
+      owned_.push_back(std::make_unique_for_overwrite<uint8_t[]>(kPayloadRunBytes));
+      return owned_.back().get();
+    }
+    uint8_t* buffer = free_.back();
+    free_.pop_back();
+    return buffer;
+  }
+
+  void giveBack(uint8_t* buffer) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      free_.push_back(buffer);
+    }
+    given_back_.notify_one();
+  }
+
+ private:
+  std::mutex mutex_;  // guards the fields below
+  std::condition_variable given_back_;
+  std::vector<std::unique_ptr<uint8_t[]>> owned_;
+  std::vector<uint8_t*> free_;
+};
+
+/// Places the payloads of the writer's runs: the coarse levels' from memory, the others from
+/// the parts. A run's payloads from one part lie back to back there (the part is written in
+/// the output's order), so each such stretch is read with pread into a buffer of a small
+/// pool, its checksums verified there, and handed to the appender's writer thread, which
+/// writes it to the output while the next stretch is read and checked. pread, not a mapping:
+/// a part cut short by another process (parts live on shared file systems) is then a short
+/// read, an error naming the part, where reading a mapping past the file's end kills the
+/// process.
+class PayloadCopier {
+ public:
+  static Result<PayloadCopier> open(const std::vector<OpenedPart>& parts, uint32_t merge_level,
+                                    const std::vector<std::vector<uint32_t>>& owner,
+                                    const std::deque<std::vector<uint8_t>>& coarse_payloads) {
+    PayloadCopier copier(parts, merge_level, owner, coarse_payloads);
+    for (const OpenedPart& part : parts) {
+      PartFile file;
+      file.fd = ::open(part.path.c_str(), O_RDONLY | O_CLOEXEC);
+      struct stat st {};
+      if (file.fd < 0 || ::fstat(file.fd, &st) != 0)
+        return fail(ErrorCode::kIo,
+                    fmt::format("{}: cannot open for the copy: {}", part.path, strerror(errno)));
+      file.size_bytes = uint64_t(st.st_size);
+      if (file.size_bytes != part.archive->source().sizeBytes())
+        return fail(ErrorCode::kIo, part.path + ": changed while the merge read it");
+      (void)::posix_fadvise(file.fd, 0, 0, POSIX_FADV_SEQUENTIAL);  // a hint for a cold part
+      copier.files_.push_back(std::move(file));
+    }
+    return copier;
+  }
+
+  /// Appends `run`'s payloads, counting what came from the parts in `report`.
+  Result<void> append(std::span<const RunTile> run, FileAppender& appender, MergeReport& report) {
+    auto part_of = [&](const RunTile& tile) -> int64_t {
+      if (tile.tile.level >= merge_level_) return -1;  // computed by the merge
+      return owner_[tile.tile.level][tile.tile.y];
+    };
+    auto same_part = [&](const RunTile& a, const RunTile& b) {
+      return part_of(a) >= 0 && part_of(a) == part_of(b);
+    };
+    auto place = [&](size_t first, size_t end, uint64_t offset, size_t,
+                     size_t length) -> Result<void> {
+      const int64_t owner_part = part_of(run[first]);
+      if (owner_part < 0) {
+        TESSERA_TRY(appender.append(coarse_payloads_[run[first].entry->spool_offset]));
+        return {};
+      }
+      TESSERA_TRY(copyStretch(size_t(owner_part), run.subspan(first, end - first), offset, length,
+                              appender));
+      report.payload_bytes_copied += length;
+      report.tiles_copied += end - first;
+      ++report.part_reads;
+      return {};
+    };
+    return forEachStoredRange(run, place, same_part);
+  }
+
+ private:
+  PayloadCopier(const std::vector<OpenedPart>& parts, uint32_t merge_level,
+                const std::vector<std::vector<uint32_t>>& owner,
+                const std::deque<std::vector<uint8_t>>& coarse_payloads)
+      : parts_(parts),
+        merge_level_(merge_level),
+        owner_(owner),
+        coarse_payloads_(coarse_payloads) {}
+
+  /// `tiles`, stored back to back from `offset` in part `p`, onto the output.
+  Result<void> copyStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset, size_t length,
+                           FileAppender& appender) const {
+    const OpenedPart& part = parts_[p];
+    if (offset + length > files_[p].size_bytes)
+      return fail(
+          ErrorCode::kCorrupt,
+          fmt::format("{}: tile ({},{},{}) lies past the end of the file ({} bytes)", part.path,
+                      tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y, files_[p].size_bytes));
+    auto read_and_verify = [&](std::span<uint8_t> bytes) -> Result<void> {
+      TESSERA_TRY(readStretch(p, tiles, offset, bytes));
+      return verify(part, tiles, bytes);
+    };
+    if (length > kPayloadRunBytes) {
+      // A single payload larger than the pool's buffers (a run holds at most one such): read
+      // into an allocation of the appender's own and written on this thread.
+      TESSERA_TRY(appender.appendFilled(length, read_and_verify));
+      return {};
+    }
+    uint8_t* buffer = buffers_->take();
+    OwnedBytes owned;
+    owned.bytes = {buffer, length};
+    owned.release = [buffers = buffers_, buffer] { buffers->giveBack(buffer); };
+    Result<void> filled = read_and_verify({buffer, length});
+    if (!filled) {
+      owned.release();
+      return filled;
+    }
+    TESSERA_TRY(appender.appendOwned(std::move(owned)));
+    return {};
+  }
+
+  /// Fills `bytes` from `offset` of part `p`; a part shorter than when it was opened (cut
+  /// short by another process) is an error naming it.
+  Result<void> readStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset,
+                           std::span<uint8_t> bytes) const {
+    const OpenedPart& part = parts_[p];
+    size_t done = 0;
+    while (done < bytes.size()) {
+      const ssize_t got =
+          ::pread(files_[p].fd, bytes.data() + done, bytes.size() - done, off_t(offset + done));
+      if (got > 0) {
+        done += size_t(got);
+        continue;
+      }
+      if (got < 0 && errno == EINTR) continue;
+      const std::string tile =
+          fmt::format("tile ({},{},{})", tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y);
+      if (got == 0)
+        return fail(ErrorCode::kIo,
+                    fmt::format("{}: cut short while the merge read it ({} bytes, {} at byte {})",
+                                part.path, offset + done, tile, offset));
+      return fail(ErrorCode::kIo, fmt::format("{}: cannot read {} at byte {}: {}", part.path, tile,
+                                              offset, strerror(errno)));
+    }
+    return {};
+  }
+
+  static Result<void> verify(const OpenedPart& part, std::span<const RunTile> tiles,
+                             std::span<const uint8_t> bytes) {
+    size_t at = 0;
+    for (const RunTile& tile : tiles) {
+      const uint32_t size = tile.entry->length_bytes;
+      if (checksum64(bytes.subspan(at, size)) != tile.entry->checksum)
+        return fail(ErrorCode::kCorrupt,
+                    fmt::format("{}: tile ({},{},{}) fails its checksum", part.path,
+                                tile.tile.level, tile.tile.x, tile.tile.y));
+      at += size;
+    }
+    return {};
+  }
+
+  const std::vector<OpenedPart>& parts_;
+  uint32_t merge_level_;
+  const std::vector<std::vector<uint32_t>>& owner_;  ///< [level][tile row]: the part holding it
+  const std::deque<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
+  std::vector<PartFile> files_;                              ///< by part
+  std::shared_ptr<StretchBuffers> buffers_ = std::make_shared<StretchBuffers>();
+};
+
 }  // namespace
 
 Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
@@ -238,64 +471,50 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
     out.entries[l].resize(size_t(info.tilesX(l)) * info.tilesY(l));
   std::vector<std::vector<uint32_t>> owner;
   TESSERA_TRY(copyPartEntries(parts, plan, out, owner));
+  MergeReport report;
+  auto phase_start = std::chrono::steady_clock::now();
+  auto end_phase = [&](double& phase_s) {
+    const auto now = std::chrono::steady_clock::now();
+    phase_s = std::chrono::duration<double>(now - phase_start).count();
+    phase_start = now;
+  };
+  report.open_s = std::chrono::duration<double>(phase_start - start).count();
 
   nlohmann::json metadata = parts[0].meta["archive_metadata"];
   ImageInfo level_info = info;
   level_info.width_px = info.levelWidthPx(plan.merge_level);
   level_info.height_px = info.levelHeightPx(plan.merge_level);
   level_info.level_count = info.level_count - plan.merge_level;
-  CoarseSink sink(level_info, plan.merge_level, out, metadata["build"]);
-  {
+  const uint32_t threads = std::clamp(std::thread::hardware_concurrency(), 1u, 4u);
+  TESSERA_ASSIGN_OR_RETURN(std::unique_ptr<WorkerPool> pool,
+                           WorkerPool::start(threads, 2 * threads));
+  CoarseSink sink(level_info, plan.merge_level, out, metadata["build"], *pool);
+  Result<void> computed = [&]() -> Result<void> {
     PyramidBuilder pyramid(level_info, sink);
-    TESSERA_TRY(computeCoarseLevels(parts, info, plan.merge_level, pyramid));
-  }
+    return computeCoarseLevels(parts, info, plan.merge_level, pyramid);
+  }();
+  pool->waitIdle();  // queued jobs hold `sink`
+  TESSERA_TRY(computed);
+  TESSERA_TRY(sink.error());
   metadata["images"][0]["statistics"] = sink.statistics;
   if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
+  end_phase(report.coarse_s);
 
-  MergeReport report;
-  // A run's payloads from one part lie back to back there (the part is written in the
-  // output's order), so each stretch is one read straight into the writer's buffer, its
-  // checksums verified while the bytes are still in cache.
-  auto part_of = [&](const RunTile& tile) -> int64_t {
-    if (tile.tile.level >= plan.merge_level) return -1;  // computed by the merge
-    return owner[tile.tile.level][tile.tile.y];
-  };
-  auto same_part = [&](const RunTile& a, const RunTile& b) {
-    return part_of(a) >= 0 && part_of(a) == part_of(b);
-  };
-  auto fetch = [&](std::span<const RunTile> run, std::span<uint8_t> bytes) -> Result<void> {
-    if (cancel && cancel->load()) return fail(ErrorCode::kCancelled, output + ": merge cancelled");
-    auto read = [&](size_t first, size_t end, uint64_t offset, size_t at,
-                    size_t length) -> Result<void> {
-      const int64_t owner_part = part_of(run[first]);
-      if (owner_part < 0) {
-        std::memcpy(bytes.data() + at, sink.payloads[run[first].entry->spool_offset].data(),
-                    length);
-        return {};
-      }
-      const OpenedPart& part = parts[size_t(owner_part)];
-      TESSERA_TRY(part.archive->source().read(offset, bytes.subspan(at, length)));
-      for (size_t k = first; k < end; ++k) {
-        const uint32_t size = run[k].entry->length_bytes;
-        if (checksum64(bytes.subspan(at, size)) != run[k].entry->checksum) {
-          const TileId& tile = run[k].tile;
-          return fail(ErrorCode::kCorrupt, fmt::format("{}: tile ({},{},{}) fails its checksum",
-                                                       part.path, tile.level, tile.x, tile.y));
-        }
-        at += size;
-      }
-      report.payload_bytes_copied += length;
-      report.tiles_copied += end - first;
-      ++report.part_reads;
-      return {};
-    };
-    return forEachStoredRange(run, read, same_part);
-  };
   TESSERA_ASSIGN_OR_RETURN(TempFile file, TempFile::create(output));
-  TESSERA_ASSIGN_OR_RETURN(WrittenArchive written,
-                           writeArchiveRuns(fetch, std::span<const SpooledImage>(&out, 1),
-                                            buildOrderOf(metadata), metadata, file));
+  TESSERA_ASSIGN_OR_RETURN(PayloadCopier copier,
+                           PayloadCopier::open(parts, plan.merge_level, owner, sink.payloads));
+  auto append = [&](std::span<const RunTile> run, size_t, FileAppender& appender) {
+    if (cancel && cancel->load())
+      return Result<void>(fail(ErrorCode::kCancelled, output + ": merge cancelled"));
+    return copier.append(run, appender, report);
+  };
+  TESSERA_ASSIGN_OR_RETURN(
+      WrittenArchive written,
+      writeArchiveAppending(append, std::span<const SpooledImage>(&out, 1), buildOrderOf(metadata),
+                            metadata, file, AppendWrites::kBackground));
+  end_phase(report.copy_s);
   TESSERA_TRY(file.commit());
+  end_phase(report.commit_s);
   report.output_bytes = written.file_bytes;
   report.tiles_computed = sink.payloads.size();
   report.elapsed_s =

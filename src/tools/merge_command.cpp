@@ -27,7 +27,11 @@ int runMerge(const MergeArgs& args) {
                                         {"tiles_copied", report->tiles_copied},
                                         {"part_reads", report->part_reads},
                                         {"tiles_computed", report->tiles_computed},
-                                        {"elapsed_s", report->elapsed_s}})
+                                        {"elapsed_s", report->elapsed_s},
+                                        {"open_s", report->open_s},
+                                        {"coarse_s", report->coarse_s},
+                                        {"copy_s", report->copy_s},
+                                        {"commit_s", report->commit_s}})
                             .dump(2)
                             .c_str());
   } else if (!args.quiet) {

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <tessera/build.h>
+#include <tessera/split_build.h>
 
 #include "support/test_images.h"
 
@@ -38,6 +39,30 @@ TEST(BuildConcurrency, EncodersCuttingFromTheBandsGiveTheSameArchiveAsOne) {
     EXPECT_EQ(buildBytes(dir + "many.tess", codec, 6, border), one)
         << codecName(codec) << " border " << border;
   }
+}
+
+// A merge encodes the coarse levels on a worker pool and writes on a second thread while the
+// next payloads are mapped from the parts: the same bytes as the single build.
+TEST(BuildConcurrency, AMergeOfPartsGivesTheSingleBuildsArchive) {
+  const std::string dir = test::testTempDir();
+  BuildOptions options;
+  options.inputs = {"synthetic:520x400:3:3"};
+  options.tile_size_px = 64;
+  options.codec = Codec::kZstd;
+  options.threads = 2;
+  options.output = dir + "single.tess";
+  ASSERT_TRUE(buildArchive(options));
+  std::vector<std::string> parts;
+  for (uint32_t i = 1; i <= 3; ++i) {
+    options.output = dir + "part-" + std::to_string(i) + ".tess";
+    ASSERT_TRUE(buildArchivePart(options, {i, 3}));
+    parts.push_back(options.output);
+  }
+  Result<MergeReport> merged = mergeArchiveParts(parts, dir + "merged.tess");
+  ASSERT_TRUE(merged) << merged.error().message;
+  EXPECT_GT(merged->tiles_computed, 0u);
+  EXPECT_GT(merged->tiles_copied, 0u);
+  EXPECT_TRUE(test::readFileBytes(dir + "single.tess") == test::readFileBytes(dir + "merged.tess"));
 }
 
 }  // namespace

@@ -3,6 +3,8 @@
 // codecs and orders; missing, duplicate and foreign parts are refused naming the file, and
 // leave no output.
 #include <filesystem>
+#include <fstream>
+#include <optional>
 #include <random>
 
 #include <fmt/format.h>
@@ -209,6 +211,41 @@ TEST(SplitMerge, RefusesMissingDuplicateAndForeignParts) {
   EXPECT_NE(mergeError({parts[0], parts[1], options.output}, out).find("not a part"),
             std::string::npos);
   EXPECT_TRUE(mergeArchiveParts({parts[2], parts[0], parts[1]}, out));
+}
+
+// A payload changed in a part after its build (a bad disk, a bad copy) fails the merge,
+// naming the part and the tile, and leaves no output.
+TEST(SplitMerge, RefusesAPartWhosePayloadFailsItsChecksum) {
+  const std::string dir = test::testTempDir();
+  const std::string out = dir + "/out.tess";
+  BuildOptions options = syntheticOptions("synthetic:700x500:5:3", out);
+  options.codec = Codec::kZstd;
+  const std::vector<std::string> parts = buildParts(options, 3, dir);
+  auto part = Archive::openFile(parts[1]);
+  ASSERT_TRUE(part) << part.error().message;
+  const ImageInfo info = (*part)->images()[0];
+  std::optional<TileId> changed;
+  uint64_t offset = 0;
+  for (const TileId& tile : detail::tileOrder(info, 0, TileOrder::kHilbert)) {
+    Result<TileEntry> entry = (*part)->tileEntry(tile);
+    ASSERT_TRUE(entry);
+    if (tile.level != 0 || entry->kind != TileKind::kEncoded) continue;
+    changed = tile;
+    offset = entry->offset_bytes + entry->length_bytes / 2;
+  }
+  ASSERT_TRUE(changed) << "part 2 holds no payload of level 0";
+  part->reset();
+  std::vector<uint8_t> bytes = test::readFileBytes(parts[1]);
+  bytes[offset] ^= 0x20;
+  {
+    std::ofstream rewrite(parts[1], std::ios::binary | std::ios::trunc);
+    rewrite.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+  }
+  const std::string error = mergeError(parts, out);
+  EXPECT_NE(error.find(parts[1]), std::string::npos) << error;
+  EXPECT_NE(error.find(fmt::format("tile (0,{},{}) fails its checksum", changed->x, changed->y)),
+            std::string::npos)
+      << error;
 }
 
 TEST(SplitMerge, ParsesPartsCountedFromOne) {
