@@ -316,11 +316,23 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
     parser_.emplace();
     parser_->header_limit(options().header_limit_bytes);
     parser_->body_limit(options().body_limit_bytes);
+    // A header that arrived whole (the usual case: waitForRequest read it) is parsed here and
+    // now; async_read_header would parse the same bytes after a trip through the queue. Of an
+    // incomplete one the parser may already have taken the start line: async_read_header goes
+    // on from there, and those bytes count towards the header's size.
+    size_t parsed_bytes = 0;
+    if (buffer_.size() > 0) {
+      beast::error_code ec;
+      parsed_bytes = parser_->put(buffer_.data(), ec);
+      buffer_.consume(parsed_bytes);
+      if (ec != http::error::need_more) return onHeader(ec, parsed_bytes);
+    }
     tcp().expires_after(std::chrono::milliseconds(options().header_timeout_ms));
-    http::async_read_header(stream_, buffer_, *parser_,
-                            [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
-                              self->onHeader(ec, bytes);
-                            });
+    http::async_read_header(
+        stream_, buffer_, *parser_,
+        [self = this->shared_from_this(), parsed_bytes](beast::error_code ec, size_t bytes) {
+          self->onHeader(ec, parsed_bytes + bytes);
+        });
   }
 
   void onHeader(beast::error_code ec, size_t header_bytes) {
