@@ -213,7 +213,10 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   /// `tls` is the context of a TLS connection (kept alive as long as the connection), null
   /// for a plain one.
   Connection(TileServer::Impl& server, tcp::socket socket, std::shared_ptr<ssl::context> tls)
-      : server_(server), tls_(std::move(tls)), stream_(openStream(std::move(socket), tls_.get())) {
+      : server_(server),
+        tls_(std::move(tls)),
+        stream_(openStream(std::move(socket), tls_.get())),
+        watchdog_(stream_.get_executor()) {
     beast::error_code ec;
     tcp::endpoint remote = tcp().socket().remote_endpoint(ec);
     peer_ = ec ? "-" : fmt::format("{}:{}", remote.address().to_string(), remote.port());
@@ -257,6 +260,37 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   const ServeOptions& options() const { return server_.options; }
   beast::tcp_stream& tcp() { return beast::get_lowest_layer(stream_); }
 
+  // Timeouts are deadlines checked by one timer per connection, not Beast's per-operation
+  // timers (tcp_stream::expires_after), which schedule and cancel a timer around every read
+  // and write: a tenth of a small request's cost. The timer is re-armed only when it fires
+  // before the deadline or a deadline moves earlier; on expiry it closes the socket, so the
+  // operation in progress fails and timed_out_ says why.
+  void expireAfter(std::chrono::milliseconds timeout) {
+    deadline_ = Clock::now() + timeout;
+    if (watchdog_armed_ && watchdog_.expiry() <= deadline_) return;
+    armWatchdog();
+  }
+
+  // The handler holds the connection weakly, so that a pending wait (up to an idle timeout)
+  // does not keep a closed connection alive; the timer's destruction cancels it.
+  void armWatchdog() {
+    watchdog_armed_ = true;
+    watchdog_.expires_at(deadline_);
+    watchdog_.async_wait([weak = this->weak_from_this()](beast::error_code ec) {
+      if (ec) return;  // re-armed for an earlier deadline, or the connection is going
+      if (auto self = weak.lock()) self->onWatchdog();
+    });
+  }
+
+  void onWatchdog() {
+    watchdog_armed_ = false;
+    if (Clock::now() < deadline_) return armWatchdog();
+    timed_out_ = true;
+    close();
+  }
+
+  bool timedOut(beast::error_code ec) const { return timed_out_ || ec == beast::error::timeout; }
+
   static Stream openStream(tcp::socket socket, ssl::context* tls) {
     if constexpr (kTls)
       return Stream(std::move(socket), *tls);
@@ -269,7 +303,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   void handshake() {
     started_ = Clock::now();
     idle_ = true;
-    tcp().expires_after(std::chrono::milliseconds(options().header_timeout_ms));
+    expireAfter(std::chrono::milliseconds(options().header_timeout_ms));
     stream_.async_handshake(ssl::stream_base::server,
                             [self = this->shared_from_this()](beast::error_code ec) {
                               self->idle_ = false;
@@ -283,7 +317,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   // logged (status 0, the cause as the target) and closed without a word, since there is no
   // TLS session to answer in.
   void onHandshakeError(beast::error_code ec) {
-    const bool timeout = ec == beast::error::timeout;
+    const bool timeout = timedOut(ec);
     server_.metrics.recordError(timeout ? detail::ServeError::kTimeout : detail::ServeError::kTls);
     if (server_.access_log.enabled()) {
       std::string cause = timeout ? "timeout" : ec.message();
@@ -302,7 +336,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
     // the idle timeout runs until its first byte arrives, then the header timeout.
     if (buffer_.size() > 0) return readHeader();
     idle_ = true;
-    tcp().expires_after(std::chrono::milliseconds(options().idle_timeout_ms));
+    expireAfter(std::chrono::milliseconds(options().idle_timeout_ms));
     stream_.async_read_some(buffer_.prepare(4096),
                             [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
                               self->idle_ = false;
@@ -327,7 +361,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       buffer_.consume(parsed_bytes);
       if (ec != http::error::need_more) return onHeader(ec, parsed_bytes);
     }
-    tcp().expires_after(std::chrono::milliseconds(options().header_timeout_ms));
+    expireAfter(std::chrono::milliseconds(options().header_timeout_ms));
     http::async_read_header(
         stream_, buffer_, *parser_,
         [self = this->shared_from_this(), parsed_bytes](beast::error_code ec, size_t bytes) {
@@ -359,7 +393,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       return refuse(http::status::not_implemented,
                     "the only transfer coding accepted in requests is chunked");
     if (!parser_->is_done()) {
-      tcp().expires_after(std::chrono::milliseconds(options().body_timeout_ms));
+      expireAfter(std::chrono::milliseconds(options().body_timeout_ms));
       http::async_read(stream_, buffer_, *parser_,
                        [self = this->shared_from_this()](beast::error_code read_ec, size_t) {
                          if (read_ec) return self->onReadError(read_ec);
@@ -411,7 +445,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       serializer_.emplace(response_);
       return writeSome();
     }
-    tcp().expires_after(std::chrono::milliseconds(options().send_timeout_ms));
+    expireAfter(std::chrono::milliseconds(options().send_timeout_ms));
     auto done = [self = this->shared_from_this()](beast::error_code ec, size_t) {
       self->onWritten(ec);
     };
@@ -470,7 +504,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   // The send timeout runs per write, not per response: a large archive download to a slow but
   // live client keeps going, while a client that stops reading is closed.
   void writeSome() {
-    tcp().expires_after(std::chrono::milliseconds(options().send_timeout_ms));
+    expireAfter(std::chrono::milliseconds(options().send_timeout_ms));
     http::async_write_some(stream_, *serializer_,
                            [self = this->shared_from_this()](beast::error_code ec, size_t) {
                              if (!ec && !self->serializer_->is_done()) return self->writeSome();
@@ -515,7 +549,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   }
 
   void onSocketError(beast::error_code ec) {
-    if (ec == beast::error::timeout) {
+    if (timedOut(ec)) {
       server_.metrics.recordError(detail::ServeError::kTimeout);
     } else if (ec != http::error::end_of_stream && ec != net::error::eof &&
                ec != net::error::operation_aborted && ec != net::error::connection_reset &&
@@ -541,7 +575,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   void lingeringClose() {
     if constexpr (kTls) {
       if (tls_established_) {
-        tcp().expires_after(closeBound());
+        expireAfter(closeBound());
         stream_.async_shutdown(
             [self = this->shared_from_this()](beast::error_code) { self->tcpLingeringClose(); });
         return;
@@ -556,7 +590,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   void tcpLingeringClose() {
     beast::error_code ignored;
     tcp().socket().shutdown(tcp::socket::shutdown_send, ignored);
-    tcp().expires_after(closeBound());
+    expireAfter(closeBound());
     drain();
   }
 
@@ -575,6 +609,10 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   TileServer::Impl& server_;
   std::shared_ptr<ssl::context> tls_;  // before stream_, which refers to it
   Stream stream_;
+  net::steady_timer watchdog_;  // fires at or before deadline_ while watchdog_armed_
+  Clock::time_point deadline_ = Clock::time_point::max();  // of the operation in progress
+  bool watchdog_armed_ = false;
+  bool timed_out_ = false;  // the watchdog closed the socket: the error that follows is a timeout
   beast::flat_buffer buffer_;
   std::optional<http::request_parser<http::string_body>> parser_;
   detail::Response response_;

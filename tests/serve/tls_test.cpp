@@ -180,6 +180,23 @@ TEST_F(TlsServe, PlainHttpAndOldTlsAreClosedCleanlyAndCounted) {
   EXPECT_EQ(servedFingerprint(server_->port()), fingerprintOf(first_.cert));
 }
 
+// A client that connects and never says hello is closed at the header timeout, counted as a
+// timeout rather than a failed handshake.
+TEST_F(TlsServe, SilentClientIsClosedAtTheHeaderTimeout) {
+  ServeOptions options = tlsOptions();
+  options.header_timeout_ms = 150;
+  server_ = startServer({archive_}, options);
+  ASSERT_TRUE(server_);
+  RawConnection silent(server_->port());
+  ASSERT_TRUE(silent.connected());
+  bool timed_out = false;
+  EXPECT_EQ(silent.readUntilClosed(&timed_out), "");
+  EXPECT_FALSE(timed_out) << "the server closed the connection before the client gave up";
+  EXPECT_TRUE(eventually([&] { return server_->stats().timeouts >= 1; }));
+  EXPECT_EQ(server_->stats().tls_handshake_errors, 0u);
+  EXPECT_EQ(servedFingerprint(server_->port()), fingerprintOf(first_.cert));
+}
+
 TEST_F(TlsServe, ReloadSwapsTheCertificateAndABrokenFileKeepsTheOldOne) {
   server_ = startServer({archive_}, tlsOptions());
   ASSERT_TRUE(server_);
