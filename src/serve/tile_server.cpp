@@ -35,7 +35,6 @@
 #include <boost/beast/core/stream_traits.hpp>
 #include <boost/beast/core/flat_buffer.hpp>
 #include <boost/beast/core/string.hpp>
-#include <boost/beast/core/tcp_stream.hpp>
 #include <boost/beast/http/error.hpp>
 #include <boost/beast/http/read.hpp>
 #include <boost/beast/http/serializer.hpp>
@@ -202,8 +201,11 @@ struct TileServer::Impl {
   }
 };
 
-using PlainStream = beast::tcp_stream;
-using TlsStream = beast::ssl_stream<beast::tcp_stream>;
+// Bare sockets, not beast::tcp_stream: its only addition, per-operation timeouts, is done
+// more cheaply by the connection's watchdog, and its layer costs every read and write a
+// composed operation.
+using PlainStream = tcp::socket;
+using TlsStream = beast::ssl_stream<tcp::socket>;
 
 template <class Stream>
 class Connection : public ConnectionBase, public std::enable_shared_from_this<Connection<Stream>> {
@@ -218,7 +220,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
         stream_(openStream(std::move(socket), tls_.get())),
         watchdog_(stream_.get_executor()) {
     beast::error_code ec;
-    tcp::endpoint remote = tcp().socket().remote_endpoint(ec);
+    tcp::endpoint remote = tcpSocket().remote_endpoint(ec);
     peer_ = ec ? "-" : fmt::format("{}:{}", remote.address().to_string(), remote.port());
     // Asio asks OpenSSL to free a connection's record buffers whenever they empty, which
     // costs a 16 KiB allocation and free per record each way on a busy keep-alive connection.
@@ -250,7 +252,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       self->stop_requested_ = true;
       if (force || self->idle_) {
         beast::error_code ignored;
-        self->tcp().socket().close(ignored);
+        self->tcpSocket().close(ignored);
       }
     });
   }
@@ -258,10 +260,10 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
  private:
   using Request = detail::Request;
   const ServeOptions& options() const { return server_.options; }
-  beast::tcp_stream& tcp() { return beast::get_lowest_layer(stream_); }
+  tcp::socket& tcpSocket() { return beast::get_lowest_layer(stream_); }
 
   // Timeouts are deadlines checked by one timer per connection, not Beast's per-operation
-  // timers (tcp_stream::expires_after), which schedule and cancel a timer around every read
+  // timers (beast::tcp_stream::expires_after), which schedule and cancel a timer around every read
   // and write: a tenth of a small request's cost. The timer is re-armed only when it fires
   // before the deadline or a deadline moves earlier; on expiry it closes the socket, so the
   // operation in progress fails and timed_out_ says why.
@@ -562,7 +564,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
 
   void close() {
     beast::error_code ignored;
-    tcp().socket().close(ignored);
+    tcpSocket().close(ignored);
   }
 
   std::chrono::milliseconds closeBound() const {
@@ -589,7 +591,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   // before the client has read that response.
   void tcpLingeringClose() {
     beast::error_code ignored;
-    tcp().socket().shutdown(tcp::socket::shutdown_send, ignored);
+    tcpSocket().shutdown(tcp::socket::shutdown_send, ignored);
     expireAfter(closeBound());
     drain();
   }
@@ -598,12 +600,12 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   // worth decrypting.
   void drain() {
     buffer_.consume(buffer_.size());
-    tcp().async_read_some(buffer_.prepare(4096),
-                          [self = this->shared_from_this()](beast::error_code ec, size_t bytes) {
-                            if (ec) return self->close();
-                            self->buffer_.commit(bytes);
-                            self->drain();
-                          });
+    tcpSocket().async_read_some(buffer_.prepare(4096), [self = this->shared_from_this()](
+                                                           beast::error_code ec, size_t bytes) {
+      if (ec) return self->close();
+      self->buffer_.commit(bytes);
+      self->drain();
+    });
   }
 
   TileServer::Impl& server_;
