@@ -1,11 +1,13 @@
 // TileServer: the accept loop and one Connection per socket, over Boost.Beast and Asio. Each
 // connection lives on one I/O thread's io_context; request handling (pread, decode, encode)
 // runs there too, which is cheap for stored tiles and bounded for transcodes by the cache.
-// One Connection template serves plain TCP and TLS (beast::ssl_stream over the same TCP
-// stream): only the handshake and the close differ.
+// One Connection template serves plain TCP and TLS (OpenSSL over the same socket,
+// tls_socket_stream.h): only the handshake and the close differ.
 #include <tessera/serve.h>
 
 #include <fcntl.h>
+#include <pthread.h>
+#include <signal.h>
 #include <sys/resource.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -39,12 +41,11 @@
 #include <boost/beast/http/read.hpp>
 #include <boost/beast/http/serializer.hpp>
 #include <boost/beast/http/write.hpp>
-#include <boost/beast/ssl/ssl_stream.hpp>
 #include <fmt/format.h>
-#include <openssl/ssl.h>
 
 #include "router.h"
 #include "tls_context.h"
+#include "tls_socket_stream.h"
 
 namespace tessera {
 
@@ -203,9 +204,9 @@ struct TileServer::Impl {
 
 // Bare sockets, not beast::tcp_stream: its only addition, per-operation timeouts, is done
 // more cheaply by the connection's watchdog, and its layer costs every read and write a
-// composed operation.
+// composed operation. TLS runs OpenSSL on the socket itself (tls_socket_stream.h).
 using PlainStream = tcp::socket;
-using TlsStream = beast::ssl_stream<tcp::socket>;
+using TlsStream = detail::TlsSocketStream;
 
 template <class Stream>
 class Connection : public ConnectionBase, public std::enable_shared_from_this<Connection<Stream>> {
@@ -222,9 +223,6 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
     beast::error_code ec;
     tcp::endpoint remote = tcpSocket().remote_endpoint(ec);
     peer_ = ec ? "-" : fmt::format("{}:{}", remote.address().to_string(), remote.port());
-    // Asio asks OpenSSL to free a connection's record buffers whenever they empty, which
-    // costs a 16 KiB allocation and free per record each way on a busy keep-alive connection.
-    if constexpr (kTls) SSL_clear_mode(stream_.native_handle(), SSL_MODE_RELEASE_BUFFERS);
     server_.metrics.connectionOpened();
   }
   ~Connection() {
@@ -782,7 +780,15 @@ Result<std::unique_ptr<TileServer>> TileServer::start(const ServeOptions& option
   if (options.on_listening) options.on_listening(impl->address, impl->port);
   impl->accept();
   for (uint32_t i = 0; i < threads; ++i)
-    impl->threads.emplace_back([context = impl->contexts[i].get()] { context->run(); });
+    impl->threads.emplace_back([context = impl->contexts[i].get()] {
+      // OpenSSL writes TLS records with write(), which raises SIGPIPE on a connection the
+      // client has reset; blocked here, the write just fails with EPIPE.
+      sigset_t pipe;
+      sigemptyset(&pipe);
+      sigaddset(&pipe, SIGPIPE);
+      pthread_sigmask(SIG_BLOCK, &pipe, nullptr);
+      context->run();
+    });
   return std::unique_ptr<TileServer>(new TileServer(std::move(impl)));
 }
 
