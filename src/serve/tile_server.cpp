@@ -223,6 +223,9 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
     beast::error_code ec;
     tcp::endpoint remote = tcpSocket().remote_endpoint(ec);
     peer_ = ec ? "-" : fmt::format("{}:{}", remote.address().to_string(), remote.port());
+    // Plain writes are tried inline first (writeInline), and must fail with would_block
+    // rather than wait when the send buffer is full.
+    if constexpr (!kTls) tcpSocket().non_blocking(true, ec);
     server_.metrics.connectionOpened();
   }
   ~Connection() {
@@ -446,6 +449,9 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       return writeSome();
     }
     expireAfter(std::chrono::milliseconds(options().send_timeout_ms));
+    if constexpr (!kTls) {
+      if (!writing_inline_ && writeInline()) return;
+    }
     auto done = [self = this->shared_from_this()](beast::error_code ec, size_t) {
       self->onWritten(ec);
     };
@@ -453,6 +459,27 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
       net::async_write(stream_, net::buffer(out_), std::move(done));
     else
       net::async_write(stream_, gather_, std::move(done));
+  }
+
+  // Most plain responses fit the socket's send buffer: sent here in one sendmsg, and the
+  // connection goes on to its next request without a trip through the queue. What did not
+  // fit is left in gather_ for the asynchronous write (false). Not for a write reached from
+  // an inline one (pipelined requests), which would nest a call per request.
+  bool writeInline() {
+    beast::error_code ec;
+    size_t sent = tcpSocket().write_some(gather_, ec);
+    if (ec == net::error::would_block || ec == net::error::try_again) ec = {};
+    size_t first = 0;
+    while (first < gather_.size() && sent >= gather_[first].size()) sent -= gather_[first++].size();
+    if (!ec && first < gather_.size()) {
+      gather_.erase(gather_.begin(), gather_.begin() + std::ptrdiff_t(first));
+      gather_.front() += sent;
+      return false;
+    }
+    writing_inline_ = true;
+    onWritten(ec);
+    writing_inline_ = false;
+    return true;
   }
 
   // Tiles, documents and errors (small bodies, all in memory) skip Beast's serializer, whose
@@ -630,6 +657,7 @@ class Connection : public ConnectionBase, public std::enable_shared_from_this<Co
   bool tls_established_ = false;
   bool idle_ = false;            // waiting for the first byte of a request
   bool stop_requested_ = false;  // close after the response in progress
+  bool writing_inline_ = false;  // inside writeInline's call of onWritten
 };
 
 void TileServer::Impl::adopt(tcp::socket socket) {
