@@ -16,10 +16,11 @@
 #      nginx; then (unless --no-slow) at 64 connections while a helper holds 1000 slow clients
 #      (partial headers, one byte every few seconds, reconnecting when closed) on the plain
 #      servers;
-#   5. a table of requests/s, MB/s and p50/p99 latency, and the tessera/nginx ratios, against
-#      the targets (issue 34: at 1000 connections throughput >= 1.0x nginx and p99 < 50 ms,
-#      TLS on and off; issue 5: p99 < 20 ms at 64 connections, < 100 ms with 1000 slow
-#      clients).
+#   5. a table of requests/s, MB/s, p50/p99 latency and each server's CPU time per request
+#      (user + system, from /proc: steadier than throughput on a shared machine), and the
+#      tessera/nginx ratios, against the targets (issue 34: at 1000 connections throughput
+#      >= 1.0x nginx and p99 < 50 ms, TLS on and off; issue 5: p99 < 20 ms at 64
+#      connections, < 100 ms with 1000 slow clients).
 #
 # Both servers get the same number of worker threads (--threads, default: all cores). The
 # machine is shared: the 1-minute load average is printed before every run.
@@ -44,7 +45,7 @@ while (($#)); do
     --no-tls) TLS=0; shift ;;
     --no-slow) SLOW=0; shift ;;
     --build-dir) BUILD_DIR=$2; shift 2 ;;
-    -h|--help) sed -n '2,31p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,29p' "$0"; exit 0 ;;
     *) echo "serve_bench: unknown option $1" >&2; exit 2 ;;
   esac
 done
@@ -100,6 +101,7 @@ chmod 644 "$RUN/key.pem"
 if ((TLS)); then
   start_tessera tessera-tls --tls-cert "$RUN/cert.pem" --tls-key "$RUN/key.pem"
   TESSERA_TLS_PORT=$STARTED_PORT
+  TESSERA_TLS_PID=$STARTED_PID
 fi
 
 # Tile list and files: every encoded tile (204 = uniform or empty, no payload, skipped).
@@ -219,17 +221,32 @@ while True:
             socks[s] = now
 EOF
 
+# CPU time (user + system, clock ticks) of the given processes, from /proc.
+cpu_ticks() {
+  local total=0 pid
+  for pid in "$@"; do total=$((total + $(awk '{print $14 + $15}' "/proc/$pid/stat"))); done
+  echo "$total"
+}
+CLK_TCK=$(getconf CLK_TCK)
+NGINX_WORKERS=$(pgrep -P "$(cat "$RUN/nginx.pid")" | tr '\n' ' ')
+
 RESULTS=$RUN/results.txt
 : >"$RESULTS"
-run_wrk() {  # name port connections [scheme]
-  local name=$1 port=$2 conns=$3 scheme=${4:-http}
-  local wrk_threads=$((THREADS < 4 ? THREADS : 4))
+# Besides wrk's figures, the server's CPU time per request: on a shared machine throughput
+# follows the load of the moment, while CPU per request moves much less.
+run_wrk() {  # name port connections scheme pid...
+  local name=$1 port=$2 conns=$3 scheme=$4
+  shift 4
+  local wrk_threads=$((THREADS < 4 ? THREADS : 4)) ticks
   echo "serve_bench: $name, $conns connections, ${DURATION}s, load average $(cut -d' ' -f1 /proc/loadavg)"
+  ticks=$(cpu_ticks "$@")
   TILE_LIST=$RUN/paths.txt wrk -t"$wrk_threads" -c"$conns" -d"${DURATION}s" --latency \
     -s "$RUN/random_tiles.lua" "$scheme://127.0.0.1:$port" >"$RUN/wrk.txt" 2>&1
-  python3 - "$name" "$conns" "$RUN/wrk.txt" >>"$RESULTS" <<'EOF'
+  ticks=$(($(cpu_ticks "$@") - ticks))
+  python3 - "$name" "$conns" "$RUN/wrk.txt" "$ticks" "$CLK_TCK" >>"$RESULTS" <<'EOF'
 import re, sys
 name, conns, path = sys.argv[1], sys.argv[2], sys.argv[3]
+cpu_seconds = int(sys.argv[4]) / int(sys.argv[5])
 text = open(path).read()
 def latency(label):
     m = re.search(r"^\s+%s\s+([\d.]+)(us|ms|s)\s*$" % label, text, re.M)
@@ -240,8 +257,10 @@ mbs = re.search(r"Transfer/sec:\s+([\d.]+)(\w+)", text)
 mb = float(mbs.group(1)) * {"B": 1e-6, "KB": 1.024e-3, "MB": 1.048576, "GB": 1073.741824}[mbs.group(2)]
 errors = re.search(r"Socket errors: (.*)", text)
 non2xx = re.search(r"Non-2xx or 3xx responses: (\d+)", text)
+requests = int(re.search(r"(\d+) requests in", text).group(1))
+cpu_us = cpu_seconds * 1e6 / requests if requests else float("nan")
 print(f"{name}\t{conns}\t{rps:.0f}\t{mb:.1f}\t{latency('50%'):.2f}\t{latency('99%'):.2f}\t"
-      f"{errors.group(1) if errors else '-'}\t{non2xx.group(1) if non2xx else 0}")
+      f"{errors.group(1) if errors else '-'}\t{non2xx.group(1) if non2xx else 0}\t{cpu_us:.1f}")
 EOF
   tail -1 "$RESULTS"
 }
@@ -251,11 +270,13 @@ if ((TLS)); then
     { echo "serve_bench: nginx does not serve the tiles over TLS" >&2; exit 1; }
 fi
 for conns in $CONNECTIONS; do
-  run_wrk tessera "$TESSERA_PORT" "$conns"
-  run_wrk nginx "$NGINX_PORT" "$conns"
+  run_wrk tessera "$TESSERA_PORT" "$conns" http "$TESSERA_PID"
+  # shellcheck disable=SC2086 # one argument per worker
+  run_wrk nginx "$NGINX_PORT" "$conns" http $NGINX_WORKERS
   if ((TLS)); then
-    run_wrk tessera-tls "$TESSERA_TLS_PORT" "$conns" https
-    run_wrk nginx-tls "$NGINX_TLS_PORT" "$conns" https
+    run_wrk tessera-tls "$TESSERA_TLS_PORT" "$conns" https "$TESSERA_TLS_PID"
+    # shellcheck disable=SC2086
+    run_wrk nginx-tls "$NGINX_TLS_PORT" "$conns" https $NGINX_WORKERS
   fi
 done
 
@@ -269,7 +290,10 @@ for target in tessera nginx; do
   PIDS+=($slow_pid)
   exec 4<"$RUN/slow.$target"
   read -r _ <&4
-  run_wrk "$target+1000slow" "$port" 64
+  pids=$TESSERA_PID
+  [[ $target == nginx ]] && pids=$NGINX_WORKERS
+  # shellcheck disable=SC2086
+  run_wrk "$target+1000slow" "$port" 64 http $pids
   kill "$slow_pid" 2>/dev/null || true
   exec 4<&-
 done
@@ -280,19 +304,19 @@ rss() { awk -v k="$1" '$1 == k ":" {printf "%.1f MiB", $2 / 1024}' "/proc/$TESSE
 echo
 echo "tessera serve memory: peak RSS $(rss VmHWM), now $(rss VmRSS)"
 echo
-echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket errors | non-2xx |"
-echo "|---|---:|---:|---:|---:|---:|---|---:|"
-awk -F'\t' '{printf "| %s | %s | %s | %s | %s | %s | %s | %s |\n", $1, $2, $3, $4, $5, $6, $7, $8}' "$RESULTS"
+echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket errors | non-2xx | server CPU us/request |"
+echo "|---|---:|---:|---:|---:|---:|---|---:|---:|"
+awk -F'\t' '{printf "| %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", $1, $2, $3, $4, $5, $6, $7, $8, $9}' "$RESULTS"
 echo
 awk -F'\t' -v conns_list="$CONNECTIONS" -v tls="$TLS" -v slow="$SLOW" '
-  { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6 }
+  { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6; cpu[$1 "@" $2] = $9 }
   END {
     n = split(conns_list, conns, " ")
     for (i = 1; i <= n; ++i) {
       k = conns[i]
       for (t = 0; t <= tls; ++t) {
         suffix = t ? "-tls" : ""
-        printf "%s at %s connections: throughput tessera/nginx %.2f, p99 tessera %s ms, nginx %s ms\n", t ? "TLS  " : "plain", k, rps["tessera" suffix "@" k] / rps["nginx" suffix "@" k], p99["tessera" suffix "@" k], p99["nginx" suffix "@" k]
+        printf "%s at %s connections: throughput tessera/nginx %.2f, p99 tessera %s ms, nginx %s ms, CPU per request tessera/nginx %.2f\n", t ? "TLS  " : "plain", k, rps["tessera" suffix "@" k] / rps["nginx" suffix "@" k], p99["tessera" suffix "@" k], p99["nginx" suffix "@" k], cpu["tessera" suffix "@" k] / cpu["nginx" suffix "@" k]
       }
     }
     print "targets: at 1000 connections throughput >= 1.0x nginx and p99 < 50 ms, TLS on and off; p99 < 20 ms at 64"

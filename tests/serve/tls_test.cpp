@@ -86,6 +86,30 @@ std::string servedFingerprint(uint16_t port, int max_version = TLS1_3_VERSION) {
   return hex;
 }
 
+// Over TLS to 127.0.0.1:port: handshakes, sends `request` and closes the socket at once,
+// reading nothing. The server's answer then meets a closed socket (a reset on loopback), so
+// its next write fails with EPIPE. False when the handshake fails.
+bool sendAndVanish(uint16_t port, const std::string& request) {
+  std::unique_ptr<SSL_CTX, decltype(&SSL_CTX_free)> context(SSL_CTX_new(TLS_client_method()),
+                                                            SSL_CTX_free);
+  const int fd = ::socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_in address{};
+  address.sin_family = AF_INET;
+  address.sin_port = htons(port);
+  address.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  timeval guard{10, 0};
+  ::setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &guard, sizeof guard);
+  bool sent = false;
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0) {
+    SSL* ssl = SSL_new(context.get());
+    SSL_set_fd(ssl, fd);
+    sent = SSL_connect(ssl) == 1 && SSL_write(ssl, request.data(), int(request.size())) > 0;
+    SSL_free(ssl);
+  }
+  ::close(fd);
+  return sent;
+}
+
 std::string fingerprintOf(const std::string& pem) {
   std::unique_ptr<BIO, decltype(&BIO_free)> bio(BIO_new_mem_buf(pem.data(), int(pem.size())),
                                                 BIO_free);
@@ -177,6 +201,37 @@ TEST_F(TlsServe, PlainHttpAndOldTlsAreClosedCleanlyAndCounted) {
   EXPECT_EQ(servedFingerprint(server_->port(), TLS1_1_VERSION), "") << "TLS 1.1 refused";
   EXPECT_TRUE(eventually([&] { return server_->stats().tls_handshake_errors >= 2; }));
   // The server is unharmed.
+  EXPECT_EQ(servedFingerprint(server_->port()), fingerprintOf(first_.cert));
+}
+
+// A client that connects and never says hello is closed at the header timeout, counted as a
+// timeout rather than a failed handshake.
+TEST_F(TlsServe, SilentClientIsClosedAtTheHeaderTimeout) {
+  ServeOptions options = tlsOptions();
+  options.header_timeout_ms = 150;
+  server_ = startServer({archive_}, options);
+  ASSERT_TRUE(server_);
+  RawConnection silent(server_->port());
+  ASSERT_TRUE(silent.connected());
+  bool timed_out = false;
+  EXPECT_EQ(silent.readUntilClosed(&timed_out), "");
+  EXPECT_FALSE(timed_out) << "the server closed the connection before the client gave up";
+  EXPECT_TRUE(eventually([&] { return server_->stats().timeouts >= 1; }));
+  EXPECT_EQ(server_->stats().tls_handshake_errors, 0u);
+  EXPECT_EQ(servedFingerprint(server_->port()), fingerprintOf(first_.cert));
+}
+
+// OpenSSL writes records with write(), which raises SIGPIPE on such a socket: the server's
+// close_notify after a `Connection: close` response would kill the process (this one) if the
+// I/O threads did not block the signal.
+TEST_F(TlsServe, ClientsVanishingBeforeTheirResponseLeaveTheServerServing) {
+  server_ = startServer({archive_}, tlsOptions());
+  ASSERT_TRUE(server_);
+  for (int i = 0; i < 20; ++i)
+    ASSERT_TRUE(sendAndVanish(server_->port(),
+                              "GET /tlsplain/0/0/0/0 HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                              "Connection: close\r\n\r\n"));
+  EXPECT_TRUE(eventually([&] { return server_->stats().requests >= 20; }));
   EXPECT_EQ(servedFingerprint(server_->port()), fingerprintOf(first_.cert));
 }
 
