@@ -4,12 +4,7 @@
 // parts' exact level-M rows.
 #include <tessera/split_build.h>
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <cerrno>
 #include <chrono>
 #include <condition_variable>
 #include <cstring>
@@ -253,20 +248,6 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   return {};
 }
 
-/// A part's file opened for the copy, apart from its Archive (a byte source, not a file).
-struct PartFile {
-  int fd = -1;
-  uint64_t size_bytes = 0;
-
-  PartFile() = default;
-  PartFile(PartFile&& other) noexcept
-      : fd(std::exchange(other.fd, -1)), size_bytes(other.size_bytes) {}
-  PartFile& operator=(PartFile&&) = delete;
-  ~PartFile() {
-    if (fd >= 0) ::close(fd);
-  }
-};
-
 /// The buffers the stretches of the parts are read into, reused: the merging thread reads and
 /// checks a stretch in one while the appender's writer thread writes the previous from another
 /// and gives it back once written. Never more than kBuffers of kPayloadRunBytes, however large
@@ -309,33 +290,21 @@ class StretchBuffers {
 
 /// Places the payloads of the writer's runs: the coarse levels' from memory, the others from
 /// the parts. A run's payloads from one part lie back to back there (the part is written in
-/// the output's order), so each such stretch is read with pread into a buffer of a small
-/// pool, its checksums verified there, and handed to the appender's writer thread, which
-/// writes it to the output while the next stretch is read and checked. pread, not a mapping:
-/// a part cut short by another process (parts live on shared file systems) is then a short
-/// read, an error naming the part, where reading a mapping past the file's end kills the
-/// process.
+/// the output's order), so each such stretch is one read of the part's byte source into a
+/// buffer of a small pool, its checksums verified there, and handed to the appender's writer
+/// thread, which writes it to the output while the next stretch is read and checked. Reads,
+/// not a mapping: a part cut short by another process (parts live on shared file systems) is
+/// then a short read, which the source reports naming the part, where reading a mapping past
+/// the file's end kills the process.
 class PayloadCopier {
  public:
-  static Result<PayloadCopier> open(const std::vector<OpenedPart>& parts, uint32_t merge_level,
-                                    const std::vector<std::vector<uint32_t>>& owner,
-                                    const std::deque<std::vector<uint8_t>>& coarse_payloads) {
-    PayloadCopier copier(parts, merge_level, owner, coarse_payloads);
-    for (const OpenedPart& part : parts) {
-      PartFile file;
-      file.fd = ::open(part.path.c_str(), O_RDONLY | O_CLOEXEC);
-      struct stat st {};
-      if (file.fd < 0 || ::fstat(file.fd, &st) != 0)
-        return fail(ErrorCode::kIo,
-                    fmt::format("{}: cannot open for the copy: {}", part.path, strerror(errno)));
-      file.size_bytes = uint64_t(st.st_size);
-      if (file.size_bytes != part.archive->source().sizeBytes())
-        return fail(ErrorCode::kIo, part.path + ": changed while the merge read it");
-      (void)::posix_fadvise(file.fd, 0, 0, POSIX_FADV_SEQUENTIAL);  // a hint for a cold part
-      copier.files_.push_back(std::move(file));
-    }
-    return copier;
-  }
+  PayloadCopier(const std::vector<OpenedPart>& parts, uint32_t merge_level,
+                const std::vector<std::vector<uint32_t>>& owner,
+                const std::deque<std::vector<uint8_t>>& coarse_payloads)
+      : parts_(parts),
+        merge_level_(merge_level),
+        owner_(owner),
+        coarse_payloads_(coarse_payloads) {}
 
   /// Appends `run`'s payloads, counting what came from the parts in `report`.
   Result<void> append(std::span<const RunTile> run, FileAppender& appender, MergeReport& report) {
@@ -364,25 +333,12 @@ class PayloadCopier {
   }
 
  private:
-  PayloadCopier(const std::vector<OpenedPart>& parts, uint32_t merge_level,
-                const std::vector<std::vector<uint32_t>>& owner,
-                const std::deque<std::vector<uint8_t>>& coarse_payloads)
-      : parts_(parts),
-        merge_level_(merge_level),
-        owner_(owner),
-        coarse_payloads_(coarse_payloads) {}
-
   /// `tiles`, stored back to back from `offset` in part `p`, onto the output.
   Result<void> copyStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset, size_t length,
                            FileAppender& appender) const {
     const OpenedPart& part = parts_[p];
-    if (offset + length > files_[p].size_bytes)
-      return fail(
-          ErrorCode::kCorrupt,
-          fmt::format("{}: tile ({},{},{}) lies past the end of the file ({} bytes)", part.path,
-                      tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y, files_[p].size_bytes));
     auto read_and_verify = [&](std::span<uint8_t> bytes) -> Result<void> {
-      TESSERA_TRY(readStretch(p, tiles, offset, bytes));
+      TESSERA_TRY(part.archive->source().read(offset, bytes));
       return verify(part, tiles, bytes);
     };
     if (length > kPayloadRunBytes) {
@@ -404,32 +360,6 @@ class PayloadCopier {
     return {};
   }
 
-  /// Fills `bytes` from `offset` of part `p`; a part shorter than when it was opened (cut
-  /// short by another process) is an error naming it.
-  Result<void> readStretch(size_t p, std::span<const RunTile> tiles, uint64_t offset,
-                           std::span<uint8_t> bytes) const {
-    const OpenedPart& part = parts_[p];
-    size_t done = 0;
-    while (done < bytes.size()) {
-      const ssize_t got =
-          ::pread(files_[p].fd, bytes.data() + done, bytes.size() - done, off_t(offset + done));
-      if (got > 0) {
-        done += size_t(got);
-        continue;
-      }
-      if (got < 0 && errno == EINTR) continue;
-      const std::string tile =
-          fmt::format("tile ({},{},{})", tiles[0].tile.level, tiles[0].tile.x, tiles[0].tile.y);
-      if (got == 0)
-        return fail(ErrorCode::kIo,
-                    fmt::format("{}: cut short while the merge read it ({} bytes, {} at byte {})",
-                                part.path, offset + done, tile, offset));
-      return fail(ErrorCode::kIo, fmt::format("{}: cannot read {} at byte {}: {}", part.path, tile,
-                                              offset, strerror(errno)));
-    }
-    return {};
-  }
-
   static Result<void> verify(const OpenedPart& part, std::span<const RunTile> tiles,
                              std::span<const uint8_t> bytes) {
     size_t at = 0;
@@ -448,7 +378,6 @@ class PayloadCopier {
   uint32_t merge_level_;
   const std::vector<std::vector<uint32_t>>& owner_;  ///< [level][tile row]: the part holding it
   const std::deque<std::vector<uint8_t>>& coarse_payloads_;  ///< by SpoolEntry::spool_offset
-  std::vector<PartFile> files_;                              ///< by part
   std::shared_ptr<StretchBuffers> buffers_ = std::make_shared<StretchBuffers>();
 };
 
@@ -501,8 +430,7 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
   end_phase(report.coarse_s);
 
   TESSERA_ASSIGN_OR_RETURN(TempFile file, TempFile::create(output));
-  TESSERA_ASSIGN_OR_RETURN(PayloadCopier copier,
-                           PayloadCopier::open(parts, plan.merge_level, owner, sink.payloads));
+  PayloadCopier copier(parts, plan.merge_level, owner, sink.payloads);
   auto append = [&](std::span<const RunTile> run, size_t, FileAppender& appender) {
     if (cancel && cancel->load())
       return Result<void>(fail(ErrorCode::kCancelled, output + ": merge cancelled"));
