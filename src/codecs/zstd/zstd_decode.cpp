@@ -20,21 +20,19 @@ struct ZstdDecodeState : CodecState {
   ZstdFrameDecoder frame;
 };
 
-}  // namespace
-
-Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8_t> out,
-                                 const char* what, ZstdFrameDecoder& decoder) {
-  // Read the header before touching the data: the declared size must be the expected one and
-  // the frame must end exactly where the payload does.
+// The header checks made before touching the data: the declared size must be the expected one
+// and the frame must end exactly where the payload does.
+Result<void> checkFrameHeader(std::span<const uint8_t> frame, size_t expected_bytes,
+                              const char* what) {
   unsigned long long content_bytes = ZSTD_getFrameContentSize(frame.data(), frame.size());
   if (content_bytes == ZSTD_CONTENTSIZE_ERROR)
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}: not a zstd frame ({} bytes)", what, frame.size()));
   if (content_bytes == ZSTD_CONTENTSIZE_UNKNOWN)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: zstd frame does not record its size", what));
-  if (content_bytes != out.size())
+  if (content_bytes != expected_bytes)
     return fail(ErrorCode::kCorrupt, fmt::format("{}: zstd frame holds {} bytes, {} expected", what,
-                                                 content_bytes, out.size()));
+                                                 content_bytes, expected_bytes));
   size_t frame_bytes = ZSTD_findFrameCompressedSize(frame.data(), frame.size());
   if (ZSTD_isError(frame_bytes))
     return fail(ErrorCode::kCorrupt,
@@ -42,6 +40,14 @@ Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8
   if (frame_bytes != frame.size())
     return fail(ErrorCode::kCorrupt, fmt::format("{}: {} trailing bytes after the zstd frame", what,
                                                  frame.size() - frame_bytes));
+  return {};
+}
+
+}  // namespace
+
+Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8_t> out,
+                                 const char* what, ZstdFrameDecoder& decoder) {
+  TESSERA_TRY(checkFrameHeader(frame, out.size(), what));
   if (decoder.context == nullptr) {
     decoder.context = ZSTD_createDCtx();
     if (decoder.context == nullptr)
@@ -59,12 +65,7 @@ Result<void> decompressZstdFrame(std::span<const uint8_t> frame, std::span<uint8
 }
 
 bool isWholeZstdFrame(std::span<const uint8_t> payload, size_t content_bytes) {
-  const unsigned long long content = ZSTD_getFrameContentSize(payload.data(), payload.size());
-  if (content == ZSTD_CONTENTSIZE_ERROR || content == ZSTD_CONTENTSIZE_UNKNOWN ||
-      content != content_bytes)
-    return false;
-  const size_t frame_bytes = ZSTD_findFrameCompressedSize(payload.data(), payload.size());
-  return !ZSTD_isError(frame_bytes) && frame_bytes == payload.size();
+  return checkFrameHeader(payload, content_bytes, "zstd payload").has_value();
 }
 
 Result<void> decodeZstd(std::span<const uint8_t> payload, Image& out,
