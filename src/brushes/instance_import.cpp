@@ -233,6 +233,9 @@ Result<std::vector<BrushInstance>> parseJson(std::string_view text, InstanceFile
     return fail(ErrorCode::kInvalidArgument,
                 fmt::format("{}:{}: JSON syntax error: {}", name,
                             lineColumn(text, e.byte > 0 ? e.byte - 1 : 0), e.what()));
+  } catch (const nlohmann::json::exception& e) {
+    // Valid syntax the parser still refuses: a number beyond a double (1e999).
+    return fail(ErrorCode::kInvalidArgument, fmt::format("{}: JSON error: {}", name, e.what()));
   }
   std::vector<BrushInstance> instances;
   if (format == InstanceFileFormat::kGeoJson) {

@@ -164,6 +164,9 @@ Result<MosaicManifest> readMosaicManifest(const std::string& path) {
     return fail(ErrorCode::kCorrupt,
                 fmt::format("{}:{}: bad JSON: {}", path,
                             lineColumn(text, e.byte > 0 ? e.byte - 1 : 0), problem));
+  } catch (const nlohmann::json::exception& e) {
+    // Valid syntax the parser still refuses: a number beyond a double (1e999).
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: bad JSON: {}", path, e.what()));
   }
   MosaicManifest manifest;
   manifest.path = path;

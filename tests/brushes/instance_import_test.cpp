@@ -98,6 +98,11 @@ TEST(InstanceImport, JsonErrorsNameLineColumnOrPath) {
       parseError("[\n  {\"brush\": \"rock\",\n   \"x\": 1,, }\n]", InstanceFileFormat::kJson);
   EXPECT_EQ(syntax.rfind("in:3:", 0), 0u) << syntax;
   EXPECT_NE(syntax.find("JSON syntax error"), std::string::npos);
+  // Valid syntax, but beyond a double: the parser throws out_of_range, not parse_error.
+  EXPECT_EQ(parseError(R"([{"brush": "rock", "x": 1e999, "y": 2, "radius": 1}])",
+                       InstanceFileFormat::kJson)
+                .rfind("in: JSON error: ", 0),
+            0u);
   EXPECT_EQ(parseError(R"([{"brush": "rock", "x": 1, "y": 2, "radius": 1},
                            {"brush": "rock", "x": 1, "y": 2, "radius": "big"}])",
                        InstanceFileFormat::kJson),
