@@ -5,6 +5,7 @@ set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build pkg-config git clang-format clang-tidy clang libclang-rt-14-dev
+  universal-ctags
   libtiff-dev libjpeg62-turbo-dev libturbojpeg0-dev libpng-dev libwebp-dev
   libzstd-dev liblz4-dev libxxhash-dev libsquish-dev
   libcli11-dev libfmt-dev nlohmann-json3-dev libboost-dev libcurl4-openssl-dev
