@@ -21,6 +21,7 @@
 #include "build_internals.h"
 #include "codecs/encode.h"
 #include "format/checksum.h"
+#include "format/metadata.h"
 #include "output/file_appender.h"
 #include "output/output_file.h"
 #include "part_build.h"
@@ -36,13 +37,72 @@ namespace {
 struct OpenedPart {
   std::string path;
   std::shared_ptr<Archive> archive;
-  nlohmann::json meta;  ///< its "split_part" metadata
+  nlohmann::json meta;  ///< its "split_part" metadata, checked by checkPartFields
+  uint32_t index = 0;   ///< 1..count once openParts accepts it
+  uint32_t count = 0;   ///< 1..kMaxBuildParts
+  uint32_t merge_level = 0;
+  uint32_t first_row = 0, end_row = 0;  ///< its level-0 rows, "rows"
 };
 
 /// The first place two JSON values differ, as a JSON pointer ("/build/quality").
 std::string firstDifference(const nlohmann::json& a, const nlohmann::json& b) {
   const nlohmann::json patch = nlohmann::json::diff(a, b);
   return patch.empty() ? std::string() : patch[0]["path"].get<std::string>();
+}
+
+Result<void> metadataError(const OpenedPart& part, std::string_view field, const char* problem) {
+  return fail(ErrorCode::kInvalidArgument,
+              fmt::format("{}: metadata \"split_part.{}\" {}", part.path, field, problem));
+}
+
+/// Takes the numbers the merge relies on from `part.meta` and checks the types of the build
+/// settings it uses: a damaged or hand-made part is an error naming the file and the field,
+/// never a JSON exception.
+Result<void> checkPartFields(OpenedPart& part) {
+  const nlohmann::json& meta = part.meta;  // holds the keys openPart requires
+  constexpr uint64_t kMax32 = UINT32_MAX;
+  auto number = [&](const char* key, uint64_t max, uint32_t& out) -> Result<void> {
+    TESSERA_ASSIGN_OR_RETURN(
+        const uint64_t value,
+        metadataUnsigned(meta[key], part.path, fmt::format("split_part.{}", key), max));
+    out = uint32_t(value);
+    return {};
+  };
+  TESSERA_TRY(number("index", kMax32, part.index));
+  TESSERA_TRY(number("count", kMaxBuildParts, part.count));
+  TESSERA_TRY(number("merge_level", kMax32, part.merge_level));
+  const nlohmann::json& rows = meta["rows"];
+  if (!rows.is_array() || rows.size() != 2)
+    return metadataError(part, "rows", "is not a pair of row numbers");
+  TESSERA_ASSIGN_OR_RETURN(part.first_row,
+                           metadataUnsigned(rows[0], part.path, "split_part.rows[0]", kMax32));
+  TESSERA_ASSIGN_OR_RETURN(part.end_row,
+                           metadataUnsigned(rows[1], part.path, "split_part.rows[1]", kMax32));
+  const nlohmann::json& archive_metadata = meta["archive_metadata"];
+  if (!archive_metadata.is_object())
+    return metadataError(part, "archive_metadata", "is not an object");
+  const auto images = archive_metadata.find("images");
+  if (images != archive_metadata.end() &&
+      (!images->is_array() || (!images->empty() && !(*images)[0].is_object())))
+    return metadataError(part, "archive_metadata.images", "is not an array of objects");
+  const auto build = archive_metadata.find("build");
+  if (build == archive_metadata.end() || !build->is_object())
+    return metadataError(part, "archive_metadata.build", "is not an object");
+  Codec codec = Codec::kRaw;
+  const auto codec_name = build->find("codec");
+  if (codec_name == build->end() || !codec_name->is_string() ||
+      !parseCodecName(codec_name->get<std::string>(), &codec))
+    return metadataError(part, "archive_metadata.build.codec", "is not a codec's name");
+  const auto order = build->find("order");
+  if (order == build->end() || !order->is_string())
+    return metadataError(part, "archive_metadata.build.order", "is not a tile order's name");
+  for (const char* key : {"quality", "effort"}) {
+    const auto value = build->find(key);
+    const std::string field = fmt::format("archive_metadata.build.{}", key);
+    if (value == build->end()) return metadataError(part, field, "is missing");
+    TESSERA_TRY(metadataInt(*value, part.path, "split_part." + field));
+  }
+  return {};
 }
 
 Result<OpenedPart> openPart(const std::string& path) {
@@ -60,6 +120,9 @@ Result<OpenedPart> openPart(const std::string& path) {
     if (!part.meta.contains(key))
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}: split_part metadata lacks \"{}\"", path, key));
+  // Refused like every part the merge cannot take (docs/builder.md: exit code 2).
+  if (Result<void> checked = checkPartFields(part); !checked)
+    return fail(ErrorCode::kInvalidArgument, checked.error().message);
   return part;
 }
 
@@ -72,22 +135,27 @@ Result<std::vector<OpenedPart>> openParts(const std::vector<std::string>& paths)
     opened.push_back(std::move(part));
   }
   const OpenedPart& first = opened[0];
-  const uint32_t count = first.meta["count"].get<uint32_t>();
+  const uint32_t count = first.count;
   std::vector<const OpenedPart*> by_index(count, nullptr);
+  // find, not a const operator[]: that is undefined for a key the object lacks.
+  auto entry = [](const nlohmann::json& meta, const char* key) {
+    const auto found = meta.find(key);
+    return found == meta.end() ? nlohmann::json() : *found;
+  };
   for (const OpenedPart& part : opened) {
     for (const char* key : {"count", "input", "archive_metadata", "page_tiles_log2"}) {
-      if (part.meta[key] == first.meta[key]) continue;
-      const std::string where = firstDifference(first.meta[key], part.meta[key]);
+      const nlohmann::json mine = entry(part.meta, key), firsts = entry(first.meta, key);
+      if (mine == firsts) continue;
+      const std::string where = firstDifference(firsts, mine);
       const nlohmann::json::json_pointer pointer(where);
       auto at = [&](const nlohmann::json& value) {
         return value.contains(pointer) ? value.at(pointer).dump().substr(0, 200) : "none";
       };
-      return fail(
-          ErrorCode::kInvalidArgument,
-          fmt::format("{}: not a part of the same build as {}: its {}{} is {}, not {}", part.path,
-                      first.path, key, where, at(part.meta[key]), at(first.meta[key])));
+      return fail(ErrorCode::kInvalidArgument,
+                  fmt::format("{}: not a part of the same build as {}: its {}{} is {}, not {}",
+                              part.path, first.path, key, where, at(mine), at(firsts)));
     }
-    const uint32_t index = part.meta["index"].get<uint32_t>();
+    const uint32_t index = part.index;
     if (index < 1 || index > count)
       return fail(ErrorCode::kInvalidArgument,
                   fmt::format("{}: part index {} outside 1..{}", part.path, index, count));
@@ -122,7 +190,8 @@ class CoarseSink final : public TileSink {
     parseCodecName(build["codec"].get<std::string>(), &codec_);
     options_.quality = build["quality"].get<int>();
     options_.effort = build["effort"].get<int>();
-    options_.chroma_subsampling = build["chroma_subsampling"] == "4:2:0";
+    const auto chroma = build.find("chroma_subsampling");
+    options_.chroma_subsampling = chroma != build.end() && *chroma == "4:2:0";
   }
 
   Result<void> tileRowReady(uint32_t level, uint32_t tile_row, const LevelRows& rows) override {
@@ -229,9 +298,7 @@ Result<void> copyPartEntries(const std::vector<OpenedPart>& parts, const PartPla
   owner.resize(plan.merge_level);
   for (uint32_t l = 0; l < plan.merge_level; ++l) owner[l].resize(info.tilesY(l));
   for (uint32_t p = 0; p < parts.size(); ++p) {
-    const nlohmann::json& rows = parts[p].meta["rows"];
-    if (rows[0].get<uint32_t>() != plan.firstRow(p) ||
-        rows[1].get<uint32_t>() != plan.firstRow(p + 1))
+    if (parts[p].first_row != plan.firstRow(p) || parts[p].end_row != plan.firstRow(p + 1))
       return fail(ErrorCode::kInvalidArgument,
                   parts[p].path + ": its rows are not those the split assigns to its index");
     for (uint32_t l = 0; l < plan.merge_level; ++l) {
@@ -390,7 +457,7 @@ Result<MergeReport> mergeArchiveParts(const std::vector<std::string>& paths,
   TESSERA_ASSIGN_OR_RETURN(std::vector<OpenedPart> parts, openParts(paths));
   ImageInfo info = parts[0].archive->images()[0];
   const PartPlan plan = planParts(info, uint32_t(parts.size()));
-  if (parts[0].meta["merge_level"].get<uint32_t>() != plan.merge_level)
+  if (parts[0].merge_level != plan.merge_level)
     return fail(ErrorCode::kInvalidArgument,
                 parts[0].path + ": split at another level than this version of tessera splits");
   SpooledImage out;

@@ -2,9 +2,19 @@
 
 #include <algorithm>
 
+#include <fmt/format.h>
 #include <nlohmann/json.hpp>
 
 namespace tessera::detail {
+
+namespace {
+
+/// A value as an error message quotes it: JSON, ASCII, cut at 40 characters.
+std::string shown(const nlohmann::json& value) {
+  return value.dump(-1, ' ', /*ensure_ascii=*/true).substr(0, 40);
+}
+
+}  // namespace
 
 Result<ArchiveMetadata> parseMetadata(std::span<const uint8_t> bytes, size_t image_count,
                                       const std::string& name) {
@@ -29,6 +39,52 @@ Result<ArchiveMetadata> parseMetadata(std::span<const uint8_t> bytes, size_t ima
       metadata.image_names[i] = image_name->get<std::string>();
   }
   return metadata;
+}
+
+Result<uint64_t> metadataUnsigned(const nlohmann::json& value, const std::string& name,
+                                  std::string_view field, uint64_t max) {
+  // An integer: parsed without a fraction or exponent (larger than 2^64 - 1 parses as a double
+  // and is refused too); signed when parsed with a minus or built from a C++ int.
+  const bool unsigned_integer =
+      value.is_number_unsigned() || (value.is_number_integer() && value.get<int64_t>() >= 0);
+  if (!unsigned_integer)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: metadata \"{}\" is not an unsigned integer (it is {})", name,
+                            field, shown(value)));
+  const uint64_t number = value.get<uint64_t>();
+  if (number > max)
+    return fail(ErrorCode::kCorrupt,
+                fmt::format("{}: metadata \"{}\" is {}, above {}", name, field, number, max));
+  return number;
+}
+
+Result<int> metadataInt(const nlohmann::json& value, const std::string& name,
+                        std::string_view field) {
+  const bool fits = value.is_number_unsigned()
+                        ? value.get<uint64_t>() <= uint64_t(std::numeric_limits<int>::max())
+                        : value.is_number_integer() &&
+                              value.get<int64_t>() >= std::numeric_limits<int>::min() &&
+                              value.get<int64_t>() <= std::numeric_limits<int>::max();
+  if (!fits)
+    return fail(ErrorCode::kCorrupt, fmt::format("{}: metadata \"{}\" is not an integer (it is {})",
+                                                 name, field, shown(value)));
+  return value.get<int>();
+}
+
+Result<UpdateRecord> parseUpdateRecord(const nlohmann::json& metadata, const std::string& name) {
+  UpdateRecord record;
+  const auto update = metadata.find("update");
+  if (update == metadata.end()) return record;
+  if (!update->is_object())
+    return fail(ErrorCode::kCorrupt, name + ": metadata \"update\" is not an object");
+  if (const auto version = update->find("version"); version != update->end()) {
+    TESSERA_ASSIGN_OR_RETURN(record.version, metadataUnsigned(*version, name, "update.version"));
+    record.recorded = true;
+  }
+  if (const auto dead = update->find("dead_bytes"); dead != update->end()) {
+    TESSERA_ASSIGN_OR_RETURN(record.dead_bytes, metadataUnsigned(*dead, name, "update.dead_bytes"));
+  }
+  return record;
 }
 
 }  // namespace tessera::detail

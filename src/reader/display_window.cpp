@@ -47,7 +47,11 @@ bool statisticsRange(const Archive& archive, uint32_t image, double& low, double
   if (!meta.is_object() || !meta.contains("images") || !meta["images"].is_array() ||
       image >= meta["images"].size())
     return false;
-  const nlohmann::json& stats = meta["images"][image].value("statistics", nlohmann::json());
+  // Free-form metadata: an entry of another type is as good as none (the window then comes
+  // from the pixels).
+  const nlohmann::json& entry = meta["images"][image];
+  if (!entry.is_object()) return false;
+  const nlohmann::json stats = entry.value("statistics", nlohmann::json());
   if (!stats.is_object() || !stats.contains("min") || !stats.contains("max")) return false;
   const nlohmann::json &mins = stats["min"], &maxes = stats["max"];
   if (!mins.is_array() || !maxes.is_array()) return false;

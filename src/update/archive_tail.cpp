@@ -11,6 +11,7 @@
 #include <fmt/format.h>
 
 #include "format/checksum.h"
+#include "format/metadata.h"
 
 namespace tessera::detail {
 
@@ -122,11 +123,10 @@ Result<void> ArchiveTail::load() {
     if (!metadata_.is_object())
       return fail(ErrorCode::kCorrupt, path_ + ": metadata is not a JSON object");
   }
-  const auto update = metadata_.find("update");
-  if (update != metadata_.end() && update->is_object()) {
-    version_ = update->value("version", uint64_t(1));
-    dead_bytes_ = update->value("dead_bytes", uint64_t(0));
-  }
+  // The next commit counts on from these: a damaged record is refused, not overwritten.
+  TESSERA_ASSIGN_OR_RETURN(const UpdateRecord update, parseUpdateRecord(metadata_, path_));
+  version_ = update.version;
+  dead_bytes_ = update.dead_bytes;
   // Nothing references an uncommitted tail; cutting it keeps the file free of garbage.
   if (size > header_.file_bytes && ::ftruncate(fd_, off_t(header_.file_bytes)) != 0)
     return fail(ErrorCode::kIo,

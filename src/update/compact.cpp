@@ -19,7 +19,10 @@ namespace {
 TileOrder recordedOrder(const nlohmann::json& metadata) {
   const auto build = metadata.find("build");
   if (build == metadata.end() || !build->is_object()) return TileOrder::kHilbert;
-  const std::string order = build->value("order", std::string("hilbert"));
+  // Any order makes a valid archive: a name of another type, like an unknown one, is Hilbert.
+  const auto found = build->find("order");
+  const std::string order = found != build->end() && found->is_string() ? found->get<std::string>()
+                                                                        : std::string("hilbert");
   return order == "quadtree"    ? TileOrder::kQuadtree
          : order == "row-major" ? TileOrder::kRowMajor
                                 : TileOrder::kHilbert;

@@ -11,6 +11,7 @@
 #include "builder/downsample.h"
 #include "builder/texture_pyramid.h"
 #include "codecs/encode.h"
+#include "format/metadata.h"
 #include "level_pages.h"
 #include "update/archive_update.h"
 
@@ -142,13 +143,20 @@ LevelWindow downsampleChanged(LevelWindow& window, const ImageInfo& info, uint32
   return next;
 }
 
-EncodeOptions buildEncodeOptions(const nlohmann::json& metadata) {
+// Re-encoded tiles take the build's settings: one of the wrong type is refused by name, not
+// replaced by a default that would code them unlike their neighbours.
+Result<EncodeOptions> buildEncodeOptions(const nlohmann::json& metadata, const std::string& path) {
   EncodeOptions options;
   const auto build = metadata.find("build");
   if (build == metadata.end() || !build->is_object()) return options;
-  options.quality = build->value("quality", options.quality);
-  options.effort = build->value("effort", options.effort);
-  options.chroma_subsampling = build->value("chroma_subsampling", std::string("4:2:0")) == "4:2:0";
+  if (const auto quality = build->find("quality"); quality != build->end()) {
+    TESSERA_ASSIGN_OR_RETURN(options.quality, metadataInt(*quality, path, "build.quality"));
+  }
+  if (const auto effort = build->find("effort"); effort != build->end()) {
+    TESSERA_ASSIGN_OR_RETURN(options.effort, metadataInt(*effort, path, "build.effort"));
+  }
+  const auto chroma = build->find("chroma_subsampling");
+  options.chroma_subsampling = chroma == build->end() || *chroma == "4:2:0";
   return options;
 }
 
@@ -205,7 +213,8 @@ Result<UpdateReport> updateRegion(const std::string& path, uint32_t image, uint3
   TESSERA_TRY(checkPatch(tail, image, x, y, patch, patch_name));
   TESSERA_ASSIGN_OR_RETURN(std::shared_ptr<Archive> archive, Archive::openFile(path));
   const ImageInfo& info = archive->images()[image];
-  const EncodeOptions options = buildEncodeOptions(tail.metadata());
+  TESSERA_ASSIGN_OR_RETURN(const EncodeOptions options,
+                           buildEncodeOptions(tail.metadata(), tail.path()));
   LevelWindow changed{{x, y, x + patch.width_px, y + patch.height_px}, patch};
   CodecScratch scratch;
   std::vector<uint8_t> tile_texels;

@@ -1,7 +1,7 @@
 // Split builds (tessera/split_build.h): the merge of N parts is byte for byte the archive of a
 // single build with the same options, over random sizes, part counts, tile sizes, borders,
-// codecs and orders; missing, duplicate and foreign parts are refused naming the file, and
-// leave no output.
+// codecs and orders; missing, duplicate, foreign and damaged parts are refused naming the
+// file, and leave no output.
 #include <filesystem>
 #include <fstream>
 #include <optional>
@@ -15,6 +15,7 @@
 #include <tessera/split_build.h>
 
 #include "format/tile_order.h"
+#include "support/archive_fixture.h"
 #include "support/test_images.h"
 
 namespace tessera {
@@ -211,6 +212,59 @@ TEST(SplitMerge, RefusesMissingDuplicateAndForeignParts) {
   EXPECT_NE(mergeError({parts[0], parts[1], options.output}, out).find("not a part"),
             std::string::npos);
   EXPECT_TRUE(mergeArchiveParts({parts[2], parts[0], parts[1]}, out));
+}
+
+// The merge relies on the parts' "split_part" metadata: a field of the wrong type or out of
+// range (a damaged or hand-made part) is refused naming the part and the field, where it threw
+// from the JSON library before.
+TEST(SplitMerge, RefusesAPartWithDamagedSplitMetadataNamingTheField) {
+  const std::string dir = test::testTempDir();
+  const std::string out = dir + "/out.tess";
+  const std::vector<std::string> parts =
+      buildParts(syntheticOptions("synthetic:300x200:5:3", out), 2, dir);
+  auto part = Archive::openFile(parts[0]);
+  ASSERT_TRUE(part) << part.error().message;
+  const nlohmann::json metadata = nlohmann::json::parse((*part)->metadataJson());
+  part->reset();
+  const std::vector<uint8_t> bytes = test::readFileBytes(parts[0]);
+  const std::string hostile = dir + "/hostile.tess";
+  const struct {
+    const char* pointer;
+    nlohmann::json value;
+    const char* message;
+  } cases[] = {
+      {"/split_part/count", "2", R"("split_part.count" is not an unsigned integer (it is "2"))"},
+      {"/split_part/count", 100000, R"("split_part.count" is 100000, above 65536)"},
+      {"/split_part/index", -1, R"("split_part.index" is not an unsigned integer (it is -1))"},
+      {"/split_part/merge_level", 1.5, R"("split_part.merge_level" is not an unsigned)"},
+      {"/split_part/rows", 5, R"("split_part.rows" is not a pair of row numbers)"},
+      {"/split_part/rows/1", "x", R"("split_part.rows[1]" is not an unsigned integer)"},
+      {"/split_part/archive_metadata", nlohmann::json::array(),
+       R"("split_part.archive_metadata" is not an object)"},
+      {"/split_part/archive_metadata/images", nlohmann::json::object(),
+       R"("split_part.archive_metadata.images" is not an array of objects)"},
+      {"/split_part/archive_metadata/build/codec", 3,
+       R"("split_part.archive_metadata.build.codec" is not a codec's name)"},
+      {"/split_part/archive_metadata/build/order", nullptr,
+       R"("split_part.archive_metadata.build.order" is not a tile order's name)"},
+      {"/split_part/archive_metadata/build/quality", "high",
+       R"("split_part.archive_metadata.build.quality" is not an integer)"},
+  };
+  for (const auto& c : cases) {
+    nlohmann::json damaged = metadata;
+    damaged[nlohmann::json::json_pointer(c.pointer)] = c.value;
+    ASSERT_TRUE(test::writeFileBytes(hostile, test::withMetadata(bytes, damaged.dump())));
+    const std::string error = mergeError({hostile, parts[1]}, out);
+    EXPECT_EQ(error.find(hostile + ": metadata "), 0u) << c.pointer << ": " << error;
+    EXPECT_NE(error.find(c.message), std::string::npos) << c.pointer << ": " << error;
+  }
+  // A key the comparison of parts reads, absent from the first part: compared as none.
+  nlohmann::json lacking = metadata;
+  lacking["split_part"].erase("page_tiles_log2");
+  ASSERT_TRUE(test::writeFileBytes(hostile, test::withMetadata(bytes, lacking.dump())));
+  const std::string error = mergeError({hostile, parts[1]}, out);
+  EXPECT_NE(error.find("page_tiles_log2"), std::string::npos) << error;
+  EXPECT_TRUE(mergeArchiveParts(parts, out));
 }
 
 // A payload changed in a part after its build (a bad disk, a bad copy) fails the merge,

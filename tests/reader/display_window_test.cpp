@@ -8,8 +8,10 @@
 #include <gtest/gtest.h>
 
 #include <tessera/build.h>
+#include <tessera/byte_source.h>
 #include <tessera/display_window.h>
 
+#include "support/archive_fixture.h"
 #include "support/test_images.h"
 #include "support/wide_archive.h"
 
@@ -118,6 +120,30 @@ TEST(DisplayWindowResolve, AutoTakesTheStatisticsAndPercentilesTheFiniteSamples)
     ASSERT_TRUE(middle);
     EXPECT_EQ(middle->low, values[size_t(std::llround(0.25 * double(values.size() - 1)))]);
     EXPECT_EQ(middle->high, values[size_t(std::llround(0.75 * double(values.size() - 1)))]);
+  }
+}
+
+// The statistics are free-form metadata: an image entry, or its statistics, of another type
+// is as good as none, and auto falls back to the percentiles (it threw before).
+TEST(DisplayWindowResolve, AutoIgnoresStatisticsOfTheWrongType) {
+  std::shared_ptr<Archive> built = buildRamp(SampleType::kU16);
+  ASSERT_TRUE(built);
+  std::vector<uint8_t> bytes(built->fileBytes());
+  ASSERT_TRUE(built->source().read(0, bytes));
+  DisplayWindowRequest percentiles;
+  ASSERT_TRUE(parseDisplayWindow("p1,p99", percentiles));
+  Result<DisplayWindow> expected = resolveDisplayWindow(*built, 0, percentiles);
+  ASSERT_TRUE(expected) << expected.error().message;
+  for (const char* metadata :
+       {R"({"images":[5]})", R"({"images":["x"]})", R"({"images":[{"statistics":7}]})",
+        R"({"images":[{"statistics":{"min":"a","max":{}}}]})"}) {
+    Result<std::shared_ptr<Archive>> archive =
+        Archive::open(makeMemorySource(test::withMetadata(bytes, metadata), "hostile.tess"));
+    ASSERT_TRUE(archive) << archive.error().message;
+    Result<DisplayWindow> automatic = resolveDisplayWindow(**archive, 0, DisplayWindowRequest{});
+    ASSERT_TRUE(automatic) << metadata << ": " << automatic.error().message;
+    EXPECT_EQ(automatic->low, expected->low) << metadata;
+    EXPECT_EQ(automatic->high, expected->high) << metadata;
   }
 }
 

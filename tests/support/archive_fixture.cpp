@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include "builder/band_reader.h"
+#include "format/checksum.h"
+#include "format/header.h"
 #include "support/test_images.h"
 
 namespace tessera::test {
@@ -54,6 +56,26 @@ BuiltArchive buildFromImage(const Image& image, BuildOptions options, const std:
   built.path = options.output;
   built.bytes = readFileBytes(built.path);
   return built;
+}
+
+std::vector<uint8_t> withMetadata(std::vector<uint8_t> bytes, const std::string& json) {
+  Result<detail::FileHeader> header = detail::decodeHeader(bytes, "withMetadata");
+  if (!header) {
+    ADD_FAILURE() << header.error().message;
+    return bytes;
+  }
+  const std::span<const uint8_t> block(reinterpret_cast<const uint8_t*>(json.data()), json.size());
+  header->metadata = {bytes.size(), block.size(), detail::checksum64(block)};
+  bytes.insert(bytes.end(), block.begin(), block.end());
+  header->file_bytes = bytes.size();
+  const std::vector<uint8_t> sealed = detail::encodeHeader(*header);
+  std::copy(sealed.begin(), sealed.end(), bytes.begin());
+  return bytes;
+}
+
+void rewriteMetadata(const std::string& path, const std::string& json) {
+  ASSERT_TRUE(writeFileBytes(path, withMetadata(readFileBytes(path), json)))
+      << path << ": cannot rewrite";
 }
 
 }  // namespace tessera::test

@@ -32,6 +32,15 @@ struct BuiltArchive {
 BuiltArchive buildFromImage(const Image& image, BuildOptions options, const std::string& dir,
                             const std::string& name = "archive.tess");
 
+/// `bytes` (a whole archive) with its metadata block replaced by `json`, which need not be
+/// what a builder writes: the block is appended and the header resealed to point at it, the
+/// old block left unreferenced. Fails the test and returns `bytes` unchanged when the header
+/// does not decode.
+std::vector<uint8_t> withMetadata(std::vector<uint8_t> bytes, const std::string& json);
+
+/// The archive file at `path` rewritten in place by withMetadata.
+void rewriteMetadata(const std::string& path, const std::string& json);
+
 /// Flips bit `bit` (0..7) of byte `offset`.
 inline void flipBit(std::vector<uint8_t>& bytes, size_t offset, uint32_t bit) {
   bytes[offset] ^= uint8_t(1u << bit);

@@ -2,7 +2,7 @@
 // with its peak memory measured (issue 31): headers claiming absurd sizes fail with one line
 // within the stated budget and never abort; special files at the output are refused and kept;
 // bad numbers and misspelt names are usage errors that say what is accepted; extract crops
-// edge tiles; SIGTERM exits 143.
+// edge tiles; free-form metadata never throws; SIGTERM exits 143.
 #include <fcntl.h>
 #include <signal.h>
 #include <spawn.h>
@@ -468,6 +468,53 @@ TEST_F(HostileCli, ExtractRefusesARectangleOutsideTheLevel) {
   Outcome deep = run({"extract", archive, "--level", "9", "--tile", "0,0", "-o", dir_ + "d.png"});
   EXPECT_EQ(deep.exit_code, 2);
   EXPECT_NE(deep.err.find("--level 9 but image 0 has levels 0..3"), std::string::npos) << deep.err;
+}
+
+// ---- Metadata: free-form JSON, read without throwing ----------------------------------------
+
+// The metadata block is checked at open only to be one object. info shows informational
+// fields of another type as they are, or skips them; the update record, which `update` counts
+// on from, is refused naming the file and the field. Each threw from the JSON library before
+// ("internal error").
+TEST_F(HostileCli, InfoShowsFreeFormMetadataAndRefusesADamagedUpdateRecord) {
+  const std::vector<uint8_t> bytes = test::readFileBytes(smallArchive());
+  const std::string path = dir_ + "meta.tess";
+  const struct {
+    const char* metadata;
+    const char* shown;  ///< a line of the output
+  } free_form[] = {
+      {R"({"format_version":2,"images":{"0":{"georeference":1}}})", "Tessera archive 2, "},
+      {R"({"images":[5]})", "Tessera archive 1.0, "},
+      {R"({"images":[{"georeference":[1]}]})", "\n  georeference: [1]\n"},
+  };
+  for (const auto& c : free_form) {
+    ASSERT_TRUE(test::writeFileBytes(path, test::withMetadata(bytes, c.metadata)));
+    Outcome shown = run({"info", path, "--no-levels"});
+    ASSERT_TRUE(shown.exited) << c.metadata << ": killed by signal " << shown.signal;
+    EXPECT_EQ(shown.exit_code, 0) << c.metadata << ": " << shown.err;
+    EXPECT_EQ(shown.err, "") << c.metadata;
+    EXPECT_NE(shown.out.find(c.shown), std::string::npos) << c.metadata << ": " << shown.out;
+    EXPECT_EQ(shown.out.find("georeference: 1"), std::string::npos) << "not an image's entry";
+  }
+  Outcome json = run({"info", path, "--json", "--no-levels"});
+  EXPECT_EQ(json.exit_code, 0) << json.err;
+
+  const struct {
+    const char* metadata;
+    std::string error;
+  } damaged[] = {
+      {R"({"update":{"version":"2"}})",
+       R"(metadata "update.version" is not an unsigned integer (it is "2"))"},
+      {R"({"update":{"version":3,"dead_bytes":-5}})",
+       R"(metadata "update.dead_bytes" is not an unsigned integer (it is -5))"},
+  };
+  for (const auto& c : damaged) {
+    ASSERT_TRUE(test::writeFileBytes(path, test::withMetadata(bytes, c.metadata)));
+    Outcome refused = run({"info", path, "--no-levels"});
+    ASSERT_TRUE(refused.exited) << c.metadata << ": killed by signal " << refused.signal;
+    EXPECT_EQ(refused.exit_code, 1) << c.metadata;
+    EXPECT_EQ(refused.err, "tessera: " + path + ": " + c.error + "\n");
+  }
 }
 
 // ---- Signals --------------------------------------------------------------------------------

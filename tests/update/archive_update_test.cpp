@@ -11,6 +11,7 @@
 #include <tessera/archive.h>
 #include <tessera/build.h>
 
+#include "support/archive_fixture.h"
 #include "support/test_images.h"
 
 namespace tessera {
@@ -200,6 +201,34 @@ TEST(Update, MalformedRequestsFailNamingTheProblemAndLeaveTheFileAlone) {
   EXPECT_EQ(ptm.error().code, ErrorCode::kUnsupported);
   test::writeFileBytes(dir + "junk.tess", std::vector<uint8_t>(5000, 7));
   EXPECT_FALSE(detail::updateRegion(dir + "junk.tess", 0, 0, 0, makeImage(5, 5, 3, 1), "x"));
+}
+
+// The next version counts on from the stored record, and re-encoded tiles take the build's
+// settings: a damaged one is refused by name (it threw from the JSON library before), and the
+// file is left as it was.
+TEST(Update, ADamagedUpdateRecordOrBuildSettingIsRefusedNamingTheField) {
+  const std::string path = test::testTempDir() + "damaged-record.tess";
+  Image base = makeImage(100, 60, 3, 4);
+  buildFrom({&base}, optionsFor(path, Codec::kZstd, 64, 0));
+  const std::vector<uint8_t> built = test::readFileBytes(path);
+  const struct {
+    const char* metadata;
+    const char* message;
+  } cases[] = {
+      {R"({"update":{"version":"2","dead_bytes":0}})",
+       R"(: metadata "update.version" is not an unsigned integer (it is "2"))"},
+      {R"({"build":{"quality":"high"}})",
+       R"(: metadata "build.quality" is not an integer (it is "high"))"},
+  };
+  for (const auto& c : cases) {
+    ASSERT_TRUE(test::writeFileBytes(path, test::withMetadata(built, c.metadata)));
+    const std::vector<uint8_t> before = test::readFileBytes(path);
+    Result<UpdateReport> report = detail::updateRegion(path, 0, 0, 0, makeImage(5, 5, 3, 1), "x");
+    ASSERT_FALSE(report) << c.metadata;
+    EXPECT_EQ(report.error().code, ErrorCode::kCorrupt);
+    EXPECT_EQ(report.error().message, path + c.message);
+    EXPECT_EQ(test::readFileBytes(path), before) << c.metadata;
+  }
 }
 
 // The updater averages and cuts 8-bit texels only: wider images and patches are refused by
