@@ -16,6 +16,11 @@
 #      nginx; then (unless --no-slow) at 64 connections while a helper holds 1000 slow clients
 #      (partial headers, one byte every few seconds, reconnecting when closed) on the plain
 #      servers;
+#      with --rate R the load is paced instead of saturating: each connection waits a random
+#      (exponential) delay before each request, so that all of them together offer about R
+#      requests/s (--tls-rate for the TLS runs, default R / 2); p99 then measures the latency
+#      clients see at a load both servers sustain, not the queue of a saturated closed loop
+#      (at saturation Little's law makes the mean latency connections / throughput);
 #   5. a table of requests/s, MB/s, p50/p99 latency and each server's CPU time per request
 #      (user + system, from /proc: steadier than throughput on a shared machine), and the
 #      tessera/nginx ratios, against the targets (issue 34: at 1000 connections throughput
@@ -26,7 +31,7 @@
 # machine is shared: the 1-minute load average is printed before every run.
 #
 #   bench/serve_bench.sh [--duration 10] [--threads N] [--connections "64 1000"] [--no-tls]
-#                        [--no-slow] [--build-dir build]
+#                        [--no-slow] [--rate R] [--tls-rate R] [--build-dir build]
 set -euo pipefail
 
 REPO=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
@@ -37,6 +42,8 @@ THREADS=$(nproc)
 CONNECTIONS="64 1000"
 TLS=1
 SLOW=1
+RATE=0
+TLS_RATE=
 while (($#)); do
   case $1 in
     --duration) DURATION=$2; shift 2 ;;
@@ -44,12 +51,17 @@ while (($#)); do
     --connections) CONNECTIONS=$2; shift 2 ;;
     --no-tls) TLS=0; shift ;;
     --no-slow) SLOW=0; shift ;;
+    --rate) RATE=$2; shift 2 ;;
+    --tls-rate) TLS_RATE=$2; shift 2 ;;
     --build-dir) BUILD_DIR=$2; shift 2 ;;
-    -h|--help) sed -n '2,29p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,34p' "$0"; exit 0 ;;
     *) echo "serve_bench: unknown option $1" >&2; exit 2 ;;
   esac
 done
 
+[[ $RATE =~ ^[0-9]+$ && ${TLS_RATE:-0} =~ ^[0-9]+$ ]] ||
+  { echo "serve_bench: --rate and --tls-rate take requests per second" >&2; exit 2; }
+TLS_RATE=${TLS_RATE:-$((RATE / 2))}
 TESSERA=$BUILD_DIR/src/tools/tessera
 for tool in "$TESSERA" nginx wrk curl python3 openssl; do
   command -v "$tool" >/dev/null || [[ -x $tool ]] || { echo "serve_bench: $tool not found" >&2; exit 1; }
@@ -182,6 +194,15 @@ math.randomseed(os.time() + (tonumber(tostring({}):sub(8), 16) or 0))
 request = function()
   return wrk.format("GET", paths[math.random(#paths)])
 end
+-- Paced runs (PACE_MS > 0): an exponential wait before each request, so the connections'
+-- requests together arrive as a Poisson stream of about connections / PACE_MS per ms rather
+-- than in step.
+local pace_ms = tonumber(os.getenv("PACE_MS") or "0")
+if pace_ms > 0 then
+  delay = function()
+    return math.floor(-pace_ms * math.log(1 - math.random()) + 0.5)
+  end
+end
 EOF
 
 # The slow clients: N connections that each send a partial header and then one more header
@@ -237,10 +258,12 @@ RESULTS=$RUN/results.txt
 run_wrk() {  # name port connections scheme pid...
   local name=$1 port=$2 conns=$3 scheme=$4
   shift 4
-  local wrk_threads=$((THREADS < 4 ? THREADS : 4)) ticks
-  echo "serve_bench: $name, $conns connections, ${DURATION}s, load average $(cut -d' ' -f1 /proc/loadavg)"
+  local wrk_threads=$((THREADS < 4 ? THREADS : 4)) ticks rate=$RATE pace_ms=0
+  [[ $scheme == https ]] && rate=$TLS_RATE
+  ((rate > 0)) && pace_ms=$(python3 -c "print($conns * 1000 / $rate)")
+  echo "serve_bench: $name, $conns connections, ${DURATION}s$( ((rate > 0)) && echo ", paced at $rate requests/s"), load average $(cut -d' ' -f1 /proc/loadavg)"
   ticks=$(cpu_ticks "$@")
-  TILE_LIST=$RUN/paths.txt wrk -t"$wrk_threads" -c"$conns" -d"${DURATION}s" --latency \
+  PACE_MS=$pace_ms TILE_LIST=$RUN/paths.txt wrk -t"$wrk_threads" -c"$conns" -d"${DURATION}s" --latency \
     -s "$RUN/random_tiles.lua" "$scheme://127.0.0.1:$port" >"$RUN/wrk.txt" 2>&1
   ticks=$(($(cpu_ticks "$@") - ticks))
   python3 - "$name" "$conns" "$RUN/wrk.txt" "$ticks" "$CLK_TCK" >>"$RESULTS" <<'EOF'
@@ -308,7 +331,8 @@ echo "| server | connections | requests/s | MB/s | p50 ms | p99 ms | socket erro
 echo "|---|---:|---:|---:|---:|---:|---|---:|---:|"
 awk -F'\t' '{printf "| %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", $1, $2, $3, $4, $5, $6, $7, $8, $9}' "$RESULTS"
 echo
-awk -F'\t' -v conns_list="$CONNECTIONS" -v tls="$TLS" -v slow="$SLOW" '
+awk -F'\t' -v conns_list="$CONNECTIONS" -v tls="$TLS" -v slow="$SLOW" -v rate="$RATE" \
+    -v tls_rate="$TLS_RATE" '
   { rps[$1 "@" $2] = $3; p99[$1 "@" $2] = $6; cpu[$1 "@" $2] = $9 }
   END {
     n = split(conns_list, conns, " ")
@@ -316,6 +340,7 @@ awk -F'\t' -v conns_list="$CONNECTIONS" -v tls="$TLS" -v slow="$SLOW" '
       k = conns[i]
       for (t = 0; t <= tls; ++t) {
         suffix = t ? "-tls" : ""
+        if (rate > 0) printf "paced at %s requests/s: ", t ? tls_rate : rate
         printf "%s at %s connections: throughput tessera/nginx %.2f, p99 tessera %s ms, nginx %s ms, CPU per request tessera/nginx %.2f\n", t ? "TLS  " : "plain", k, rps["tessera" suffix "@" k] / rps["nginx" suffix "@" k], p99["tessera" suffix "@" k], p99["nginx" suffix "@" k], cpu["tessera" suffix "@" k] / cpu["nginx" suffix "@" k]
       }
     }
