@@ -9,7 +9,9 @@
 #   5. builds every fuzzer of fuzz/ with clang's libFuzzer under ASan + UBSan and runs each
 #      from its committed corpus for a minute (two at a time),
 # and ends with each stage's ctest summary. Every stage runs even when an earlier one failed,
-# so one run reports everything; the exit status is non-zero when any stage failed.
+# so one run reports everything; the exit status is non-zero when any stage failed. Each
+# stage's build after the first runs in the background at nice 19 while the stage before it
+# tests (the pipeline at the end of this file).
 #
 # Environment (all optional):
 #   TESSERA_CI_STAGES   stages to run, default "format release asan tsan fuzz"
@@ -33,13 +35,15 @@ filter=${TESSERA_CI_FILTER:-}
 werror=${TESSERA_CI_WERROR:-ON}
 test_jobs=2
 
-summary=()   # one line per stage, printed at the end
-failed=0
+mkdir -p "$build_root"
+# One line per stage result, printed at the end. A file, not a variable: the next stage's
+# build runs in a background subshell (see the pipeline at the end) and reports through it.
+results=$build_root/ci-results.txt
+: >"$results"
 
 log() { printf '\n==== ci: %s\n' "$*"; }
 stage_result() {  # stage_result NAME STATUS DETAIL
-  summary+=("$(printf '%-8s %-4s %s' "$1" "$2" "$3")")
-  [[ $2 == ok ]] || failed=1
+  printf '%-12s %-4s %s\n' "$1" "$2" "$3" >>"$results"
 }
 
 scripts/install-deps.sh || { echo "ci: scripts/install-deps.sh failed" >&2; exit 1; }
@@ -159,12 +163,15 @@ function_size_check() {
 # Steps run right after a stage's configure, given its build folder.
 declare -A after_configure=([release]=function_size_check)
 
-# build_and_test NAME BUILD_TYPE SANITIZE LABEL TIMEOUT [extra cmake args...]
-# With LABEL, only the test executables carrying it are built (all of them if none is found).
-build_and_test() {
-  local name=$1 type=$2 sanitize=$3 label=$4 timeout=$5
-  shift 5
-  local dir=$build_root/$name
+# stage_build NAME BUILD_TYPE SANITIZE LABEL [extra cmake args...]: configures and builds a
+# stage in $build_root/NAME. With LABEL, only the test executables carrying it are built (all
+# of them if none is found). Writes "ok", "none: WHY" (nothing to test) or "FAIL" to
+# $build_root/NAME.built for stage_test.
+stage_build() {
+  local name=$1 type=$2 sanitize=$3 label=$4
+  shift 4
+  local dir=$build_root/$name status_file=$build_root/$name.built
+  echo FAIL >"$status_file"
   log "$name: configure ($type${sanitize:+, sanitize=$sanitize}) in $dir"
   if ! cmake -S "$repo" -B "$dir" -G Ninja -DCMAKE_BUILD_TYPE="$type" \
       -DTESSERA_BUILD_TESTS=ON -DTESSERA_BUILD_TOOLS=ON -DTESSERA_SANITIZE="$sanitize" "$@"; then
@@ -176,7 +183,7 @@ build_and_test() {
   if [[ -n $label ]]; then
     mapfile -t targets < <(targets_with_label "$label")
     if ((${#targets[@]} == 0)); then
-      stage_result "$name" ok "no tests labelled $label yet"
+      echo "none: no tests labelled $label yet" >"$status_file"
       return
     fi
   fi
@@ -185,6 +192,19 @@ build_and_test() {
     stage_result "$name" FAIL "build failed"
     return
   fi
+  echo ok >"$status_file"
+}
+
+# stage_test NAME LABEL TIMEOUT: runs the tests of a stage stage_build built.
+stage_test() {
+  local name=$1 label=$2 timeout=$3
+  local dir=$build_root/$name built
+  built=$(cat "$build_root/$name.built" 2>/dev/null || echo FAIL)
+  case $built in
+    ok) ;;
+    none:*) stage_result "$name" ok "${built#none: }"; return ;;
+    *) return ;;  # stage_build reported the failure
+  esac
   log "$name: test${label:+ (label $label)}"
   local args=(--test-dir "$dir" --output-on-failure -j "$test_jobs" --timeout "$timeout"
               --no-tests=ignore)
@@ -231,8 +251,9 @@ fuzzer_names() {
 # scratch folder, so the committed corpus is only read; a crash, a sanitizer report, a timeout
 # (10 s for one input) or an RSS over 2 GiB fails the stage, and the reproducer stays in
 # build-ci/fuzz/artifacts/ (replay: build-ci/fuzz/fuzz/NAME_fuzzer FILE).
-fuzz_stage() {
-  local dir=$build_root/fuzz names=() name
+fuzz_build() {
+  local dir=$build_root/fuzz names=()
+  echo FAIL >"$build_root/fuzz.built"
   log "fuzz: configure (clang, libFuzzer, sanitize=address,undefined) in $dir"
   if ! command -v clang++ >/dev/null 2>&1; then
     stage_result fuzz FAIL "clang++ not found (scripts/install-deps.sh installs clang)"
@@ -252,6 +273,13 @@ fuzz_stage() {
     stage_result fuzz FAIL "build failed"
     return
   fi
+  echo ok >"$build_root/fuzz.built"
+}
+
+fuzz_run() {
+  local dir=$build_root/fuzz names=() name
+  [[ $(cat "$build_root/fuzz.built" 2>/dev/null) == ok ]] || return  # fuzz_build reported it
+  mapfile -t names < <(fuzzer_names)
   mkdir -p "$dir/artifacts"
   local failures=() running=0 pids=() pid_names=()
   for name in "${names[@]}"; do
@@ -283,28 +311,65 @@ fuzz_stage() {
   fi
 }
 
+build_stage() {  # build_stage NAME: the stage's build
+  case $1 in
+    release)
+      stage_build release Release "" "" -DTESSERA_BUILD_BENCH=ON -DTESSERA_WERROR="$werror" \
+        -DCMAKE_CXX_FLAGS="$release_flags" ;;
+    asan) stage_build asan RelWithDebInfo address,undefined "" "${asan_flags[@]}" ;;
+    tsan) stage_build tsan RelWithDebInfo thread concurrency "${tsan_flags[@]}" ;;
+    fuzz) fuzz_build ;;
+  esac
+}
+test_stage() {  # test_stage NAME: the stage's tests (the fuzzers' runs for fuzz)
+  case $1 in
+    release) stage_test release "" "$timeout_s" ;;
+    # The kill loops check crash consistency, which the release stage does at 100 points;
+    # under the sanitizers 20 points still run every phase of the killed programs.
+    asan) TESSERA_KILL_POINTS=${TESSERA_KILL_POINTS:-20} stage_test asan "" $((timeout_s * 3)) ;;
+    tsan) stage_test tsan concurrency $((timeout_s * 3)) ;;
+    fuzz) fuzz_run ;;
+  esac
+}
+
 start=$SECONDS
+built=()
 for stage in $stages; do
   case $stage in
     format) format_check; editorconfig_check ;;
-    release)
-      build_and_test release Release "" "" "$timeout_s" -DTESSERA_BUILD_BENCH=ON \
-        -DTESSERA_WERROR="$werror" -DCMAKE_CXX_FLAGS="$release_flags" ;;
-    asan)
-      # The kill loops check crash consistency, which the release stage does at 100 points;
-      # under the sanitizers 20 points still run every phase of the killed programs.
-      TESSERA_KILL_POINTS=${TESSERA_KILL_POINTS:-20} \
-        build_and_test asan RelWithDebInfo address,undefined "" $((timeout_s * 3)) "${asan_flags[@]}" ;;
-    tsan)
-      build_and_test tsan RelWithDebInfo thread concurrency $((timeout_s * 3)) "${tsan_flags[@]}" ;;
-    fuzz) fuzz_stage ;;
+    release | asan | tsan | fuzz) built+=("$stage") ;;
     *) echo "ci: unknown stage '$stage' (known: format release asan tsan fuzz)" >&2; exit 2 ;;
   esac
 done
 
+# A pipeline: while one stage's tests run, the next stage's build runs beside them at the
+# lowest priority (nice 19), on the CPU the tests leave idle (they wait on servers, browsers,
+# children and timeouts much of the time); the tests keep their share, since the scheduler
+# gives a nice-0 task about 98 % of a core against a nice-19 one. The background build's
+# output goes to a log printed when it is waited for, so the run's output stays in order.
+background_pid=
+background_log=
+for index in "${!built[@]}"; do
+  stage=${built[$index]}
+  if ((index == 0)); then
+    build_stage "$stage"
+  else
+    wait "$background_pid"
+    cat "$background_log"
+  fi
+  next=${built[$((index + 1))]:-}
+  if [[ -n $next ]]; then
+    background_log=$build_root/$next.build.log
+    log "$next: configure and build in the background (nice 19) while $stage tests; output in $background_log"
+    (renice -n 19 -p "$BASHPID" >/dev/null && build_stage "$next") >"$background_log" 2>&1 &
+    background_pid=$!
+  fi
+  test_stage "$stage"
+done
+
 log "summary ($(((SECONDS - start) / 60)) min $(((SECONDS - start) % 60)) s)"
-printf '%s\n' "${summary[@]}"
-if ((failed)); then
+cat "$results"
+if grep -qvE '^[^ ]+ +ok ' "$results"; then
   echo "ci: FAILED"
   exit 1
 fi
