@@ -764,9 +764,10 @@ TEST(LinkSizedReadsTest, MergedReadsNeverSpanAWiderGapAndEveryTileGetsItsOwnByte
       }
     }
     EXPECT_GT(checked, 0u);
-#if !defined(__SANITIZE_THREAD__)
-    // Under TSan the loader measures its own slowdown as a slow link (14 KiB a round trip was
-    // seen): the sizing is checked in the other builds, the merges' gaps and bytes in all.
+#if !defined(__SANITIZE_THREAD__) && !defined(__SANITIZE_ADDRESS__)
+    // Under a sanitizer the loader measures its own slowdown as a slow link (14 KiB a round
+    // trip under TSan, 8.7-15 KiB under ASan with a compiler running beside it): the sizing is
+    // checked in Release, the merges' gaps and bytes in all builds.
     EXPECT_GT(round_trip_bytes, 16 * 1024) << "the link sizing never applied";
 #endif
     // Inside every read, the bytes between consecutive payloads are at most the gap.
