@@ -1,4 +1,4 @@
-#include "downsample.h"
+#include "builder/downsample.h"
 
 #include <algorithm>
 #include <array>

@@ -3,7 +3,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "downsample.h"
+#include "builder/downsample.h"
 
 namespace tessera::detail {
 

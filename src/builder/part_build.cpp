@@ -13,7 +13,7 @@
 #include "band_reader.h"
 #include "build_internals.h"
 #include "codecs/encode.h"
-#include "downsample.h"
+#include "builder/downsample.h"
 #include "format/checksum.h"
 #include "format/header.h"
 #include "grid_reader.h"

@@ -5,7 +5,7 @@
 
 #include <fmt/format.h>
 
-#include "downsample.h"
+#include "builder/downsample.h"
 #include "uninitialized_buffer.h"
 
 namespace tessera::detail {
